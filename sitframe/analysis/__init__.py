@@ -1,0 +1,1 @@
+"""Offline analysis of sitframe HDF5 logs: arrays and matplotlib figures."""

@@ -1,0 +1,57 @@
+"""Errors that reach the user as one clear line.
+
+Every error caused by input (a config, a world file, a log, a plugin) is an
+:class:`InputError`. It is a :class:`ValueError`, so library callers may catch
+the standard type, and it carries *where* the problem is (file and key path)
+so the CLI can print one line and exit with status 2.
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Iterable
+
+
+class SitframeError(Exception):
+    """Base class of the errors sitframe raises on purpose."""
+
+
+class InputError(SitframeError, ValueError):
+    """Bad input: names the file, the key path, what was wrong and what was expected.
+
+    Parameters
+    ----------
+    message
+        What was wrong and what was expected, e.g. ``"expected a number, got 'abc'"``.
+    file
+        The file the problem is in, if any.
+    key
+        Dotted key path inside that file, e.g. ``"walls[2].points[0]"``.
+    """
+
+    def __init__(self, message: str, *, file: str | None = None, key: str | None = None):
+        self.message = message
+        self.file = None if file is None else str(file)
+        self.key = key
+        super().__init__(self.__str__())
+
+    def __str__(self) -> str:
+        where = ": ".join(p for p in (self.file, self.key) if p)
+        return f"{where}: {self.message}" if where else self.message
+
+    def at(self, *, file: str | None = None, key_prefix: str | None = None) -> InputError:
+        """Return a copy located in ``file`` and/or below ``key_prefix``."""
+        key = self.key
+        if key_prefix:
+            key = f"{key_prefix}.{key}" if key else key_prefix
+        return InputError(self.message, file=file or self.file, key=key)
+
+
+class PluginError(SitframeError):
+    """A plugin failed: names the plugin, its origin and the hook or component."""
+
+
+def did_you_mean(word: str, choices: Iterable[str]) -> str:
+    """Return ``" (did you mean 'x'?)"`` for the closest choice, or ``""``."""
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
+    return f" (did you mean '{close[0]}'?)" if close else ""

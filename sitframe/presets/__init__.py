@@ -1,0 +1,1 @@
+"""Experiment presets shipped with sitframe (TOML run configs)."""
