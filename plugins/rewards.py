@@ -1,0 +1,86 @@
+"""Reward plugins of the thesis: obstacle avoidance (Alg. 4) and speed (Alg. 6).
+
+A reward is any callable class with a ``name`` that maps a
+:class:`sitframe.records.Transition` to a float. This module is the example
+to copy; a new reward is ~20 lines::
+
+    from sitframe import hookimpl
+
+    class Cautious:
+        name = "cautious"
+        def __init__(self, *, margin: float = 0.5):
+            self.margin = margin
+        def __call__(self, tr):
+            if tr.collided:
+                return -30.0
+            return 10.0 if tr.after.nearest > self.margin else -5.0
+
+    @hookimpl
+    def sitframe_rewards():
+        return [Cautious]
+
+Drop that file in a folder, run with ``--plugins-dir FOLDER`` and name it in
+a behaviour's table: ``reward = "cautious"``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sitframe import hookimpl
+from sitframe import params as P
+from sitframe.records import Transition
+
+
+class ObstacleAvoidanceReward:
+    """Thesis Algorithm 4: -30 on collision, else ``30 - 0.1 * |heading|`` (degrees).
+
+    The printed algorithm subtracts the *signed* crisp heading, which would
+    reward right turns over left turns; the text's intent (prefer actions that
+    need less energy) is the magnitude, which is what we use.
+    """
+
+    name = "obstacle-avoidance"
+
+    def __init__(self, *, collision: float = -30.0, base: float = 30.0,
+                 heading_cost: float = 0.1) -> None:
+        self.collision = P.number("collision", collision)
+        self.base = P.number("base", base)
+        self.heading_cost = P.number("heading_cost", heading_cost, lo=0.0)
+
+    def __call__(self, tr: Transition) -> float:
+        if tr.outcome.collided:
+            return self.collision
+        return self.base - self.heading_cost * abs(tr.command.heading_change_deg)
+
+
+class SpeedReward:
+    """Thesis Algorithm 6: reward speed, penalise closing in on obstacles fast.
+
+    -30 on collision; else if the previous closest distance was below ``near``
+    (30 cm) and the current one is smaller, ``current - previous`` in cm
+    (negative); else ``10 + 0.2 * speed`` with speed in mm/s. The closest
+    distance is the smallest sonar range (from the robot's rim).
+    """
+
+    name = "speed"
+
+    def __init__(self, *, collision: float = -30.0, near: float = 0.30, base: float = 10.0,
+                 per_mm_s: float = 0.2) -> None:
+        self.collision = P.number("collision", collision)
+        self.near = P.number("near", near, lo=0.0)
+        self.base = P.number("base", base)
+        self.per_mm_s = P.number("per_mm_s", per_mm_s)
+
+    def __call__(self, tr: Transition) -> float:
+        if tr.outcome.collided:
+            return self.collision
+        prev, cur = tr.before.nearest, tr.after.nearest
+        if prev < self.near and cur < prev:
+            return (cur - prev) * 100.0
+        return self.base + self.per_mm_s * tr.command.speed_m_s * 1000.0
+
+
+@hookimpl
+def sitframe_rewards() -> list[Any]:
+    return [ObstacleAvoidanceReward, SpeedReward]

@@ -1,0 +1,321 @@
+"""Run configs: TOML files (or shipped presets) validated into a plain dict.
+
+A config has these tables (every key optional unless noted; defaults are the
+thesis's Table A.1):
+
+``[experiment]``
+    ``name``, ``description``, ``seed`` (int), ``trials`` (learning trials),
+    ``iterations`` (l, per trial), ``stages`` (subset of
+    ``["collect", "cluster", "learn", "evaluate"]``), ``world`` (the learning
+    world), ``default_speed`` (m/s, when no behaviour proposes a speed).
+``[robot]``
+    Fields of :class:`sitframe.robot.RobotParams` (radius, turn-rate limit,
+    substep, speed limits, collision recovery).
+``[sensor]``
+    ``component`` (required; e.g. ``"pioneer-sonar"``) and its parameters.
+``[collect]``
+    ``mode`` (``"trajectory"`` or ``"wander"``), ``worlds``, ``speed`` (m/s),
+    ``rate_hz`` (samples per second), ``wander_samples`` (per world).
+``[interpreter]``
+    ``component`` (e.g. ``"fcm"``) and its parameters (c, m, trials ...).
+``[behaviours.LABEL]``
+    One table per behaviour: ``component`` (required), optional ``reward``
+    (a reward component name: the behaviour learns from it), optional
+    ``reward_params`` table, optional ``policy_from = {log = "...", trial = 0,
+    behaviour = "LABEL"}`` to start from a learned policy, then the
+    behaviour's own parameters.
+``[arbiter]``
+    ``component`` (default ``"single"``) and its parameters.
+``[evaluate]``
+    ``worlds`` (default: the shipped novel rooms and the learning world),
+    ``iterations``.
+``[goal]``
+    ``episodes``, ``timeout``, ``min_distance``, ``worlds`` (goal episodes).
+``[plugins]``
+    ``dirs``: folders of loose plugin modules, relative to the config file.
+
+Component parameters are checked against the component's signature when the
+run resolves its components (unknown names get a did-you-mean); everything
+else is checked here. Every error is an :class:`~sitframe.errors.InputError`
+naming the file and the key path.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import importlib.resources
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from sitframe import params as P
+from sitframe.errors import InputError, did_you_mean
+
+STAGES = ("collect", "cluster", "learn", "evaluate")
+
+#: Defaults of the core sections; component tables are free-form.
+DEFAULTS: dict[str, dict[str, Any]] = {
+    "experiment": {
+        "name": "experiment",
+        "description": "",
+        "seed": 0,
+        "trials": 11,
+        "iterations": 5000,
+        "stages": list(STAGES),
+        "world": "training",
+        "default_speed": 0.15,
+    },
+    "robot": {},
+    "sensor": {"component": "pioneer-sonar"},
+    "collect": {
+        "mode": "trajectory",
+        "worlds": ["collect-1", "collect-2", "collect-3", "collect-4", "collect-5"],
+        "speed": 0.15,
+        "rate_hz": 2.0,
+        "wander_samples": 300,
+    },
+    "interpreter": {"component": "fcm"},
+    "behaviours": {},
+    "arbiter": {"component": "single"},
+    "evaluate": {"worlds": ["training", "novel-1", "novel-2"], "iterations": 1000},
+    "goal": {"episodes": 50, "timeout": 300, "min_distance": 3.0, "worlds": ["goal"]},
+    "plugins": {"dirs": []},
+}
+
+_CORE_KEYS = {s: set(v) for s, v in DEFAULTS.items() if s not in ("behaviours",)}
+_COMPONENT_SECTIONS = ("sensor", "interpreter", "arbiter")
+_BEHAVIOUR_META = ("component", "reward", "reward_params", "policy_from")
+
+
+def list_presets() -> list[str]:
+    """Names of the experiment presets shipped with sitframe."""
+    root = importlib.resources.files("sitframe.presets")
+    return sorted(p.name[:-5] for p in root.iterdir() if p.name.endswith(".toml"))
+
+
+def preset_text(name: str) -> str:
+    """TOML text of a shipped preset."""
+    return (importlib.resources.files("sitframe.presets") / f"{name}.toml").read_text("utf-8")
+
+
+def load_config(experiment: str) -> tuple[dict[str, Any], str, str]:
+    """Load a preset name or a TOML path.
+
+    Returns
+    -------
+    (config, source, base_dir)
+        The validated config (defaults filled in), a label for the source used
+        in error messages, and the folder relative paths are resolved from.
+    """
+    path = Path(experiment)
+    if experiment.endswith(".toml") or path.exists() or "/" in experiment:
+        if not path.is_file():
+            raise InputError("config file not found (expected a preset name or a .toml file)",
+                             file=experiment)
+        try:
+            text = path.read_text("utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise InputError(f"cannot read config: {exc}", file=experiment) from None
+        return parse_config(text, file=str(path)), str(path), str(path.parent)
+    presets = list_presets()
+    if experiment not in presets:
+        raise InputError(
+            f"unknown experiment '{experiment}'{did_you_mean(experiment, presets)}; "
+            f"available presets: {', '.join(presets)} (or give a path to a .toml config)"
+        )
+    return parse_config(preset_text(experiment), file=f"preset:{experiment}"), \
+        f"preset:{experiment}", "."
+
+
+def parse_config(text: str, *, file: str | None = None) -> dict[str, Any]:
+    """Parse and validate config TOML text; fill in defaults."""
+    if not text.strip():
+        raise InputError("config is empty (expected TOML with at least [behaviours])", file=file)
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"not valid TOML: {exc}", file=file) from None
+    return validate_config(raw, file=file)
+
+
+def validate_config(raw: dict[str, Any], *, file: str | None = None) -> dict[str, Any]:
+    """Validate a config dict and return a new dict with defaults filled in."""
+    cfg = copy.deepcopy(DEFAULTS)
+    sections = set(DEFAULTS)
+    for section, value in raw.items():
+        if section not in sections:
+            raise InputError(
+                f"unknown section{did_you_mean(section, sections)}; "
+                f"expected one of {', '.join(sorted(sections))}",
+                file=file, key=section,
+            )
+        if not isinstance(value, dict):
+            raise InputError(f"expected a table, got {type(value).__name__}", file=file,
+                             key=section)
+        if section == "behaviours":
+            cfg["behaviours"] = _validate_behaviours(value, file)
+        elif section in _COMPONENT_SECTIONS:
+            table = dict(value)
+            if "component" in table:
+                table["component"] = _at(P.string, "component", table["component"], file, section)
+            else:
+                table["component"] = DEFAULTS[section]["component"]
+            cfg[section] = table
+        elif section == "robot":
+            cfg["robot"] = _validate_robot(value, file)
+        else:
+            known = _CORE_KEYS[section]
+            for key in value:
+                if key not in known:
+                    raise InputError(
+                        f"unknown key{did_you_mean(key, known)}; expected one of "
+                        f"{', '.join(sorted(known))}", file=file, key=f"{section}.{key}")
+            cfg[section].update(value)
+    _check_core(cfg, file)
+    if not cfg["behaviours"]:
+        raise InputError("no behaviours configured (expected at least one [behaviours.LABEL] "
+                         "table with a 'component')", file=file, key="behaviours")
+    return cfg
+
+
+def _at(fn: Any, name: str, value: Any, file: str | None, prefix: str, **kw: Any) -> Any:
+    try:
+        return fn(name, value, **kw)
+    except InputError as exc:
+        raise exc.at(file=file, key_prefix=prefix) from None
+
+
+def _validate_robot(value: dict[str, Any], file: str | None) -> dict[str, Any]:
+    from sitframe.params import accepted_params
+    from sitframe.robot import RobotParams
+
+    known, _ = accepted_params(RobotParams)
+    for key in value:
+        if key not in known:
+            raise InputError(f"unknown key{did_you_mean(key, known)}; expected one of "
+                             f"{', '.join(sorted(known))}", file=file, key=f"robot.{key}")
+    try:
+        RobotParams(**value)
+    except InputError as exc:
+        raise exc.at(file=file, key_prefix="robot") from None
+    except (ValueError, TypeError) as exc:
+        raise InputError(str(exc), file=file, key="robot") from None
+    return dict(value)
+
+
+def _validate_behaviours(value: dict[str, Any], file: str | None) -> dict[str, Any]:
+    out = {}
+    for label, table in value.items():
+        key = f"behaviours.{label}"
+        if not isinstance(table, dict):
+            raise InputError(f"expected a table, got {type(table).__name__}", file=file, key=key)
+        if "component" not in table:
+            raise InputError("missing 'component' (the behaviour's registered name)",
+                             file=file, key=key)
+        t = dict(table)
+        _at(P.string, "component", t["component"], file, key)
+        if "reward" in t:
+            _at(P.string, "reward", t["reward"], file, key)
+        if "reward_params" in t and not isinstance(t["reward_params"], dict):
+            raise InputError("expected a table", file=file, key=f"{key}.reward_params")
+        if "policy_from" in t:
+            pf = t["policy_from"]
+            if not isinstance(pf, dict) or "log" not in pf:
+                raise InputError("expected a table {log = \"path.h5\", trial = 0, "
+                                 "behaviour = \"label\"}", file=file, key=f"{key}.policy_from")
+            for k in pf:
+                if k not in ("log", "trial", "behaviour"):
+                    raise InputError(f"unknown key{did_you_mean(k, ['log', 'trial', 'behaviour'])}"
+                                     "; expected log, trial, behaviour",
+                                     file=file, key=f"{key}.policy_from.{k}")
+            _at(P.string, "log", pf["log"], file, f"{key}.policy_from")
+            if "trial" in pf:
+                _at(P.number, "trial", pf["trial"], file, f"{key}.policy_from", lo=0, integer=True)
+        out[label] = t
+    return out
+
+
+def _check_core(cfg: dict[str, Any], file: str | None) -> None:
+    e = cfg["experiment"]
+    _at(P.string, "name", e["name"], file, "experiment")
+    if not isinstance(e["description"], str):
+        raise InputError("expected a string", file=file, key="experiment.description")
+    _at(P.number, "seed", e["seed"], file, "experiment", lo=0, integer=True)
+    _at(P.number, "trials", e["trials"], file, "experiment", lo=1, integer=True)
+    _at(P.number, "iterations", e["iterations"], file, "experiment", lo=1, integer=True)
+    _at(P.number, "default_speed", e["default_speed"], file, "experiment", lo=0.0, lo_open=True)
+    _at(P.string, "world", e["world"], file, "experiment")
+    stages = e["stages"]
+    if not isinstance(stages, list) or not stages:
+        raise InputError(f"expected a non-empty list of stages from {list(STAGES)}", file=file,
+                         key="experiment.stages")
+    for i, s in enumerate(stages):
+        _at(P.choice, f"stages[{i}]", s, file, "experiment", choices=STAGES)
+    c = cfg["collect"]
+    _at(P.choice, "mode", c["mode"], file, "collect", choices=("trajectory", "wander"))
+    _check_names(c["worlds"], file, "collect.worlds")
+    _at(P.number, "speed", c["speed"], file, "collect", lo=0.0, lo_open=True)
+    _at(P.number, "rate_hz", c["rate_hz"], file, "collect", lo=0.0, lo_open=True)
+    _at(P.number, "wander_samples", c["wander_samples"], file, "collect", lo=1, integer=True)
+    v = cfg["evaluate"]
+    _check_names(v["worlds"], file, "evaluate.worlds")
+    _at(P.number, "iterations", v["iterations"], file, "evaluate", lo=1, integer=True)
+    g = cfg["goal"]
+    _at(P.number, "episodes", g["episodes"], file, "goal", lo=1, integer=True)
+    _at(P.number, "timeout", g["timeout"], file, "goal", lo=1, integer=True)
+    _at(P.number, "min_distance", g["min_distance"], file, "goal", lo=0.0)
+    _check_names(g["worlds"], file, "goal.worlds")
+    _check_names(cfg["plugins"]["dirs"], file, "plugins.dirs", allow_empty=True)
+
+
+def _check_names(value: Any, file: str | None, key: str, allow_empty: bool = False) -> None:
+    if not isinstance(value, list) or (not value and not allow_empty):
+        raise InputError(f"expected a {'' if allow_empty else 'non-empty '}list of names, "
+                         f"got {value!r}", file=file, key=key)
+    for i, v in enumerate(value):
+        if not isinstance(v, str) or not v:
+            raise InputError(f"expected a name (string), got {v!r}", file=file, key=f"{key}[{i}]")
+
+
+def to_toml(cfg: dict[str, Any]) -> str:
+    """Render a config dict as TOML (for logs; round-trips through tomllib)."""
+    lines: list[str] = []
+
+    def val(v: Any) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, int | float):
+            return repr(v)
+        if isinstance(v, str):
+            return '"' + v.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
+        if isinstance(v, list | tuple):
+            return "[" + ", ".join(val(x) for x in v) + "]"
+        if isinstance(v, dict):
+            return "{" + ", ".join(f"{_k(k)} = {val(x)}" for k, x in v.items()) + "}"
+        raise TypeError(f"cannot render {type(v).__name__} as TOML")
+
+    def table(prefix: str, d: dict[str, Any]) -> None:
+        scalars = {k: v for k, v in d.items() if not isinstance(v, dict)}
+        nested = {k: v for k, v in d.items() if isinstance(v, dict)}
+        if prefix:
+            lines.append(f"[{prefix}]")
+        for k, v in scalars.items():
+            lines.append(f"{_k(k)} = {val(v)}")
+        lines.append("")
+        for k, v in nested.items():
+            if prefix and k in ("reward_params", "policy_from"):
+                lines.insert(len(lines) - 1, f"{_k(k)} = {val(v)}")
+                continue
+            table(f"{prefix}.{_k(k)}" if prefix else _k(k), v)
+
+    table("", cfg)
+    return "\n".join(lines).strip() + "\n"
+
+
+def _k(key: str) -> str:
+    return key if key.replace("_", "").replace("-", "").isalnum() else f'"{key}"'
+
+
+def config_hash(text: str) -> str:
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()

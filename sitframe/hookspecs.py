@@ -1,0 +1,206 @@
+"""The sitframe plugin contract: every hook a plugin may implement.
+
+A plugin is any module or object with functions decorated by
+:data:`sitframe.hookimpl`. Plugins are discovered from setuptools entry points
+in the group ``"sitframe"`` (the built-in plugins are declared there too, in
+sitframe's own ``pyproject.toml``), from loose ``.py`` files in a
+``--plugins-dir``, or registered directly on a plugin manager made by
+:func:`sitframe.pluginmanager.get_plugin_manager`.
+
+There are two kinds of hook:
+
+*Registration hooks* (``sitframe_sensors`` ... ``sitframe_arbiters``) are called
+once per run, when the run resolves its components. Each returns a list of
+*component factories*: classes (or callables) with a unique string attribute
+``name``, called with the keyword parameters of the component's config table.
+Every implementation is called and the lists are merged; two factories with
+the same ``name`` in one kind are an error that names both plugins. The
+interfaces the created components must satisfy are in
+:mod:`sitframe.components`.
+
+*Observer hooks* (``sitframe_run_start`` ... ``sitframe_run_end``) are called
+by the scheduler as a run progresses. They return nothing; every
+implementation is called. The HDF5 logger and the progress bar are plugins on
+these hooks. Observer hooks are called in the process that writes the run
+(the main process), so an observer never sees a partial trial from a worker.
+``sitframe_step`` is the exception: it fires inside the loop of the process
+that simulates the trial, once per control iteration, and only when some
+plugin implements it (the loop checks once per trial), so keep it cheap.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import pluggy
+
+if TYPE_CHECKING:
+    from sitframe.records import RunInfo, StepRecord, TrialResult
+
+hookspec = pluggy.HookspecMarker("sitframe")
+
+
+# --------------------------------------------------------------------------
+# Registration hooks
+# --------------------------------------------------------------------------
+
+
+@hookspec
+def sitframe_sensors() -> list[Any]:
+    """Register sensor factories.
+
+    Called once per run, when components are resolved. A sensor turns the
+    world and the robot's pose into one reading (e.g. the 8 Pioneer sonar
+    ranges); see :class:`sitframe.components.Sensor`.
+
+    :return: A list of factories, each with a unique ``name`` attribute,
+        called as ``factory(**params)`` with the keys of the config's
+        ``[sensor]`` table (except ``component``).
+
+    All implementations are called; their lists are merged.
+    """
+
+
+@hookspec
+def sitframe_interpreters() -> list[Any]:
+    """Register situation-interpreter factories.
+
+    Called once per run, when components are resolved. An interpreter is
+    fitted on collected readings (the *cluster* stage) and then turns each live
+    reading into memberships of ``c`` situations; see
+    :class:`sitframe.components.SituationInterpreter`.
+
+    :return: A list of factories with unique ``name`` attributes, called with
+        the keys of the config's ``[interpreter]`` table.
+
+    All implementations are called; their lists are merged.
+    """
+
+
+@hookspec
+def sitframe_rewards() -> list[Any]:
+    """Register reward factories.
+
+    Called once per run, when components are resolved. A reward maps one
+    :class:`sitframe.records.Transition` to a float; a learning behaviour
+    names the reward it learns from in its config table (``reward = "..."``);
+    see :class:`sitframe.components.Reward`.
+
+    :return: A list of factories with unique ``name`` attributes, called with
+        the keys of the behaviour's ``[behaviours.NAME.reward_params]`` table.
+
+    All implementations are called; their lists are merged.
+    """
+
+
+@hookspec
+def sitframe_behaviours() -> list[Any]:
+    """Register behaviour factories.
+
+    Called once per run, when components are resolved. A behaviour proposes a
+    heading change (and optionally a speed) every iteration and may learn from
+    its reward; see :class:`sitframe.components.Behaviour`.
+
+    :return: A list of factories with unique ``name`` attributes, called with
+        the keys of a ``[behaviours.LABEL]`` table (except ``component``,
+        ``reward`` and ``reward_params``).
+
+    All implementations are called; their lists are merged.
+    """
+
+
+@hookspec
+def sitframe_arbiters() -> list[Any]:
+    """Register arbiter factories.
+
+    Called once per run, when components are resolved. An arbiter fuses the
+    behaviours' proposals into the one command the robot executes (a single
+    behaviour, priority switching, context-dependent blending ...); see
+    :class:`sitframe.components.Arbiter`.
+
+    :return: A list of factories with unique ``name`` attributes, called with
+        the keys of the config's ``[arbiter]`` table.
+
+    All implementations are called; their lists are merged.
+    """
+
+
+# --------------------------------------------------------------------------
+# Observer hooks
+# --------------------------------------------------------------------------
+
+
+@hookspec
+def sitframe_run_start(run: RunInfo) -> None:
+    """A run is starting.
+
+    Called once, in the main process, after the config is resolved and before
+    the first stage runs (for ``--resume``, before the missing trials run).
+
+    :param run: What the run is: resolved config (text and dict), seed, output
+        path, number of trials, plugin list, stages to run.
+
+    All implementations are called; the return value is ignored.
+    """
+
+
+@hookspec
+def sitframe_stage_end(run: RunInfo, stage: str, data: dict[str, Any]) -> None:
+    """A non-learning stage finished (``"collect"`` or ``"cluster"``).
+
+    Called once per stage, in the main process.
+
+    :param run: The run, as given to :func:`sitframe_run_start`.
+    :param stage: ``"collect"`` or ``"cluster"``.
+    :param data: The stage's results as numpy arrays and scalars (e.g.
+        ``samples``, ``poses`` for collect; ``centers``, ``measures``,
+        ``chosen`` for cluster), ready to be written.
+
+    All implementations are called; the return value is ignored.
+    """
+
+
+@hookspec
+def sitframe_step(record: StepRecord) -> None:
+    """One control iteration finished.
+
+    Called inside the simulation loop of the process that runs the trial,
+    after the behaviours learned from the iteration, once per iteration (each
+    is 1.5 s of robot time), only if at least one plugin implements it.
+
+    :param record: An immutable :class:`sitframe.records.StepRecord` holding
+        references (not copies) to this iteration's arrays. Do not keep it
+        beyond the call unless you copy what you need.
+
+    All implementations are called; the return value is ignored.
+    """
+
+
+@hookspec
+def sitframe_trial_end(run: RunInfo, trial: TrialResult) -> None:
+    """One learning trial (or evaluation/goal episode batch) finished.
+
+    Called in the main process, in trial order, with the complete per-iteration
+    arrays of the trial, whether it was simulated here or in a worker.
+
+    :param run: The run, as given to :func:`sitframe_run_start`.
+    :param trial: The :class:`sitframe.records.TrialResult`: seed, per-
+        iteration arrays, per-behaviour learning data and summary scalars.
+
+    All implementations are called; the return value is ignored.
+    """
+
+
+@hookspec
+def sitframe_run_end(run: RunInfo, status: str) -> None:
+    """A run ended.
+
+    Called once in the main process, also when the run fails or is
+    interrupted.
+
+    :param run: The run, as given to :func:`sitframe_run_start`.
+    :param status: ``"complete"``, ``"aborted"`` (interrupted, e.g. Ctrl-C) or
+        ``"failed"`` (an error stopped it).
+
+    All implementations are called; the return value is ignored.
+    """

@@ -1,0 +1,264 @@
+"""Fuzzy Q-learning of a situation rule base (thesis 4.6).
+
+The learner keeps a lookup table ``Q`` of shape (c situations, A actions) and
+a *current rule base*: one action per situation, executed by the fuzzy
+controller. Every iteration it updates the Q-values of the current rules that
+were activated, and from time to time it replaces the rule base using a
+soft-max (Boltzmann) behaviour policy over each situation's Q row.
+
+Choices where the thesis is ambiguous (all configurable):
+
+* **Update rule** (``update``). ``"thesis"`` is Eq. 4.14,
+  ``Q_i += alpha * (w_i r + gamma w_i V(s') - Q_i)``, which pulls weakly
+  activated rules toward 0. ``"standard"`` is the usual fuzzy Q-learning form
+  ``Q_i += alpha * w_i * (r + gamma V(s') - Q_i)``. In both,
+  ``V(s') = sum_j u_j(s') max_a Q(j, a)`` (Eq. 4.15) and ``w_i`` is the rule
+  strength, i.e. the membership of the reading to situation ``i``.
+* **Which rules are updated** (``activation``). The thesis updates "all the
+  rules which were activated". Read literally as *every* rule, Eq. 4.14 pulls
+  the current action of each inactive situation toward 0 every iteration (with
+  m = 1.2 most memberships are ~0), the greedy choice keeps flipping and
+  learning never converges. We update only rules whose strength is at least
+  ``activation`` (default 0.3); ``activation = 0`` gives the literal reading.
+* **Soft-max temperature** (``temperature``, ``temperature_mode``). The Q scale
+  differs between the two update rules and with the reward, so the default is
+  scale-free (``"relative"``): each row's logits are
+  ``(Q - max Q) / (temperature * (max Q - min Q))`` so the worst action of a
+  situation is ``exp(-1/temperature)`` times as likely as the best one,
+  whatever the scale. ``"absolute"`` uses ``Q / temperature`` as in the
+  textbook.
+* **When the rule base changes**: after a collision, or after ``b``
+  collision-free iterations since the last change (thesis 4.6.3).
+* **Convergence**: the greedy rule base (argmax of each row) is unchanged for
+  ``p`` consecutive rule-base changes (thesis 4.6.4). After that the greedy
+  rule base is frozen, learning stops and the trial goes on so that
+  post-convergence collisions can be counted.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sitframe import params as P
+
+UPDATE_RULES = ("thesis", "standard")
+TEMPERATURE_MODES = ("relative", "absolute")
+Q_INITS = ("constant", "random")
+
+
+@dataclass(frozen=True)
+class QLearningParams:
+    """Parameters of fuzzy Q-learning; defaults are thesis Table A.1.
+
+    Attributes
+    ----------
+    alpha
+        Learning rate in (0, 1].
+    gamma
+        Discount factor in [0, 1).
+    b
+        Collision-free iterations between rule-base changes.
+    p
+        Consecutive rule-base changes with an unchanged greedy rule base that
+        count as convergence.
+    temperature
+        Soft-max temperature (see ``temperature_mode``).
+    temperature_mode
+        ``"relative"`` (scale-free, default) or ``"absolute"``.
+    q_init
+        ``"constant"`` (every entry ``q_init_value``) or ``"random"`` (uniform in
+        ``q_init_value ± q_init_spread``).
+    q_init_value, q_init_spread
+        See ``q_init``.
+    update
+        ``"thesis"`` (Eq. 4.14, default) or ``"standard"``.
+    activation
+        Minimum rule strength for a rule to be updated (0 = every rule).
+    """
+
+    alpha: float = 0.3
+    gamma: float = 0.9
+    b: int = 5
+    p: int = 50
+    temperature: float = 0.25
+    temperature_mode: str = "relative"
+    q_init: str = "constant"
+    q_init_value: float = 0.0
+    q_init_spread: float = 0.0
+    update: str = "thesis"
+    activation: float = 0.3
+
+    def __post_init__(self) -> None:
+        P.number("alpha", self.alpha, lo=0.0, hi=1.0, lo_open=True)
+        P.number("gamma", self.gamma, lo=0.0, hi=1.0, hi_open=True)
+        P.number("b", self.b, lo=1, integer=True)
+        P.number("p", self.p, lo=1, integer=True)
+        P.number("temperature", self.temperature, lo=0.0, lo_open=True)
+        P.choice("temperature_mode", self.temperature_mode, TEMPERATURE_MODES)
+        P.choice("q_init", self.q_init, Q_INITS)
+        P.number("q_init_value", self.q_init_value)
+        P.number("q_init_spread", self.q_init_spread, lo=0.0)
+        P.choice("update", self.update, UPDATE_RULES)
+        P.number("activation", self.activation, lo=0.0, hi=1.0)
+
+
+def softmax_choice(q: np.ndarray, params: QLearningParams, rng: np.random.Generator) -> np.ndarray:
+    """Draw one action per row of ``q`` (c, A) with the soft-max policy.
+
+    Returns (c,) action indices. Uses one uniform draw per row (inverse CDF),
+    so the random stream consumed is always ``c`` numbers.
+    """
+    if params.temperature_mode == "relative":
+        top = q.max(axis=1, keepdims=True)
+        spread = top - q.min(axis=1, keepdims=True)
+        logits = (q - top) / (params.temperature * np.where(spread > 0, spread, 1.0))
+    else:
+        logits = (q - q.max(axis=1, keepdims=True)) / params.temperature
+    w = np.exp(logits)
+    cdf = np.cumsum(w, axis=1)
+    draws = rng.random(q.shape[0]) * cdf[:, -1]
+    return np.minimum((cdf < draws[:, None]).sum(axis=1), q.shape[1] - 1)
+
+
+class FuzzyQLearner:
+    """Learns one consequent (e.g. heading) of a situation rule base.
+
+    Parameters
+    ----------
+    n_situations, n_actions
+        Shape of the lookup table.
+    params
+        :class:`QLearningParams`.
+    rng
+        The trial's generator: Q initialisation and every soft-max draw.
+    max_iterations
+        Upper bound on iterations (sizes the per-iteration records).
+
+    Attributes
+    ----------
+    q : (c, A) lookup table.
+    rule_base : (c,) action index per situation, currently executed.
+    converged_at : iteration at which convergence was declared, or None.
+    """
+
+    def __init__(
+        self,
+        n_situations: int,
+        n_actions: int,
+        params: QLearningParams,
+        rng: np.random.Generator,
+        max_iterations: int,
+    ) -> None:
+        self.params = params
+        self.rng = rng
+        c, a = n_situations, n_actions
+        if params.q_init == "random":
+            self.q = params.q_init_value + rng.uniform(-1.0, 1.0, (c, a)) * params.q_init_spread
+        else:
+            self.q = np.full((c, a), float(params.q_init_value))
+        self.rule_base = rng.integers(0, a, size=c)  # thesis Alg. 3 step 5: random rules
+        self.greedy = self.q.argmax(axis=1)
+        self.converged_at: int | None = None
+        self.stable_changes = 0
+        self.since_change = 0
+        self._rows = np.arange(c)
+        # Records: one row per rule-base change (snapshots) and per iteration.
+        self._snap_iter: list[int] = [0]
+        self._snap_rules: list[np.ndarray] = [self.rule_base.copy()]
+        self._snap_greedy: list[np.ndarray] = [self.greedy.copy()]
+        self._snap_q: list[np.ndarray] = [self.q.copy()]
+        self.rules_per_iteration = np.zeros((max_iterations, c), dtype=np.int8)
+        self.q_per_iteration_max = None  # reserved
+
+    @property
+    def frozen(self) -> bool:
+        return self.converged_at is not None
+
+    def record_rules(self, iteration: int) -> None:
+        """Remember the rule base executed at ``iteration``."""
+        self.rules_per_iteration[iteration] = self.rule_base
+
+    def update(
+        self,
+        u_before: np.ndarray,
+        reward: float,
+        u_after: np.ndarray,
+        collided: bool,
+        iteration: int,
+    ) -> None:
+        """Learn from one iteration, then change the rule base if it is time.
+
+        Parameters
+        ----------
+        u_before
+            (c,) memberships of the reading the rule base acted on (rule strengths).
+        reward
+            The reward for the iteration.
+        u_after
+            (c,) memberships of the next reading (for V(s'), Eq. 4.15).
+        collided
+            Whether the iteration ended in a collision (triggers a change).
+        iteration
+            0-based iteration (for the records).
+        """
+        if self.converged_at is not None:
+            return
+        prm = self.params
+        q = self.q
+        active = np.flatnonzero(u_before >= prm.activation) if prm.activation > 0 else self._rows
+        if active.size:
+            v_next = float(u_after @ q.max(axis=1))
+            acts = self.rule_base[active]
+            w = u_before[active]
+            cur = q[active, acts]
+            if prm.update == "thesis":
+                q[active, acts] = cur + prm.alpha * (w * reward + prm.gamma * w * v_next - cur)
+            else:
+                q[active, acts] = cur + prm.alpha * w * (reward + prm.gamma * v_next - cur)
+        self.since_change += 1
+        if collided or self.since_change >= prm.b:
+            self._change(iteration)
+
+    def _change(self, iteration: int) -> None:
+        self.since_change = 0
+        greedy = self.q.argmax(axis=1)
+        if np.array_equal(greedy, self.greedy):
+            self.stable_changes += 1
+        else:
+            self.stable_changes = 0
+            self.greedy = greedy
+        if self.stable_changes >= self.params.p:
+            self.converged_at = iteration + 1
+            self.rule_base = greedy.copy()
+        else:
+            self.rule_base = softmax_choice(self.q, self.params, self.rng)
+        self._snap_iter.append(iteration + 1)
+        self._snap_rules.append(self.rule_base.copy())
+        self._snap_greedy.append(greedy)
+        self._snap_q.append(self.q.copy())
+
+    def freeze(self, rule_base: np.ndarray) -> None:
+        """Execute ``rule_base`` from now on and stop learning (evaluation)."""
+        self.rule_base = np.asarray(rule_base, dtype=np.intp).copy()
+        self.greedy = self.rule_base.copy()
+        self.converged_at = 0
+
+    def final_rule_base(self) -> np.ndarray:
+        """The greedy rule base (the converged one if learning converged)."""
+        return self.q.argmax(axis=1) if self.converged_at is None else self.rule_base.copy()
+
+    def data(self, iterations: int) -> dict[str, np.ndarray | int | bool]:
+        """Arrays to log: snapshots at each rule-base change and per-iteration rules."""
+        return {
+            "q": self.q.copy(),
+            "q_snapshots": np.stack(self._snap_q),
+            "snapshot_iteration": np.asarray(self._snap_iter, dtype=np.int64),
+            "snapshot_rule_base": np.stack(self._snap_rules).astype(np.int16),
+            "snapshot_greedy": np.stack(self._snap_greedy).astype(np.int16),
+            "rule_base": self.rules_per_iteration[:iterations].copy(),
+            "final_rule_base": self.final_rule_base().astype(np.int16),
+            "converged": self.converged_at is not None,
+            "convergence_iteration": -1 if self.converged_at is None else int(self.converged_at),
+        }

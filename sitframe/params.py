@@ -1,0 +1,136 @@
+"""Parameter validation helpers for component authors and the config loader.
+
+Every check raises :class:`sitframe.errors.InputError` whose ``key`` is the
+parameter name; the config loader prefixes the table path, so a user sees e.g.
+``obstacle.toml: behaviours.avoid.alpha: expected a number in [0, 1], got 1.5``.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from collections.abc import Sequence
+from typing import Any
+
+from sitframe.errors import InputError, did_you_mean
+
+
+def _fmt(value: Any) -> str:
+    return repr(value) if isinstance(value, str) else str(value)
+
+
+def number(
+    name: str,
+    value: Any,
+    *,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    hi_open: bool = False,
+    integer: bool = False,
+) -> float | int:
+    """Check that ``value`` is a finite (integer) number within bounds and return it."""
+    kind = "an integer" if integer else "a number"
+    bounds = ""
+    if lo is not None or hi is not None:
+        left = ("(" if lo_open else "[") + (str(lo) if lo is not None else "-inf")
+        right = (str(hi) if hi is not None else "inf") + (")" if hi_open else "]")
+        bounds = f" in {left}, {right}"
+    expected = f"expected {kind}{bounds}"
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        try:
+            import numpy as np
+
+            if isinstance(value, np.integer | np.floating) and not isinstance(value, bool):
+                value = value.item()
+            else:
+                raise TypeError
+        except TypeError:
+            raise InputError(f"{expected}, got {type(value).__name__} {_fmt(value)}",
+                             key=name) from None
+    if integer and not (isinstance(value, int) or float(value).is_integer()):
+        raise InputError(f"{expected}, got {_fmt(value)}", key=name)
+    if not math.isfinite(value):
+        raise InputError(f"{expected}, got non-finite {value}", key=name)
+    if lo is not None and (value < lo or (lo_open and value == lo)):
+        raise InputError(f"{expected}, got {_fmt(value)}", key=name)
+    if hi is not None and (value > hi or (hi_open and value == hi)):
+        raise InputError(f"{expected}, got {_fmt(value)}", key=name)
+    return int(value) if integer else float(value)
+
+
+def number_list(
+    name: str,
+    value: Any,
+    *,
+    min_len: int = 1,
+    lo: float | None = None,
+    hi: float | None = None,
+    length: int | None = None,
+) -> list[float]:
+    """Check a list of finite numbers (each optionally within bounds)."""
+    if isinstance(value, str) or not isinstance(value, Sequence):
+        raise InputError(f"expected a list of numbers, got {type(value).__name__} "
+                         f"{_fmt(value)}", key=name)
+    if length is not None and len(value) != length:
+        raise InputError(f"expected a list of {length} numbers, got {len(value)}", key=name)
+    if len(value) < min_len:
+        raise InputError(f"expected at least {min_len} numbers, got {len(value)}", key=name)
+    return [float(number(f"{name}[{i}]", v, lo=lo, hi=hi)) for i, v in enumerate(value)]
+
+
+def choice(name: str, value: Any, choices: Sequence[str]) -> str:
+    """Check that ``value`` is one of ``choices``."""
+    if not isinstance(value, str) or value not in choices:
+        hint = did_you_mean(str(value), choices) if isinstance(value, str) else ""
+        raise InputError(
+            f"expected one of {', '.join(repr(c) for c in choices)}, got {_fmt(value)}{hint}",
+            key=name,
+        )
+    return value
+
+
+def boolean(name: str, value: Any) -> bool:
+    if not isinstance(value, bool):
+        raise InputError(f"expected true or false, got {_fmt(value)}", key=name)
+    return value
+
+
+def string(name: str, value: Any) -> str:
+    if not isinstance(value, str) or not value:
+        raise InputError(f"expected a non-empty string, got {_fmt(value)}", key=name)
+    return value
+
+
+def accepted_params(factory: Any) -> tuple[set[str], bool]:
+    """Keyword parameter names ``factory`` accepts, and whether it takes ``**kwargs``."""
+    try:
+        sig = inspect.signature(factory)
+    except (TypeError, ValueError):
+        return set(), True
+    names = set()
+    var_kw = False
+    for p in sig.parameters.values():
+        if p.kind is inspect.Parameter.VAR_KEYWORD:
+            var_kw = True
+        elif p.kind in (inspect.Parameter.KEYWORD_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD):
+            names.add(p.name)
+    return names, var_kw
+
+
+def check_params(
+    factory: Any, params: dict[str, Any], *, file: str | None = None, key: str | None = None
+) -> None:
+    """Reject parameters ``factory`` does not accept, suggesting the closest name."""
+    names, var_kw = accepted_params(factory)
+    if var_kw:
+        return
+    for pname in params:
+        if pname not in names:
+            where = f"{key}.{pname}" if key else pname
+            raise InputError(
+                f"unknown parameter '{pname}'{did_you_mean(pname, names)} for "
+                f"'{getattr(factory, 'name', factory)}'; accepted: {', '.join(sorted(names))}",
+                file=file,
+                key=where,
+            )
