@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 import numpy as np
 
 if TYPE_CHECKING:
-    from sitframe.records import Command, Context, Proposal, Transition
+    from sitframe.records import Context, Proposal, Transition
     from sitframe.world import World
 
 
@@ -81,7 +81,8 @@ class Reward(Protocol):
 class Behaviour(Protocol):
     """Proposes a heading change (and optionally a speed) each iteration.
 
-    Lifecycle per trial: ``reset`` → (``propose`` → ``learn``)* → ``trial_data``.
+    Lifecycle per trial: [``load_policy``] → ``reset`` → (``propose`` → ``learn``)*
+    → ``trial_data``.
     ``learn`` is called only when the behaviour has a reward bound in the
     config and ``learning`` is on.
     """
@@ -106,7 +107,11 @@ class Behaviour(Protocol):
         ...
 
     def load_policy(self, policy: dict[str, np.ndarray]) -> None:
-        """Freeze the behaviour to a learned policy read back from a log."""
+        """Fix (part of) the behaviour to a learned policy read back from a log.
+
+        Called before :meth:`reset`, e.g. to evaluate a frozen rule base or to
+        hold the heading rule base fixed while speed is learned.
+        """
         ...
 
 
@@ -118,6 +123,10 @@ class Arbiter(Protocol):
 
     def combine(
         self, context: Context, proposals: dict[str, Proposal]
-    ) -> tuple[Command, np.ndarray]:
-        """Return the command and the (k,) weight given to each proposal, in order."""
+    ) -> tuple[Proposal, np.ndarray]:
+        """Return the fused proposal and the (k,) weight given to each proposal, in order.
+
+        A fused speed of ``None`` means the run's ``experiment.default_speed``.
+        The scheduler clips the result to the robot's limits.
+        """
         ...

@@ -7,7 +7,9 @@ thesis's Table A.1):
     ``name``, ``description``, ``seed`` (int), ``trials`` (learning trials),
     ``iterations`` (l, per trial), ``stages`` (subset of
     ``["collect", "cluster", "learn", "evaluate"]``), ``world`` (the learning
-    world), ``default_speed`` (m/s, when no behaviour proposes a speed).
+    world), ``default_speed`` (m/s, when no behaviour proposes a speed),
+    ``clusters_from`` (path of a log whose fitted situations are reused;
+    collect and cluster are then skipped).
 ``[robot]``
     Fields of :class:`sitframe.robot.RobotParams` (radius, turn-rate limit,
     substep, speed limits, collision recovery).
@@ -65,6 +67,7 @@ DEFAULTS: dict[str, dict[str, Any]] = {
         "stages": list(STAGES),
         "world": "training",
         "default_speed": 0.15,
+        "clusters_from": "",
     },
     "robot": {},
     "sensor": {"component": "pioneer-sonar"},
@@ -246,6 +249,9 @@ def _check_core(cfg: dict[str, Any], file: str | None) -> None:
     _at(P.number, "iterations", e["iterations"], file, "experiment", lo=1, integer=True)
     _at(P.number, "default_speed", e["default_speed"], file, "experiment", lo=0.0, lo_open=True)
     _at(P.string, "world", e["world"], file, "experiment")
+    if not isinstance(e["clusters_from"], str):
+        raise InputError("expected a path to a log (string)", file=file,
+                         key="experiment.clusters_from")
     stages = e["stages"]
     if not isinstance(stages, list) or not stages:
         raise InputError(f"expected a non-empty list of stages from {list(STAGES)}", file=file,

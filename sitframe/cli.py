@@ -1,0 +1,289 @@
+"""The ``sitframe`` command line.
+
+::
+
+    sitframe run EXPERIMENT [--trials N] [--seed S] [--world W] [--iterations L]
+                            [--out LOG] [--clusters-from LOG] [--json]
+    sitframe evaluate LOG --world W [--trial K] [--iterations N] [--seed S] [--json]
+    sitframe world show W [-o PNG]
+    sitframe world list
+    sitframe presets
+    sitframe plugins
+
+Errors caused by input (config, world, log, plugin) print one line on stderr
+(``sitframe: error: FILE: KEY: what was wrong; what was expected``) and exit
+with status 2, before anything is written. Set ``SITFRAME_TRACEBACK=1`` to see
+the traceback as well. Ctrl-C exits with status 130.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+from sitframe import __version__
+from sitframe.errors import InputError, PluginError
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # one line, exit 2 (argparse's own convention)
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="sitframe", description="Situation-based robot behaviours: fuzzy c-means "
+                "situations, fuzzy Q-learning, pluggy plugins, HDF5 logs.")
+    p.add_argument("--version", action="version", version=f"sitframe {__version__}")
+    p.add_argument("--plugins-dir", action="append", default=[], metavar="DIR",
+                   help="load loose *.py plugin modules from DIR (repeatable)")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    r = sub.add_parser("run", help="run an experiment (preset name or TOML config)")
+    r.add_argument("experiment", help="preset name (see `sitframe presets`) or path to a .toml")
+    r.add_argument("--trials", type=int, help="number of learning trials")
+    r.add_argument("--seed", type=int, help="run seed (trial seeds are derived from it)")
+    r.add_argument("--world", help="learning world (shipped name or .toml path)")
+    r.add_argument("--iterations", type=int, help="iterations per trial (l)")
+    r.add_argument("--out", help="HDF5 log path (default logs/<name>.h5)")
+    r.add_argument("--clusters-from", metavar="LOG",
+                   help="reuse the fitted situations of LOG (skips collect and cluster)")
+    r.add_argument("--json", action="store_true", help="print machine-readable results")
+
+    e = sub.add_parser("evaluate", help="run a log's frozen rule base in a world")
+    e.add_argument("log")
+    e.add_argument("--world", required=True, help="world to evaluate in")
+    e.add_argument("--trial", type=int, default=0, help="which learning trial's policy")
+    e.add_argument("--iterations", type=int, default=1000)
+    e.add_argument("--seed", type=int, default=0)
+    e.add_argument("--json", action="store_true")
+
+    w = sub.add_parser("world", help="worlds: draw or list")
+    wsub = w.add_subparsers(dest="world_command", required=True, parser_class=_Parser)
+    ws = wsub.add_parser("show", help="draw a world to a PNG")
+    ws.add_argument("world", help="shipped name or .toml path")
+    ws.add_argument("-o", "--output", help="PNG path (default <name>.png)")
+    wsub.add_parser("list", help="list the shipped worlds")
+
+    sub.add_parser("presets", help="list the shipped experiment presets")
+    sub.add_parser("plugins", help="list discovered plugins and their components")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return _dispatch(args)
+    except (InputError, PluginError) as exc:
+        if os.environ.get("SITFRAME_TRACEBACK"):
+            raise
+        print(f"sitframe: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("sitframe: interrupted", file=sys.stderr)
+        return 130
+
+
+def _dispatch(args: argparse.Namespace) -> int:
+    cmd = args.command
+    if cmd == "run":
+        return cmd_run(args)
+    if cmd == "evaluate":
+        return cmd_evaluate(args)
+    if cmd == "world":
+        return cmd_world(args)
+    if cmd == "presets":
+        return cmd_presets()
+    if cmd == "plugins":
+        return cmd_plugins(args)
+    raise AssertionError(cmd)  # pragma: no cover - argparse enforces the choices
+
+
+def _positive(name: str, value: int | None) -> None:
+    if value is not None and value < 1:
+        raise InputError(f"must be at least 1, got {value}", key=f"--{name}")
+
+
+# ---------------------------------------------------------------------------
+# run
+# ---------------------------------------------------------------------------
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from sitframe.config import load_config
+    from sitframe.experiment import prepare_experiment
+
+    _positive("trials", args.trials)
+    _positive("iterations", args.iterations)
+    if args.seed is not None and args.seed < 0:
+        raise InputError(f"must be a non-negative integer, got {args.seed}", key="--seed")
+    cfg, source, base_dir = load_config(args.experiment)
+    e = cfg["experiment"]
+    for key in ("trials", "seed", "world", "iterations", "clusters_from"):
+        val = getattr(args, key)
+        if val is not None:
+            e[key] = val
+    out = args.out or str(Path("logs") / f"{e['name']}.h5")
+    exp, kwargs = prepare_experiment(cfg, source=source, base_dir=base_dir, out=out,
+                                     plugins_dirs=tuple(args.plugins_dir),
+                                     progress=not args.json and sys.stderr.isatty())
+    result = exp.run(**kwargs)
+    if args.json:
+        print(json.dumps(run_json(result), indent=2, default=_json_default))
+    else:
+        print_run(result)
+    return 0
+
+
+def _json_default(o: Any) -> Any:
+    import numpy as np
+
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(type(o).__name__)
+
+
+def _finite(x: Any) -> Any:
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+def run_json(result: Any) -> dict[str, Any]:
+    """The ``run --json`` document (keys are a contract; see the README)."""
+    trials = []
+    for tr in result.trials:
+        s = tr.summary
+        rule_base = {}
+        for label, data in tr.behaviours.items():
+            for k, v in data.items():
+                if k.startswith("policy/"):
+                    out = k.split("/", 1)[1]
+                    singles = data.get(f"singletons/{out}")
+                    rule_base[f"{label}.{out}"] = ([float(singles[i]) for i in v]
+                                                   if singles is not None else list(map(int, v)))
+        entry = {
+            "trial": tr.index,
+            "seed": tr.seed,
+            "converged": bool(s["converged"]),
+            "convergence_iteration": (int(s["convergence_iteration"])
+                                      if s["converged"] else None),
+            "collisions_per_1000_after_convergence":
+                _finite(s["collisions_per_1000_after_convergence"]),
+            "rule_base": rule_base,
+            "collisions": s["collisions"],
+            "collisions_per_1000": _finite(s["collisions_per_1000"]),
+            "coverage": _finite(s["coverage"]),
+            "evaluation": {k[5:]: _finite(v) for k, v in s.items() if k.startswith("eval/")},
+        }
+        trials.append(entry)
+    return {"log": result.info.out, "wall_seconds": round(result.wall_seconds, 3),
+            "status": result.status, "trials": trials}
+
+
+def print_run(result: Any) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console()
+    t = Table(title=f"{result.info.name}: {len(result.trials)} trials "
+              f"in {result.wall_seconds:.1f} s")
+    for col in ("trial", "converged at", "collisions", "coll./1000 after conv.", "coverage"):
+        t.add_column(col, justify="right")
+    for tr in result.trials:
+        s = tr.summary
+        t.add_row(str(tr.index),
+                  str(s["convergence_iteration"]) if s["converged"] else "not converged",
+                  str(s["collisions"]),
+                  f"{s['collisions_per_1000_after_convergence']:.1f}",
+                  f"{s['coverage']:.2f}")
+    console.print(t)
+    if result.trials:
+        from sitframe.experiment import rule_base_table
+
+        console.print(rule_base_table(result, 0))
+    if result.info.out:
+        console.print(f"log: {result.info.out}")
+
+
+# ---------------------------------------------------------------------------
+# evaluate
+# ---------------------------------------------------------------------------
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from sitframe.experiment import evaluate_log
+
+    _positive("iterations", args.iterations)
+    summary = evaluate_log(args.log, world=args.world, trial=args.trial,
+                           iterations=args.iterations, seed=args.seed,
+                           plugins_dirs=tuple(args.plugins_dir))
+    doc = {k: _finite(v) for k, v in summary.items()}
+    if args.json:
+        print(json.dumps(doc, indent=2, default=_json_default))
+    else:
+        for k, v in doc.items():
+            print(f"{k:>22}: {v}")
+    return 0
+
+
+# ---------------------------------------------------------------------------
+# world, presets, plugins
+# ---------------------------------------------------------------------------
+
+
+def cmd_world(args: argparse.Namespace) -> int:
+    from sitframe.world import list_worlds, load_world
+
+    if args.world_command == "list":
+        for name in list_worlds():
+            w = load_world(name)
+            print(f"{name:16} {w.description}")
+        return 0
+    world = load_world(args.world)
+    out = Path(args.output or f"{world.name}.png")
+    if out.suffix.lower() != ".png":
+        raise InputError(f"expected a .png output path, got '{out}'", key="-o")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from sitframe.analysis.world_plot import plot_world
+
+    fig = plot_world(world)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=150, bbox_inches="tight")
+    print(out)
+    return 0
+
+
+def cmd_presets() -> int:
+    from sitframe.config import load_config, list_presets
+
+    for name in list_presets():
+        cfg, _s, _b = load_config(name)
+        print(f"{name:24} {cfg['experiment']['description']}")
+    return 0
+
+
+def cmd_plugins(args: argparse.Namespace) -> int:
+    from sitframe.pluginmanager import Registry, get_plugin_manager
+
+    pm = get_plugin_manager(plugins_dirs=args.plugins_dir)
+    reg = Registry.collect(pm)
+    for info, comps in reg.plugins_table():
+        print(info.describe())
+        for kind, names in comps.items():
+            print(f"    {kind:12} {', '.join(names)}")
+        if not comps:
+            print("    (observer hooks only)")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

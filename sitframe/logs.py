@@ -1,0 +1,398 @@
+"""HDF5 run logs: crash-safe writing and a reader API.
+
+Layout (schema ``sitframe-log``, version :data:`SCHEMA_VERSION`)::
+
+    /                     attrs: schema, schema_version, status (running|complete|
+                          aborted|failed), name, created, config (TOML text),
+                          config_hash, seed, source, versions (JSON), plugins
+                          (JSON list), worlds (JSON name -> TOML text)
+    /collect/             samples (n, d) [m], poses (n, 3) [m, m, rad],
+                          source (n,) world index; attrs worlds (JSON)
+    /cluster/             trial_centers (T, c, d), trial_measures (T, k) with
+                          attr columns, trial_n_iter, trial_converged,
+                          attrs chosen, rule; optional sweep_c, sweep_measures
+    /cluster/state/       the interpreter's fitted state (e.g. centers, m)
+    /trials/NNNN/         one group per learning trial; attrs: index, seed,
+                          world, every summary scalar; per-iteration datasets
+                          pose (L+1, 3), sonar (L, d), memberships (L, c),
+                          command (L, 2) [deg, m/s], collision (L,),
+                          contact (L, 2), nearest (L,), weights (L, k),
+                          proposals/<label> (L, 2), reward/<label> (L,)
+    /trials/NNNN/behaviours/<label>/   what the behaviour's trial_data() returned
+                          (e.g. heading/q_snapshots (K, c, A),
+                          heading/snapshot_iteration (K,), policy/heading (c,))
+    /trials/NNNN/episodes/...          evaluation / goal-episode arrays
+    /summary              structured table, one row per finished trial
+
+Every dataset has a ``units`` or ``description`` attribute where it helps.
+
+Crash safety: an HDF5 file left open by a process that dies can be
+unreadable, so the writer never holds the file open across a run. Each stage
+and each finished trial is written by open (append) → write → flush → close;
+a ``kill -9`` costs at most the trial in progress and the file always opens,
+with ``status = "running"`` telling the reader it did not complete.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from sitframe.errors import InputError
+from sitframe.records import RunInfo, TrialResult
+
+SCHEMA = "sitframe-log"
+SCHEMA_VERSION = 1
+
+UNITS = {
+    "pose": "x [m], y [m], theta [rad]; row L is the pose after the last iteration",
+    "sonar": "range from the robot's rim [m], columns = sensor angles_deg",
+    "memberships": "membership of each situation [0-1], rows sum to 1",
+    "command": "heading change [deg, + = left], speed [m/s]",
+    "collision": "true if the iteration ended in a collision",
+    "contact": "contact point x, y [m] (NaN without collision)",
+    "nearest": "smallest sensor range at the start of the iteration [m]",
+    "weights": "arbiter weight of each behaviour (columns = behaviour labels)",
+    "samples": "sensor readings [m]",
+    "poses": "x [m], y [m], theta [rad]",
+}
+
+_COMPRESS_MIN = 4096  # elements; smaller arrays are stored contiguous
+
+
+def _write_value(group: h5py.Group, name: str, value: Any) -> None:
+    """Write a scalar as an attribute, an array as a (compressed) dataset."""
+    if "/" in name:
+        head, tail = name.split("/", 1)
+        sub = group.require_group(head)
+        _write_value(sub, tail, value)
+        return
+    if value is None:
+        return
+    if isinstance(value, bool | int | float | str | np.integer | np.floating | np.bool_):
+        group.attrs[name] = value
+        return
+    if isinstance(value, list | tuple) and all(isinstance(v, str) for v in value):
+        group.attrs[name] = json.dumps(list(value))
+        return
+    if isinstance(value, dict):
+        sub = group.require_group(name)
+        for k, v in value.items():
+            _write_value(sub, str(k), v)
+        return
+    arr = np.asarray(value)
+    kw: dict[str, Any] = {}
+    if arr.size >= _COMPRESS_MIN:
+        kw = {"compression": "gzip", "compression_opts": 1, "shuffle": True, "chunks": True}
+    if name in group:
+        del group[name]
+    ds = group.create_dataset(name, data=arr, **kw)
+    if name in UNITS:
+        ds.attrs["units"] = UNITS[name]
+
+
+class LogWriter:
+    """Writes one run's log by short open-append-close transactions.
+
+    Parameters
+    ----------
+    path
+        The HDF5 file. Created by :meth:`start`; its folder is created if needed.
+    """
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.path = Path(path)
+
+    def _open(self) -> h5py.File:
+        return h5py.File(self.path, "a")
+
+    def start(self, info: RunInfo, *, resume: bool = False) -> None:
+        """Create the file with the run's attributes (``status = "running"``)."""
+        if not resume:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = self.path.with_name(self.path.name + ".part")
+            with h5py.File(tmp, "w") as f:
+                a = f.attrs
+                a["schema"] = SCHEMA
+                a["schema_version"] = SCHEMA_VERSION
+                a["status"] = "running"
+                a["name"] = info.name
+                a["created"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+                a["config"] = info.config_text
+                a["config_hash"] = info.config_hash
+                a["seed"] = info.seed
+                a["n_trials"] = info.n_trials
+                a["iterations"] = info.iterations
+                a["source"] = str(info.extra.get("source", ""))
+                a["versions"] = json.dumps(info.extra.get("versions", {}))
+                a["plugins"] = json.dumps(info.plugins)
+                a["worlds"] = json.dumps(info.worlds)
+                f.create_group("trials")
+            os.replace(tmp, self.path)
+        else:
+            self.set_status("running")
+
+    def stage(self, stage: str, data: dict[str, Any]) -> None:
+        """Write a stage's data under ``/<stage>`` (replacing an earlier one)."""
+        with self._open() as f:
+            if stage in f:
+                del f[stage]
+            g = f.create_group(stage)
+            for k, v in data.items():
+                _write_value(g, k, v)
+            f.flush()
+
+    def trial(self, trial: TrialResult, behaviour_labels: list[str] | None = None) -> None:
+        """Write a finished trial and refresh the root summary table."""
+        with self._open() as f:
+            trials = f.require_group("trials")
+            name = f"{trial.index:04d}"
+            if name in trials:
+                del trials[name]
+            g = trials.create_group(name)
+            g.attrs["index"] = trial.index
+            g.attrs["seed"] = np.uint64(trial.seed)
+            g.attrs["world"] = trial.world
+            for k, v in trial.summary.items():
+                _write_value(g.require_group("summary"), k.replace("/", "."), v)
+            for k, v in trial.arrays.items():
+                _write_value(g, k, v)
+            if behaviour_labels:
+                g["weights"].attrs["columns"] = json.dumps(behaviour_labels)
+            for label, data in trial.behaviours.items():
+                bg = g.require_group("behaviours").require_group(label)
+                for k, v in data.items():
+                    _write_value(bg, k, v)
+            for k, v in trial.episodes.items():
+                _write_value(g.require_group("episodes"), k, v)
+            _write_summary(f)
+            f.flush()
+
+    def set_status(self, status: str) -> None:
+        with self._open() as f:
+            f.attrs["status"] = status
+            f.flush()
+
+
+def _summary_rows(f: h5py.File) -> tuple[list[str], list[dict[str, Any]]]:
+    rows = []
+    keys: dict[str, None] = {}
+    for name in sorted(f["trials"]):
+        s = f["trials"][name]["summary"].attrs
+        row = {"trial": int(f["trials"][name].attrs["index"])}
+        for k in s:
+            v = s[k]
+            if isinstance(v, bool | int | float | np.integer | np.floating | np.bool_):
+                row[k] = v
+                keys[k] = None
+        rows.append(row)
+    return ["trial", *keys], rows
+
+
+def _write_summary(f: h5py.File) -> None:
+    cols, rows = _summary_rows(f)
+    dtype = [("trial", "i4")] + [(c, "f8") for c in cols[1:]]
+    table = np.zeros(len(rows), dtype=dtype)
+    for i, row in enumerate(rows):
+        table[i]["trial"] = row["trial"]
+        for c in cols[1:]:
+            table[i][c] = float(row.get(c, np.nan))
+    if "summary" in f:
+        del f["summary"]
+    ds = f.create_dataset("summary", data=table)
+    ds.attrs["description"] = "one row per finished trial; booleans as 0/1, missing as NaN"
+
+
+# ---------------------------------------------------------------------------
+# Reader
+# ---------------------------------------------------------------------------
+
+
+def _read_group(g: h5py.Group) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for k, v in g.attrs.items():
+        out[k] = _attr(v)
+    for k, item in g.items():
+        if isinstance(item, h5py.Group):
+            for kk, vv in _read_group(item).items():
+                out[f"{k}/{kk}"] = vv
+        else:
+            out[k] = item[()]
+    return out
+
+
+def _attr(v: Any) -> Any:
+    if isinstance(v, bytes):
+        v = v.decode()
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
+
+
+@dataclass
+class TrialLog:
+    """One trial read back from a log.
+
+    Attributes
+    ----------
+    index, seed, world
+        Trial number, 64-bit seed, world name.
+    summary
+        Summary scalars (``converged``, ``convergence_iteration``, ...).
+    arrays
+        Per-iteration arrays (see the module docstring for names and units).
+    behaviours
+        Behaviour label -> flattened dict of its logged data.
+    episodes
+        Evaluation / goal-episode arrays.
+    """
+
+    index: int
+    seed: int
+    world: str
+    summary: dict[str, Any]
+    arrays: dict[str, np.ndarray]
+    behaviours: dict[str, dict[str, Any]]
+    episodes: dict[str, Any] = field(default_factory=dict)
+
+    def policy(self, label: str) -> dict[str, np.ndarray]:
+        """The learned policy (``output -> rule base``) of behaviour ``label``."""
+        data = self.behaviours[label]
+        return {k.split("/", 1)[1]: np.asarray(v) for k, v in data.items()
+                if k.startswith("policy/")}
+
+
+@dataclass
+class Log:
+    """A sitframe HDF5 log opened for reading (the file is not kept open).
+
+    Use :func:`open_log`. Attributes mirror the root attributes; methods read
+    stages and trials on demand.
+    """
+
+    path: str
+    attrs: dict[str, Any]
+
+    @property
+    def status(self) -> str:
+        return str(self.attrs.get("status", "unknown"))
+
+    @property
+    def complete(self) -> bool:
+        return self.status == "complete"
+
+    @property
+    def config(self) -> dict[str, Any]:
+        return tomllib.loads(self.attrs["config"])
+
+    @property
+    def worlds(self) -> dict[str, str]:
+        return json.loads(self.attrs.get("worlds", "{}"))
+
+    @property
+    def plugins(self) -> list[dict[str, Any]]:
+        return json.loads(self.attrs.get("plugins", "[]"))
+
+    @property
+    def versions(self) -> dict[str, str]:
+        return json.loads(self.attrs.get("versions", "{}"))
+
+    def _file(self) -> h5py.File:
+        return h5py.File(self.path, "r")
+
+    def has(self, group: str) -> bool:
+        with self._file() as f:
+            return group in f
+
+    def trial_indices(self) -> list[int]:
+        with self._file() as f:
+            if "trials" not in f:
+                return []
+            return sorted(int(f["trials"][n].attrs["index"]) for n in f["trials"])
+
+    def stage(self, name: str) -> dict[str, Any]:
+        """Flattened dict of a stage group (``collect`` or ``cluster``)."""
+        with self._file() as f:
+            if name not in f:
+                raise InputError(f"the log has no '{name}' stage (status: {self.status})",
+                                 file=self.path, key=name)
+            return _read_group(f[name])
+
+    def interpreter_state(self) -> dict[str, Any]:
+        """The fitted interpreter state written by the cluster stage."""
+        with self._file() as f:
+            if "cluster/state" not in f:
+                raise InputError("the log has no fitted situations (no /cluster/state); "
+                                 "was the cluster stage run?", file=self.path, key="cluster")
+            return _read_group(f["cluster/state"])
+
+    def trial(self, index: int) -> TrialLog:
+        """Read trial ``index`` (an InputError lists the trials present if it is missing)."""
+        with self._file() as f:
+            name = f"trials/{index:04d}"
+            if name not in f:
+                have = self.trial_indices()
+                raise InputError(f"the log has no trial {index}; it has "
+                                 f"{have if have else 'no finished trials'}",
+                                 file=self.path, key="trials")
+            g = f[name]
+            arrays = {}
+            for k, item in g.items():
+                if k in ("summary", "behaviours", "episodes"):
+                    continue
+                if isinstance(item, h5py.Group):
+                    for kk, ds in item.items():
+                        arrays[f"{k}/{kk}"] = ds[()]
+                else:
+                    arrays[k] = item[()]
+            behaviours = ({lb: _read_group(bg) for lb, bg in g["behaviours"].items()}
+                          if "behaviours" in g else {})
+            episodes = _read_group(g["episodes"]) if "episodes" in g else {}
+            summary = dict(_read_group(g["summary"])) if "summary" in g else {}
+            summary = {k.replace(".", "/"): v for k, v in summary.items()}
+            return TrialLog(int(g.attrs["index"]), int(g.attrs["seed"]), str(g.attrs["world"]),
+                            summary, arrays, behaviours, episodes)
+
+    def summary(self) -> np.ndarray:
+        """The root summary table (structured array, one row per finished trial)."""
+        with self._file() as f:
+            if "summary" not in f:
+                return np.zeros(0, dtype=[("trial", "i4")])
+            return f["summary"][()]
+
+
+def open_log(path: str | os.PathLike[str]) -> Log:
+    """Open a sitframe log for reading.
+
+    Raises
+    ------
+    InputError
+        The file does not exist, is not HDF5, is not a sitframe log, or has a
+        schema version this sitframe does not know.
+    """
+    p = str(path)
+    if not os.path.exists(p):
+        raise InputError("log file not found", file=p)
+    if not h5py.is_hdf5(p):
+        raise InputError("not an HDF5 file (expected a sitframe .h5 log)", file=p)
+    try:
+        with h5py.File(p, "r") as f:
+            attrs = {k: _attr(v) for k, v in f.attrs.items()}
+    except OSError as exc:
+        raise InputError(f"cannot open HDF5 log (truncated or corrupted?): {exc}", file=p) from None
+    if attrs.get("schema") != SCHEMA:
+        raise InputError(f"not a sitframe log (root attribute schema is "
+                         f"{attrs.get('schema')!r}, expected {SCHEMA!r})", file=p)
+    version = attrs.get("schema_version")
+    if version != SCHEMA_VERSION:
+        raise InputError(f"unknown log schema version {version!r}; this sitframe reads version "
+                         f"{SCHEMA_VERSION}", file=p, key="schema_version")
+    return Log(p, attrs)

@@ -1,0 +1,444 @@
+"""The scheduler: resolves components from a config and runs the stages.
+
+Stages of an experiment (DESIGN section 3): **collect** sensor data →
+**cluster** (fit the situation interpreter) → **learn** (N independent
+trials) → **evaluate** (each trial's frozen policy in other worlds). The core
+knows no component by name: everything is looked up in the
+:class:`~sitframe.pluginmanager.Registry` by the names the config gives.
+
+One control iteration (1.5 s of robot time)::
+
+    reading   = sensor.read(world, pose, rng)
+    u         = interpreter.memberships(reading)
+    proposals = {label: b.propose(context) for b in behaviours}
+    proposal  = arbiter.combine(context, proposals)
+    outcome   = step_robot(world, pose, command, robot, rng)
+    r         = reward(transition)        # per learning behaviour
+    b.learn(transition, r)
+    hook.sitframe_step(record)            # only if some plugin implements it
+
+Seeds: the run seed ``S`` gives each stage and each trial its own
+:class:`numpy.random.SeedSequence` (``spawn_key`` = stage, trial), so trial
+``k`` is the same whatever the number of trials or workers, and all
+randomness of a trial flows from one :class:`numpy.random.Generator`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import platform
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pluggy
+
+from sitframe import __version__
+from sitframe.collect import Collected, collect_trajectories, collect_wander
+from sitframe.config import config_hash, to_toml
+from sitframe.errors import InputError, PluginError
+from sitframe.metrics import collisions_per_1000, coverage, path_length
+from sitframe.pluginmanager import Registry, get_plugin_manager
+from sitframe.records import Context, Proposal, RunInfo, StepRecord, Transition, TrialResult
+from sitframe.robot import Command, RobotParams, step_robot
+from sitframe.world import World, load_world
+
+STAGE_COLLECT, STAGE_CLUSTER, STAGE_TRIALS, STAGE_EVAL = 0, 1, 2, 3
+
+
+def stage_seed(seed: int, stage: int, index: int = 0) -> int:
+    """A 64-bit seed for ``(stage, index)`` derived from the run seed."""
+    ss = np.random.SeedSequence(entropy=seed, spawn_key=(stage, index))
+    return int(ss.generate_state(1, np.uint64)[0])
+
+
+@dataclass
+class Resolved:
+    """A config resolved against a registry: creates fresh components on demand."""
+
+    cfg: dict[str, Any]
+    registry: Registry
+    file: str | None = None
+    robot: RobotParams = field(default_factory=RobotParams)
+    _worlds: dict[str, World] = field(default_factory=dict)
+
+    @classmethod
+    def build(cls, cfg: dict[str, Any], registry: Registry, file: str | None = None) -> Resolved:
+        try:
+            robot = RobotParams(**cfg["robot"])
+        except InputError as exc:
+            raise exc.at(file=file, key_prefix="robot") from None
+        except (ValueError, TypeError) as exc:
+            raise InputError(str(exc), file=file, key="robot") from None
+        res = cls(cfg, registry, file, robot)
+        # Create each component once now so bad names/params fail before anything runs.
+        res.sensor()
+        res.interpreter()
+        res.behaviours()
+        res.arbiter()
+        return res
+
+    def _create(self, kind: str, section: str, table: dict[str, Any]) -> Any:
+        params = {k: v for k, v in table.items() if k != "component"}
+        return self.registry.create(kind, table["component"], params, file=self.file, key=section)
+
+    def sensor(self) -> Any:
+        return self._create("sensor", "sensor", self.cfg["sensor"])
+
+    def interpreter(self) -> Any:
+        return self._create("interpreter", "interpreter", self.cfg["interpreter"])
+
+    def arbiter(self) -> Any:
+        return self._create("arbiter", "arbiter", self.cfg["arbiter"])
+
+    def behaviours(self) -> dict[str, tuple[Any, Any | None]]:
+        """Label -> (behaviour, reward or None), in config order."""
+        out = {}
+        for label, table in self.cfg["behaviours"].items():
+            key = f"behaviours.{label}"
+            params = {k: v for k, v in table.items() if k not in
+                      ("component", "reward", "reward_params", "policy_from")}
+            beh = self.registry.create("behaviour", table["component"], params,
+                                       file=self.file, key=key)
+            reward = None
+            if "reward" in table:
+                reward = self.registry.create("reward", table["reward"],
+                                              dict(table.get("reward_params", {})),
+                                              file=self.file, key=f"{key}.reward")
+            out[label] = (beh, reward)
+        return out
+
+    def world(self, name: str, key: str = "experiment.world") -> World:
+        if name not in self._worlds:
+            try:
+                self._worlds[name] = load_world(name)
+            except InputError as exc:
+                if exc.file is None:
+                    raise InputError(exc.message, file=self.file, key=key) from None
+                raise
+        return self._worlds[name]
+
+
+@dataclass(frozen=True)
+class TrialSpec:
+    """Everything one trial needs; picklable so workers can run it.
+
+    Attributes
+    ----------
+    index
+        Trial number.
+    seed
+        64-bit seed of the trial's Generator.
+    world
+        World name.
+    iterations
+        Number of control iterations.
+    learn
+        Whether behaviours with a reward learn (False = evaluation).
+    interpreter_state
+        Fitted interpreter state (from the cluster stage or a log).
+    policies
+        Behaviour label -> policy dict to load before the trial.
+    evaluate
+        World names to evaluate the trial's final policy in afterwards.
+    eval_iterations
+        Iterations per evaluation.
+    """
+
+    index: int
+    seed: int
+    world: str
+    iterations: int
+    learn: bool
+    interpreter_state: dict[str, Any]
+    policies: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
+    evaluate: tuple[str, ...] = ()
+    eval_iterations: int = 1000
+
+
+def simulate(
+    res: Resolved,
+    spec: TrialSpec,
+    *,
+    step_hook: Callable[[StepRecord], Any] | None = None,
+    world: World | None = None,
+    start: np.ndarray | None = None,
+) -> TrialResult:
+    """Run one trial (learning or frozen evaluation) and return its arrays."""
+    rng = np.random.default_rng(spec.seed)
+    world = world or res.world(spec.world)
+    sensor = res.sensor()
+    interp = res.interpreter()
+    interp.load_state(spec.interpreter_state)
+    c = interp.n_situations
+    behaviours = res.behaviours()
+    arbiter = res.arbiter()
+    L = spec.iterations
+    for label, (beh, _r) in behaviours.items():
+        if label in spec.policies:
+            beh.load_policy(spec.policies[label])
+        beh.reset(rng, c, L)
+    learners = [(label, beh, rew) for label, (beh, rew) in behaviours.items()
+                if rew is not None and spec.learn]
+    labels = list(behaviours)
+    default_speed = float(res.cfg["experiment"]["default_speed"])
+    robot = res.robot
+
+    d = len(sensor.angles_deg)
+    pose_a = np.empty((L + 1, 3))
+    sonar_a = np.empty((L, d))
+    u_a = np.empty((L, c))
+    cmd_a = np.empty((L, 2))
+    coll_a = np.zeros(L, dtype=bool)
+    contact_a = np.full((L, 2), np.nan)
+    near_a = np.empty(L)
+    weights_a = np.empty((L, len(labels)))
+    prop_a = {lb: np.empty((L, 2)) for lb in labels}
+    rew_a = {lb: np.empty(L) for lb, _b, _r in learners}
+
+    pose = (world.start if start is None else start).astype(float)
+    reading = sensor.read(world, pose, rng)
+    u = interp.memberships(reading)
+    ctx = Context(0, pose, reading, u, float(reading.min()), world, world.goal)
+    for t in range(L):
+        proposals = {lb: beh.propose(ctx) for lb, (beh, _r) in behaviours.items()}
+        prop, weights = arbiter.combine(ctx, proposals)
+        speed = prop.speed_m_s if prop.speed_m_s is not None else default_speed
+        cmd = Command(prop.heading_deg, speed)
+        out = step_robot(world, pose, cmd, robot, rng)
+        pose = out.pose
+        reading2 = sensor.read(world, pose, rng)
+        u2 = interp.memberships(reading2)
+        ctx2 = Context(t + 1, pose, reading2, u2, float(reading2.min()), world, world.goal)
+        tr = Transition(ctx, cmd, out, ctx2)
+        rewards = {}
+        for lb, beh, rew in learners:
+            r = float(rew(tr))
+            rewards[lb] = r
+            rew_a[lb][t] = r
+            beh.learn(tr, r)
+        pose_a[t] = ctx.pose
+        sonar_a[t] = ctx.reading
+        u_a[t] = ctx.memberships
+        cmd_a[t] = (cmd.heading_change_deg, cmd.speed_m_s)
+        if out.collided:
+            coll_a[t] = True
+            contact_a[t] = out.contact_xy
+        near_a[t] = ctx.nearest
+        weights_a[t] = weights
+        for lb in labels:
+            p = proposals[lb]
+            prop_a[lb][t] = (p.heading_deg, np.nan if p.speed_m_s is None else p.speed_m_s)
+        if step_hook is not None:
+            step_hook(StepRecord(spec.index, tr, proposals, weights, rewards))
+        ctx = ctx2
+    pose_a[L] = pose
+
+    arrays: dict[str, np.ndarray] = {
+        "pose": pose_a, "sonar": sonar_a, "memberships": u_a, "command": cmd_a,
+        "collision": coll_a, "contact": contact_a, "nearest": near_a, "weights": weights_a,
+    }
+    for lb in labels:
+        arrays[f"proposals/{lb}"] = prop_a[lb]
+    for lb in rew_a:
+        arrays[f"reward/{lb}"] = rew_a[lb]
+    bdata = {lb: beh.trial_data() for lb, (beh, _r) in behaviours.items()}
+    summary = trial_summary(world, arrays, bdata, robot)
+    result = TrialResult(spec.index, spec.seed, world.name, arrays, bdata, summary)
+    if spec.evaluate:
+        policies = {lb: extract_policy(data) for lb, data in bdata.items()}
+        for k, wname in enumerate(spec.evaluate):
+            ev_spec = dataclasses.replace(
+                spec, seed=stage_seed(spec.seed % (2**63), STAGE_EVAL, k), world=wname,
+                iterations=spec.eval_iterations, learn=False, policies=policies, evaluate=())
+            ev = simulate(res, ev_spec)
+            result.episodes[f"eval/{wname}/pose"] = ev.arrays["pose"]
+            result.episodes[f"eval/{wname}/collision"] = ev.arrays["collision"]
+            for key, val in ev.summary.items():
+                result.summary[f"eval/{wname}/{key}"] = val
+    return result
+
+
+def extract_policy(bdata: dict[str, Any]) -> dict[str, np.ndarray]:
+    """The ``policy/<output>`` entries of a behaviour's trial data."""
+    return {k.split("/", 1)[1]: np.asarray(v) for k, v in bdata.items()
+            if k.startswith("policy/")}
+
+
+def trial_summary(world: World, arrays: dict[str, np.ndarray], bdata: dict[str, dict[str, Any]],
+                  robot: RobotParams) -> dict[str, Any]:
+    """Scalars of a trial: convergence, collision rates, distance, coverage."""
+    coll = arrays["collision"]
+    L = coll.size
+    conv = [d.get("convergence_iteration", -1) for d in bdata.values() if "converged" in d]
+    converged = bool(conv) and all(c >= 0 for c in conv)
+    conv_it = max(conv) if converged else -1
+    xy = arrays["pose"][:, :2]
+    out = {
+        "iterations": L,
+        "converged": converged,
+        "convergence_iteration": int(conv_it),
+        "collisions": int(coll.sum()),
+        "collisions_per_1000": collisions_per_1000(coll),
+        "collisions_before_convergence": int(coll[: conv_it if converged else L].sum()),
+        "collisions_per_1000_after_convergence":
+            collisions_per_1000(coll, conv_it) if converged and conv_it < L else float("nan"),
+        "distance_m": path_length(xy),
+        "mean_speed_m_s": float(arrays["command"][:, 1].mean()),
+        "coverage": coverage(world, xy, radius=robot.radius),
+    }
+    for key, val in arrays.items():
+        if key.startswith("reward/"):
+            out[f"mean_{key.replace('/', '_')}"] = float(val.mean())
+    return out
+
+
+@dataclass
+class RunResult:
+    """What :func:`run_experiment` returns (also the basis of ``run --json``)."""
+
+    info: RunInfo
+    trials: list[TrialResult]
+    wall_seconds: float
+    status: str
+    interpreter_state: dict[str, Any] = field(default_factory=dict)
+    sensor_angles_deg: np.ndarray | None = None
+
+
+class Experiment:
+    """A configured experiment ready to run its stages.
+
+    Parameters
+    ----------
+    cfg
+        Validated config (:func:`sitframe.config.load_config`).
+    source
+        Where the config came from (for messages).
+    pm
+        Plugin manager; a fresh one from :func:`get_plugin_manager` by default.
+    out
+        HDF5 log path (written by the logger plugin), or ``None``.
+    """
+
+    def __init__(self, cfg: dict[str, Any], *, source: str | None = None,
+                 pm: pluggy.PluginManager | None = None, out: str | None = None,
+                 plugins_dirs: tuple[str, ...] = ()) -> None:
+        self.cfg = cfg
+        self.source = source
+        self.pm = pm or get_plugin_manager(plugins_dirs=plugins_dirs)
+        self.registry = Registry.collect(self.pm)
+        self.res = Resolved.build(cfg, self.registry, source)
+        self.out = out
+        text = to_toml(cfg)
+        e = cfg["experiment"]
+        worlds = {}
+        names = [e["world"]]
+        if "collect" in e["stages"]:
+            names += cfg["collect"]["worlds"]
+        if "evaluate" in e["stages"]:
+            names += cfg["evaluate"]["worlds"]
+        for name in dict.fromkeys(names):
+            key = "experiment.world" if name == e["world"] else "worlds"
+            worlds[name] = self.res.world(name, key).text
+        plugins = [dataclasses.asdict(info) for info, _c in self.registry.plugins_table()]
+        self.info = RunInfo(
+            name=e["name"], config=cfg, config_text=text, config_hash=config_hash(text),
+            seed=int(e["seed"]), out=out, n_trials=int(e["trials"]),
+            iterations=int(e["iterations"]), plugins=plugins, worlds=worlds,
+            extra={"versions": versions(), "source": source or ""},
+        )
+
+    # -- stages ------------------------------------------------------------
+    def collect(self) -> Collected:
+        c = self.cfg["collect"]
+        rng = np.random.default_rng(stage_seed(self.info.seed, STAGE_COLLECT))
+        worlds = [self.res.world(n, "collect.worlds") for n in c["worlds"]]
+        sensor = self.res.sensor()
+        if c["mode"] == "trajectory":
+            return collect_trajectories(worlds, sensor, rng, speed=c["speed"],
+                                        rate_hz=c["rate_hz"], params=self.res.robot)
+        return collect_wander(worlds, sensor, rng, n_samples=c["wander_samples"],
+                              speed=c["speed"], rate_hz=c["rate_hz"], params=self.res.robot)
+
+    def cluster(self, samples: np.ndarray) -> tuple[dict[str, Any], dict[str, Any]]:
+        rng = np.random.default_rng(stage_seed(self.info.seed, STAGE_CLUSTER))
+        interp = self.res.interpreter()
+        fit = interp.fit(samples, rng)
+        return fit, interp.state()
+
+    def trial_spec(self, k: int, interpreter_state: dict[str, Any],
+                   policies: dict[str, dict[str, np.ndarray]] | None = None) -> TrialSpec:
+        e = self.cfg["experiment"]
+        evaluate = tuple(self.cfg["evaluate"]["worlds"]) if "evaluate" in e["stages"] else ()
+        return TrialSpec(
+            index=k, seed=stage_seed(self.info.seed, STAGE_TRIALS, k), world=e["world"],
+            iterations=int(e["iterations"]), learn=True, interpreter_state=interpreter_state,
+            policies=policies or {}, evaluate=evaluate,
+            eval_iterations=int(self.cfg["evaluate"]["iterations"]))
+
+    def run(self, *, interpreter_state: dict[str, Any] | None = None,
+            collected: Collected | None = None,
+            policies: dict[str, dict[str, np.ndarray]] | None = None,
+            trials: list[int] | None = None) -> RunResult:
+        """Run the configured stages; observers see every stage and trial.
+
+        ``interpreter_state`` (e.g. read from an earlier log) skips collect
+        and cluster. ``trials`` restricts which trial indices run (resume).
+        """
+        hook = self.pm.hook
+        t0 = time.perf_counter()
+        stages = self.cfg["experiment"]["stages"]
+        hook.sitframe_run_start(run=self.info)
+        status = "failed"
+        results: list[TrialResult] = []
+        try:
+            if interpreter_state is None:
+                if collected is None and "collect" in stages:
+                    collected = self.collect()
+                    hook.sitframe_stage_end(run=self.info, stage="collect", data={
+                        "samples": collected.samples, "poses": collected.poses,
+                        "source": collected.source, "worlds": list(collected.worlds)})
+                if collected is None:
+                    raise InputError("the run needs clusters: include 'collect' and 'cluster' "
+                                     "in experiment.stages or reuse clusters from a log",
+                                     file=self.source, key="experiment.stages")
+                fit, interpreter_state = self.cluster(collected.samples)
+                hook.sitframe_stage_end(run=self.info, stage="cluster",
+                                        data={**fit, "state": interpreter_state})
+            if "learn" in stages:
+                step_hook = None
+                if hook.sitframe_step.get_hookimpls():
+                    def step_hook(rec: StepRecord) -> None:
+                        hook.sitframe_step(record=rec)
+                idx = range(self.info.n_trials) if trials is None else trials
+                for k in idx:
+                    spec = self.trial_spec(k, interpreter_state, policies)
+                    result = simulate(self.res, spec, step_hook=step_hook)
+                    results.append(result)
+                    hook.sitframe_trial_end(run=self.info, trial=result)
+            status = "complete"
+        except KeyboardInterrupt:
+            status = "aborted"
+            raise
+        finally:
+            hook.sitframe_run_end(run=self.info, status=status)
+        return RunResult(self.info, results, time.perf_counter() - t0, status,
+                         interpreter_state or {}, np.asarray(self.res.sensor().angles_deg))
+
+
+def versions() -> dict[str, str]:
+    """Versions of sitframe, Python and the numerical/IO stack."""
+    import h5py
+    import scipy
+
+    return {
+        "sitframe": __version__, "python": platform.python_version(), "numpy": np.__version__,
+        "scipy": scipy.__version__, "h5py": h5py.__version__, "hdf5": h5py.version.hdf5_version,
+        "pluggy": pluggy.__version__ if hasattr(pluggy, "__version__") else "",
+    }
+
+
+__all__ = ["Experiment", "Resolved", "RunResult", "TrialSpec", "simulate", "stage_seed",
+           "PluginError", "Proposal"]
