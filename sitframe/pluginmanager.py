@@ -230,7 +230,7 @@ class Registry:
         for kind, hook_name in KINDS.items():
             reg.entries[kind] = {}
             hook = getattr(pm.hook, hook_name)
-            for impl in reversed(hook.get_hookimpls()):
+            for impl in hook.get_hookimpls():  # registration order
                 plugin_name = impl.plugin_name
                 where = reg.describe_plugin(plugin_name)
                 try:

@@ -1,0 +1,131 @@
+"""Situation FCS inference and fuzzy Q-learning behaviour users rely on."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sitframe.errors import InputError
+from sitframe.fuzzy import SituationFCS, centre_of_gravity, label_strengths
+from sitframe.learning import FuzzyQLearner, QLearningParams, softmax_choice
+
+HEADINGS = np.array([90, 60, 30, 0, -30, -60, -90], float)
+
+
+def test_min_max_inference_and_cog():
+    # Two rules conclude +90 with strengths 0.2 and 0.5: max gives 0.5.
+    u = np.array([0.2, 0.5, 0.3])
+    fcs = SituationFCS(HEADINGS, np.array([0, 0, 3]))
+    expected = (0.5 * 90 + 0.3 * 0) / 0.8
+    assert fcs.output(u) == pytest.approx(expected)
+    assert centre_of_gravity(label_strengths(u, np.array([0, 0, 3]), 7), HEADINGS) == \
+        pytest.approx(expected)
+
+
+@given(st.lists(st.floats(0, 1), min_size=2, max_size=16).filter(lambda v: sum(v) > 1e-3),
+       st.data())
+@settings(max_examples=200, deadline=None)
+def test_output_is_within_singleton_range(u, data):
+    u = np.asarray(u) / np.sum(u)
+    actions = np.asarray(data.draw(st.lists(st.integers(0, 6), min_size=len(u),
+                                            max_size=len(u))))
+    out = SituationFCS(HEADINGS, actions).output(u)
+    used = HEADINGS[actions]
+    assert used.min() - 1e-9 <= out <= used.max() + 1e-9
+
+
+def test_fcs_rejects_bad_rules():
+    with pytest.raises(ValueError, match="rule_actions must index the 7 singletons"):
+        SituationFCS(HEADINGS, np.array([0, 7]))
+
+
+def test_params_validate_with_key():
+    with pytest.raises(InputError, match="alpha: expected a number in"):
+        QLearningParams(alpha=0.0)
+    with pytest.raises(InputError, match=r"update: expected one of 'thesis', 'standard', got "
+                                         r"'standrd' \(did you mean 'standard'\?\)"):
+        QLearningParams(update="standrd")
+
+
+def test_softmax_prefers_high_q_and_is_scale_free():
+    rng = np.random.default_rng(0)
+    q = np.array([[10.0, 0.0, 0.0]] * 2000)
+    picks = softmax_choice(q, QLearningParams(temperature=0.25), rng)
+    frac = np.mean(picks == 0)
+    # worst:best = exp(-4): P(best) = 1 / (1 + 2 exp(-4)) ~ 0.965
+    assert frac == pytest.approx(1 / (1 + 2 * np.exp(-4)), abs=0.02)
+    picks2 = softmax_choice(q * 100, QLearningParams(temperature=0.25),
+                            np.random.default_rng(0))
+    assert np.array_equal(picks, picks2)  # relative mode ignores the Q scale
+
+
+def _learner(**kw):
+    params = QLearningParams(**kw)
+    return FuzzyQLearner(2, 3, params, np.random.default_rng(1), 100)
+
+
+def test_thesis_update_matches_eq_4_14():
+    lr = _learner(alpha=0.5, gamma=0.9, activation=0.3, b=100)
+    lr.q[:] = [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]
+    lr.rule_base[:] = [0, 1]
+    u0, u1 = np.array([0.8, 0.2]), np.array([0.5, 0.5])
+    v = 0.5 * 3.0 + 0.5 * 6.0
+    lr.update(u0, 10.0, u1, False, 0)
+    assert lr.q[0, 0] == pytest.approx(1.0 + 0.5 * (0.8 * 10 + 0.9 * 0.8 * v - 1.0))
+    assert lr.q[1, 1] == 5.0  # strength 0.2 < activation 0.3: not updated
+
+
+def test_standard_update():
+    lr = _learner(alpha=0.5, gamma=0.9, activation=0.0, update="standard", b=100)
+    lr.q[:] = [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]
+    lr.rule_base[:] = [0, 1]
+    u0, u1 = np.array([0.8, 0.2]), np.array([0.5, 0.5])
+    v = 4.5
+    lr.update(u0, 10.0, u1, False, 0)
+    assert lr.q[0, 0] == pytest.approx(1.0 + 0.5 * 0.8 * (10 + 0.9 * v - 1.0))
+    assert lr.q[1, 1] == pytest.approx(5.0 + 0.5 * 0.2 * (10 + 0.9 * v - 5.0))
+
+
+def test_rule_base_changes_after_b_iterations_or_collision():
+    lr = _learner(b=5)
+    u = np.array([1.0, 0.0])
+    for t in range(4):
+        lr.update(u, 1.0, u, False, t)
+    assert len(lr._snap_iter) == 1
+    lr.update(u, 1.0, u, False, 4)
+    assert lr._snap_iter[-1] == 5
+    lr.update(u, -30.0, u, True, 5)
+    assert lr._snap_iter[-1] == 6
+
+
+def test_converges_when_greedy_is_stable_for_p_changes_then_freezes():
+    lr = _learner(b=1, p=3)
+    lr.q[:] = [[5.0, 0.0, 0.0], [0.0, 0.0, 5.0]]
+    lr.greedy = lr.q.argmax(axis=1)
+    u = np.array([0.0, 0.0])  # nothing activated: Q does not move
+    for t in range(3):
+        lr.update(u, 0.0, u, False, t)
+    assert lr.converged_at == 3
+    assert list(lr.rule_base) == [0, 2]
+    q_before = lr.q.copy()
+    lr.update(np.array([1.0, 0.0]), -30.0, u, True, 3)
+    assert np.array_equal(lr.q, q_before)  # frozen: no more learning
+    data = lr.data(4)
+    assert data["converged"] and data["convergence_iteration"] == 3
+    assert list(data["final_rule_base"]) == [0, 2]
+
+
+def test_learner_is_deterministic():
+    def run():
+        lr = FuzzyQLearner(4, 7, QLearningParams(), np.random.default_rng(7), 200)
+        rng = np.random.default_rng(3)
+        for t in range(200):
+            u = rng.dirichlet(np.ones(4))
+            lr.update(u, float(rng.normal()), rng.dirichlet(np.ones(4)), bool(t % 17 == 0), t)
+        return lr.data(200)
+
+    a, b = run(), run()
+    for k in a:
+        assert np.array_equal(np.asarray(a[k]), np.asarray(b[k]))
