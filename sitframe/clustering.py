@@ -1,0 +1,572 @@
+"""The clustering stage: FCM trials, validity-based trial selection, sweeps over c.
+
+Pure functions, no I/O (thesis 4.4 and 5.1). Sonar data ``X`` is samples x 8
+ranges in metres; the FCM itself lives in :mod:`sitframe.fcm`.
+
+Typical use::
+
+    trials = cluster_trials(X, 8, n_trials=50, seed=1)
+    prototypes = trials.chosen_centers          # (8, 8) situations
+    [describe_prototype(v, SONAR_ANGLES_DEG) for v in prototypes]
+
+Trial selection rule (:func:`select_trial`)
+-------------------------------------------
+1. Eligible trials are those with ``min_card > 0`` (no empty cluster, Eq. 4.8).
+   If no trial is eligible, all trials are (``ClusteringTrials.fallback`` is
+   set and a ``RuntimeWarning`` is issued).
+2. Each measure with a direction ``"max"``/``"min"`` in
+   :data:`sitframe.fcm.MEASURE_DIRECTIONS` (pc, pe, nfi, min_ht, mean_ht, rf,
+   objective) is ranked over the eligible trials, rank 1 = best, ties get their
+   average rank; NaN ranks last.
+3. The chosen trial has the smallest mean rank over those seven measures
+   ("satisfies the most measures"); ties go to the lowest objective ``J_m``,
+   then to the lowest trial index.
+
+Note that ``nfi`` is an increasing function of ``pc`` for a fixed ``c``, so
+the partition coefficient effectively counts twice, as in the thesis's list.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+import warnings
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import rankdata
+
+from sitframe.fcm import (
+    MEASURE_DIRECTIONS,
+    _as_generator,
+    _check_c,
+    _check_int,
+    _check_m,
+    _check_X,
+    _fcm_core,
+    _Workspace,
+    init_centers_from_data,
+    partition_measures,
+)
+
+__all__ = [
+    "RANKED_MEASURES",
+    "SELECTION_RULE",
+    "SONAR_ANGLES_DEG",
+    "ClusteringTrials",
+    "SweepResult",
+    "canonical_order",
+    "cluster_trials",
+    "describe_prototype",
+    "rank_trials",
+    "select_trial",
+    "sweep_c",
+]
+
+#: Bearings of the 8 front sonars of the Pioneer 2DX, degrees, positive = left.
+SONAR_ANGLES_DEG: tuple[float, ...] = (90.0, 50.0, 30.0, 10.0, -10.0, -30.0, -50.0, -90.0)
+
+#: The measures that are ranked when selecting a trial (every "max"/"min" one).
+RANKED_MEASURES: tuple[str, ...] = tuple(
+    k for k, v in MEASURE_DIRECTIONS.items() if v in ("max", "min")
+)
+
+#: Human-readable statement of the selection rule (stored in every result).
+SELECTION_RULE = (
+    "among trials with min_card > 0, the best mean rank over "
+    + ", ".join(f"{k} ({MEASURE_DIRECTIONS[k]})" for k in RANKED_MEASURES)
+    + " (rank 1 = best, ties averaged); ties -> lowest objective, then lowest trial index"
+)
+
+
+# ------------------------------------------------------------------------- selection
+
+
+def _check_measures(measures: Mapping[str, object]) -> tuple[dict[str, np.ndarray], int]:
+    if not isinstance(measures, Mapping):
+        raise TypeError(f"measures must be a mapping name -> (T,) array, got "
+                        f"{type(measures).__name__}")
+    need = (*RANKED_MEASURES, "min_card")
+    missing = [k for k in need if k not in measures]
+    if missing:
+        raise ValueError(f"measures is missing {missing}; expected the keys {list(need)}")
+    arrs = {k: np.atleast_1d(np.asarray(measures[k], dtype=np.float64)) for k in need}
+    lengths = {k: a.shape for k, a in arrs.items()}
+    shapes = set(lengths.values())
+    if len(shapes) != 1 or next(iter(shapes)) == (0,) or len(next(iter(shapes))) != 1:
+        raise ValueError(f"measures must all be 1-D arrays of the same length T >= 1, got "
+                         f"shapes {lengths}")
+    return arrs, next(iter(shapes))[0]
+
+
+def rank_trials(
+    measures: Mapping[str, np.ndarray],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """Rank trials on each measure in its direction (see the module docstring).
+
+    Parameters
+    ----------
+    measures : mapping str -> array, shape (T,)
+        At least the keys of :data:`RANKED_MEASURES` and ``min_card``.
+
+    Returns
+    -------
+    ranks : ndarray, shape (T, len(RANKED_MEASURES))
+        Rank of each eligible trial on each measure (1 = best); NaN for
+        ineligible trials.
+    mean_rank : ndarray, shape (T,)
+        Mean over the measures; NaN for ineligible trials.
+    eligible : ndarray of bool, shape (T,)
+        Trials that took part in the ranking.
+    fallback : bool
+        True if no trial had ``min_card > 0`` and all trials were ranked.
+    """
+    arrs, T = _check_measures(measures)
+    eligible = arrs["min_card"] > 0
+    fallback = not eligible.any()
+    if fallback:
+        eligible = np.ones(T, dtype=bool)
+    ranks = np.full((T, len(RANKED_MEASURES)), np.nan)
+    for j, key in enumerate(RANKED_MEASURES):
+        v = arrs[key][eligible]
+        oriented = -v if MEASURE_DIRECTIONS[key] == "max" else v.copy()
+        oriented[np.isnan(oriented)] = np.inf  # NaN ranks last
+        ranks[eligible, j] = rankdata(oriented, method="average")
+    mean_rank = np.full(T, np.nan)
+    mean_rank[eligible] = ranks[eligible].mean(axis=1)
+    return ranks, mean_rank, eligible, bool(fallback)
+
+
+def select_trial(measures: Mapping[str, np.ndarray]) -> int:
+    """Index of the trial chosen by the documented rule (module docstring).
+
+    Among trials with ``min_card > 0`` (all trials if there is none, with a
+    ``RuntimeWarning``), the best mean rank over the ranked measures; ties to
+    the lowest objective, then the lowest index.
+
+    Parameters
+    ----------
+    measures : mapping str -> array, shape (T,)
+        Per-trial validity measures, e.g. ``ClusteringTrials.measures``.
+
+    Returns
+    -------
+    int
+        Trial index in ``range(T)``.
+    """
+    _, mean_rank, eligible, fallback = rank_trials(measures)
+    if fallback:
+        warnings.warn(
+            "no trial has min_card > 0 (every partition has an empty cluster); "
+            "selecting among all trials", RuntimeWarning, stacklevel=2,
+        )
+    return _pick(mean_rank, eligible, np.asarray(measures["objective"], dtype=np.float64))
+
+
+def _pick(mean_rank: np.ndarray, eligible: np.ndarray, objective: np.ndarray) -> int:
+    idx = np.flatnonzero(eligible)
+    obj = np.where(np.isnan(objective[idx]), np.inf, objective[idx])
+    order = np.lexsort((idx, obj, mean_rank[idx]))
+    return int(idx[order[0]])
+
+
+# ---------------------------------------------------------------------------- trials
+
+
+@dataclass(frozen=True)
+class ClusteringTrials:
+    """Every FCM trial of one clustering run and the chosen one.
+
+    Attributes
+    ----------
+    c : int
+        Number of clusters.
+    m : float
+        Fuzzifier.
+    centers : ndarray, shape (T, c, d)
+        Final prototypes of every trial (units of X, metres for sonar).
+    init_centers : ndarray, shape (T, c, d)
+        The random starting centres of every trial.
+    measures : dict[str, ndarray]
+        Every key of :func:`sitframe.fcm.validity` -> (T,) values.
+    n_iter : ndarray of int, shape (T,)
+        Centre updates per trial.
+    converged : ndarray of bool, shape (T,)
+        Whether each trial met ``tol`` within ``max_iter``.
+    chosen : int
+        Index of the selected trial.
+    ranks : ndarray, shape (T, len(ranked_measures))
+        Per-measure ranks (1 = best; NaN for trials excluded by ``min_card``).
+    mean_rank : ndarray, shape (T,)
+        Mean of ``ranks`` over the measures (NaN for excluded trials).
+    ranked_measures : tuple of str
+        Column names of ``ranks``.
+    eligible : ndarray of bool, shape (T,)
+        Trials that took part in the ranking.
+    fallback : bool
+        True if no trial had ``min_card > 0`` and all were ranked.
+    rule : str
+        The selection rule, human-readable.
+    tol, max_iter
+        FCM stopping parameters used.
+    """
+
+    c: int
+    m: float
+    centers: np.ndarray
+    init_centers: np.ndarray
+    measures: dict[str, np.ndarray]
+    n_iter: np.ndarray
+    converged: np.ndarray
+    chosen: int
+    ranks: np.ndarray
+    mean_rank: np.ndarray
+    ranked_measures: tuple[str, ...]
+    eligible: np.ndarray
+    fallback: bool
+    rule: str
+    tol: float
+    max_iter: int
+
+    @property
+    def n_trials(self) -> int:
+        """Number of trials T."""
+        return int(self.centers.shape[0])
+
+    @property
+    def chosen_centers(self) -> np.ndarray:
+        """(c, d) prototypes of the chosen trial."""
+        return self.centers[self.chosen]
+
+    @property
+    def chosen_measures(self) -> dict[str, float]:
+        """Validity measures of the chosen trial."""
+        return {k: float(v[self.chosen]) for k, v in self.measures.items()}
+
+
+def _check_tol(tol: object) -> float:
+    if isinstance(tol, bool) or not isinstance(tol, numbers.Real) or not (
+        math.isfinite(float(tol)) and float(tol) > 0
+    ):
+        raise ValueError(f"tol must be a finite real number > 0 (centre movement, units of X), "
+                         f"got {tol!r}")
+    return float(tol)
+
+
+def cluster_trials(
+    X: np.ndarray,
+    c: int,
+    *,
+    n_trials: int = 50,
+    m: float = 1.2,
+    tol: float = 1e-5,
+    max_iter: int = 300,
+    seed: int | np.random.Generator | None,
+) -> ClusteringTrials:
+    """Run ``n_trials`` FCM trials from different random starts and select one.
+
+    Each trial starts from ``c`` distinct samples chosen by
+    :func:`sitframe.fcm.init_centers_from_data`; all starts are drawn from the
+    one generator made from ``seed``, trial after trial, so a given seed gives
+    identical results. Every trial's centres and validity measures are kept
+    (``measures["objective"]`` is ``J_m`` at the trial's final centres). The
+    trial is selected by :func:`select_trial`.
+
+    Parameters
+    ----------
+    X : array_like, shape (n, d)
+        Samples, e.g. sonar ranges in metres.
+    c : int
+        Number of clusters, ``2 <= c <= n``.
+    n_trials : int, default 50
+        Number of trials T (the thesis uses 50), >= 1.
+    m, tol, max_iter
+        As in :func:`sitframe.fcm.fcm`.
+    seed : int, numpy.random.Generator or None
+        Required keyword (pass None explicitly for fresh OS entropy). A
+        Generator is advanced.
+
+    Returns
+    -------
+    ClusteringTrials
+    """
+    Xa = _check_X(X)
+    n, d = Xa.shape
+    c = _check_c(c, n)
+    n_trials = _check_int(n_trials, "n_trials", 1)
+    mf = _check_m(m)
+    tol = _check_tol(tol)
+    max_iter = _check_int(max_iter, "max_iter", 1)
+    rng = _as_generator(seed)
+    ws = _Workspace(Xa, c, mf)
+    centers = np.empty((n_trials, c, d))
+    inits = np.empty((n_trials, c, d))
+    n_iter = np.empty(n_trials, dtype=np.int64)
+    converged = np.empty(n_trials, dtype=bool)
+    rows: list[dict[str, float]] = []
+    for t in range(n_trials):
+        inits[t] = init_centers_from_data(Xa, c, rng)
+        res = _fcm_core(ws, inits[t], tol, max_iter)
+        centers[t] = res.centers
+        n_iter[t] = res.n_iter
+        converged[t] = res.converged
+        row = partition_measures(res.u)
+        row["objective"] = res.objective
+        rows.append(row)
+    measures = {k: np.array([r[k] for r in rows]) for k in MEASURE_DIRECTIONS}
+    ranks, mean_rank, eligible, fallback = rank_trials(measures)
+    if fallback:
+        warnings.warn(
+            f"c = {c}: no trial of {n_trials} has min_card > 0 (every partition has an empty "
+            "cluster); selecting among all trials", RuntimeWarning, stacklevel=2,
+        )
+    chosen = _pick(mean_rank, eligible, measures["objective"])
+    rule = SELECTION_RULE + (" [fallback: no trial had min_card > 0, all ranked]"
+                             if fallback else "")
+    return ClusteringTrials(
+        c=c, m=mf, centers=centers, init_centers=inits, measures=measures, n_iter=n_iter,
+        converged=converged, chosen=chosen, ranks=ranks, mean_rank=mean_rank,
+        ranked_measures=RANKED_MEASURES, eligible=eligible, fallback=fallback, rule=rule,
+        tol=tol, max_iter=max_iter,
+    )
+
+
+# ----------------------------------------------------------------------------- sweep
+
+
+@dataclass(frozen=True)
+class SweepResult:
+    """Validity of the chosen partition for each number of clusters (thesis Fig. 4.5).
+
+    Attributes
+    ----------
+    cs : ndarray of int, shape (k,)
+        Numbers of clusters, in the order swept.
+    measures : dict[str, ndarray]
+        Every validity key -> (k,) value of the chosen trial for each ``cs[i]``.
+    chosen : ndarray of int, shape (k,)
+        Chosen trial index for each c.
+    fallback : ndarray of bool, shape (k,)
+        Whether the selection for each c had to ignore ``min_card > 0``.
+    trials : tuple of ClusteringTrials
+        The full trials for each c.
+    m : float
+    n_trials : int
+    """
+
+    cs: np.ndarray
+    measures: dict[str, np.ndarray]
+    chosen: np.ndarray
+    fallback: np.ndarray
+    trials: tuple[ClusteringTrials, ...]
+    m: float
+    n_trials: int
+
+    def at(self, c: int) -> ClusteringTrials:
+        """The :class:`ClusteringTrials` for ``c`` clusters."""
+        hits = np.flatnonzero(self.cs == c)
+        if hits.size == 0:
+            raise ValueError(f"c must be one of the swept values {self.cs.tolist()}, got {c!r}")
+        return self.trials[int(hits[0])]
+
+    def centers(self, c: int) -> np.ndarray:
+        """(c, d) chosen prototypes for ``c`` clusters."""
+        return self.at(c).chosen_centers
+
+
+def sweep_c(
+    X: np.ndarray,
+    cs: Iterable[int] = range(2, 21),
+    *,
+    n_trials: int = 20,
+    m: float = 1.2,
+    tol: float = 1e-5,
+    max_iter: int = 300,
+    seed: int | np.random.Generator | None,
+) -> SweepResult:
+    """:func:`cluster_trials` for each number of clusters in ``cs`` (thesis Fig. 4.5).
+
+    One generator made from ``seed`` is used for all c, in the order of ``cs``,
+    so the same ``(seed, cs)`` gives identical results.
+
+    Parameters
+    ----------
+    X : array_like, shape (n, d)
+    cs : iterable of int, default 2..20
+        Distinct numbers of clusters, each in ``[2, n]``.
+    n_trials : int, default 20
+        Trials per c (fewer than the 50 of a final clustering, to keep a full
+        sweep to seconds).
+    m, tol, max_iter, seed
+        As in :func:`cluster_trials`.
+
+    Returns
+    -------
+    SweepResult
+    """
+    Xa = _check_X(X)
+    try:
+        cs_list = list(cs)
+    except TypeError as exc:
+        raise TypeError(f"cs must be an iterable of integers, got {cs!r}") from exc
+    if not cs_list:
+        raise ValueError("cs must contain at least one number of clusters, got none")
+    cs_int = [_check_c(c, Xa.shape[0]) for c in cs_list]
+    if len(set(cs_int)) != len(cs_int):
+        raise ValueError(f"cs must not repeat a value, got {cs_int}")
+    rng = _as_generator(seed)
+    trials = tuple(
+        cluster_trials(Xa, c, n_trials=n_trials, m=m, tol=tol, max_iter=max_iter, seed=rng)
+        for c in cs_int
+    )
+    measures = {k: np.array([t.measures[k][t.chosen] for t in trials])
+                for k in MEASURE_DIRECTIONS}
+    return SweepResult(
+        cs=np.array(cs_int, dtype=np.int64), measures=measures,
+        chosen=np.array([t.chosen for t in trials], dtype=np.int64),
+        fallback=np.array([t.fallback for t in trials], dtype=bool), trials=trials,
+        m=trials[0].m, n_trials=trials[0].n_trials,
+    )
+
+
+# ------------------------------------------------------------------------ prototypes
+
+
+def _check_proto(center: object, angles_deg: object) -> tuple[np.ndarray, np.ndarray]:
+    v = np.asarray(center, dtype=np.float64)
+    a = np.asarray(angles_deg, dtype=np.float64)
+    if v.ndim != 1 or a.ndim != 1 or v.shape != a.shape or v.size < 1:
+        raise ValueError(f"center and angles_deg must be 1-D arrays of the same length (one "
+                         f"range per sonar), got shapes {v.shape} and {a.shape}")
+    if not (np.all(np.isfinite(v)) and np.all(np.isfinite(a))):
+        raise ValueError("center and angles_deg must be finite")
+    return v, a
+
+
+def describe_prototype(
+    center: np.ndarray,
+    angles_deg: np.ndarray = SONAR_ANGLES_DEG,
+    *,
+    near: float = 0.5,
+    far: float = 1.5,
+    lane: float = 0.4,
+) -> str:
+    """Short description of a sonar prototype, for tables and plot titles.
+
+    Each range ``r`` at bearing ``a`` (degrees, positive = left) is a hit at
+    forward distance ``r cos a`` and lateral offset ``r sin a`` (metres):
+
+    - *ahead* = the smallest forward distance of the hits of the frontal sonars
+      (``|a| <= 35``) that lie in the robot's lane (``|r sin a| <= lane``);
+      ``inf`` if none does (e.g. the +-30 deg sonars seeing corridor walls);
+    - *left* / *right* = the smallest range of the sonars with ``a >= 45`` /
+      ``a <= -45``; the *side* sonars are those with ``|a| >= 70``.
+
+    A value is *blocked* below ``near`` and *close* below ``far``. Rules, first
+    match wins:
+
+    - ahead, left and right all below ``far`` -> ``"dead end"``;
+    - ahead below ``far``:
+      both sides open -> ``"front blocked"`` (``"obstacle ahead"`` if it is
+      only close), followed by ``", left open"`` or ``", right open"`` for the
+      side whose mean range (over all ``a > 0`` / ``a < 0`` sonars) is larger by
+      at least 0.25 m;
+      left below ``far`` -> ``"left corner"`` if the left side sonar is below
+      ``far``, else ``"obstacle front-left"``; the same on the right;
+    - ahead open: left and right below ``far`` -> ``"corridor"``; left below
+      ``far`` -> ``"wall on left"`` (``"obstacle front-left"`` if the side sonar
+      is open); the same on the right; otherwise ``"open space"``.
+
+    Parameters
+    ----------
+    center : array_like, shape (d,)
+        One prototype: a range per sonar, metres.
+    angles_deg : array_like, shape (d,), default Pioneer 2DX front ring
+        Sonar bearings, degrees, positive = left (counter-clockwise).
+    near, far : float, metres
+        Thresholds, ``0 < near < far``.
+    lane : float, metres
+        Half-width of the lane ahead of the robot, > 0.
+
+    Returns
+    -------
+    str
+    """
+    v, a = _check_proto(center, angles_deg)
+    if not (0 < near < far):
+        raise ValueError(f"near and far must satisfy 0 < near < far (metres), got near={near}, "
+                         f"far={far}")
+    if not lane > 0:
+        raise ValueError(f"lane must be > 0 (metres), got {lane}")
+    rad = np.deg2rad(a)
+    fwd, lat = v * np.cos(rad), v * np.sin(rad)
+    in_lane = (np.abs(a) <= 35) & (np.abs(lat) <= lane)
+    ahead = float(fwd[in_lane].min()) if in_lane.any() else math.inf
+
+    def level(mask: np.ndarray) -> float:
+        return float(v[mask].min()) if mask.any() else math.inf
+
+    left, right = level(a >= 45), level(a <= -45)
+    left_side, right_side = level(a >= 70), level(a <= -70)
+    if ahead < far and left < far and right < far:
+        return "dead end"
+    if ahead < far:
+        if left >= far and right >= far:
+            head = "front blocked" if ahead < near else "obstacle ahead"
+            lm = float(v[a > 0].mean()) if (a > 0).any() else 0.0
+            rm = float(v[a < 0].mean()) if (a < 0).any() else 0.0
+            if abs(lm - rm) >= 0.25:
+                return f"{head}, {'left' if lm > rm else 'right'} open"
+            return head
+        if left < far:
+            return "left corner" if left_side < far else "obstacle front-left"
+        return "right corner" if right_side < far else "obstacle front-right"
+    if left < far and right < far:
+        return "corridor"
+    if left < far:
+        return "wall on left" if left_side < far else "obstacle front-left"
+    if right < far:
+        return "wall on right" if right_side < far else "obstacle front-right"
+    return "open space"
+
+
+def canonical_order(
+    centers: np.ndarray,
+    angles_deg: np.ndarray = SONAR_ANGLES_DEG,
+    *,
+    max_range: float = 3.0,
+) -> np.ndarray:
+    """A deterministic order of prototypes, so that tables and figures are stable.
+
+    Each prototype's obstacle *proximity* per sonar is ``max(max_range - r, 0)``.
+    Prototypes are sorted by total proximity (open space first, dead ends
+    last), ties broken by the proximity-weighted mean bearing (left first),
+    then by the ranges themselves (lexicographically).
+
+    Parameters
+    ----------
+    centers : array_like, shape (c, d)
+        Prototypes, metres.
+    angles_deg : array_like, shape (d,)
+        Sonar bearings, degrees, positive = left.
+    max_range : float
+        Sonar maximum range, metres.
+
+    Returns
+    -------
+    ndarray of int, shape (c,)
+        Permutation: ``centers[order]`` is the canonical order.
+    """
+    V = np.asarray(centers, dtype=np.float64)
+    a = np.asarray(angles_deg, dtype=np.float64)
+    if V.ndim != 2 or a.ndim != 1 or V.shape[1] != a.size:
+        raise ValueError(f"centers must be (c, d) and angles_deg (d,), got shapes {V.shape} "
+                         f"and {a.shape}")
+    prox = np.maximum(max_range - V, 0.0)
+    total = prox.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        bearing = np.where(total > 0, prox @ a / np.where(total > 0, total, 1.0), 0.0)
+    keys = [V[:, j] for j in range(V.shape[1] - 1, -1, -1)]
+    order = np.lexsort((*keys, -np.round(bearing, 9), np.round(total, 9)))
+    return order.astype(np.int64)
