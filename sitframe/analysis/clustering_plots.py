@@ -1,0 +1,260 @@
+"""Figures of the clustering stage: prototypes (thesis Fig. 5.2), validity per trial (Fig. 5.1)
+and per number of clusters (Fig. 4.5).
+
+Every function builds and returns a :class:`matplotlib.figure.Figure` without
+touching pyplot's global state (headless-safe; save it with ``fig.savefig``).
+Colours are from the Okabe-Ito colour-blind-safe palette.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from sitframe.clustering import SONAR_ANGLES_DEG, ClusteringTrials, SweepResult, describe_prototype
+from sitframe.fcm import MEASURE_DIRECTIONS
+
+__all__ = ["OKABE_ITO", "plot_measures_by_c", "plot_measures_by_trial", "plot_prototypes"]
+
+#: Okabe-Ito palette (colour-blind safe).
+OKABE_ITO: dict[str, str] = {
+    "black": "#000000",
+    "orange": "#E69F00",
+    "sky_blue": "#56B4E9",
+    "bluish_green": "#009E73",
+    "yellow": "#F0E442",
+    "blue": "#0072B2",
+    "vermillion": "#D55E00",
+    "reddish_purple": "#CC79A7",
+}
+
+# short panel titles and y-axis labels (units: X in metres -> J_m in m^2)
+_TITLES = {
+    "pc": "Partition coefficient",
+    "pe": "Partition entropy",
+    "nfi": "Non-fuzzy index",
+    "min_ht": "Min. hard tendency",
+    "mean_ht": "Mean hard tendency",
+    "min_card": "Min. cardinality",
+    "rf": "Relative fuzziness",
+    "objective": "Objective $J_m$",
+}
+_YLABELS = {
+    "pc": "$V_{PC}$",
+    "pe": "$V_{PE}$ (nats)",
+    "nfi": "NFI",
+    "min_ht": "MinHT",
+    "mean_ht": "MeanHT",
+    "min_card": "MinCard (samples)",
+    "rf": "$R_f$",
+    "objective": "$J_m$ ({u}$^2$)",
+}
+_DIRECTION_WORDS = {"max": "max", "min": "min", "positive": "> 0"}
+_FONT = 8
+
+
+def _panel_title(key: str) -> str:
+    return f"{_TITLES[key]} ({_DIRECTION_WORDS[MEASURE_DIRECTIONS[key]]})"
+
+
+def plot_prototypes(
+    centers: np.ndarray,
+    angles_deg: np.ndarray = SONAR_ANGLES_DEG,
+    *,
+    max_range: float = 3.0,
+    labels: list[str] | None = None,
+    ncols: int | None = None,
+    first_index: int = 1,
+) -> Figure:
+    """Each cluster prototype as a polar plot of its sonar ranges (thesis Fig. 5.2).
+
+    Front is up and left is left (bearings counter-clockwise from the heading);
+    each beam is drawn from the robot (the black triangle at the centre, pointing
+    along the heading) to its range, the free space they enclose is shaded.
+
+    Parameters
+    ----------
+    centers : array_like, shape (c, d)
+        Prototypes: one range per sonar, metres (clipped to ``max_range`` for drawing).
+    angles_deg : array_like, shape (d,)
+        Sonar bearings, degrees, positive = left; default the Pioneer 2DX front ring.
+    max_range : float, metres
+        Sonar maximum range = radial axis limit.
+    labels : list of str, optional
+        One description per prototype; default :func:`describe_prototype`.
+    ncols : int, optional
+        Columns of the grid (default ``min(c, 4)``).
+    first_index : int, default 1
+        Number of the first situation in the titles ``"S{i}: {label}"``.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    V = np.asarray(centers, dtype=np.float64)
+    a = np.asarray(angles_deg, dtype=np.float64)
+    if V.ndim != 2 or a.ndim != 1 or V.shape[1] != a.size:
+        raise ValueError(f"centers must be (c, d) and angles_deg (d,) with the same d, got "
+                         f"shapes {V.shape} and {a.shape}")
+    if not max_range > 0:
+        raise ValueError(f"max_range must be > 0 (metres), got {max_range}")
+    c = V.shape[0]
+    if labels is None:
+        labels = [describe_prototype(v, a) for v in V]
+    elif len(labels) != c:
+        raise ValueError(f"labels must have one entry per prototype ({c}), got {len(labels)}")
+    ncols = min(c, 4) if ncols is None else int(ncols)
+    if ncols < 1:
+        raise ValueError(f"ncols must be >= 1, got {ncols}")
+    nrows = math.ceil(c / ncols)
+    fig = Figure(figsize=(1.75 * ncols + 0.2, 1.45 * nrows + 0.35), layout="constrained")
+    order = np.argsort(a)
+    th = np.deg2rad(a[order])
+    ticks = np.arange(1.0, max_range + 1e-9, 1.0)
+    for i in range(c):
+        ax = fig.add_subplot(nrows, ncols, i + 1, projection="polar")
+        ax.set_theta_zero_location("N")
+        ax.set_theta_direction(1)  # counter-clockwise: positive bearings to the left
+        ax.set_thetamin(-100)
+        ax.set_thetamax(100)
+        ax.set_ylim(0, max_range)
+        r = np.clip(V[i, order], 0.0, max_range)
+        ax.fill(np.r_[0.0, th, 0.0], np.r_[0.0, r, 0.0], color=OKABE_ITO["sky_blue"],
+                alpha=0.35, lw=0)
+        for t, rr in zip(th, r, strict=True):
+            ax.plot([t, t], [0, rr], color=OKABE_ITO["blue"], lw=0.9)
+        ax.plot(th, r, "o", color=OKABE_ITO["blue"], ms=3, zorder=3)
+        ax.plot([0], [0], marker="^", color=OKABE_ITO["black"], ms=6, zorder=4)
+        ax.set_xticks(np.deg2rad([-90, -45, 0, 45, 90]))
+        ax.set_xticklabels([])
+        ax.set_yticks(ticks)
+        ax.set_yticklabels([f"{t:g}" for t in ticks[:-1]] + [f"{ticks[-1]:g} m"])
+        ax.tick_params(axis="y", labelsize=_FONT - 2, pad=0)
+        ax.set_rlabel_position(-97)
+        ax.grid(lw=0.4, alpha=0.6)
+        ax.set_title(f"S{i + first_index}: {labels[i]}", fontsize=_FONT, pad=2)
+    fig.suptitle("Cluster prototypes: sonar ranges (m), front up, left on the left",
+                 fontsize=_FONT + 1)
+    return fig
+
+
+def _finite_for_plot(values: np.ndarray) -> tuple[np.ndarray, int]:
+    v = np.asarray(values, dtype=np.float64).copy()
+    bad = ~np.isfinite(v)
+    v[bad] = np.nan
+    return v, int(bad.sum())
+
+
+def _note_nonfinite(ax, n_bad: int) -> None:
+    if n_bad:
+        ax.text(0.98, 0.04, f"{n_bad} infinite, not shown", transform=ax.transAxes,
+                ha="right", va="bottom", fontsize=_FONT - 2, color=OKABE_ITO["black"])
+
+
+def _measure_grid(n: int) -> tuple[Figure, np.ndarray]:
+    ncols = 4
+    nrows = math.ceil(n / ncols)
+    fig = Figure(figsize=(7.0, 1.75 * nrows + 0.4), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False).ravel())
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    return fig, axes
+
+
+def plot_measures_by_trial(trials: ClusteringTrials, *, units: str = "m") -> Figure:
+    """Every validity measure against trial index, chosen trial highlighted (thesis Fig. 5.1).
+
+    Hollow markers are trials excluded from the selection (``min_card = 0``);
+    each panel's title gives the measure's direction.
+
+    Parameters
+    ----------
+    trials : ClusteringTrials
+        Output of :func:`sitframe.clustering.cluster_trials`.
+    units : str, default "m"
+        Units of the clustered data (for ``J_m``'s axis label).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    keys = list(MEASURE_DIRECTIONS)
+    fig, axes = _measure_grid(len(keys))
+    T = trials.n_trials
+    idx = np.arange(T)
+    ok = trials.eligible
+    k = trials.chosen
+    for ax, key in zip(axes, keys, strict=False):
+        v, n_bad = _finite_for_plot(trials.measures[key])
+        ax.plot(idx, v, color=OKABE_ITO["blue"], lw=0.6, alpha=0.5)
+        ax.plot(idx[ok], v[ok], "o", ms=2.8, color=OKABE_ITO["blue"], label="trial")
+        if (~ok).any():
+            ax.plot(idx[~ok], v[~ok], "o", ms=2.8, mfc="none", color=OKABE_ITO["blue"],
+                    label="excluded (MinCard = 0)")
+        ax.axvline(k, color=OKABE_ITO["vermillion"], lw=0.8, alpha=0.6, zorder=0)
+        ax.plot([k], [v[k]], "D", ms=5, color=OKABE_ITO["vermillion"],
+                label=f"chosen (trial {k})", zorder=4)
+        if key == "min_card":
+            ax.axhline(0, color=OKABE_ITO["black"], lw=0.6, ls="--")
+        ax.set_title(_panel_title(key), fontsize=_FONT)
+        ax.set_ylabel(_YLABELS[key].replace("{u}", units), fontsize=_FONT)
+        ax.set_xlabel("Trial index", fontsize=_FONT)
+        ax.tick_params(labelsize=_FONT - 1)
+        ax.grid(lw=0.3, alpha=0.5)
+        _note_nonfinite(ax, n_bad)
+    handles, lbls = axes[0].get_legend_handles_labels()
+    fig.legend(handles, lbls, loc="outside lower center", ncols=len(lbls), fontsize=_FONT,
+               frameon=False)
+    fig.suptitle(f"Validity measures of {T} FCM trials (c = {trials.c}, m = {trials.m:g})",
+                 fontsize=_FONT + 1)
+    return fig
+
+
+def plot_measures_by_c(sweep: SweepResult, *, units: str = "m") -> Figure:
+    """Validity measures of the chosen partition against the number of clusters (Fig. 4.5).
+
+    Hollow markers mark numbers of clusters where no trial had ``min_card > 0``.
+
+    Parameters
+    ----------
+    sweep : SweepResult
+        Output of :func:`sitframe.clustering.sweep_c`.
+    units : str, default "m"
+        Units of the clustered data (for ``J_m``'s axis label).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    keys = list(MEASURE_DIRECTIONS)
+    fig, axes = _measure_grid(len(keys))
+    order = np.argsort(sweep.cs)
+    cs = sweep.cs[order]
+    fb = sweep.fallback[order]
+    for ax, key in zip(axes, keys, strict=False):
+        v, n_bad = _finite_for_plot(sweep.measures[key][order])
+        ax.plot(cs, v, "-", color=OKABE_ITO["bluish_green"], lw=1.0)
+        ax.plot(cs[~fb], v[~fb], "o", ms=3, color=OKABE_ITO["bluish_green"],
+                label="chosen trial")
+        if fb.any():
+            ax.plot(cs[fb], v[fb], "o", ms=3, mfc="none", color=OKABE_ITO["vermillion"],
+                    label="no trial with MinCard > 0")
+        if key == "min_card":
+            ax.axhline(0, color=OKABE_ITO["black"], lw=0.6, ls="--")
+        ax.set_title(_panel_title(key), fontsize=_FONT)
+        ax.set_ylabel(_YLABELS[key].replace("{u}", units), fontsize=_FONT)
+        ax.set_xlabel("Number of clusters $c$", fontsize=_FONT)
+        if cs.size <= 20:
+            ax.set_xticks(cs[:: max(1, math.ceil(cs.size / 7))])
+        ax.tick_params(labelsize=_FONT - 1)
+        ax.grid(lw=0.3, alpha=0.5)
+        _note_nonfinite(ax, n_bad)
+    if fb.any():
+        handles, lbls = axes[0].get_legend_handles_labels()
+        fig.legend(handles, lbls, loc="outside lower center", ncols=len(lbls), fontsize=_FONT,
+                   frameon=False)
+    fig.suptitle(f"Validity of the chosen partition vs. number of clusters "
+                 f"(m = {sweep.m:g}, {sweep.n_trials} trials per c)", fontsize=_FONT + 1)
+    return fig
