@@ -35,8 +35,8 @@ _TITLES = {
     "pc": "Partition coefficient",
     "pe": "Partition entropy",
     "nfi": "Non-fuzzy index",
-    "min_ht": "Min. hard tendency",
-    "mean_ht": "Mean hard tendency",
+    "min_ht": "Min. hard tend.",
+    "mean_ht": "Mean hard tend.",
     "min_card": "Min. cardinality",
     "rf": "Relative fuzziness",
     "objective": "Objective $J_m$",
@@ -156,7 +156,7 @@ def _note_nonfinite(ax, n_bad: int) -> None:
 def _measure_grid(n: int) -> tuple[Figure, np.ndarray]:
     ncols = 4
     nrows = math.ceil(n / ncols)
-    fig = Figure(figsize=(7.0, 1.75 * nrows + 0.4), layout="constrained")
+    fig = Figure(figsize=(7.2, 1.8 * nrows + 0.4), layout="constrained")
     axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False).ravel())
     for ax in axes[n:]:
         ax.set_visible(False)
@@ -198,7 +198,7 @@ def plot_measures_by_trial(trials: ClusteringTrials, *, units: str = "m") -> Fig
                 label=f"chosen (trial {k})", zorder=4)
         if key == "min_card":
             ax.axhline(0, color=OKABE_ITO["black"], lw=0.6, ls="--")
-        ax.set_title(_panel_title(key), fontsize=_FONT)
+        ax.set_title(_panel_title(key), fontsize=_FONT - 0.5)
         ax.set_ylabel(_YLABELS[key].replace("{u}", units), fontsize=_FONT)
         ax.set_xlabel("Trial index", fontsize=_FONT)
         ax.tick_params(labelsize=_FONT - 1)
@@ -243,7 +243,7 @@ def plot_measures_by_c(sweep: SweepResult, *, units: str = "m") -> Figure:
                     label="no trial with MinCard > 0")
         if key == "min_card":
             ax.axhline(0, color=OKABE_ITO["black"], lw=0.6, ls="--")
-        ax.set_title(_panel_title(key), fontsize=_FONT)
+        ax.set_title(_panel_title(key), fontsize=_FONT - 0.5)
         ax.set_ylabel(_YLABELS[key].replace("{u}", units), fontsize=_FONT)
         ax.set_xlabel("Number of clusters $c$", fontsize=_FONT)
         if cs.size <= 20:
