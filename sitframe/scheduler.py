@@ -46,6 +46,9 @@ from sitframe.robot import Command, RobotParams, step_robot
 from sitframe.world import World, load_world
 
 STAGE_COLLECT, STAGE_CLUSTER, STAGE_TRIALS, STAGE_EVAL = 0, 1, 2, 3
+#: Summary keys of a frozen-policy evaluation (``evaluate --json`` and ``eval/<world>/...``).
+EVAL_KEYS = ("iterations", "collisions", "collisions_per_1000", "distance_m", "mean_speed_m_s",
+             "coverage")
 
 
 def stage_seed(seed: int, stage: int, index: int = 0) -> int:
@@ -256,8 +259,8 @@ def simulate(
             ev = simulate(res, ev_spec)
             result.episodes[f"eval/{wname}/pose"] = ev.arrays["pose"]
             result.episodes[f"eval/{wname}/collision"] = ev.arrays["collision"]
-            for key, val in ev.summary.items():
-                result.summary[f"eval/{wname}/{key}"] = val
+            for key in EVAL_KEYS:
+                result.summary[f"eval/{wname}/{key}"] = ev.summary[key]
     return result
 
 

@@ -1,0 +1,177 @@
+"""End to end through the CLI: run -> HDF5 log -> reader -> evaluate; errors exit 2."""
+
+from __future__ import annotations
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+
+from sitframe.cli import main
+from sitframe.logs import SCHEMA_VERSION, open_log
+
+SMALL = """
+[experiment]
+name = "small"
+trials = 2
+iterations = 300
+seed = 3
+
+[collect]
+worlds = ["collect-1", "collect-2"]
+
+[interpreter]
+component = "fcm"
+c = 6
+trials = 4
+
+[behaviours.avoid]
+component = "fuzzy-q"
+reward = "obstacle-avoidance"
+p = 5
+
+[evaluate]
+worlds = ["novel-1"]
+iterations = 100
+"""
+
+
+@pytest.fixture(scope="module")
+def small_run(tmp_path_factory):
+    d = tmp_path_factory.mktemp("run")
+    cfg = d / "small.toml"
+    cfg.write_text(SMALL)
+    out = d / "small.h5"
+    return cfg, out
+
+
+def _run_json(capsys, *argv):
+    code = main(list(argv))
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    return json.loads(captured.out)
+
+
+def test_run_json_contract_and_log(small_run, capsys):
+    cfg, out = small_run
+    doc = _run_json(capsys, "run", str(cfg), "--out", str(out), "--json")
+    assert doc["log"] == str(out)
+    assert doc["wall_seconds"] > 0
+    assert [t["trial"] for t in doc["trials"]] == [0, 1]
+    for t in doc["trials"]:
+        assert set(t) >= {"trial", "seed", "converged", "convergence_iteration",
+                          "collisions_per_1000_after_convergence", "rule_base"}
+        headings = t["rule_base"]["avoid.heading"]
+        assert len(headings) == 6
+        assert set(headings) <= {90.0, 60.0, 30.0, 0.0, -30.0, -60.0, -90.0}
+
+    log = open_log(out)
+    assert log.status == "complete"
+    assert log.attrs["schema_version"] == SCHEMA_VERSION
+    assert log.config["interpreter"]["c"] == 6
+    assert {"sitframe", "numpy", "h5py", "hdf5", "python"} <= set(log.versions)
+    assert any(p["name"] == "fuzzy-q" for p in log.plugins)
+    assert "novel-1" in log.worlds and "collect-1" in log.worlds
+    col = log.stage("collect")
+    assert col["samples"].shape[1] == 8 and col["samples"].shape[0] == col["poses"].shape[0]
+    cl = log.stage("cluster")
+    assert cl["trial_centers"].shape == (4, 6, 8)
+    assert 0 <= cl["chosen"] < 4
+    tr = log.trial(1)
+    assert tr.arrays["pose"].shape == (301, 3)
+    assert tr.arrays["sonar"].shape == (300, 8)
+    np.testing.assert_allclose(tr.arrays["memberships"].sum(axis=1), 1.0)
+    assert tr.arrays["reward/avoid"].shape == (300,)
+    beh = tr.behaviours["avoid"]
+    assert beh["heading/q_snapshots"].shape[1:] == (6, 7)
+    assert beh["heading/snapshot_iteration"][0] == 0
+    assert tr.policy("avoid")["heading"].shape == (6,)
+    summary = log.summary()
+    assert list(summary["trial"]) == [0, 1]
+    assert summary["collisions"][1] == tr.arrays["collision"].sum()
+    # reward is -30 exactly on collision iterations
+    r, c = tr.arrays["reward/avoid"], tr.arrays["collision"]
+    assert np.all(r[c] == -30.0) and np.all(r[~c] > 0)
+
+
+def test_evaluate_json_contract(small_run, capsys):
+    cfg, out = small_run
+    if not out.exists():
+        main(["run", str(cfg), "--out", str(out), "--json"])
+        capsys.readouterr()
+    doc = _run_json(capsys, "evaluate", str(out), "--world", "novel-2", "--trial", "1",
+                    "--iterations", "120", "--json")
+    assert set(doc) >= {"iterations", "collisions", "collisions_per_1000", "distance_m",
+                        "mean_speed_m_s", "coverage"}
+    assert doc["iterations"] == 120
+    assert 0.0 < doc["coverage"] <= 1.0
+    assert doc["mean_speed_m_s"] == pytest.approx(0.15)
+    assert doc["collisions_per_1000"] == pytest.approx(doc["collisions"] * 1000 / 120)
+
+
+def _datasets(path):
+    out = {}
+    with h5py.File(path, "r") as f:
+        def visit(name, obj):
+            if isinstance(obj, h5py.Dataset):
+                out[name] = obj[()]
+        f.visititems(visit)
+    return out
+
+
+def test_same_seed_gives_identical_datasets(tmp_path, capsys):
+    cfg = tmp_path / "small.toml"
+    cfg.write_text(SMALL.replace("trials = 2", "trials = 1"))
+    a, b = tmp_path / "a.h5", tmp_path / "b.h5"
+    main(["run", str(cfg), "--out", str(a), "--json"])
+    main(["run", str(cfg), "--out", str(b), "--json"])
+    capsys.readouterr()
+    da, db = _datasets(a), _datasets(b)
+    assert da.keys() == db.keys()
+    for k in da:  # bit for bit
+        assert da[k].dtype == db[k].dtype and da[k].tobytes() == db[k].tobytes(), k
+    main(["run", str(cfg), "--out", str(b), "--seed", "4", "--json"])
+    capsys.readouterr()
+    assert not np.array_equal(da["trials/0000/pose"], _datasets(b)["trials/0000/pose"])
+
+
+@pytest.mark.parametrize(
+    ("argv", "pattern"),
+    [
+        (["run", "obstacle-avoid"], r"unknown experiment 'obstacle-avoid' .*available presets"),
+        (["run", "nope.toml"], r"nope.toml: config file not found"),
+        (["run", "obstacle-avoidance", "--trials", "0"], r"--trials: must be at least 1"),
+        (["run", "obstacle-avoidance", "--world", "narnia"], r"experiment.world: unknown world"),
+        (["evaluate", "missing.h5", "--world", "training"], r"missing.h5: log file not found"),
+        (["world", "show", "narnia"], r"unknown world 'narnia'"),
+    ],
+)
+def test_bad_input_one_line_exit_2(argv, pattern, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.count("\n") == 1 and err.startswith("sitframe: error: ")
+    assert __import__("re").search(pattern, err), err
+    assert not (tmp_path / "logs").exists()  # nothing written
+
+
+def test_not_hdf5_and_wrong_schema(tmp_path, capsys):
+    bogus = tmp_path / "bogus.h5"
+    bogus.write_text("hello")
+    assert main(["evaluate", str(bogus), "--world", "training"]) == 2
+    assert "not an HDF5 file" in capsys.readouterr().err
+    other = tmp_path / "other.h5"
+    with h5py.File(other, "w") as f:
+        f.attrs["schema"] = "sitframe-log"
+        f.attrs["schema_version"] = 99
+    assert main(["evaluate", str(other), "--world", "training"]) == 2
+    assert "unknown log schema version 99" in capsys.readouterr().err
+
+
+def test_speed_needs_a_heading_log(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "speed"]) == 2
+    err = capsys.readouterr().err
+    assert "logs/obstacle-avoidance.h5: log file not found" in err
