@@ -164,7 +164,8 @@ class SonarRing:
             dist = np.full(ang.shape[0], reach)
         if self.rays_per_beam > 1:
             dist = dist.reshape(self._n, self.rays_per_beam).min(axis=1)
-        reading = dist - self.robot_radius
+        # a ray that hit nothing reads exactly max_range (no rounding from - radius)
+        reading = np.where(dist >= reach, self.max_range, dist - self.robot_radius)
         if self.noise_std > 0.0:
             reading = reading + rng.normal(0.0, self.noise_std, self._n)
         if self.dropout > 0.0:

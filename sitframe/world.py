@@ -379,7 +379,10 @@ def parse_world(text: str, *, file: str | None = None) -> World:
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"not valid TOML: {exc}", file=file) from exc
+        msg = str(exc)
+        if "line" not in msg:  # tomllib says "at end of document": give the line anyway
+            msg = f"{msg}, line {text.count(chr(10)) + (not text.endswith(chr(10)))}"
+        raise InputError(f"not valid TOML: {msg}", file=file) from exc
 
     _check_keys(data, _TOP_KEYS, "", file)
     for req in ("name", "robot", "walls"):
