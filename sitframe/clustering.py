@@ -45,6 +45,7 @@ from sitframe.fcm import (
     _check_m,
     _check_X,
     _fcm_core,
+    _ignore_underflow,
     _Workspace,
     init_centers_from_data,
     partition_measures,
@@ -254,6 +255,7 @@ def _check_tol(tol: object) -> float:
     return float(tol)
 
 
+@_ignore_underflow
 def cluster_trials(
     X: np.ndarray,
     c: int,

@@ -43,10 +43,12 @@ at 0); points within round-off of a centre are recomputed exactly.
 
 from __future__ import annotations
 
+import functools
 import math
 import numbers
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, ParamSpec, TypeVar
 
 import numpy as np
 from scipy.special import xlogy
@@ -96,6 +98,25 @@ _REL_ZERO = 1e-12
 _MAX_INT_POWER = 128
 # Samples per block ~ this many (c, block) elements, so that temporaries stay in cache.
 _BLOCK_ELEMENTS = 2**15
+
+
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
+
+
+def _ignore_underflow(func: Callable[_P, _R]) -> Callable[_P, _R]:
+    """Run ``func`` with floating-point underflow ignored (flushing to 0 is the intended result).
+
+    Memberships of far-away clusters legitimately underflow; without this a
+    caller's ``np.errstate(all="raise")`` would turn that into an error.
+    """
+
+    @functools.wraps(func)
+    def wrapper(*args: _P.args, **kwargs: _P.kwargs) -> _R:
+        with np.errstate(under="ignore"):
+            return func(*args, **kwargs)
+
+    return wrapper
 
 
 # --------------------------------------------------------------------------- results
@@ -398,6 +419,7 @@ class _Workspace:
 # ------------------------------------------------------------------------ public API
 
 
+@_ignore_underflow
 def memberships(X: np.ndarray, centers: np.ndarray, m: float) -> np.ndarray:
     """Fuzzy memberships of samples to clusters, Eq. 3.2.
 
@@ -430,6 +452,7 @@ def memberships(X: np.ndarray, centers: np.ndarray, m: float) -> np.ndarray:
     return u[0] if single else u
 
 
+@_ignore_underflow
 def init_centers_from_data(X: np.ndarray, c: int, rng: np.random.Generator) -> np.ndarray:
     """Pick ``c`` distinct samples of ``X`` as initial centres (Algorithm 1, step 4).
 
@@ -464,6 +487,7 @@ def init_centers_from_data(X: np.ndarray, c: int, rng: np.random.Generator) -> n
     return X[perm[np.concatenate([idx, rest])]].copy()
 
 
+@_ignore_underflow
 def fcm(
     X: np.ndarray,
     c: int,
@@ -572,6 +596,7 @@ def _check_u(u: object) -> np.ndarray:
     return ua
 
 
+@_ignore_underflow
 def partition_measures(
     u: np.ndarray, *, rf_count: Literal["points", "entries"] = "points"
 ) -> dict[str, float]:
@@ -626,6 +651,7 @@ def partition_measures(
     }
 
 
+@_ignore_underflow
 def validity(
     X: np.ndarray, result: FCMResult, *, rf_count: Literal["points", "entries"] = "points"
 ) -> dict[str, float]:

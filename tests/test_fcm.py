@@ -1,0 +1,329 @@
+"""Tests of sitframe.fcm: Eq. 3.2 memberships, Algorithm 1, validity measures (Eqs. 4.1-4.9)."""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from sitframe.fcm import (
+    MEASURE_DIRECTIONS,
+    FCMResult,
+    fcm,
+    memberships,
+    partition_measures,
+    validity,
+)
+
+KEYS = ["pc", "pe", "nfi", "min_ht", "mean_ht", "min_card", "rf", "objective"]
+
+
+def blobs(n=300, d=8, k=4, seed=0, spread=0.2):
+    rng = np.random.default_rng(seed)
+    protos = rng.uniform(0.3, 3.0, size=(k, d))
+    lab = rng.integers(0, k, n)
+    return np.clip(protos[lab] + rng.normal(0, spread, (n, d)), 0, 3)
+
+
+def naive_memberships(X, V, m):
+    D = np.sqrt(((X[:, None, :] - V[None, :, :]) ** 2).sum(-1))
+    ratio = (D[:, :, None] / D[:, None, :]) ** (2 / (m - 1))
+    return 1.0 / ratio.sum(axis=2)
+
+
+# ----------------------------------------------------------------------- memberships
+
+
+def test_memberships_match_eq_3_2():
+    rng = np.random.default_rng(1)
+    X, V = rng.normal(size=(50, 3)), rng.normal(size=(4, 3))
+    for m in (1.2, 1.5, 2.0, 2.7, 3.0):
+        np.testing.assert_allclose(memberships(X, V, m), naive_memberships(X, V, m),
+                                   rtol=1e-10, atol=1e-300)
+
+
+finite = st.floats(-50, 50, allow_nan=False, allow_infinity=False)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    X=arrays(np.float64, st.tuples(st.integers(1, 30), st.just(3)), elements=finite),
+    V=arrays(np.float64, st.tuples(st.integers(1, 6), st.just(3)), elements=finite),
+    m=st.floats(1.01, 3.0),
+)
+def test_memberships_are_a_fuzzy_partition(X, V, m):
+    with np.errstate(all="raise"), warnings.catch_warnings():
+        warnings.simplefilter("error")
+        u = memberships(X, V, m)
+    assert u.shape == (X.shape[0], V.shape[0])
+    assert np.all(np.isfinite(u))
+    assert np.all(u >= 0) and np.all(u <= 1)
+    np.testing.assert_allclose(u.sum(axis=1), 1.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("m", [1.01, 1.05, 1.2, 2.0])
+def test_memberships_far_points_no_overflow(m):
+    V = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    X = np.array([[1e6, 1e6], [-3e7, 2.0], [0.5, 0.5], [1e-9, 0.0]])
+    with np.errstate(all="raise"):
+        u = memberships(X, V, m)
+    np.testing.assert_allclose(u.sum(axis=1), 1.0, atol=1e-12)
+    assert u[3, 0] == pytest.approx(1.0)
+    assert u[2, 1] == pytest.approx(u[2, 2])
+
+
+def test_point_on_a_centre_gets_membership_one():
+    V = np.array([[0.0, 0.0], [2.0, 1.0], [5.0, 5.0]])
+    X = np.array([[2.0, 1.0], [0.0, 0.0], [1.0, 1.0]])
+    with np.errstate(all="raise"):
+        u = memberships(X, V, 1.2)
+    np.testing.assert_array_equal(u[0], [0.0, 1.0, 0.0])
+    np.testing.assert_array_equal(u[1], [1.0, 0.0, 0.0])
+    # identical centres share equally
+    V2 = np.array([[1.0, 1.0], [1.0, 1.0], [3.0, 0.0]])
+    with np.errstate(all="raise"):
+        u2 = memberships(np.array([[1.0, 1.0], [2.0, 2.0]]), V2, 1.2)
+    np.testing.assert_array_equal(u2[0], [0.5, 0.5, 0.0])
+    assert u2[1, 0] == pytest.approx(u2[1, 1])
+
+
+def test_memberships_single_reading():
+    V = np.array([[0.0, 0.0], [1.0, 1.0]])
+    u = memberships(np.array([0.1, 0.1]), V, 1.2)
+    assert u.shape == (2,)
+    assert u[0] > 0.99
+
+
+# ------------------------------------------------------------------------------- fcm
+
+
+def test_fcm_result_shapes_and_consistency():
+    X = blobs()
+    r = fcm(X, 4, seed=0)
+    assert r.centers.shape == (4, 8) and r.u.shape == (300, 4)
+    assert r.converged and 1 <= r.n_iter <= 300 and r.m == 1.2
+    assert r.objective_history.shape == (r.n_iter,)
+    np.testing.assert_allclose(r.u, memberships(X, r.centers, 1.2), atol=1e-12)
+    assert validity(X, r)["objective"] == pytest.approx(r.objective, rel=1e-9)
+
+
+@pytest.mark.parametrize("m", [1.2, 1.5, 2.0, 2.3])
+def test_objective_is_non_increasing(m):
+    X = blobs(n=400, k=6, spread=0.5, seed=3)
+    r = fcm(X, 6, m, tol=1e-9, max_iter=200, seed=5)
+    h = np.append(r.objective_history, r.objective)
+    assert np.all(np.diff(h) <= 1e-10 * h[0])
+
+
+def test_fcm_is_deterministic_for_a_seed_and_accepts_generators():
+    X = blobs()
+    a, b = fcm(X, 5, seed=7), fcm(X, 5, seed=7)
+    np.testing.assert_array_equal(a.centers, b.centers)
+    g1, g2 = np.random.default_rng(3), np.random.default_rng(3)
+    np.testing.assert_array_equal(fcm(X, 5, seed=g1).centers, fcm(X, 5, seed=g2).centers)
+
+
+def test_fcm_c_equals_n_each_point_its_own_cluster():
+    X = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 2.0], [3.0, 3.0]])
+    with np.errstate(all="raise"):
+        r = fcm(X, 4, seed=0)
+    assert np.all(np.isfinite(r.u)) and r.objective == 0.0
+    np.testing.assert_array_equal(np.sort(r.u, axis=1)[:, -1], 1.0)
+    assert validity(X, r)["min_card"] == 1
+
+
+def test_fcm_identical_points():
+    X = np.ones((10, 3))
+    with np.errstate(all="raise"):
+        r = fcm(X, 2, seed=0)
+    assert np.all(np.isfinite(r.centers)) and np.all(np.isfinite(r.u))
+    np.testing.assert_allclose(r.u, 0.5)
+    assert r.objective == 0.0
+    v = validity(X, r)
+    assert v["min_card"] == 0 and v["pc"] == pytest.approx(0.5)
+
+
+def test_fcm_duplicate_rows_get_distinct_initial_centres():
+    rng = np.random.default_rng(0)
+    X = np.vstack([np.full((900, 8), 3.0), rng.uniform(0, 3, (100, 8))])
+    for s in range(5):
+        r = fcm(X, 6, seed=s, max_iter=1)
+        assert np.unique(r.centers, axis=0).shape[0] == 6
+
+
+def test_init_centers_used():
+    X = blobs()
+    V0 = X[[0, 50, 100]]
+    a = fcm(X, 3, init_centers=V0)
+    b = fcm(X, 3, init_centers=V0, seed=123)
+    np.testing.assert_array_equal(a.centers, b.centers)
+
+
+# ------------------------------------------------------------------------ bad inputs
+
+
+@pytest.mark.parametrize(
+    "kwargs, exc, words",
+    [
+        (dict(c=1), ValueError, ["c must", ">= 2", "got 1"]),
+        (dict(c=0), ValueError, ["c must"]),
+        (dict(c=301), ValueError, ["c must", "n_samples (300)", "got 301"]),
+        (dict(c=2.5), TypeError, ["c must be an integer"]),
+        (dict(c=True), TypeError, ["c must"]),
+        (dict(c=3, m=1.0), ValueError, ["m must", "> 1", "got 1.0"]),
+        (dict(c=3, m=0.5), ValueError, ["m must"]),
+        (dict(c=3, m=float("nan")), ValueError, ["m must"]),
+        (dict(c=3, tol=0.0), ValueError, ["tol must", "> 0"]),
+        (dict(c=3, tol=-1e-3), ValueError, ["tol must"]),
+        (dict(c=3, max_iter=0), ValueError, ["max_iter must", ">= 1", "got 0"]),
+        (dict(c=3, max_iter=2.0), TypeError, ["max_iter must be an integer"]),
+        (dict(c=3, init_centers=np.zeros((2, 8))), ValueError, ["init_centers", "(3, 8)",
+                                                                "(2, 8)"]),
+        (dict(c=3, init_centers=np.zeros((3, 7))), ValueError, ["init_centers"]),
+        (dict(c=3, init_centers=np.full((3, 8), np.nan)), ValueError, ["init_centers",
+                                                                       "finite"]),
+        (dict(c=3, seed="x"), TypeError, ["seed"]),
+    ],
+)
+def test_bad_arguments_are_named(kwargs, exc, words):
+    X = blobs()
+    with pytest.raises(exc) as info:
+        fcm(X, **kwargs)
+    for w in words:
+        assert w in str(info.value)
+
+
+@pytest.mark.parametrize(
+    "X, words",
+    [
+        (np.zeros(8), ["X must be a 2-D", "1-D"]),
+        (np.zeros((2, 3, 4)), ["X must be a 2-D", "3-D"]),
+        (np.array([[0.0, np.nan], [1.0, 1.0], [2.0, 2.0]]), ["X must be finite", "nan"]),
+        (np.array([[0.0, np.inf], [1.0, 1.0], [2.0, 2.0]]), ["X must be finite", "inf"]),
+        (np.zeros((1, 3)), ["c must", "n_samples (1)"]),
+        (np.array([["a", "b"]]), ["X must be a real numeric array"]),
+    ],
+)
+def test_bad_X(X, words):
+    with pytest.raises((ValueError, TypeError)) as info:
+        fcm(X, 2)
+    for w in words:
+        assert w in str(info.value)
+
+
+def test_memberships_bad_arguments():
+    with pytest.raises(ValueError, match="m must"):
+        memberships(np.zeros((2, 2)), np.ones((2, 2)), 1.0)
+    with pytest.raises(ValueError, match="centers must have shape"):
+        memberships(np.zeros((2, 2)), np.ones((2, 3)), 1.2)
+
+
+# --------------------------------------------------------------------------- validity
+
+
+def test_hard_partition_measures():
+    u = np.array([[1, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, 1]], dtype=float)
+    v = partition_measures(u)
+    assert v["pc"] == 1.0 and v["pe"] == 0.0 and v["nfi"] == 1.0
+    assert v["rf"] == 0.0
+    assert v["min_ht"] == math.inf and v["mean_ht"] == math.inf  # every T_s = 0
+    assert v["min_card"] == 1.0
+
+
+def test_uniform_partition_measures():
+    c, n = 4, 10
+    u = np.full((n, c), 1 / c)
+    v = partition_measures(u)
+    assert v["pc"] == pytest.approx(1 / c)
+    assert v["pe"] == pytest.approx(math.log(c))
+    assert v["nfi"] == pytest.approx(0.0, abs=1e-12)
+    assert v["rf"] == math.inf  # no point reaches the threshold (1+c)/(2c)
+    # argmax ties -> cluster 0 gets every point, the others are empty
+    assert v["min_card"] == 0.0
+    assert v["min_ht"] == 0.0  # T_s = 1 for cluster 0 (r = 1) and for the empty clusters
+    assert v["mean_ht"] == 0.0
+
+
+def test_hand_computed_fuzzy_partition():
+    # c = 2: threshold (1+c)/(2c) = 0.75
+    u = np.array([[0.9, 0.1], [0.8, 0.2], [0.6, 0.4], [0.3, 0.7]])
+    v = partition_measures(u)
+    n = 4
+    pc = (0.81 + 0.01 + 0.64 + 0.04 + 0.36 + 0.16 + 0.09 + 0.49) / n
+    assert v["pc"] == pytest.approx(pc)
+    pe = -sum(a * math.log(a) for a in u.ravel()) / n
+    assert v["pe"] == pytest.approx(pe)
+    assert v["nfi"] == pytest.approx((2 * pc - 1) / 1)
+    # cluster 0: points 0,1,2 with r = 1/9, 2/8, 4/6; cluster 1: point 3 with r = 3/7
+    T0 = (1 / 9 + 2 / 8 + 4 / 6) / 3
+    T1 = 3 / 7
+    ht = [-math.log10(T0), -math.log10(T1)]
+    assert v["min_ht"] == pytest.approx(min(ht))  # the MINIMUM over clusters
+    assert v["mean_ht"] == pytest.approx(sum(ht) / 2)
+    assert v["min_card"] == 1.0
+    # max memberships 0.9, 0.8 >= 0.75 (non-fuzzy); 0.6, 0.7 fuzzy -> Rf = 2/2
+    assert v["rf"] == pytest.approx(1.0)
+    # "entries" reading: fuzzy = 8 - 2 = 6 entries -> 3 = c (rf + 1) - 1
+    assert partition_measures(u, rf_count="entries")["rf"] == pytest.approx(3.0)
+
+
+def test_empty_cluster_min_ht_zero():
+    u = np.array([[0.9, 0.05, 0.05], [0.1, 0.85, 0.05]])
+    v = partition_measures(u)
+    assert v["min_card"] == 0.0 and v["min_ht"] == 0.0 and v["mean_ht"] > 0
+
+
+def test_validity_keys_and_directions():
+    X = blobs()
+    v = validity(X, fcm(X, 4, seed=0))
+    assert list(v) == KEYS
+    assert set(MEASURE_DIRECTIONS) == set(KEYS)
+    assert set(MEASURE_DIRECTIONS.values()) == {"max", "min", "positive"}
+    assert all(isinstance(x, float) for x in v.values())
+    assert 0.25 <= v["pc"] <= 1 and v["min_ht"] <= v["mean_ht"]
+
+
+def test_validity_objective_by_hand():
+    X = np.array([[0.0, 0.0], [2.0, 0.0]])
+    V = np.array([[0.0, 0.0], [2.0, 1.0]])
+    u = np.array([[0.7, 0.3], [0.4, 0.6]])
+    r = FCMResult(centers=V, u=u, objective=0.0, n_iter=0, converged=True, m=2.0)
+    J = 0.3**2 * 5 + 0.4**2 * 4 + 0.6**2 * 1
+    assert validity(X, r)["objective"] == pytest.approx(J)
+
+
+def test_validity_rejects_mismatched_result():
+    X = blobs()
+    r = fcm(X, 3, seed=0)
+    with pytest.raises(ValueError, match="result.u"):
+        validity(X[:10], r)
+    with pytest.raises(ValueError, match="u rows must sum to 1"):
+        partition_measures(np.array([[0.5, 0.2], [0.5, 0.5]]))
+
+
+# ------------------------------------------------------------------ skfuzzy agreement
+
+
+@pytest.mark.parametrize("c", [3, 6])
+def test_same_fixed_point_as_skfuzzy(c):
+    skfuzzy = pytest.importorskip("skfuzzy")
+    X = blobs(n=400, k=5, spread=0.4, seed=2)
+    rng = np.random.default_rng(c)
+    V0 = X[rng.choice(len(X), c, replace=False)]
+    m = 1.2
+    ours = fcm(X, c, m, tol=1e-10, max_iter=3000, init_centers=V0)
+    u0 = memberships(X, V0, m).T  # skfuzzy takes (c, n) initial memberships
+    cntr, *_ = skfuzzy.cluster.cmeans(X.T, c, m, 1e-12, 3000, init=u0)
+    # like with like: J_m(U(V), V) at skfuzzy's final centres (its own jm is J at the previous
+    # memberships), with the same Eq. 3.2
+    theirs = FCMResult(cntr, memberships(X, cntr, m), 0.0, 0, True, m)
+    J_theirs = validity(X, theirs)["objective"]
+    assert ours.objective == pytest.approx(J_theirs, rel=1e-6)
+    # same prototypes (up to order)
+    order = [int(np.argmin(((cntr - v) ** 2).sum(1))) for v in ours.centers]
+    np.testing.assert_allclose(ours.centers, cntr[order], atol=1e-5)
