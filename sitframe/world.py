@@ -304,7 +304,7 @@ def list_worlds() -> list[str]:
     return sorted(p.name[:-5] for p in root.iterdir() if p.name.endswith(".toml"))
 
 
-def load_world(name_or_path: str | Path) -> World:
+def load_world(name_or_path: str | Path | World) -> World:
     """Load a shipped world by name, or a world file by path.
 
     Parameters

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
 from sitframe import geometry as geo
 from sitframe.errors import InputError
@@ -173,8 +174,14 @@ def test_shipped_world_is_sound(name: str) -> None:
         assert np.allclose(traj[0], w.start[:2]), "a forced path starts at the start pose"
     if w.goal is not None:
         assert w.is_free(w.goal.position[None, :], r)[0]
-    # every free cell is large: plenty of open space
+    # plenty of open space, and all of it reachable from the start (one component)
     assert len(w.free_cells(0.5, r)) > 20
+    x0, y0, x1, y1 = w.bounds
+    h = 0.05
+    gx, gy = np.meshgrid(np.arange(x0 + h / 2, x1, h), np.arange(y0 + h / 2, y1, h))
+    free = w.is_free(np.stack([gx.ravel(), gy.ravel()], axis=1), r + 0.01).reshape(gx.shape)
+    labels, n = ndimage.label(free)
+    assert n == 1, f"{name}: {n} separate free regions"
 
 
 def test_data_collection_rooms() -> None:
