@@ -19,6 +19,7 @@ the traceback as well. Ctrl-C exits with status 130.
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import math
 import os
@@ -71,7 +72,16 @@ def build_parser() -> argparse.ArgumentParser:
 
     sub.add_parser("presets", help="list the shipped experiment presets")
     sub.add_parser("plugins", help="list discovered plugins and their components")
+    for name, module in EXTRA_COMMANDS.items():
+        mod = importlib.import_module(module)
+        sp = sub.add_parser(name, help=mod.HELP, description=mod.__doc__)
+        mod.add_arguments(sp)
     return p
+
+
+#: Subcommands implemented in their own modules: name -> module with ``HELP``,
+#: ``add_arguments(parser)`` and ``main(args) -> int`` (exit status).
+EXTRA_COMMANDS: dict[str, str] = {}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -100,6 +110,8 @@ def _dispatch(args: argparse.Namespace) -> int:
         return cmd_presets()
     if cmd == "plugins":
         return cmd_plugins(args)
+    if cmd in EXTRA_COMMANDS:
+        return int(importlib.import_module(EXTRA_COMMANDS[cmd]).main(args))
     raise AssertionError(cmd)  # pragma: no cover - argparse enforces the choices
 
 

@@ -43,7 +43,7 @@ from sitframe.metrics import collisions_per_1000, coverage, path_length
 from sitframe.pluginmanager import Registry, get_plugin_manager
 from sitframe.records import Context, Proposal, RunInfo, StepRecord, Transition, TrialResult
 from sitframe.robot import Command, RobotParams, step_robot
-from sitframe.world import World, load_world
+from sitframe.world import Goal, World, load_world
 
 STAGE_COLLECT, STAGE_CLUSTER, STAGE_TRIALS, STAGE_EVAL = 0, 1, 2, 3
 #: Summary keys of a frozen-policy evaluation (``evaluate --json`` and ``eval/<world>/...``).
@@ -148,6 +148,14 @@ class TrialSpec:
         World names to evaluate the trial's final policy in afterwards.
     eval_iterations
         Iterations per evaluation.
+    start
+        Start pose (x [m], y [m], theta [rad]); ``None`` = the world's start.
+    goal
+        Goal (x [m], y [m], radius [m]) given to behaviours in the context;
+        ``None`` = the world's ``[goal]`` if any.
+    stop_at_goal
+        End the trial as soon as the robot's centre is within the goal radius
+        (goal episodes); arrays are then shorter than ``iterations``.
     """
 
     index: int
@@ -159,6 +167,9 @@ class TrialSpec:
     policies: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
     evaluate: tuple[str, ...] = ()
     eval_iterations: int = 1000
+    start: tuple[float, float, float] | None = None
+    goal: tuple[float, float, float] | None = None
+    stop_at_goal: bool = False
 
 
 def simulate(
@@ -166,12 +177,14 @@ def simulate(
     spec: TrialSpec,
     *,
     step_hook: Callable[[StepRecord], Any] | None = None,
-    world: World | None = None,
-    start: np.ndarray | None = None,
 ) -> TrialResult:
-    """Run one trial (learning or frozen evaluation) and return its arrays."""
+    """Run one trial (learning, frozen evaluation or goal episode) and return its arrays."""
     rng = np.random.default_rng(spec.seed)
-    world = world or res.world(spec.world)
+    world = res.world(spec.world)
+    goal = world.goal if spec.goal is None else Goal(np.asarray(spec.goal[:2], float),
+                                                     float(spec.goal[2]))
+    goal_xy = None if goal is None else goal.position
+    goal_r2 = 0.0 if goal is None else goal.radius ** 2
     sensor = res.sensor()
     interp = res.interpreter()
     interp.load_state(spec.interpreter_state)
@@ -201,10 +214,11 @@ def simulate(
     prop_a = {lb: np.empty((L, 2)) for lb in labels}
     rew_a = {lb: np.empty(L) for lb, _b, _r in learners}
 
-    pose = (world.start if start is None else start).astype(float)
+    pose = np.array(world.start if spec.start is None else spec.start, dtype=float)
     reading = sensor.read(world, pose, rng)
     u = interp.memberships(reading)
-    ctx = Context(0, pose, reading, u, float(reading.min()), world, world.goal)
+    ctx = Context(0, pose, reading, u, float(reading.min()), world, goal)
+    n_done = L
     for t in range(L):
         proposals = {lb: beh.propose(ctx) for lb, (beh, _r) in behaviours.items()}
         prop, weights = arbiter.combine(ctx, proposals)
@@ -214,7 +228,7 @@ def simulate(
         pose = out.pose
         reading2 = sensor.read(world, pose, rng)
         u2 = interp.memberships(reading2)
-        ctx2 = Context(t + 1, pose, reading2, u2, float(reading2.min()), world, world.goal)
+        ctx2 = Context(t + 1, pose, reading2, u2, float(reading2.min()), world, goal)
         tr = Transition(ctx, cmd, out, ctx2)
         rewards = {}
         for lb, beh, rew in learners:
@@ -237,16 +251,22 @@ def simulate(
         if step_hook is not None:
             step_hook(StepRecord(spec.index, tr, proposals, weights, rewards))
         ctx = ctx2
-    pose_a[L] = pose
+        if spec.stop_at_goal and goal_xy is not None and \
+                (pose[0] - goal_xy[0]) ** 2 + (pose[1] - goal_xy[1]) ** 2 <= goal_r2:
+            n_done = t + 1
+            break
+    pose_a[n_done] = pose
 
+    n = n_done
     arrays: dict[str, np.ndarray] = {
-        "pose": pose_a, "sonar": sonar_a, "memberships": u_a, "command": cmd_a,
-        "collision": coll_a, "contact": contact_a, "nearest": near_a, "weights": weights_a,
+        "pose": pose_a[: n + 1], "sonar": sonar_a[:n], "memberships": u_a[:n],
+        "command": cmd_a[:n], "collision": coll_a[:n], "contact": contact_a[:n],
+        "nearest": near_a[:n], "weights": weights_a[:n],
     }
     for lb in labels:
-        arrays[f"proposals/{lb}"] = prop_a[lb]
+        arrays[f"proposals/{lb}"] = prop_a[lb][:n]
     for lb in rew_a:
-        arrays[f"reward/{lb}"] = rew_a[lb]
+        arrays[f"reward/{lb}"] = rew_a[lb][:n]
     bdata = {lb: beh.trial_data() for lb, (beh, _r) in behaviours.items()}
     summary = trial_summary(world, arrays, bdata, robot)
     result = TrialResult(spec.index, spec.seed, world.name, arrays, bdata, summary)
@@ -275,6 +295,8 @@ def trial_summary(world: World, arrays: dict[str, np.ndarray], bdata: dict[str, 
     """Scalars of a trial: convergence, collision rates, distance, coverage."""
     coll = arrays["collision"]
     L = coll.size
+    if L == 0:
+        raise ValueError("a trial needs at least one iteration")
     conv = [d.get("convergence_iteration", -1) for d in bdata.values() if "converged" in d]
     converged = bool(conv) and all(c >= 0 for c in conv)
     conv_it = max(conv) if converged else -1
@@ -296,6 +318,19 @@ def trial_summary(world: World, arrays: dict[str, np.ndarray], bdata: dict[str, 
         if key.startswith("reward/"):
             out[f"mean_{key.replace('/', '_')}"] = float(val.mean())
     return out
+
+
+class SerialExecutor:
+    """Runs trials one after another in this process (fires ``sitframe_step``)."""
+
+    def map(self, experiment: Experiment, specs: list[TrialSpec]) -> Any:
+        hook = experiment.pm.hook
+        step_hook = None
+        if hook.sitframe_step.get_hookimpls():
+            def step_hook(rec: StepRecord) -> None:
+                hook.sitframe_step(record=rec)
+        for spec in specs:
+            yield simulate(experiment.res, spec, step_hook=step_hook)
 
 
 @dataclass
@@ -323,13 +358,21 @@ class Experiment:
         Plugin manager; a fresh one from :func:`get_plugin_manager` by default.
     out
         HDF5 log path (written by the logger plugin), or ``None``.
+    plugins_dirs
+        Folders of loose plugin modules (also loaded by worker processes).
+    executor
+        Runs the trials: anything with ``map(experiment, specs)`` yielding
+        :class:`TrialResult` in the order of ``specs``. Default
+        :class:`SerialExecutor` (in this process, with ``sitframe_step``).
     """
 
     def __init__(self, cfg: dict[str, Any], *, source: str | None = None,
                  pm: pluggy.PluginManager | None = None, out: str | None = None,
-                 plugins_dirs: tuple[str, ...] = ()) -> None:
+                 plugins_dirs: tuple[str, ...] = (), executor: Any = None) -> None:
         self.cfg = cfg
         self.source = source
+        self.plugins_dirs = tuple(plugins_dirs)
+        self.executor = executor or SerialExecutor()
         self.pm = pm or get_plugin_manager(plugins_dirs=plugins_dirs)
         self.registry = Registry.collect(self.pm)
         self.res = Resolved.build(cfg, self.registry, source)
@@ -411,14 +454,9 @@ class Experiment:
                 hook.sitframe_stage_end(run=self.info, stage="cluster",
                                         data={**fit, "state": interpreter_state})
             if "learn" in stages:
-                step_hook = None
-                if hook.sitframe_step.get_hookimpls():
-                    def step_hook(rec: StepRecord) -> None:
-                        hook.sitframe_step(record=rec)
                 idx = range(self.info.n_trials) if trials is None else trials
-                for k in idx:
-                    spec = self.trial_spec(k, interpreter_state, policies)
-                    result = simulate(self.res, spec, step_hook=step_hook)
+                specs = [self.trial_spec(k, interpreter_state, policies) for k in idx]
+                for result in self.executor.map(self, specs):
                     results.append(result)
                     hook.sitframe_trial_end(run=self.info, trial=result)
             status = "complete"
