@@ -24,9 +24,9 @@ import time
 from collections.abc import Callable
 
 import numpy as np
-from sitframe.plugins.sonar import SonarRing
 
 from sitframe import geometry as geo
+from sitframe.plugins.sonar import SonarRing
 from sitframe.robot import Command, RobotParams, StepOutcome, step_robot
 from sitframe.world import World, load_world
 

@@ -66,7 +66,8 @@ class FCMInterpreter:
             "chosen": int(res.chosen),
             "rule": res.rule,
             "measure_names": list(res.measures),
-            "trial_measures": np.column_stack([np.asarray(v, float) for v in res.measures.values()]),
+            "trial_measures": np.column_stack(
+                [np.asarray(v, float) for v in res.measures.values()]),
         }
         if self.sweep:
             sw = sweep_c(X, self.sweep, n_trials=self.trials, m=self.m, seed=rng)

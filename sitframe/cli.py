@@ -275,7 +275,7 @@ def cmd_world(args: argparse.Namespace) -> int:
 
 
 def cmd_presets() -> int:
-    from sitframe.config import load_config, list_presets
+    from sitframe.config import list_presets, load_config
 
     for name in list_presets():
         cfg, _s, _b = load_config(name)

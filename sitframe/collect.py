@@ -82,7 +82,8 @@ def trajectory_poses(
             delta = (heading - prev_heading + np.pi) % (2 * np.pi) - np.pi
             n_turn = int(abs(delta) // turn_step_rad)
             for k in range(1, n_turn + 1):
-                out.append(np.array([a[0], a[1], prev_heading + np.sign(delta) * k * turn_step_rad]))
+                theta = prev_heading + np.sign(delta) * k * turn_step_rad
+                out.append(np.array([a[0], a[1], theta]))
         s = np.arange(spacing - carry if out else 0.0, length, spacing)
         xy = a + np.outer(s / length, seg)
         out.extend(np.column_stack([xy, np.full(len(s), heading)]))

@@ -78,7 +78,8 @@ class SituationFCS:
         """Replace the rule base (an action index per situation)."""
         actions = np.asarray(rule_actions, dtype=np.intp)
         if actions.ndim != 1 or actions.size == 0:
-            raise ValueError(f"rule_actions must be a non-empty 1-D array, got shape {actions.shape}")
+            raise ValueError(
+                f"rule_actions must be a non-empty 1-D array, got shape {actions.shape}")
         if actions.min() < 0 or actions.max() >= self.singletons.size:
             raise ValueError(
                 f"rule_actions must index the {self.singletons.size} singletons, "

@@ -270,7 +270,9 @@ class Registry:
     def names(self, kind: str) -> list[str]:
         return sorted(self.entries[kind])
 
-    def get(self, kind: str, name: str, *, file: str | None = None, key: str | None = None) -> Entry:
+    def get(
+        self, kind: str, name: str, *, file: str | None = None, key: str | None = None
+    ) -> Entry:
         """The factory registered as ``name`` for ``kind``, or an InputError listing the choices."""
         try:
             return self.entries[kind][name]

@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 import pytest
-from sitframe.plugins.sonar import SonarRing, sitframe_sensors
 
+from sitframe.plugins.sonar import SonarRing, sitframe_sensors
 from sitframe.world import World, load_world, parse_world
 
 BOX = """
