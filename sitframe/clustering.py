@@ -451,7 +451,7 @@ def describe_prototype(
     angles_deg: np.ndarray = SONAR_ANGLES_DEG,
     *,
     near: float = 0.5,
-    far: float = 1.5,
+    far: float = 0.8,
     lane: float = 0.4,
 ) -> str:
     """Short description of a sonar prototype, for tables and plot titles.

@@ -1,6 +1,6 @@
 """The collect stage: record sensor readings for clustering (thesis 4.3, 5.3).
 
-Two modes:
+Two modes (``both`` concatenates them, trajectory samples first):
 
 ``trajectory``
     The robot is driven along each world's forced ``[[trajectories]]`` at
@@ -154,3 +154,12 @@ def collect_wander(
             pose = step_robot(world, pose, Command(turn, speed), params, rng).pose
     return Collected(np.asarray(samples), np.asarray(poses), np.asarray(source, dtype=np.int16),
                      tuple(w.name for w in worlds))
+
+
+def concat_collected(parts: list[Collected]) -> Collected:
+    """Concatenate collections over the same worlds (e.g. trajectory + wander samples)."""
+    if len(parts) == 1:
+        return parts[0]
+    return Collected(np.concatenate([p.samples for p in parts]),
+                     np.concatenate([p.poses for p in parts]),
+                     np.concatenate([p.source for p in parts]), parts[0].worlds)

@@ -16,7 +16,7 @@ thesis's Table A.1):
 ``[sensor]``
     ``component`` (required; e.g. ``"pioneer-sonar"``) and its parameters.
 ``[collect]``
-    ``mode`` (``"trajectory"`` or ``"wander"``), ``worlds``, ``speed`` (m/s),
+    ``mode`` (``"trajectory"``, ``"wander"`` or ``"both"``), ``worlds``, ``speed`` (m/s),
     ``rate_hz`` (samples per second), ``wander_samples`` (per world).
 ``[interpreter]``
     ``component`` (e.g. ``"fcm"``) and its parameters (c, m, trials ...).
@@ -259,7 +259,7 @@ def _check_core(cfg: dict[str, Any], file: str | None) -> None:
     for i, s in enumerate(stages):
         _at(P.choice, f"stages[{i}]", s, file, "experiment", choices=STAGES)
     c = cfg["collect"]
-    _at(P.choice, "mode", c["mode"], file, "collect", choices=("trajectory", "wander"))
+    _at(P.choice, "mode", c["mode"], file, "collect", choices=("trajectory", "wander", "both"))
     _check_names(c["worlds"], file, "collect.worlds")
     _at(P.number, "speed", c["speed"], file, "collect", lo=0.0, lo_open=True)
     _at(P.number, "rate_hz", c["rate_hz"], file, "collect", lo=0.0, lo_open=True)

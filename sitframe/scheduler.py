@@ -36,7 +36,7 @@ import numpy as np
 import pluggy
 
 from sitframe import __version__
-from sitframe.collect import Collected, collect_trajectories, collect_wander
+from sitframe.collect import Collected, collect_trajectories, collect_wander, concat_collected
 from sitframe.config import config_hash, to_toml
 from sitframe.errors import InputError, PluginError
 from sitframe.metrics import collisions_per_1000, coverage, path_length
@@ -402,11 +402,15 @@ class Experiment:
         rng = np.random.default_rng(stage_seed(self.info.seed, STAGE_COLLECT))
         worlds = [self.res.world(n, "collect.worlds") for n in c["worlds"]]
         sensor = self.res.sensor()
-        if c["mode"] == "trajectory":
-            return collect_trajectories(worlds, sensor, rng, speed=c["speed"],
-                                        rate_hz=c["rate_hz"], params=self.res.robot)
-        return collect_wander(worlds, sensor, rng, n_samples=c["wander_samples"],
-                              speed=c["speed"], rate_hz=c["rate_hz"], params=self.res.robot)
+        parts = []
+        if c["mode"] in ("trajectory", "both"):
+            parts.append(collect_trajectories(worlds, sensor, rng, speed=c["speed"],
+                                              rate_hz=c["rate_hz"], params=self.res.robot))
+        if c["mode"] in ("wander", "both"):
+            parts.append(collect_wander(worlds, sensor, rng, n_samples=c["wander_samples"],
+                                        speed=c["speed"], rate_hz=c["rate_hz"],
+                                        params=self.res.robot))
+        return concat_collected(parts)
 
     def cluster(self, samples: np.ndarray) -> tuple[dict[str, Any], dict[str, Any]]:
         rng = np.random.default_rng(stage_seed(self.info.seed, STAGE_CLUSTER))
