@@ -22,6 +22,7 @@ Config (``[behaviours.LABEL]``)::
     temperature_mode = "relative"
     update = "thesis"      # or "standard"
     activation = 0.3
+    terminal_on_collision = false
     q_init = "constant"
     q_init_value = 0.0
 """
@@ -63,6 +64,7 @@ class FuzzyQBehaviour:
         q_init_spread: float = 0.0,
         update: str = "thesis",
         activation: float = 0.3,
+        terminal_on_collision: bool = False,
     ) -> None:
         self.singletons: dict[str, np.ndarray] = {
             "heading": np.asarray(P.number_list("headings", list(headings), lo=-90, hi=90))
@@ -79,6 +81,7 @@ class FuzzyQBehaviour:
             alpha=alpha, gamma=gamma, b=b, p=p, temperature=temperature,
             temperature_mode=temperature_mode, q_init=q_init, q_init_value=q_init_value,
             q_init_spread=q_init_spread, update=update, activation=activation,
+            terminal_on_collision=terminal_on_collision,
         )
         self.learners: dict[str, FuzzyQLearner] = {}
         self.fcs: dict[str, SituationFCS] = {}
