@@ -24,7 +24,7 @@ import numpy as np
 from sitframe import hookimpl
 from sitframe import params as P
 from sitframe.clustering import cluster_trials, sweep_c
-from sitframe.fcm import memberships
+from sitframe.fcm import MembershipFunction
 
 
 class FCMInterpreter:
@@ -59,6 +59,7 @@ class FCMInterpreter:
         res = cluster_trials(X, self.c, n_trials=self.trials, m=self.m, tol=self.tol,
                              max_iter=self.max_iter, seed=rng)
         self.centers = np.asarray(res.centers[res.chosen], dtype=float)
+        self._u = MembershipFunction(self.centers, self.m)
         out: dict[str, Any] = {
             "trial_centers": np.asarray(res.centers),
             "trial_n_iter": np.asarray(res.n_iter),
@@ -77,7 +78,7 @@ class FCMInterpreter:
         return out
 
     def memberships(self, reading: np.ndarray) -> np.ndarray:
-        return memberships(reading[None, :], self.centers, self.m)[0]
+        return self._u(reading)
 
     def state(self) -> dict[str, Any]:
         if self.centers is None:
@@ -91,6 +92,7 @@ class FCMInterpreter:
                              f"for c = {self.c}")
         self.centers = centers
         self.m = float(state.get("m", self.m))
+        self._u = MembershipFunction(centers, self.m)
 
 
 @hookimpl

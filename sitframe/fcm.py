@@ -452,6 +452,50 @@ def memberships(X: np.ndarray, centers: np.ndarray, m: float) -> np.ndarray:
     return u[0] if single else u
 
 
+class MembershipFunction:
+    """Memberships of one reading at a time, for a controller's hot loop.
+
+    The same formula as :func:`memberships` (Eq. 3.2 from squared-distance
+    ratios scaled by the smallest distance), with the argument checks and the
+    centres' preparation done once here instead of on every call; distances
+    are computed directly (no expansion), so a reading on a centre is exact.
+
+    Parameters
+    ----------
+    centers : array_like, shape (c, d)
+        Cluster prototypes.
+    m : float
+        Fuzzifier, ``m > 1``: the clustering's m.
+
+    Examples
+    --------
+    >>> f = MembershipFunction(np.array([[0.0, 0.0], [1.0, 1.0]]), 1.2)
+    >>> f(np.array([0.0, 0.0]))
+    array([1., 0.])
+    """
+
+    def __init__(self, centers: np.ndarray, m: float) -> None:
+        self.m = _check_m(m)
+        V = np.asarray(centers, dtype=float)
+        if V.ndim != 2 or V.shape[0] < 1 or not np.all(np.isfinite(V)):
+            raise ValueError(f"centers must be a finite (c, d) array, got shape {V.shape}")
+        self.centers = V.copy()
+        self.p = 1.0 / (self.m - 1.0)
+        # s = d2_min / d2 in (0, 1]; flooring s keeps s**p at or above 1e-300 (no subnormals).
+        self.floor = 10.0 ** (-_FLOOR_DECADES / self.p)
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        """Return the (c,) memberships of one (d,) reading; they sum to 1."""
+        diff = self.centers - x
+        d2 = np.einsum("ij,ij->i", diff, diff)
+        dmin = d2.min()
+        if dmin <= 0.0:
+            on = d2 <= 0.0
+            return on / on.sum()
+        w = np.maximum(dmin / d2, self.floor) ** self.p
+        return w / w.sum()
+
+
 @_ignore_underflow
 def init_centers_from_data(X: np.ndarray, c: int, rng: np.random.Generator) -> np.ndarray:
     """Pick ``c`` distinct samples of ``X`` as initial centres (Algorithm 1, step 4).

@@ -327,3 +327,18 @@ def test_same_fixed_point_as_skfuzzy(c):
     # same prototypes (up to order)
     order = [int(np.argmin(((cntr - v) ** 2).sum(1))) for v in ours.centers]
     np.testing.assert_allclose(ours.centers, cntr[order], atol=1e-5)
+
+
+@given(st.integers(2, 16), st.floats(1.01, 3.0), st.integers(0, 10_000))
+@settings(max_examples=150, deadline=None)
+def test_membership_function_matches_memberships(c, m, seed):
+    from sitframe.fcm import MembershipFunction
+
+    rng = np.random.default_rng(seed)
+    V = rng.uniform(0, 3, (c, 8))
+    X = np.vstack([rng.uniform(0, 3, (20, 8)), V[:2]])  # includes readings on centres
+    f = MembershipFunction(V, m)
+    expected = memberships(X, V, m)
+    got = np.array([f(x) for x in X])
+    np.testing.assert_allclose(got, expected, atol=1e-9)
+    np.testing.assert_allclose(got.sum(axis=1), 1.0)
