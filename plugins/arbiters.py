@@ -1,16 +1,34 @@
 """Arbiters: fuse behaviour proposals into one command.
 
-``single`` passes one behaviour's proposal through (the thesis's learning
-experiments run one behaviour at a time).
+``single``
+    Passes one behaviour's proposal through (the thesis's learning
+    experiments run one behaviour at a time).
+``cdb``
+    Context-dependent blending (thesis 6.2): a higher-level fuzzy controller
+    weights each behaviour by how well the current *context* (the nearest of
+    the sensor ranges) fits the behaviour's context sets, and the command is
+    the centre of gravity of the behaviours' proposals.
+``priority``
+    Switching: the first behaviour (in a configured order) whose condition
+    holds wins outright, as in subsumption-like arbitration.
+
+The arbiter contract (:class:`sitframe.components.Arbiter`): ``combine(context,
+proposals)`` gets the proposals of every behaviour keyed by label, in config
+order, and returns ``(fused proposal, weights)`` where ``weights`` is a (k,)
+array, one weight per proposal in that order, summing to 1 (logged as the
+``weights`` dataset).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
 from sitframe import hookimpl
+from sitframe import params as P
+from sitframe.errors import InputError
 from sitframe.records import Context, Proposal
 
 
@@ -31,6 +49,257 @@ class SingleArbiter:
         return prop, self._ONE
 
 
+# ---------------------------------------------------------------------------
+# helpers
+# ---------------------------------------------------------------------------
+
+
+def trapezoid(x: float, abcd: Sequence[float]) -> float:
+    """Membership of ``x`` in the trapezoid ``[a, b, c, d]`` (``a <= b <= c <= d``).
+
+    0 below ``a`` and above ``d``, 1 on ``[b, c]``, linear in between. ``a == b``
+    makes a left shoulder (1 for every ``x <= c``), ``c == d`` a right shoulder
+    (1 for every ``x >= b``); ``b == c`` is a triangle.
+    """
+    a, b, c, d = abcd
+    if x < b:
+        if a == b:
+            return 1.0
+        return max(0.0, (x - a) / (b - a))
+    if x <= c:
+        return 1.0
+    if c == d:
+        return 1.0
+    return max(0.0, (d - x) / (d - c))
+
+
+def _set(name: str, value: Any) -> tuple[float, float, float, float]:
+    v = P.number_list(name, value, length=4)
+    if not (v[0] <= v[1] <= v[2] <= v[3]):
+        raise InputError(f"expected a trapezoid [a, b, c, d] with a <= b <= c <= d [m], got {v}",
+                         key=name)
+    return v[0], v[1], v[2], v[3]
+
+
+def _label_index(labels: list[str], label: str, key: str, arbiter: str) -> int:
+    if label not in labels:
+        raise InputError(f"the '{arbiter}' arbiter names behaviour '{label}', but the run's "
+                         f"behaviours are: {', '.join(labels)}", key=f"arbiter.{key}")
+    return labels.index(label)
+
+
+# ---------------------------------------------------------------------------
+# context-dependent blending
+# ---------------------------------------------------------------------------
+
+
+class CDBArbiter:
+    """Context-dependent blending over any number of behaviours and context sets.
+
+    Contract. The *context* is ``Context.nearest``, the smallest sensor range
+    [m]. Each rule reads "IF context is SET THEN objective is BEHAVIOUR",
+    where SET is a trapezoid ``[a, b, c, d]`` on the context (see
+    :func:`trapezoid`). A behaviour's weight is the largest membership of the
+    context in the sets of its rules (Min-Max inference with one antecedent;
+    a behaviour without rules gets 0). The output singletons sit at the
+    behaviours' current proposals, so the command is their centre of gravity::
+
+        heading = sum_k w_k * heading_k / sum_k w_k
+
+    and the speed is the same average over the behaviours that propose one
+    (``None`` if none does). The returned weights are normalised to sum 1.
+    If the context is in no set (a gap between sets), the rule whose core
+    ``[b, c]`` is nearest to it fires alone, so the robot is never without a
+    command.
+
+    Parameters
+    ----------
+    sets
+        Named context sets ``{name = [a, b, c, d]}`` [m]. Default (thesis Fig.
+        6.4, two overlapping shoulders): ``close = [0, 0, 0.2, 0.6]``,
+        ``far = [0.2, 0.6, 3, 3]``.
+    rules
+        Either a table ``{set name = behaviour label}`` (e.g. ``{close = "avoid",
+        far = "goal"}``), or a list of tables ``{behaviour = "label", set = NAME
+        or [a, b, c, d]}``. Default: the i-th set (in ``sets`` order) drives the
+        i-th behaviour (in config order), so the first behaviour is the
+        ``close`` one.
+    """
+
+    name = "cdb"
+
+    def __init__(
+        self,
+        *,
+        sets: Mapping[str, Sequence[float]] | None = None,
+        rules: Mapping[str, str] | Sequence[Mapping[str, Any]] | None = None,
+    ) -> None:
+        if sets is None:
+            sets = {"close": [0.0, 0.0, 0.2, 0.6], "far": [0.2, 0.6, 3.0, 3.0]}
+        if not isinstance(sets, Mapping) or not sets:
+            raise InputError("expected a table of named trapezoids {name = [a, b, c, d]}",
+                             key="sets")
+        self.sets = {str(k): _set(f"sets.{k}", v) for k, v in sets.items()}
+        # rules as (behaviour label or None = i-th behaviour, trapezoid, key for messages)
+        self.rules: list[tuple[str | None, int, tuple[float, float, float, float], str]] = []
+        if rules is None:
+            for i, (sname, abcd) in enumerate(self.sets.items()):
+                self.rules.append((None, i, abcd, f"sets.{sname}"))
+        elif isinstance(rules, Mapping):
+            for sname, label in rules.items():
+                key = f"rules.{sname}"
+                if sname not in self.sets:
+                    raise InputError(f"unknown context set '{sname}'; sets are: "
+                                     f"{', '.join(self.sets)}", key=key)
+                self.rules.append((P.string(key, label), -1, self.sets[sname], key))
+        elif isinstance(rules, Sequence) and not isinstance(rules, str):
+            for i, rule in enumerate(rules):
+                key = f"rules[{i}]"
+                if not isinstance(rule, Mapping) or set(rule) != {"behaviour", "set"}:
+                    raise InputError("expected a table {behaviour = \"label\", set = NAME or "
+                                     "[a, b, c, d]}", key=key)
+                s = rule["set"]
+                if isinstance(s, str):
+                    if s not in self.sets:
+                        raise InputError(f"unknown context set '{s}'; sets are: "
+                                         f"{', '.join(self.sets)}", key=f"{key}.set")
+                    abcd = self.sets[s]
+                else:
+                    abcd = _set(f"{key}.set", s)
+                self.rules.append((P.string(f"{key}.behaviour", rule["behaviour"]), -1, abcd,
+                                   key))
+        else:
+            raise InputError("expected a table {set = \"behaviour\"} or a list of "
+                             "{behaviour, set} tables", key="rules")
+        if not self.rules:
+            raise InputError("expected at least one rule", key="rules")
+        self._labels: tuple[str, ...] = ()
+        self._idx = np.zeros(0, dtype=np.intp)
+        self._sets = np.zeros((0, 4))
+
+    def _bind(self, labels: list[str]) -> None:
+        idx = []
+        for label, i, _abcd, key in self.rules:
+            if label is None:
+                if i >= len(labels):
+                    raise InputError(f"{len(self.sets)} context sets but only {len(labels)} "
+                                     f"behaviours ({', '.join(labels)}); give rules = "
+                                     "{set = \"behaviour\"}", key="arbiter.rules")
+                idx.append(i)
+            else:
+                idx.append(_label_index(labels, label, f"{key}", "cdb"))
+        self._labels = tuple(labels)
+        self._idx = np.asarray(idx, dtype=np.intp)
+        self._sets = np.asarray([abcd for _l, _i, abcd, _k in self.rules])
+
+    def weights(self, nearest: float, labels: list[str]) -> np.ndarray:
+        """Normalised (k,) behaviour weights for context ``nearest`` [m]."""
+        if tuple(labels) != self._labels:
+            self._bind(labels)
+        mu = np.array([trapezoid(nearest, s) for s in self._sets])
+        w = np.zeros(len(labels))
+        np.maximum.at(w, self._idx, mu)
+        total = w.sum()
+        if total <= 0.0:
+            gap = np.maximum(self._sets[:, 1] - nearest, 0) + np.maximum(nearest - self._sets[:, 2],
+                                                                         0)
+            w[self._idx[int(np.argmin(gap))]] = 1.0
+            total = 1.0
+        return w / total
+
+    def combine(self, context: Context, proposals: dict[str, Proposal]) -> tuple[Proposal, Any]:
+        props = list(proposals.values())
+        w = self.weights(context.nearest, list(proposals))
+        heading = float(sum(wk * p.heading_deg for wk, p in zip(w, props, strict=True)))
+        sw = sum(wk for wk, p in zip(w, props, strict=True) if p.speed_m_s is not None)
+        speed = None
+        if sw > 0:
+            speed = float(sum(wk * p.speed_m_s for wk, p in zip(w, props, strict=True)
+                              if p.speed_m_s is not None) / sw)
+        return Proposal(heading, speed), w
+
+
+# ---------------------------------------------------------------------------
+# priority switching
+# ---------------------------------------------------------------------------
+
+
+class PriorityArbiter:
+    """Switching: the first behaviour whose condition holds wins outright.
+
+    Parameters
+    ----------
+    rules
+        Ordered list of tables ``{behaviour = "label", nearest_below = x}`` or
+        ``{behaviour = "label", nearest_above = x}`` or ``{behaviour = "label"}``
+        (always holds) with ``x`` in metres, compared with ``Context.nearest``.
+        If no condition holds, the last rule's behaviour wins. Default: every
+        behaviour but the last (in config order) holds when ``nearest <
+        threshold``; the last always holds -- e.g. ``avoid`` when something is
+        within ``threshold``, else ``goal``.
+    threshold
+        The distance [m] of the default rules.
+
+    The weights are 1 for the winner and 0 for the others.
+    """
+
+    name = "priority"
+    _CONDS = ("nearest_below", "nearest_above")
+
+    def __init__(self, *, rules: Sequence[Mapping[str, Any]] | None = None,
+                 threshold: float = 0.5) -> None:
+        self.threshold = P.number("threshold", threshold, lo=0.0)
+        self.rules: list[tuple[str, str | None, float]] | None = None
+        if rules is not None:
+            if isinstance(rules, str) or not isinstance(rules, Sequence) or not rules:
+                raise InputError("expected a non-empty list of {behaviour = \"label\", "
+                                 "nearest_below = x} tables", key="rules")
+            self.rules = []
+            for i, rule in enumerate(rules):
+                key = f"rules[{i}]"
+                if not isinstance(rule, Mapping) or "behaviour" not in rule:
+                    raise InputError("expected a table {behaviour = \"label\"[, nearest_below = "
+                                     "x | nearest_above = x]}", key=key)
+                conds = [k for k in rule if k != "behaviour"]
+                if len(conds) > 1 or (conds and conds[0] not in self._CONDS):
+                    raise InputError(f"expected at most one condition of "
+                                     f"{', '.join(self._CONDS)}, got {', '.join(conds)}", key=key)
+                label = P.string(f"{key}.behaviour", rule["behaviour"])
+                if conds:
+                    self.rules.append((label, conds[0],
+                                       P.number(f"{key}.{conds[0]}", rule[conds[0]], lo=0.0)))
+                else:
+                    self.rules.append((label, None, 0.0))
+        self._labels: tuple[str, ...] = ()
+        self._bound: list[tuple[int, str | None, float]] = []
+
+    def _bind(self, labels: list[str]) -> None:
+        if self.rules is None:
+            self._bound = [(i, "nearest_below", self.threshold) for i in range(len(labels) - 1)]
+            self._bound.append((len(labels) - 1, None, 0.0))
+        else:
+            self._bound = [(_label_index(labels, lb, f"rules[{i}].behaviour", "priority"), c, x)
+                           for i, (lb, c, x) in enumerate(self.rules)]
+        self._labels = tuple(labels)
+
+    def winner(self, nearest: float, labels: list[str]) -> int:
+        """Index (in ``labels``) of the behaviour that wins at context ``nearest`` [m]."""
+        if tuple(labels) != self._labels:
+            self._bind(labels)
+        for i, cond, x in self._bound:
+            if cond is None or (cond == "nearest_below" and nearest < x) or \
+                    (cond == "nearest_above" and nearest > x):
+                return i
+        return self._bound[-1][0]
+
+    def combine(self, context: Context, proposals: dict[str, Proposal]) -> tuple[Proposal, Any]:
+        labels = list(proposals)
+        k = self.winner(context.nearest, labels)
+        w = np.zeros(len(labels))
+        w[k] = 1.0
+        return proposals[labels[k]], w
+
+
 @hookimpl
 def sitframe_arbiters() -> list[Any]:
-    return [SingleArbiter]
+    return [SingleArbiter, CDBArbiter, PriorityArbiter]

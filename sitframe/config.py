@@ -32,7 +32,9 @@ thesis's Table A.1):
     ``worlds`` (default: the shipped novel rooms and the learning world),
     ``iterations``.
 ``[goal]``
-    ``episodes``, ``timeout``, ``min_distance``, ``worlds`` (goal episodes).
+    ``episodes``, ``timeout``, ``min_distance``, ``worlds``, ``pairs``
+    (``"random"`` or ``"world"``), ``radius``, ``margin`` (goal episodes; see
+    :mod:`sitframe.episodes`, which validates the last three).
 ``[plugins]``
     ``dirs``: folders of loose plugin modules, relative to the config file.
 
@@ -82,7 +84,8 @@ DEFAULTS: dict[str, dict[str, Any]] = {
     "behaviours": {},
     "arbiter": {"component": "single"},
     "evaluate": {"worlds": ["training", "novel-1", "novel-2"], "iterations": 1000},
-    "goal": {"episodes": 50, "timeout": 300, "min_distance": 3.0, "worlds": ["goal"]},
+    "goal": {"episodes": 50, "timeout": 300, "min_distance": 3.0, "worlds": ["goal"],
+             "pairs": "random", "radius": 0.3, "margin": 0.1},
     "plugins": {"dirs": []},
 }
 
