@@ -20,6 +20,8 @@ Config (``[behaviours.LABEL]``)::
     p = 50
     temperature = 0.25
     temperature_mode = "relative"
+    temperature_decay = 1.0  # annealing per rule-base change
+    temperature_min = 0.0
     update = "thesis"      # or "standard"
     activation = 0.3
     terminal_on_collision = false
@@ -59,6 +61,8 @@ class FuzzyQBehaviour:
         p: int = 50,
         temperature: float = 0.25,
         temperature_mode: str = "relative",
+        temperature_decay: float = 1.0,
+        temperature_min: float = 0.0,
         q_init: str = "constant",
         q_init_value: float = 0.0,
         q_init_spread: float = 0.0,
@@ -79,7 +83,8 @@ class FuzzyQBehaviour:
                 raise ValueError(f"learn names '{o}' but no '{o}s' singletons are configured")
         self.qparams = QLearningParams(
             alpha=alpha, gamma=gamma, b=b, p=p, temperature=temperature,
-            temperature_mode=temperature_mode, q_init=q_init, q_init_value=q_init_value,
+            temperature_mode=temperature_mode, temperature_decay=temperature_decay,
+            temperature_min=temperature_min, q_init=q_init, q_init_value=q_init_value,
             q_init_spread=q_init_spread, update=update, activation=activation,
             terminal_on_collision=terminal_on_collision,
         )

@@ -67,6 +67,10 @@ class QLearningParams:
         Soft-max temperature (see ``temperature_mode``).
     temperature_mode
         ``"relative"`` (scale-free, default) or ``"absolute"``.
+    temperature_decay, temperature_min
+        Annealing: after the k-th rule-base change the temperature is
+        ``max(temperature_min, temperature * temperature_decay**k)``
+        (default 1.0: constant, as in the thesis).
     q_init
         ``"constant"`` (every entry ``q_init_value``) or ``"random"`` (uniform in
         ``q_init_value ± q_init_spread``).
@@ -90,6 +94,8 @@ class QLearningParams:
     p: int = 50
     temperature: float = 0.25
     temperature_mode: str = "relative"
+    temperature_decay: float = 1.0
+    temperature_min: float = 0.0
     q_init: str = "constant"
     q_init_value: float = 0.0
     q_init_spread: float = 0.0
@@ -104,6 +110,8 @@ class QLearningParams:
         P.number("p", self.p, lo=1, integer=True)
         P.number("temperature", self.temperature, lo=0.0, lo_open=True)
         P.choice("temperature_mode", self.temperature_mode, TEMPERATURE_MODES)
+        P.number("temperature_decay", self.temperature_decay, lo=0.0, hi=1.0, lo_open=True)
+        P.number("temperature_min", self.temperature_min, lo=0.0)
         P.choice("q_init", self.q_init, Q_INITS)
         P.number("q_init_value", self.q_init_value)
         P.number("q_init_spread", self.q_init_spread, lo=0.0)
@@ -112,18 +120,25 @@ class QLearningParams:
         P.boolean("terminal_on_collision", self.terminal_on_collision)
 
 
-def softmax_choice(q: np.ndarray, params: QLearningParams, rng: np.random.Generator) -> np.ndarray:
+def softmax_choice(
+    q: np.ndarray,
+    params: QLearningParams,
+    rng: np.random.Generator,
+    temperature: float | None = None,
+) -> np.ndarray:
     """Draw one action per row of ``q`` (c, A) with the soft-max policy.
 
-    Returns (c,) action indices. Uses one uniform draw per row (inverse CDF),
-    so the random stream consumed is always ``c`` numbers.
+    ``temperature`` overrides ``params.temperature`` (annealing). Returns (c,)
+    action indices. Uses one uniform draw per row (inverse CDF), so the random
+    stream consumed is always ``c`` numbers.
     """
+    tau = params.temperature if temperature is None else temperature
     if params.temperature_mode == "relative":
         top = q.max(axis=1, keepdims=True)
         spread = top - q.min(axis=1, keepdims=True)
-        logits = (q - top) / (params.temperature * np.where(spread > 0, spread, 1.0))
+        logits = (q - top) / (tau * np.where(spread > 0, spread, 1.0))
     else:
-        logits = (q - q.max(axis=1, keepdims=True)) / params.temperature
+        logits = (q - q.max(axis=1, keepdims=True)) / tau
     w = np.exp(logits)
     cdf = np.cumsum(w, axis=1)
     draws = rng.random(q.shape[0]) * cdf[:, -1]
@@ -171,6 +186,7 @@ class FuzzyQLearner:
         self.converged_at: int | None = None
         self.stable_changes = 0
         self.since_change = 0
+        self.n_changes = 0
         self._rows = np.arange(c)
         # Records: one row per rule-base change (snapshots) and per iteration.
         self._snap_iter: list[int] = [0]
@@ -179,6 +195,14 @@ class FuzzyQLearner:
         self._snap_q: list[np.ndarray] = [self.q.copy()]
         self.rules_per_iteration = np.zeros((max_iterations, c), dtype=np.int8)
         self.q_per_iteration_max = None  # reserved
+
+    @property
+    def temperature(self) -> float:
+        """The soft-max temperature for the next rule-base change (after annealing)."""
+        prm = self.params
+        if prm.temperature_decay == 1.0:
+            return prm.temperature
+        return max(prm.temperature_min, prm.temperature * prm.temperature_decay ** self.n_changes)
 
     @property
     def frozen(self) -> bool:
@@ -238,11 +262,12 @@ class FuzzyQLearner:
         else:
             self.stable_changes = 0
             self.greedy = greedy
+        self.n_changes += 1
         if self.stable_changes >= self.params.p:
             self.converged_at = iteration + 1
             self.rule_base = greedy.copy()
         else:
-            self.rule_base = softmax_choice(self.q, self.params, self.rng)
+            self.rule_base = softmax_choice(self.q, self.params, self.rng, self.temperature)
         self._snap_iter.append(iteration + 1)
         self._snap_rules.append(self.rule_base.copy())
         self._snap_greedy.append(greedy)

@@ -129,3 +129,26 @@ def test_learner_is_deterministic():
     a, b = run(), run()
     for k in a:
         assert np.array_equal(np.asarray(a[k]), np.asarray(b[k]))
+
+
+def test_terminal_on_collision_drops_the_bootstrap():
+    lr = _learner(alpha=1.0, gamma=0.9, activation=0.0, b=100, terminal_on_collision=True)
+    lr.q[:] = [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]
+    lr.rule_base[:] = [0, 1]
+    u0 = np.array([1.0, 0.0])
+    lr.update(u0, -30.0, np.array([0.0, 1.0]), True, 0)
+    assert lr.q[0, 0] == pytest.approx(-30.0)  # target is the reward alone
+    lr.q[0, 0] = 1.0
+    lr.update(u0, 30.0, np.array([0.0, 1.0]), False, 1)
+    assert lr.q[0, 0] == pytest.approx(30.0 + 0.9 * 6.0)  # no collision: bootstraps
+
+
+def test_temperature_anneals_per_rule_base_change():
+    lr = _learner(temperature=4.0, temperature_mode="absolute", temperature_decay=0.5,
+                  temperature_min=1.5, b=1)
+    u = np.array([0.0, 0.0])
+    assert lr.temperature == 4.0
+    lr.update(u, 0.0, u, False, 0)
+    assert lr.temperature == 2.0
+    lr.update(u, 0.0, u, False, 1)
+    assert lr.temperature == 1.5  # floored at temperature_min
