@@ -139,6 +139,7 @@ def test_terminal_on_collision_drops_the_bootstrap():
     lr.update(u0, -30.0, np.array([0.0, 1.0]), True, 0)
     assert lr.q[0, 0] == pytest.approx(-30.0)  # target is the reward alone
     lr.q[0, 0] = 1.0
+    lr.rule_base[:] = [0, 1]  # the collision changed the rule base
     lr.update(u0, 30.0, np.array([0.0, 1.0]), False, 1)
     assert lr.q[0, 0] == pytest.approx(30.0 + 0.9 * 6.0)  # no collision: bootstraps
 
