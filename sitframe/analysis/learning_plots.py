@@ -1,0 +1,535 @@
+"""Figures of the learning and evaluation stages (thesis Figs. 5.4-5.8, 5.10, 5.11).
+
+Every function builds and returns a :class:`matplotlib.figure.Figure` without
+pyplot (headless-safe; save with ``fig.savefig(path, dpi=200)``). Single-panel
+figures are 3.5 in wide (one journal column), fonts 7-8 pt, colours from the
+Okabe-Ito colour-blind-safe palette (:data:`OKABE_ITO`), sequential maps
+``Blues`` / ``cividis`` (both readable in grey-scale and by colour-blind readers).
+
+The functions take arrays (see :mod:`sitframe.analysis.results` for how to get
+them from a log), so they also work on data that never went through a log.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from matplotlib.collections import LineCollection
+from matplotlib.colors import ListedColormap
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+
+from sitframe.analysis.clustering_plots import OKABE_ITO
+from sitframe.analysis.results import CollisionIntervals, reward_per_window
+from sitframe.analysis.world_plot import plot_world
+from sitframe.world import World
+
+__all__ = [
+    "ITERATION_S",
+    "plot_collision_intervals",
+    "plot_compare_rewards",
+    "plot_evaluation_paths",
+    "plot_exploration",
+    "plot_learning_curves",
+    "plot_reward_per_window",
+    "plot_trajectory",
+]
+
+#: Seconds of robot time per iteration (thesis: a command is held 1.5 s).
+ITERATION_S = 1.5
+_FONT = 8
+_COL = 3.5  # in, one column
+_C = OKABE_ITO
+
+
+def _path_cmap() -> ListedColormap:
+    """cividis without its palest yellow end, so late path segments stay visible on white."""
+    import matplotlib
+
+    base = matplotlib.colormaps["cividis"]
+    return ListedColormap(base(np.linspace(0.0, 0.82, 256)), name="cividis_dark")
+
+
+def _deg(a: float) -> str:
+    return f"{a:+g}°" if a else "0°"
+
+
+def _finish(ax, *, grid: str = "both") -> None:
+    ax.tick_params(labelsize=_FONT - 1)
+    ax.grid(True, axis=grid, lw=0.3, alpha=0.5)
+    ax.set_axisbelow(True)
+    for side in ("top", "right"):
+        ax.spines[side].set_visible(False)
+
+
+def _mark_convergence(ax, convergence: int | None, n_iterations: int | None = None) -> None:
+    """Vertical dashed line labelled at the top at the convergence iteration, or a note."""
+    if convergence is not None:
+        ax.axvline(convergence, color=_C["vermillion"], lw=1.0, ls="--", zorder=1)
+        right = n_iterations is not None and convergence > 0.7 * n_iterations
+        ax.annotate(f"converged\nit. {convergence}", (convergence, 1.0),
+                    xycoords=("data", "axes fraction"), xytext=(-3 if right else 3, -2),
+                    textcoords="offset points", ha="right" if right else "left", va="top",
+                    fontsize=_FONT - 1.5, color=_C["vermillion"],
+                    bbox={"boxstyle": "square,pad=0.1", "fc": "white", "ec": "none",
+                          "alpha": 0.8})
+    else:
+        txt = "not converged" + (f" in {n_iterations} it." if n_iterations else "")
+        ax.text(0.99, 0.98, txt, transform=ax.transAxes, ha="right", va="top",
+                fontsize=_FONT - 1, color=_C["vermillion"],
+                bbox={"boxstyle": "square,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.8})
+
+
+# ----------------------------------------------------------------------- exploration
+
+
+def plot_exploration(
+    counts: np.ndarray,
+    situation_labels: Sequence[str] | None = None,
+    actions: Sequence[float] | None = None,
+    *,
+    title: str | None = None,
+    action_unit: str = "deg",
+) -> Figure:
+    """Exploration distribution of situation-action pairs as an annotated heat map (Fig. 5.4).
+
+    Parameters
+    ----------
+    counts : array_like of int, shape (c, A)
+        ``counts[s, a]`` = iterations in which situation ``s`` was dominant and
+        executed action ``a`` (:func:`sitframe.analysis.results.exploration_counts`).
+    situation_labels : sequence of str, optional
+        One label per situation (row); default ``S0 ... S(c-1)``.
+    actions : sequence of float, optional
+        Action values (columns), e.g. heading changes in degrees.
+    title : str, optional
+        Figure title; default states the number of iterations.
+    action_unit : str
+        ``"deg"`` formats actions as signed degrees.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    N = np.asarray(counts)
+    if N.ndim != 2:
+        raise ValueError(f"counts must be (situations, actions), got shape {N.shape}")
+    c, A = N.shape
+    ylab = list(situation_labels) if situation_labels is not None else [
+        f"S{i}" for i in range(c)]
+    if len(ylab) != c:
+        raise ValueError(f"need {c} situation labels, got {len(ylab)}")
+    if actions is None:
+        xlab = [f"A{j + 1}" for j in range(A)]
+    else:
+        xlab = [_deg(float(a)) if action_unit == "deg" else f"{a:g}" for a in actions]
+    annotate = c * A <= 200
+    width = max(_COL, 1.0 + 0.3 * A + 0.052 * max(len(s) for s in ylab)
+                + (0 if annotate else 0.7))
+    fig = Figure(figsize=(width, 0.26 * c + 1.0), layout="constrained")
+    ax = fig.add_subplot()
+    vmax = max(int(N.max()), 1)
+    im = ax.imshow(N, cmap="Blues", vmin=0, vmax=vmax, aspect="auto")
+    if annotate:  # the numbers are the data; no colour bar needed
+        for (i, j), v in np.ndenumerate(N):
+            ax.text(j, i, str(int(v)), ha="center", va="center", fontsize=_FONT - 2,
+                    color="white" if v > 0.55 * vmax else "black")
+    else:
+        cb = fig.colorbar(im, ax=ax, shrink=0.9, pad=0.02)
+        cb.set_label("Iterations", fontsize=_FONT)
+        cb.ax.tick_params(labelsize=_FONT - 1)
+    ax.set_xticks(range(A), xlab)
+    ax.set_yticks(range(c), ylab)
+    ax.tick_params(labelsize=_FONT - 1, length=0)
+    ax.set_xlabel("Executed action" + (" (heading change)" if action_unit == "deg" else ""),
+                  fontsize=_FONT)
+    ax.set_ylabel("Dominant situation", fontsize=_FONT)
+    ax.set_xticks(np.arange(-0.5, A), minor=True)
+    ax.set_yticks(np.arange(-0.5, c), minor=True)
+    ax.grid(which="minor", color="white", lw=0.8)
+    ax.tick_params(which="minor", length=0)
+    for sp in ax.spines.values():
+        sp.set_visible(False)
+    ax.set_title(title or f"Situation-action pairs over {int(N.sum())} iterations",
+                 fontsize=_FONT)
+    return fig
+
+
+# ------------------------------------------------------------------------ collisions
+
+
+def plot_collision_intervals(
+    intervals: CollisionIntervals,
+    convergence: int | None = None,
+    *,
+    title: str | None = None,
+    log_scale: bool | None = None,
+) -> Figure:
+    """Iterations between successive collisions over the run (Figs. 5.5, 5.6).
+
+    Each collision is a stem at the iteration it happened, as tall as the
+    number of iterations since the previous collision; the right axis gives
+    the same in minutes of robot time (1 iteration = 1.5 s).
+
+    Parameters
+    ----------
+    intervals : CollisionIntervals
+        From :func:`sitframe.analysis.results.collision_intervals`.
+    convergence : int, optional
+        Convergence iteration (dashed line); None notes "not converged".
+    title : str, optional
+    log_scale : bool, optional
+        Logarithmic y axis; default when the intervals span more than 2 decades.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    it, iv = intervals.iterations, intervals.intervals
+    fig = Figure(figsize=(_COL, 2.4), layout="constrained")
+    ax = fig.add_subplot()
+    if it.size:
+        ax.vlines(it, 0 if not log_scale else 1, iv, color=_C["blue"], lw=0.6)
+        ax.plot(it, iv, "o", ms=1.8, color=_C["blue"], label="collision")
+        if log_scale is None:
+            log_scale = iv.max() / max(iv.min(), 1) > 100
+        if log_scale:
+            ax.set_yscale("log")
+            ax.set_ylim(0.8, iv.max() * 1.6)
+        else:
+            ax.set_ylim(0, iv.max() * 1.08 + 1)
+    else:
+        ax.text(0.5, 0.5, "no collisions", transform=ax.transAxes, ha="center",
+                fontsize=_FONT)
+    ax.set_xlim(0, max(intervals.n_iterations, 1))
+    _mark_convergence(ax, convergence, intervals.n_iterations)
+    ax.set_xlabel("Iteration of the collision (1 it. = 1.5 s)", fontsize=_FONT)
+    ax.set_ylabel("Iterations since previous collision", fontsize=_FONT - 0.5)
+    sec = ax.secondary_yaxis("right", functions=(lambda x: x * ITERATION_S / 60.0,
+                                                 lambda m: m * 60.0 / ITERATION_S))
+    sec.set_ylabel("Minutes of robot time", fontsize=_FONT - 0.5)
+    sec.tick_params(labelsize=_FONT - 1)
+    _finish(ax, grid="y")
+    ax.spines["right"].set_visible(True)
+    n = it.size
+    ax.set_title(title or f"{n} collisions in {intervals.n_iterations} iterations",
+                 fontsize=_FONT)
+    return fig
+
+
+# --------------------------------------------------------------------------- rewards
+
+
+def plot_reward_per_window(
+    reward: np.ndarray,
+    window: int = 50,
+    convergence: int | None = None,
+    *,
+    title: str | None = None,
+    reward_label: str = "Mean reward",
+) -> Figure:
+    """Mean reward per window of iterations over the run (Figs. 5.7, 5.8).
+
+    Parameters
+    ----------
+    reward : array_like, shape (L,)
+        Per-iteration reward of one reward plugin.
+    window : int, default 50
+        Iterations per window.
+    convergence : int, optional
+        Convergence iteration (dashed line).
+    title, reward_label : str
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    r = np.asarray(reward, dtype=np.float64)
+    means = reward_per_window(r, window)
+    x = np.arange(means.size) * window
+    fig = Figure(figsize=(_COL, 2.3), layout="constrained")
+    ax = fig.add_subplot()
+    ax.axhline(0, color="0.4", lw=0.6)
+    ax.bar(x, means, width=window, align="edge", color=np.where(
+        means >= 0, _C["sky_blue"], _C["orange"]), edgecolor="white", lw=0.2)
+    ax.step(np.r_[x, r.size], np.r_[means, means[-1:]], where="post", color=_C["blue"], lw=0.7)
+    ax.set_xlim(0, max(r.size, 1))
+    _mark_convergence(ax, convergence, r.size)
+    ax.set_xlabel("Iteration (1 it. = 1.5 s)", fontsize=_FONT)
+    ax.set_ylabel(f"{reward_label} per {window} it.", fontsize=_FONT)
+    _finish(ax, grid="y")
+    ax.set_title(title or f"Mean reward per {window} iterations", fontsize=_FONT)
+    return fig
+
+
+def plot_learning_curves(
+    rewards: Mapping[int, np.ndarray],
+    convergence: Mapping[int, int | None] | None = None,
+    window: int = 50,
+    *,
+    title: str | None = None,
+) -> Figure:
+    """Mean reward per window of every trial, and their mean (all trials of a run).
+
+    Parameters
+    ----------
+    rewards : mapping trial -> array (L,)
+        Per-iteration reward of each trial.
+    convergence : mapping trial -> int or None, optional
+        Convergence iteration of each trial (a dot on its curve).
+    window : int, default 50
+    title : str, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    convergence = convergence or {}
+    fig = Figure(figsize=(_COL, 2.4), layout="constrained")
+    ax = fig.add_subplot()
+    ax.axhline(0, color="0.4", lw=0.6)
+    curves = {k: reward_per_window(v, window) for k, v in rewards.items()}
+    n = max((c.size for c in curves.values()), default=0)
+    for k, c in curves.items():
+        x = (np.arange(c.size) + 0.5) * window
+        ax.plot(x, c, color="0.6", lw=0.6, alpha=0.8)
+        conv = convergence.get(k)
+        if conv is not None and conv // window < c.size:
+            ax.plot([x[conv // window]], [c[conv // window]], "o", ms=3.5,
+                    color=_C["vermillion"], zorder=4)
+    if curves:
+        M = np.full((len(curves), n), np.nan)
+        for i, c in enumerate(curves.values()):
+            M[i, :c.size] = c
+        ax.plot((np.arange(n) + 0.5) * window, np.nanmean(M, axis=0), color=_C["blue"], lw=1.6)
+    handles = [Line2D([], [], color="0.6", lw=0.8, label="one trial"),
+               Line2D([], [], color=_C["blue"], lw=1.6, label=f"mean of {len(curves)} trials")]
+    if any(v is not None for v in convergence.values()):
+        handles.append(Line2D([], [], ls="", marker="o", ms=3.5, color=_C["vermillion"],
+                              label="convergence"))
+    fig.legend(handles=handles, fontsize=_FONT - 1, loc="outside lower center",
+               ncols=len(handles), frameon=False)
+    ax.set_xlim(0, max(n * window, 1))
+    ax.set_xlabel("Iteration (1 it. = 1.5 s)", fontsize=_FONT)
+    ax.set_ylabel(f"Mean reward per {window} it.", fontsize=_FONT)
+    _finish(ax, grid="y")
+    ax.set_title(title or "Learning curves of all trials", fontsize=_FONT)
+    return fig
+
+
+def plot_compare_rewards(
+    runs: Mapping[str, Mapping[int, np.ndarray]],
+    window: int = 50,
+    *,
+    title: str | None = None,
+) -> Figure:
+    """Mean reward per window of several runs: mean over trials with an interquartile band.
+
+    Parameters
+    ----------
+    runs : mapping name -> (mapping trial -> reward array)
+    window : int, default 50
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    colours = [_C["blue"], _C["vermillion"], _C["bluish_green"], _C["reddish_purple"],
+               _C["orange"], _C["sky_blue"]]
+    fig = Figure(figsize=(_COL, 2.4), layout="constrained")
+    ax = fig.add_subplot()
+    ax.axhline(0, color="0.4", lw=0.6)
+    xmax = 1
+    for (name, rew), col in zip(runs.items(), colours * 4, strict=False):
+        curves = [reward_per_window(v, window) for v in rew.values()]
+        if not curves:
+            continue
+        n = max(c.size for c in curves)
+        M = np.full((len(curves), n), np.nan)
+        for i, c in enumerate(curves):
+            M[i, :c.size] = c
+        x = (np.arange(n) + 0.5) * window
+        ax.fill_between(x, np.nanpercentile(M, 25, axis=0), np.nanpercentile(M, 75, axis=0),
+                        color=col, alpha=0.2, lw=0)
+        ax.plot(x, np.nanmean(M, axis=0), color=col, lw=1.3, label=f"{name} ({len(curves)} tr.)")
+        xmax = max(xmax, n * window)
+    ax.set_xlim(0, xmax)
+    ax.set_xlabel("Iteration (1 it. = 1.5 s)", fontsize=_FONT)
+    ax.set_ylabel(f"Mean reward per {window} it.", fontsize=_FONT)
+    fig.legend(fontsize=_FONT - 1, loc="outside lower center", ncols=min(len(runs), 3),
+               frameon=False)
+    _finish(ax, grid="y")
+    ax.set_title(title or "Learning curves: mean over trials, band = interquartile range",
+                 fontsize=_FONT)
+    return fig
+
+
+# ---------------------------------------------------------------------- trajectories
+
+
+def _draw_path(ax, world: World, pose: np.ndarray, collision: np.ndarray | None,
+               contact: np.ndarray | None, start: int, stop: int, radius: float):
+    """Draw the world and the path of iterations [start, stop); return the LineCollection."""
+    plot_world(world, ax=ax, show_trajectories=False, show_start=False, show_goal=True,
+               robot_radius=radius)
+    xy = np.asarray(pose)[start:stop + 1, :2]
+    seg = np.stack([xy[:-1], xy[1:]], axis=1)
+    lc = LineCollection(seg, cmap=_path_cmap(), lw=0.9, zorder=5)
+    lc.set_array(np.arange(start, start + seg.shape[0]))
+    lc.set_clim(start, max(stop, start + 1))
+    ax.add_collection(lc)
+    ax.plot(*xy[0], "o", ms=4.5, mfc="white", mec="black", mew=1.0, zorder=7)
+    ax.plot(*xy[-1], "s", ms=4.5, mfc="black", mec="black", zorder=7)
+    n_coll = 0
+    if collision is not None:
+        col = np.asarray(collision, dtype=bool)[start:stop]
+        idx = np.flatnonzero(col) + start
+        n_coll = idx.size
+        if idx.size:
+            if contact is not None and np.isfinite(np.asarray(contact)[idx]).all():
+                pts = np.asarray(contact)[idx]
+            else:  # no contact points logged: mark the pose after the colliding iteration
+                pts = np.asarray(pose)[idx + 1, :2]
+            ax.plot(pts[:, 0], pts[:, 1], "x", ms=4, mew=1.1, color=_C["vermillion"], zorder=8)
+    x0, y0, x1, y1 = world.bounds
+    if max(x1 - x0, y1 - y0) > 8:  # 1 m ticks crowd a column-wide panel; grid stays at 1 m
+        from matplotlib.ticker import MultipleLocator
+
+        for axis in (ax.xaxis, ax.yaxis):
+            axis.set_major_locator(MultipleLocator(2.0))
+            axis.set_minor_locator(MultipleLocator(1.0))
+        ax.grid(True, which="minor", color="0.88", lw=0.6, zorder=0)
+    for t in ax.texts:
+        t.set_fontsize(_FONT - 2)
+    ax.tick_params(labelsize=_FONT - 1)
+    ax.xaxis.label.set_fontsize(_FONT)
+    ax.yaxis.label.set_fontsize(_FONT)
+    return lc, n_coll
+
+
+def _path_legend(fig, n_coll_any: bool, loc: str = "outside lower center") -> None:
+    handles = [Line2D([], [], ls="", marker="o", ms=4.5, mfc="white", mec="black", label="start"),
+               Line2D([], [], ls="", marker="s", ms=4.5, color="black", label="end")]
+    if n_coll_any:
+        handles.append(Line2D([], [], ls="", marker="x", ms=4, mew=1.1, color=_C["vermillion"],
+                              label="collision"))
+    fig.legend(handles=handles, loc=loc, ncols=len(handles), fontsize=_FONT - 1, frameon=False)
+
+
+def _window(n: int, start: int | None, stop: int | None) -> tuple[int, int]:
+    s = 0 if start is None else max(0, min(int(start), n - 1 if n else 0))
+    e = n if stop is None else max(s + 1, min(int(stop), n))
+    return s, e
+
+
+def plot_trajectory(
+    world: World,
+    pose: np.ndarray,
+    *,
+    collision: np.ndarray | None = None,
+    contact: np.ndarray | None = None,
+    start: int | None = None,
+    stop: int | None = None,
+    robot_radius: float = 0.15,
+    title: str | None = None,
+) -> Figure:
+    """The robot's path on the world, coloured by iteration, collisions marked (Figs. 5.10/5.11).
+
+    Parameters
+    ----------
+    world : World
+        The world the path was driven in.
+    pose : array_like, shape (L+1, 3)
+        Poses [m, m, rad]; row ``i`` is the pose at the start of iteration ``i``.
+    collision : array_like of bool, shape (L,), optional
+        Collision flags; marked with a cross.
+    contact : array_like, shape (L, 2), optional
+        Contact points [m]; without them a collision is marked at the pose
+        after the colliding iteration.
+    start, stop : int, optional
+        Iteration window ``[start, stop)``; default the whole path.
+    robot_radius : float
+        For the world drawing, metres.
+    title : str, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One panel, 3.5 in wide (wider for tall worlds), colour bar = iteration.
+    """
+    P = np.asarray(pose)
+    n = P.shape[0] - 1
+    s, e = _window(n, start, stop)
+    x0, y0, x1, y1 = world.bounds
+    aspect = (y1 - y0 + 0.6) / (x1 - x0 + 0.6)
+    fig = Figure(figsize=(_COL, min((_COL - 1.25) * aspect + 1.05, 5.5)))
+    ax = fig.add_subplot()
+    lc, n_coll = _draw_path(ax, world, P, collision, contact, s, e, robot_radius)
+    fig.set_layout_engine("constrained")
+    cb = fig.colorbar(lc, ax=ax, shrink=0.95, pad=0.02, aspect=25)
+    cb.set_label("Iteration", fontsize=_FONT)
+    cb.ax.tick_params(labelsize=_FONT - 1)
+    _path_legend(fig, collision is not None)
+    ax.set_title(title or f"{world.name}: it. {s}–{e}, {n_coll} collisions", fontsize=_FONT)
+    return fig
+
+
+def plot_evaluation_paths(
+    worlds: Mapping[str, World],
+    episodes: Mapping[str, Mapping[str, np.ndarray]],
+    *,
+    start: int | None = None,
+    stop: int | None = None,
+    robot_radius: float = 0.15,
+    coverage: Mapping[str, float] | None = None,
+    title: str | None = None,
+    ncols: int | None = None,
+) -> Figure:
+    """Evaluation paths of a frozen rule base, one panel per world (Figs. 5.10, 5.11, A.5).
+
+    Parameters
+    ----------
+    worlds : mapping name -> World
+    episodes : mapping name -> {"pose": (n+1, 3), "collision": (n,)}
+        As returned by :func:`sitframe.analysis.results.evaluation_episodes`.
+    start, stop : int, optional
+        Iteration window drawn in every panel (collisions counted in it).
+    robot_radius : float
+    coverage : mapping name -> float, optional
+        Coverage of each whole episode, printed in the panel title.
+    title : str, optional
+    ncols : int, optional
+        Panels per row (default up to 3).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    names = [w for w in episodes if w in worlds]
+    if not names:
+        raise ValueError("no episode has a matching world")
+    ncols = ncols or min(3, len(names))
+    nrows = math.ceil(len(names) / ncols)
+    fig = Figure(figsize=(2.45 * ncols + 0.5, 2.35 * nrows + 0.55))
+    lcs = []
+    for k, name in enumerate(names):
+        ax = fig.add_subplot(nrows, ncols, k + 1)
+        ep = episodes[name]
+        n = np.asarray(ep["pose"]).shape[0] - 1
+        s, e = _window(n, start, stop)
+        lc, n_coll = _draw_path(ax, worlds[name], ep["pose"], ep.get("collision"),
+                                ep.get("contact"), s, e, robot_radius)
+        lcs.append(lc)
+        cov = "" if not coverage or name not in coverage else (
+            f", coverage {coverage[name]:.2f}")
+        ax.set_title(f"{name}: it. {s}–{e}, {n_coll} coll.{cov}", fontsize=_FONT - 1)
+    fig.set_layout_engine("constrained")
+    cb = fig.colorbar(lcs[-1], ax=fig.axes, shrink=0.7, pad=0.01, aspect=30)
+    cb.set_label("Iteration", fontsize=_FONT)
+    cb.ax.tick_params(labelsize=_FONT - 1)
+    _path_legend(fig, True)
+    if title:
+        fig.suptitle(title, fontsize=_FONT + 1)
+    return fig

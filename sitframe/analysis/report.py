@@ -1,0 +1,425 @@
+"""Write every figure and table a log supports into a folder, with an ``index.md``.
+
+This is what ``sitframe analyse LOG [-o DIR]`` runs; from Python::
+
+    from sitframe.analysis import analyse
+    report = analyse("logs/obstacle-avoidance.h5")
+    print(report.out_dir, report.problems)
+
+Per run: cluster prototypes (Fig. 5.2), validity per FCM trial (Fig. 5.1) and
+per c (Fig. 4.5, if the log has a sweep), learning curves of all trials, the
+convergence table (Table 5.9) and the learned action per situation in every
+trial (Tables A.2/A.3). Per analysed trial (default: the representative one,
+see :func:`sitframe.analysis.results.representative_trial`): exploration
+(Fig. 5.4), iterations between collisions (Fig. 5.5), mean reward per 50
+iterations (Fig. 5.7), the learning path after convergence (Fig. 5.10), the
+evaluation paths (Fig. 5.11), lookup table (Table 5.4) and rule base
+(Table 5.7).
+
+Incomplete logs (status other than ``complete``, stages or trials missing) are
+analysed as far as they go; what is missing is listed in ``index.md`` and in
+:attr:`AnalysisReport.problems`.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sitframe.analysis import results as R
+from sitframe.errors import InputError
+from sitframe.logs import Log, TrialLog
+
+__all__ = ["AnalysisReport", "analyse", "log_problems"]
+
+_EXPECTED = (InputError, KeyError, ValueError, IndexError, OSError)
+
+
+@dataclass
+class AnalysisReport:
+    """What :func:`analyse` wrote.
+
+    Attributes
+    ----------
+    log : str
+        The analysed log.
+    out_dir : str
+        Folder with the figures, tables and ``index.md``.
+    status : str
+        The log's status attribute.
+    files : list of (section, file name, caption)
+        Everything written (file names relative to ``out_dir``; a table is one
+        entry for its ``.md`` with the ``.csv`` next to it).
+    problems : list of str
+        Why the log is incomplete (empty for a complete log).
+    skipped : list of str
+        Figures or tables that could not be made, and why.
+    trials : list of int
+        Trials that got per-trial figures.
+    seconds : float
+        Wall time.
+    """
+
+    log: str
+    out_dir: str
+    status: str
+    files: list[tuple[str, str, str]] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+    skipped: list[str] = field(default_factory=list)
+    trials: list[int] = field(default_factory=list)
+    seconds: float = 0.0
+
+    @property
+    def index(self) -> str:
+        """Path of ``index.md``."""
+        return os.path.join(self.out_dir, "index.md")
+
+
+def log_problems(log: R.LogLike) -> list[str]:
+    """Plain-language list of what a log is missing (empty for a complete log).
+
+    Checks the status attribute, the stages the config asked for
+    (``experiment.stages``), the number of finished trials against
+    ``n_trials``, and each finished trial's evaluation episodes against
+    ``evaluate.worlds``.
+    """
+    lg = R.as_log(log)
+    out: list[str] = []
+    if lg.status != "complete":
+        out.append(f"log status is '{lg.status}', not 'complete' (the run did not finish)")
+    try:
+        cfg = lg.config
+    except Exception:  # noqa: BLE001 - a broken config must not stop the analysis
+        return out + ["the log's config attribute cannot be parsed"]
+    stages = list(cfg.get("experiment", {}).get("stages", []))
+    reuse = bool(cfg.get("experiment", {}).get("clusters_from"))
+    for st in ("collect", "cluster"):
+        if st in stages and not reuse and not lg.has(st):
+            out.append(f"stage '{st}' is missing (no /{st} group)")
+    have = lg.trial_indices()
+    if "learn" in stages:
+        try:
+            n = int(lg.attrs.get("n_trials", cfg.get("experiment", {}).get("trials", 0)))
+        except (TypeError, ValueError):
+            n = 0
+        missing = sorted(set(range(n)) - set(have))
+        if missing:
+            out.append(f"{len(missing)} of {n} learning trials missing: {_ranges(missing)}")
+    if "evaluate" in stages and have:
+        worlds = list(cfg.get("evaluate", {}).get("worlds", []))
+        if worlds:
+            lacking: dict[str, list[int]] = {}
+            with lg._file() as f:
+                for k in have:
+                    g = f[f"trials/{k:04d}"]
+                    for w in worlds:
+                        if f"episodes/eval/{w}/pose" not in g:
+                            lacking.setdefault(w, []).append(k)
+            for w, ks in lacking.items():
+                out.append(f"evaluation in '{w}' missing for trial(s) {_ranges(ks)}")
+    return out
+
+
+def _ranges(ks: Iterable[int]) -> str:
+    ks = sorted(ks)
+    parts: list[str] = []
+    i = 0
+    while i < len(ks):
+        j = i
+        while j + 1 < len(ks) and ks[j + 1] == ks[j] + 1:
+            j += 1
+        parts.append(str(ks[i]) if i == j else f"{ks[i]}-{ks[j]}")
+        i = j + 1
+    return ", ".join(parts)
+
+
+class _Writer:
+    def __init__(self, report: AnalysisReport, dpi: int) -> None:
+        self.r = report
+        self.dpi = dpi
+
+    def figure(self, section: str, name: str, caption: str, make: Callable[[], Any]) -> None:
+        try:
+            fig = make()
+        except _EXPECTED as exc:
+            self.r.skipped.append(f"{name}: {exc}")
+            return
+        if fig is None:
+            return
+        fig.savefig(os.path.join(self.r.out_dir, name), dpi=self.dpi)
+        self.r.files.append((section, name, caption))
+
+    def table(self, section: str, stem: str, caption: str, make: Callable[[], R.Table]) -> None:
+        try:
+            t = make()
+        except _EXPECTED as exc:
+            self.r.skipped.append(f"{stem}.md/.csv: {exc}")
+            return
+        t.save(os.path.join(self.r.out_dir, stem))
+        self.r.files.append((section, f"{stem}.md", caption + f" ([CSV]({stem}.csv))"))
+
+
+def _worlds(lg: Log) -> dict[str, Any]:
+    from sitframe.world import parse_world
+
+    out = {}
+    for name, text in lg.worlds.items():
+        try:
+            out[name] = parse_world(text, file=f"{lg.path}:worlds/{name}")
+        except InputError:
+            continue
+    return out
+
+
+def analyse(
+    log: R.LogLike,
+    out_dir: str | os.PathLike[str] | None = None,
+    *,
+    trials: Iterable[int] | str | None = None,
+    window: int = 50,
+    path_iterations: int = 400,
+    dpi: int = 200,
+) -> AnalysisReport:
+    """Write the figures (PNG) and tables (Markdown + CSV) a log supports, and ``index.md``.
+
+    Parameters
+    ----------
+    log
+        The log or its path (bad input raises :class:`~sitframe.errors.InputError`).
+    out_dir
+        Output folder; default ``<log folder>/<log stem>-analysis``. Created.
+    trials
+        Trials that get per-trial figures: an iterable of indices, ``"all"``,
+        or None for the representative trial only.
+    window
+        Iterations per reward window (thesis: 50).
+    path_iterations
+        Iterations of each drawn path: the learning path starts at convergence
+        (or is the last ``path_iterations`` iterations of an unconverged trial);
+        evaluation paths start at 0.
+    dpi
+        Resolution of the PNGs.
+
+    Returns
+    -------
+    AnalysisReport
+    """
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    from sitframe.analysis import clustering_plots as CP
+    from sitframe.analysis import learning_plots as LP
+
+    t0 = time.perf_counter()
+    lg = R.as_log(log)
+    out = Path(out_dir) if out_dir is not None else Path(lg.path).with_name(
+        Path(lg.path).stem + "-analysis")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot create the output folder: {exc.strerror}", file=str(out),
+                         key="-o") from None
+    rep = AnalysisReport(lg.path, str(out), lg.status)
+    rep.problems = log_problems(lg)
+    W = _Writer(rep, dpi)
+    radius = R.robot_radius(lg)
+
+    # ------------------------------------------------------------- clustering
+    if lg.has("cluster"):
+        sec = "Situations (clustering)"
+        try:
+            ct = R.clustering_trials(lg)
+        except _EXPECTED as exc:
+            rep.skipped.append(f"clustering figures: {exc}")
+            ct = None
+        if lg.has("cluster/state/centers"):
+            W.figure(sec, "prototypes.png",
+                     "Cluster prototypes (situations) as polar plots of the 8 sonar ranges "
+                     "(Fig. 5.2)",
+                     lambda: CP.plot_prototypes(
+                         np.asarray(lg.interpreter_state()["centers"]), R.sensor_angles(lg),
+                         max_range=R.sensor_max_range(lg),
+                         labels=R.situation_labels(lg, numbered=False)))
+        if ct is not None:
+            W.figure(sec, "measures_by_trial.png",
+                     f"Validity measures of the {ct.n_trials} FCM trials, chosen trial "
+                     f"{ct.chosen} marked (Fig. 5.1)", lambda: CP.plot_measures_by_trial(ct))
+        sw = R.sweep_result(lg)
+        if sw is not None:
+            W.figure(sec, "measures_by_c.png",
+                     "Validity of the chosen partition against the number of clusters c "
+                     "(Fig. 4.5)", lambda: CP.plot_measures_by_c(sw))
+        else:
+            rep.skipped.append("measures_by_c.png: the log has no sweep over c "
+                               "(set [interpreter] sweep = [2, 3, ...] to record one)")
+
+    # ------------------------------------------------------------- learning
+    idx = lg.trial_indices()
+    if idx:
+        sec = "Learning (all trials)"
+        W.table(sec, "convergence", "Convergence and quality of every trial (Table 5.9)",
+                lambda: R.convergence_table(lg))
+        loaded: dict[int, TrialLog] = {}
+
+        def get(k: int) -> TrialLog:
+            if k not in loaded:
+                loaded[k] = lg.trial(k)
+            return loaded[k]
+
+        W.table(sec, "rule_bases", "Learned action per situation in every trial, and the most "
+                "frequent one (Tables A.2/A.3)", lambda: R.rule_bases_across_trials(lg))
+
+        def curves() -> Any:
+            rewards, conv = {}, {}
+            for k in idx:
+                tr = get(k)
+                lab = _reward_label(tr)
+                rewards[k] = tr.arrays[f"reward/{lab}"]
+                conv[k] = R.convergence_iteration(tr)
+            return LP.plot_learning_curves(rewards, conv, window,
+                                           title=f"Mean reward per {window} iterations, "
+                                           f"{len(idx)} trials")
+
+        W.figure(sec, "learning_curves.png", f"Mean reward per {window} iterations of every "
+                 "trial and their mean; dots = convergence", curves)
+
+        if trials is None:
+            rt = R.representative_trial(lg)
+            chosen = [rt] if rt is not None else []
+        elif trials == "all":
+            chosen = idx
+        else:
+            chosen = [int(k) for k in trials]  # type: ignore[union-attr]
+            bad = [k for k in chosen if k not in idx]
+            if bad:
+                raise InputError(f"the log has no trial(s) {bad}; it has {_ranges(idx)}",
+                                 file=lg.path, key="--trial")
+        rep.trials = chosen
+        worlds = _worlds(lg)
+        for k in chosen:
+            _trial_figures(W, lg, get(k), worlds, window, path_iterations, radius, LP)
+    rep.seconds = time.perf_counter() - t0
+    _write_index(rep, lg)
+    rep.seconds = time.perf_counter() - t0
+    return rep
+
+
+def _reward_label(tr: TrialLog) -> str:
+    labels = [k.split("/", 1)[1] for k in tr.arrays if k.startswith("reward/")]
+    if not labels:
+        raise KeyError(f"trial {tr.index} logged no reward")
+    try:
+        lab = R.learned_output(tr)[0]
+    except InputError:
+        return labels[0]
+    return lab if lab in labels else labels[0]
+
+
+def _trial_figures(W: _Writer, lg: Log, tr: TrialLog, worlds: dict[str, Any], window: int,
+                   path_iterations: int, radius: float, LP: Any) -> None:
+    k = tr.index
+    sec = f"Trial {k}"
+    conv = R.convergence_iteration(tr)
+    L = int(np.asarray(tr.arrays["collision"]).size)
+    state = f"converged at iteration {conv}" if conv is not None else "not converged"
+    sit = R.situation_labels(lg)
+
+    def exploration() -> Any:
+        lab, out = R.learned_output(tr)
+        counts = R.exploration_counts(tr, lab, out)
+        singles = tr.behaviours[lab][f"singletons/{out}"]
+        return LP.plot_exploration(counts, sit if len(sit) == counts.shape[0] else None,
+                                   singles, action_unit="deg" if out == "heading" else "",
+                                   title=f"Trial {k}: situation-action pairs over {L} "
+                                   "iterations")
+
+    W.figure(sec, f"exploration_trial{k}.png",
+             f"Exploration: how often each (dominant situation, executed action) pair "
+             f"occurred in trial {k} (Fig. 5.4)", exploration)
+    W.figure(sec, f"collision_intervals_trial{k}.png",
+             f"Iterations between collisions in trial {k}, {state} (Fig. 5.5)",
+             lambda: LP.plot_collision_intervals(
+                 R.collision_intervals(tr.arrays["collision"]), conv,
+                 title=f"Trial {k}: {int(np.sum(tr.arrays['collision']))} collisions in "
+                 f"{L} iterations"))
+
+    def reward() -> Any:
+        lab = _reward_label(tr)
+        return LP.plot_reward_per_window(tr.arrays[f"reward/{lab}"], window, conv,
+                                         title=f"Trial {k}: mean '{lab}' reward per {window} "
+                                         "iterations", reward_label="Mean reward")
+
+    W.figure(sec, f"reward_trial{k}.png",
+             f"Mean reward per {window} iterations in trial {k}, {state} (Fig. 5.7)", reward)
+
+    world = worlds.get(tr.world)
+    if world is not None and "pose" in tr.arrays:
+        s = conv if conv is not None else max(0, L - path_iterations)
+        e = min(L, s + path_iterations)
+        what = "after convergence" if conv is not None else "at the end (not converged)"
+        W.figure(sec, f"trajectory_trial{k}.png",
+                 f"Learning path of trial {k} in '{tr.world}', iterations {s}-{e} {what}; "
+                 "crosses = collisions (Fig. 5.10)",
+                 lambda: LP.plot_trajectory(
+                     world, tr.arrays["pose"], collision=tr.arrays.get("collision"),
+                     contact=tr.arrays.get("contact"), start=s, stop=e, robot_radius=radius,
+                     title=f"Trial {k}, {tr.world}, it. {s}–{e}: {_count(tr, s, e)} coll."))
+    else:
+        W.r.skipped.append(f"trajectory_trial{k}.png: world '{tr.world}' not in the log")
+    eps = R.evaluation_episodes(tr)
+    if eps:
+        cov = {w: float(tr.summary.get(f"eval/{w}/coverage", np.nan)) for w in eps}
+        missing = [w for w in eps if w not in worlds]
+        if missing:
+            W.r.skipped.append(f"evaluation_trial{k}.png: worlds {missing} not in the log")
+        W.figure(sec, f"evaluation_trial{k}.png",
+                 f"Evaluation paths of trial {k}'s frozen rule base, first {path_iterations} "
+                 "iterations per world; crosses = collisions (Fig. 5.11)",
+                 lambda: LP.plot_evaluation_paths(
+                     worlds, eps, stop=path_iterations, robot_radius=radius, coverage=cov,
+                     title=f"Trial {k}: evaluation of the frozen rule base"))
+    W.table(sec, f"lookup_table_trial{k}", f"Lookup table Q of trial {k} (Table 5.4)",
+            lambda: R.lookup_table(lg, tr))
+    W.table(sec, f"rule_base_trial{k}", f"Learned rule base of trial {k} with max Q per "
+            "situation (Tables 5.6, 5.7)", lambda: R.rule_base_table(lg, tr))
+
+
+def _count(tr: TrialLog, s: int, e: int) -> int:
+    return int(np.sum(np.asarray(tr.arrays["collision"])[s:e]))
+
+
+def _write_index(rep: AnalysisReport, lg: Log) -> None:
+    a = lg.attrs
+    lines = [f"# Analysis of `{os.path.basename(lg.path)}`", "",
+             f"- log: `{lg.path}`",
+             f"- experiment: {a.get('name', '?')}, created {a.get('created', '?')}, "
+             f"seed {a.get('seed', '?')}",
+             f"- status: **{lg.status}**",
+             f"- finished trials: {len(lg.trial_indices())}"
+             + (f" of {a['n_trials']}" if "n_trials" in a else "")]
+    if rep.trials:
+        lines.append(f"- per-trial figures for trial(s) {', '.join(map(str, rep.trials))}"
+                     " (default: the converged trial with the median convergence iteration, "
+                     "else trial 0; `--trial K` or `--all-trials` for others)")
+    lines.append("")
+    if rep.problems:
+        lines += ["## Incomplete log", "",
+                  "This log is incomplete; everything below is computed from what it holds.", ""]
+        lines += [f"- {p}" for p in rep.problems] + [""]
+    section = None
+    for sec, name, caption in rep.files:
+        if sec != section:
+            lines += ["", f"## {sec}", ""]
+            section = sec
+        lines.append(f"- [{name}]({name}) — {caption}")
+    if rep.skipped:
+        lines += ["", "## Not produced", ""] + [f"- {s}" for s in rep.skipped]
+    lines += ["", f"Written by `sitframe analyse` in {rep.seconds:.1f} s.", ""]
+    with open(rep.index, "w", encoding="utf-8") as f:
+        f.write("\n".join(lines))

@@ -1,0 +1,745 @@
+"""Numbers behind the thesis's chapter-5 figures and tables, read from a log.
+
+Everything here takes a :class:`sitframe.logs.Log` (or a path to one) and/or a
+:class:`sitframe.logs.TrialLog` and returns numpy arrays, small dataclasses or
+:class:`Table` objects; nothing draws. Figures are in
+:mod:`sitframe.analysis.learning_plots`.
+
+Definitions used throughout
+---------------------------
+* *Dominant situation* of an iteration: the situation with the largest
+  membership of the reading the controller acted on (``argmax`` of the row of
+  ``memberships``; ties go to the lower index).
+* *Executed action* for a situation: the rule base the controller executed at
+  that iteration (``behaviours/<label>/<output>/rule_base``, one action index per
+  situation), looked up at the dominant situation.
+* *Convergence iteration*: the iteration at which the learner froze its greedy
+  rule base (thesis 4.6.4); ``None`` if it did not converge. Collisions
+  "after convergence" are those of iterations ``>= convergence iteration``.
+* Situations are numbered from 0 (``S0 ... S(c-1)``) in labels and tables,
+  like the array rows and the rest of sitframe (the thesis numbers from 1).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from sitframe.clustering import (
+    SELECTION_RULE,
+    SONAR_ANGLES_DEG,
+    ClusteringTrials,
+    SweepResult,
+    describe_prototype,
+    rank_trials,
+)
+from sitframe.errors import InputError
+from sitframe.fcm import MEASURE_DIRECTIONS
+from sitframe.logs import Log, TrialLog, open_log
+
+__all__ = [
+    "CollisionIntervals",
+    "Table",
+    "as_log",
+    "clustering_trials",
+    "collision_intervals",
+    "compare_runs",
+    "convergence_iteration",
+    "convergence_table",
+    "evaluation_episodes",
+    "exploration_counts",
+    "learned_output",
+    "lookup_table",
+    "representative_trial",
+    "reward_per_window",
+    "robot_radius",
+    "rule_base_table",
+    "rule_bases_across_trials",
+    "sensor_angles",
+    "sensor_max_range",
+    "situation_labels",
+    "sweep_result",
+]
+
+LogLike = Log | str | os.PathLike[str]
+
+
+# --------------------------------------------------------------------------- basics
+
+
+def as_log(log: LogLike) -> Log:
+    """Return ``log`` itself, or open the path with :func:`sitframe.logs.open_log`.
+
+    Raises
+    ------
+    InputError
+        Missing file, not HDF5, not a sitframe log, unknown schema version.
+    """
+    return log if isinstance(log, Log) else open_log(log)
+
+
+def _section(log: Log, name: str) -> dict[str, Any]:
+    try:
+        sec = log.config.get(name, {})
+    except Exception:  # noqa: BLE001 - a log with a broken config is still analysable
+        return {}
+    return sec if isinstance(sec, dict) else {}
+
+
+def sensor_angles(log: LogLike) -> np.ndarray:
+    """Sonar bearings [deg, + = left] from the log's ``[sensor]`` config.
+
+    Defaults to the Pioneer 2DX front ring (+90 +50 +30 +10 -10 -30 -50 -90)
+    when the config does not set ``angles_deg``.
+    """
+    angles = _section(as_log(log), "sensor").get("angles_deg", SONAR_ANGLES_DEG)
+    return np.asarray(angles, dtype=np.float64).reshape(-1)
+
+
+def sensor_max_range(log: LogLike) -> float:
+    """Maximum sonar range [m] from the ``[sensor]`` config (default 3.0)."""
+    return float(_section(as_log(log), "sensor").get("max_range", 3.0))
+
+
+def robot_radius(log: LogLike) -> float:
+    """Robot disc radius [m] from the ``[robot]`` config (default 0.15)."""
+    return float(_section(as_log(log), "robot").get("radius", 0.15))
+
+
+def situation_labels(log: LogLike, *, numbered: bool = True) -> list[str]:
+    """One short label per situation, derived from the fitted prototypes.
+
+    Uses :func:`sitframe.clustering.describe_prototype` on
+    ``/cluster/state/centers`` with the log's sensor angles. Without prototypes
+    (another interpreter) the labels are just ``S0 ... S(c-1)``.
+
+    Parameters
+    ----------
+    log
+        The log (or its path).
+    numbered
+        Prefix each label with ``"S{i}: "`` (0-based, like the array rows).
+
+    Returns
+    -------
+    list of str
+    """
+    lg = as_log(log)
+    try:
+        centers = np.asarray(lg.interpreter_state()["centers"], dtype=np.float64)
+    except (InputError, KeyError):
+        return [f"S{i}" for i in range(_n_situations(lg))]
+    angles = sensor_angles(lg)
+    if centers.ndim != 2 or centers.shape[1] != angles.size:
+        return [f"S{i}" for i in range(centers.shape[0])]
+    words = [describe_prototype(v, angles) for v in centers]
+    return [f"S{i}: {w}" if numbered else w for i, w in enumerate(words)]
+
+
+def _n_situations(log: Log) -> int:
+    try:
+        return int(_section(log, "interpreter").get("c", 0))
+    except (TypeError, ValueError):
+        return 0
+
+
+# ----------------------------------------------------------------------- clustering
+
+
+def clustering_trials(log: LogLike) -> ClusteringTrials:
+    """Rebuild the clustering stage (every FCM trial, the chosen one) from ``/cluster``.
+
+    Ranks and eligibility are recomputed with
+    :func:`sitframe.clustering.rank_trials`; the chosen trial is the logged one.
+    Initial centres are not logged (``init_centers`` is NaN).
+
+    Raises
+    ------
+    InputError
+        The log has no cluster stage, or it lacks trial centres / measures.
+    """
+    lg = as_log(log)
+    st = lg.stage("cluster")
+    for key in ("trial_centers", "trial_measures", "measure_names"):
+        if key not in st:
+            raise InputError(f"the cluster stage has no '{key}' (not an FCM clustering?)",
+                             file=lg.path, key=f"cluster/{key}")
+    names = _names(st["measure_names"])
+    M = np.asarray(st["trial_measures"], dtype=np.float64)
+    measures = {k: M[:, i] for i, k in enumerate(names)}
+    missing = [k for k in MEASURE_DIRECTIONS if k not in measures]
+    if missing:
+        raise InputError(f"the cluster stage lacks the measures {missing}", file=lg.path,
+                         key="cluster/measure_names")
+    measures = {k: measures[k] for k in MEASURE_DIRECTIONS}
+    centers = np.asarray(st["trial_centers"], dtype=np.float64)
+    ranks, mean_rank, eligible, fallback = rank_trials(measures)
+    interp = _section(lg, "interpreter")
+    m = float(lg.interpreter_state().get("m", interp.get("m", 1.2))) if lg.has(
+        "cluster/state") else float(interp.get("m", 1.2))
+    T = centers.shape[0]
+    return ClusteringTrials(
+        c=int(centers.shape[1]), m=m, centers=centers, init_centers=np.full_like(centers, np.nan),
+        measures=measures,
+        n_iter=np.asarray(st.get("trial_n_iter", np.zeros(T)), dtype=np.int64),
+        converged=np.asarray(st.get("trial_converged", np.ones(T)), dtype=bool),
+        chosen=int(st.get("chosen", 0)), ranks=ranks, mean_rank=mean_rank,
+        ranked_measures=tuple(k for k, v in MEASURE_DIRECTIONS.items() if v in ("max", "min")),
+        eligible=eligible, fallback=bool(fallback), rule=str(st.get("rule", SELECTION_RULE)),
+        tol=float(interp.get("tol", 1e-5)), max_iter=int(interp.get("max_iter", 300)),
+    )
+
+
+def _names(value: Any) -> list[str]:
+    if isinstance(value, str):
+        return list(json.loads(value))
+    return [v.decode() if isinstance(v, bytes) else str(v) for v in np.asarray(value).ravel()]
+
+
+def sweep_result(log: LogLike) -> SweepResult | None:
+    """The validity-vs-c sweep (thesis Fig. 4.5) if the log has one, else None.
+
+    Only the chosen trial's measures per c are logged, so ``trials`` is empty,
+    ``chosen`` is -1 and ``fallback`` is taken as ``min_card <= 0``.
+    """
+    lg = as_log(log)
+    if not lg.has("cluster/sweep_c"):
+        return None
+    st = lg.stage("cluster")
+    names = _names(st["measure_names"])
+    M = np.asarray(st["sweep_measures"], dtype=np.float64)
+    measures = {k: M[:, i] for i, k in enumerate(names)}
+    cs = np.asarray(st["sweep_c"], dtype=np.int64)
+    interp = _section(lg, "interpreter")
+    fb = ~(measures.get("min_card", np.ones(cs.size)) > 0)
+    return SweepResult(cs=cs, measures={k: measures[k] for k in MEASURE_DIRECTIONS if k in
+                                        measures},
+                       chosen=np.full(cs.size, -1), fallback=fb, trials=(),
+                       m=float(interp.get("m", 1.2)), n_trials=int(interp.get("trials", 0)))
+
+
+# ------------------------------------------------------------------------- learning
+
+
+def learned_output(trial: TrialLog, label: str | None = None,
+                   output: str = "heading") -> tuple[str, str]:
+    """The (behaviour label, output) whose per-iteration rule base was logged.
+
+    Parameters
+    ----------
+    trial
+        A trial read with :meth:`sitframe.logs.Log.trial`.
+    label
+        Behaviour label; default the first behaviour that logged
+        ``<output>/rule_base`` (i.e. learned ``output``).
+    output
+        Output name (``"heading"`` or ``"speed"``); if ``label`` is None and no
+        behaviour learned ``output``, any learned output is taken.
+
+    Raises
+    ------
+    InputError
+        No behaviour of the trial learned anything (or ``label`` did not).
+    """
+    learned = [(lb, k.split("/", 1)[0]) for lb, data in trial.behaviours.items()
+               for k in data if k.endswith("/rule_base") and "/" in k
+               and k.count("/") == 1 and not k.startswith(("policy", "snapshot"))]
+    if label is not None:
+        learned = [x for x in learned if x[0] == label]
+    pick = [x for x in learned if x[1] == output] or learned
+    if not pick:
+        raise InputError(f"trial {trial.index} has no learned rule base"
+                         + (f" for behaviour '{label}'" if label else "")
+                         + f" (behaviours: {sorted(trial.behaviours)})", key="behaviours")
+    return pick[0]
+
+
+def _singletons(trial: TrialLog, label: str, output: str) -> np.ndarray:
+    s = trial.behaviours[label].get(f"singletons/{output}")
+    if s is None:
+        raise InputError(f"behaviour '{label}' logged no singletons/{output}",
+                         key=f"behaviours/{label}/singletons/{output}")
+    return np.asarray(s, dtype=np.float64)
+
+
+def exploration_counts(trial: TrialLog, label: str | None = None, output: str = "heading",
+                       *, start: int = 0, stop: int | None = None) -> np.ndarray:
+    """How often each (dominant situation, executed action) pair occurred (Fig. 5.4).
+
+    Parameters
+    ----------
+    trial
+        A learning trial.
+    label, output
+        Which learned rule base (see :func:`learned_output`).
+    start, stop
+        Iteration window ``[start, stop)``; default the whole trial.
+
+    Returns
+    -------
+    ndarray of int, shape (c, A)
+        ``counts[s, a]`` = iterations in which situation ``s`` was dominant and
+        its rule executed action ``a`` (indices into the singletons). Sums to
+        the number of iterations in the window.
+    """
+    label, output = learned_output(trial, label, output)
+    u = np.asarray(trial.arrays["memberships"])
+    rb = np.asarray(trial.behaviours[label][f"{output}/rule_base"])
+    A = _singletons(trial, label, output).size
+    n = min(u.shape[0], rb.shape[0])
+    sl = slice(start, n if stop is None else min(stop, n))
+    u, rb = u[sl], rb[sl]
+    dom = u.argmax(axis=1)
+    act = rb[np.arange(dom.size), dom].astype(np.intp)
+    counts = np.zeros((u.shape[1], A), dtype=np.int64)
+    np.add.at(counts, (dom, act), 1)
+    return counts
+
+
+def convergence_iteration(trial: TrialLog, label: str | None = None) -> int | None:
+    """Iteration at which the trial's learned rule base was frozen, or None."""
+    data = trial.behaviours.get(label) if label else None
+    if data is None:
+        try:
+            data = trial.behaviours[learned_output(trial)[0]]
+        except InputError:
+            data = {}
+    it = data.get("convergence_iteration", trial.summary.get("convergence_iteration", -1))
+    conv = data.get("converged", trial.summary.get("converged", False))
+    return int(it) if conv and it is not None and int(it) >= 0 else None
+
+
+@dataclass(frozen=True)
+class CollisionIntervals:
+    """Collisions of a run and the iterations between them (Figs. 5.5, 5.6).
+
+    Attributes
+    ----------
+    iterations : ndarray of int, shape (k,)
+        0-based iteration of each collision.
+    intervals : ndarray of int, shape (k,)
+        Iterations since the previous collision (for the first one: since the
+        start, i.e. ``iterations[0] + 1``). One iteration is 1.5 s.
+    n_iterations : int
+        Length of the run.
+    """
+
+    iterations: np.ndarray
+    intervals: np.ndarray
+    n_iterations: int
+
+
+def collision_intervals(collision: np.ndarray) -> CollisionIntervals:
+    """Iterations between successive collisions of a boolean per-iteration array."""
+    c = np.asarray(collision, dtype=bool).ravel()
+    it = np.flatnonzero(c)
+    iv = np.diff(np.r_[-1, it])
+    return CollisionIntervals(it.astype(np.int64), iv.astype(np.int64), int(c.size))
+
+
+def reward_per_window(reward: np.ndarray, window: int = 50) -> np.ndarray:
+    """Mean reward over consecutive windows of ``window`` iterations (Figs. 5.7, 5.8).
+
+    Returns
+    -------
+    ndarray, shape (ceil(L / window),)
+        Entry ``k`` is the mean over iterations ``[k*window, (k+1)*window)``;
+        the last window may be shorter.
+    """
+    if window < 1:
+        raise ValueError(f"window must be >= 1 iteration, got {window}")
+    r = np.asarray(reward, dtype=np.float64).ravel()
+    n = math.ceil(r.size / window)
+    if n == 0:
+        return np.zeros(0)
+    sums = np.add.reduceat(r, np.arange(0, r.size, window))
+    sizes = np.diff(np.r_[np.arange(0, r.size, window), r.size])
+    return sums / sizes
+
+
+def evaluation_episodes(trial: TrialLog) -> dict[str, dict[str, np.ndarray]]:
+    """Evaluation runs of a trial: world name -> {``pose`` (n+1, 3), ``collision`` (n,)}."""
+    out: dict[str, dict[str, np.ndarray]] = {}
+    for key, val in trial.episodes.items():
+        parts = key.split("/")
+        if len(parts) == 3 and parts[0] == "eval":
+            out.setdefault(parts[1], {})[parts[2]] = np.asarray(val)
+    return {w: d for w, d in out.items() if "pose" in d}
+
+
+def representative_trial(log: LogLike) -> int | None:
+    """The trial the per-trial figures show by default.
+
+    The converged trial whose convergence iteration is the median of the
+    converged trials (the lower one for an even count); if none converged, the
+    trial with the lowest index. None when the log has no finished trial.
+    """
+    lg = as_log(log)
+    s = lg.summary()
+    if s.size == 0:
+        return None
+    names = s.dtype.names or ()
+    if "converged" in names and "convergence_iteration" in names:
+        ok = s["converged"] > 0.5
+        if ok.any():
+            rows = s[ok]
+            order = np.argsort(rows["convergence_iteration"], kind="stable")
+            return int(rows["trial"][order[(len(order) - 1) // 2]])
+    return int(np.min(s["trial"]))
+
+
+# --------------------------------------------------------------------------- tables
+
+
+def _fmt(v: Any, digits: int) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, bool | np.bool_):
+        return "yes" if v else "no"
+    if isinstance(v, int | np.integer):
+        return str(int(v))
+    if isinstance(v, float | np.floating):
+        if not math.isfinite(float(v)):
+            return ""
+        return f"{float(v):.{digits}f}"
+    return str(v)
+
+
+@dataclass
+class Table:
+    """A small result table that renders as Markdown or CSV.
+
+    Attributes
+    ----------
+    title : str
+        One line saying what the table is (used as Markdown caption).
+    columns : list of str
+        Column headers (units in brackets).
+    rows : list of list
+        Cell values: str, int, float (NaN = empty cell), bool (yes/no) or None.
+    notes : list of str
+        Lines printed under the Markdown table.
+    digits : int
+        Decimals for floats.
+    """
+
+    title: str
+    columns: list[str]
+    rows: list[list[Any]]
+    notes: list[str] = field(default_factory=list)
+    digits: int = 2
+
+    def column(self, name: str) -> list[Any]:
+        """The values of one column."""
+        i = self.columns.index(name)
+        return [r[i] for r in self.rows]
+
+    def to_markdown(self) -> str:
+        """GitHub-flavoured Markdown: bold title line, table, notes."""
+        cells = [[_fmt(v, self.digits) or "–" for v in r] for r in self.rows]
+        num = [all(_is_num(r[i]) for r in self.rows) for i in range(len(self.columns))]
+        lines = [f"**{self.title}**", "",
+                 "| " + " | ".join(self.columns) + " |",
+                 "|" + "|".join("---:" if n else ":---" for n in num) + "|"]
+        lines += ["| " + " | ".join(c.replace("|", "\\|") for c in r) + " |" for r in cells]
+        if self.notes:
+            lines += [""] + [f"{n}  " for n in self.notes]
+        return "\n".join(lines) + "\n"
+
+    def to_csv(self) -> str:
+        """CSV with a header row; floats at full precision, NaN/None as empty cells."""
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(self.columns)
+        for r in self.rows:
+            w.writerow([_csv_cell(v) for v in r])
+        return buf.getvalue()
+
+    def save(self, stem: str | os.PathLike[str]) -> tuple[str, str]:
+        """Write ``<stem>.md`` and ``<stem>.csv``; return both paths."""
+        md, cs = f"{os.fspath(stem)}.md", f"{os.fspath(stem)}.csv"
+        with open(md, "w", encoding="utf-8") as f:
+            f.write(self.to_markdown())
+        with open(cs, "w", encoding="utf-8", newline="") as f:
+            f.write(self.to_csv())
+        return md, cs
+
+
+def _is_num(v: Any) -> bool:
+    return isinstance(v, int | float | np.integer | np.floating) and not isinstance(
+        v, bool | np.bool_) or v is None
+
+
+def _csv_cell(v: Any) -> Any:
+    if v is None:
+        return ""
+    if isinstance(v, bool | np.bool_):
+        return int(bool(v))
+    if isinstance(v, float | np.floating):
+        return "" if not math.isfinite(float(v)) else repr(float(v))
+    if isinstance(v, np.integer):
+        return int(v)
+    return v
+
+
+def _deg(a: float) -> str:
+    return f"{a:+g}°" if a else "0°"
+
+
+def _num(a: float) -> int | float:
+    """An action value as int when it is integral (90.0 -> 90), for tables."""
+    a = float(a)
+    return int(a) if a.is_integer() else a
+
+
+def lookup_table(log: LogLike, trial: int | TrialLog, label: str | None = None,
+                 output: str = "heading") -> Table:
+    """The learned lookup table Q (situations x actions) of one trial (Tables 5.4, 5.5).
+
+    Q is ``behaviours/<label>/<output>/q``, the table at the end of the trial,
+    which is the table at convergence when the trial converged (learning stops
+    then). The last column is the greedy action (largest Q).
+
+    Returns
+    -------
+    Table
+        One row per situation: ``Situation``, ``Description``, one column per
+        action (headers in degrees), ``Greedy [deg]``.
+    """
+    lg = as_log(log)
+    tr = trial if isinstance(trial, TrialLog) else lg.trial(trial)
+    label, output = learned_output(tr, label, output)
+    q = np.asarray(tr.behaviours[label][f"{output}/q"], dtype=np.float64)
+    singles = _singletons(tr, label, output)
+    labels = _labels_for(lg, q.shape[0])
+    heading = output == "heading"
+    cols = (["Situation", "Description"]
+            + [_deg(float(a)) if heading else f"{a:g}" for a in singles]
+            + ["Greedy [deg]" if heading else f"Greedy ({output})"])
+    rows = [[i, labels[i], *map(float, q[i]), _num(singles[int(np.argmax(q[i]))])]
+            for i in range(q.shape[0])]
+    conv = convergence_iteration(tr, label)
+    when = (f"at convergence (iteration {conv})" if conv is not None
+            else f"after {tr.arrays['collision'].size} iterations, not converged")
+    return Table(f"Lookup table Q of trial {tr.index}, behaviour '{label}' ({output}), {when}",
+                 cols, rows)
+
+
+def _labels_for(log: Log, c: int) -> list[str]:
+    labels = situation_labels(log, numbered=False)
+    return labels if len(labels) == c else [""] * c
+
+
+def rule_base_table(log: LogLike, trial: int | TrialLog, label: str | None = None,
+                    output: str = "heading") -> Table:
+    """The learned rule base of one trial (Tables 5.7, 5.8) with each situation's max Q.
+
+    Returns
+    -------
+    Table
+        One row per situation: ``Situation``, ``Description``, ``Action [deg]``
+        (the converged rule base, or the greedy one if the trial did not
+        converge), ``Max Q`` (the situation's desirability, Table 5.6) and
+        ``Dominant [%]`` (share of the trial's iterations in which the situation
+        was dominant).
+    """
+    lg = as_log(log)
+    tr = trial if isinstance(trial, TrialLog) else lg.trial(trial)
+    label, output = learned_output(tr, label, output)
+    singles = _singletons(tr, label, output)
+    data = tr.behaviours[label]
+    pol = data.get(f"policy/{output}", data.get(f"{output}/final_rule_base"))
+    q = np.asarray(data[f"{output}/q"], dtype=np.float64) if f"{output}/q" in data else None
+    if pol is None:
+        if q is None:
+            raise InputError(f"behaviour '{label}' logged no policy/{output}",
+                             key=f"behaviours/{label}/policy/{output}")
+        pol = q.argmax(axis=1)
+    pol = np.asarray(pol, dtype=np.intp)
+    c = pol.size
+    labels = _labels_for(lg, c)
+    counts = exploration_counts(tr, label, output).sum(axis=1)
+    share = 100.0 * counts / max(int(counts.sum()), 1)
+    head = "Action [deg]" if output == "heading" else f"Action ({output})"
+    rows = [[i, labels[i], _num(singles[pol[i]]),
+             float(q[i].max()) if q is not None else float("nan"), float(share[i])]
+            for i in range(c)]
+    conv = convergence_iteration(tr, label)
+    state = (f"converged at iteration {conv}" if conv is not None
+             else "not converged: greedy rule base of the final Q")
+    return Table(f"Learned rule base of trial {tr.index}, behaviour '{label}' ({output}), "
+                 f"{state}", ["Situation", "Description", head, "Max Q", "Dominant [%]"], rows,
+                 digits=1)
+
+
+def rule_bases_across_trials(log: LogLike, label: str | None = None,
+                             output: str = "heading") -> Table:
+    """Every trial's learned action per situation, and the most frequent one (Tables A.2/A.3).
+
+    Returns
+    -------
+    Table
+        One row per situation: ``Situation``, ``Description``, one column per
+        trial (``T0``, ``T1``, ...; action values, degrees for heading),
+        ``Most frequent``, ``Agreement [%]`` (share of trials with that action).
+    """
+    lg = as_log(log)
+    idx = lg.trial_indices()
+    acts: list[np.ndarray] = []
+    conv: list[bool] = []
+    for k in idx:
+        tr = lg.trial(k)
+        lb, out = learned_output(tr, label, output)
+        data = tr.behaviours[lb]
+        pol = np.asarray(data.get(f"policy/{out}", data.get(f"{out}/final_rule_base")),
+                         dtype=np.intp)
+        acts.append(_singletons(tr, lb, out)[pol])
+        conv.append(convergence_iteration(tr, lb) is not None)
+    if not acts:
+        raise InputError("the log has no finished learning trial", file=lg.path, key="trials")
+    A = np.stack(acts, axis=1)  # (c, T)
+    labels = _labels_for(lg, A.shape[0])
+    rows = []
+    for i in range(A.shape[0]):
+        vals, cnt = np.unique(A[i], return_counts=True)
+        best = vals[np.argmax(cnt)]
+        rows.append([i, labels[i], *map(float, A[i]), float(best),
+                     100.0 * cnt.max() / A.shape[1]])
+    cols = ["Situation", "Description"] + [f"T{k}" + ("" if c else "*")
+                                           for k, c in zip(idx, conv, strict=True)]
+    notes = ["* trial did not converge (greedy rule base of its final Q)"] if not all(conv) else []
+    return Table(f"Learned {output} action per situation in each trial "
+                 f"({'degrees' if output == 'heading' else output})",
+                 cols + ["Most frequent", "Agreement [%]"], rows, notes=notes, digits=0)
+
+
+def _summary_columns(s: np.ndarray) -> tuple[list[str], list[str]]:
+    names = s.dtype.names or ()
+    worlds: list[str] = []
+    for n in names:
+        if n.startswith("eval.") and n.endswith(".collisions_per_1000"):
+            worlds.append(n[len("eval."):-len(".collisions_per_1000")])
+    return list(names), worlds
+
+
+def _col(s: np.ndarray, name: str) -> np.ndarray:
+    names = s.dtype.names or ()
+    return np.asarray(s[name], dtype=np.float64) if name in names else np.full(s.size, np.nan)
+
+
+def convergence_table(log: LogLike) -> Table:
+    """Convergence and quality of every trial (Table 5.9, extended).
+
+    Read from the root ``/summary`` table (one row per finished trial).
+
+    Returns
+    -------
+    Table
+        One row per trial, then a ``mean`` row (convergence iteration averaged
+        over converged trials only, other columns over all trials). Columns:
+        ``Trial``, ``Converged``, ``Convergence iteration``,
+        ``Collisions after conv. [/1000 it.]``, ``Collisions [/1000 it.]``,
+        ``Coverage``, then per evaluation world ``<w> collisions [/1000 it.]``
+        and ``<w> coverage`` (fraction of free 0.5 m cells visited).
+    """
+    lg = as_log(log)
+    s = lg.summary()
+    _, worlds = _summary_columns(s)
+    conv = _col(s, "converged") > 0.5
+    it = np.where(conv, _col(s, "convergence_iteration"), np.nan)
+    series: list[tuple[str, np.ndarray]] = [
+        ("Convergence iteration", it),
+        ("Collisions after conv. [/1000 it.]", _col(s, "collisions_per_1000_after_convergence")),
+        ("Collisions [/1000 it.]", _col(s, "collisions_per_1000")),
+        ("Coverage", _col(s, "coverage")),
+    ]
+    for w in worlds:
+        series.append((f"{w} collisions [/1000 it.]", _col(s, f"eval.{w}.collisions_per_1000")))
+        series.append((f"{w} coverage", _col(s, f"eval.{w}.coverage")))
+    rows: list[list[Any]] = []
+    for j in range(s.size):
+        row: list[Any] = [int(s["trial"][j]), bool(conv[j])]
+        for name, v in series:
+            row.append(int(v[j]) if name == "Convergence iteration" and np.isfinite(v[j])
+                       else float(v[j]))
+        rows.append(row)
+    if s.size:
+        mean: list[Any] = ["mean", f"{int(conv.sum())}/{s.size}"]
+        for _name, v in series:
+            mean.append(float(np.nanmean(v)) if np.isfinite(v).any() else float("nan"))
+        rows.append(mean)
+    notes = ["Coverage = fraction of the world's free 0.5 m grid cells visited.",
+             "Mean convergence iteration over converged trials only."]
+    if not lg.complete:
+        notes.append(f"Log status is '{lg.status}': only finished trials are listed.")
+    return Table(f"Convergence of {s.size} learning trials ({os.path.basename(lg.path)})",
+                 ["Trial", "Converged", *[n for n, _ in series]], rows, notes=notes, digits=2)
+
+
+def compare_runs(a: LogLike, b: LogLike, names: tuple[str, str] | None = None) -> Table:
+    """Convergence and quality of two runs side by side.
+
+    Each metric is the mean ± standard deviation over the run's finished
+    trials (convergence iteration and post-convergence collisions over its
+    converged trials), taken from the logs' summary tables.
+
+    Parameters
+    ----------
+    a, b
+        The two logs (or paths).
+    names
+        Column headers; default the file names.
+
+    Returns
+    -------
+    Table
+        One row per metric; columns ``Metric``, name A, name B.
+    """
+    la, lb = as_log(a), as_log(b)
+    if names is None:
+        names = (os.path.basename(la.path), os.path.basename(lb.path))
+        if names[0] == names[1]:
+            names = (la.path, lb.path)
+    sa, sb = la.summary(), lb.summary()
+    worlds = sorted(set(_summary_columns(sa)[1]) | set(_summary_columns(sb)[1]))
+
+    def ms(v: np.ndarray, d: int = 1) -> str:
+        v = v[np.isfinite(v)]
+        if v.size == 0:
+            return "–"
+        return f"{v.mean():.{d}f} ± {v.std(ddof=1):.{d}f}" if v.size > 1 else f"{v[0]:.{d}f}"
+
+    def metrics(lg: Log, s: np.ndarray) -> list[str]:
+        conv = _col(s, "converged") > 0.5
+        it = _col(s, "convergence_iteration")
+        out = [f"{s.size}" + ("" if lg.complete else f" (status {lg.status})"),
+               f"{int(conv.sum())}/{s.size}",
+               ms(it[conv], 0),
+               ms(_col(s, "collisions_per_1000_after_convergence")[conv]),
+               ms(_col(s, "collisions_per_1000")),
+               ms(_col(s, "coverage"), 2)]
+        rew = [n for n in (s.dtype.names or ()) if n.startswith("mean_reward_")]
+        out.append(ms(_col(s, rew[0]), 2) if rew else "–")
+        for w in worlds:
+            out.append(ms(_col(s, f"eval.{w}.collisions_per_1000")))
+            out.append(ms(_col(s, f"eval.{w}.coverage"), 2))
+        return out
+
+    labels = ["Finished trials", "Converged trials", "Convergence iteration",
+              "Collisions after convergence [/1000 it.]", "Collisions, whole trial [/1000 it.]",
+              "Coverage, learning world", "Mean reward per iteration"]
+    for w in worlds:
+        labels += [f"Evaluation {w}: collisions [/1000 it.]", f"Evaluation {w}: coverage"]
+    va, vb = metrics(la, sa), metrics(lb, sb)
+    rows = [[m, x, y] for m, x, y in zip(labels, va, vb, strict=True)]
+    return Table("Comparison of two runs (mean ± s.d. over trials)",
+                 ["Metric", names[0], names[1]], rows,
+                 notes=["Convergence iteration and collisions after convergence: converged "
+                        "trials only."])
