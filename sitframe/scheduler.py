@@ -28,7 +28,7 @@ from __future__ import annotations
 import dataclasses
 import platform
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -270,18 +270,33 @@ def simulate(
     bdata = {lb: beh.trial_data() for lb, (beh, _r) in behaviours.items()}
     summary = trial_summary(world, arrays, bdata, robot)
     result = TrialResult(spec.index, spec.seed, world.name, arrays, bdata, summary)
-    if spec.evaluate:
-        policies = {lb: extract_policy(data) for lb, data in bdata.items()}
-        for k, wname in enumerate(spec.evaluate):
-            ev_spec = dataclasses.replace(
-                spec, seed=stage_seed(spec.seed % (2**63), STAGE_EVAL, k), world=wname,
-                iterations=spec.eval_iterations, learn=False, policies=policies, evaluate=())
-            ev = simulate(res, ev_spec)
-            result.episodes[f"eval/{wname}/pose"] = ev.arrays["pose"]
-            result.episodes[f"eval/{wname}/collision"] = ev.arrays["collision"]
-            for key in EVAL_KEYS:
-                result.summary[f"eval/{wname}/{key}"] = ev.summary[key]
+    for ev_spec in evaluation_specs(spec, bdata):
+        attach_evaluation(result, ev_spec.world, simulate(res, ev_spec))
     return result
+
+
+def evaluation_specs(spec: TrialSpec, bdata: dict[str, dict[str, Any]]) -> list[TrialSpec]:
+    """The frozen-policy evaluations of a finished trial (one spec per ``spec.evaluate`` world).
+
+    ``bdata`` is the trial's behaviour data (policies are taken from it).
+    Parallel executors run these as separate tasks; :func:`attach_evaluation`
+    adds their results to the trial in this order.
+    """
+    if not spec.evaluate:
+        return []
+    policies = {lb: extract_policy(data) for lb, data in bdata.items()}
+    return [dataclasses.replace(
+        spec, seed=stage_seed(spec.seed % (2**63), STAGE_EVAL, k), world=wname,
+        iterations=spec.eval_iterations, learn=False, policies=policies, evaluate=())
+        for k, wname in enumerate(spec.evaluate)]
+
+
+def attach_evaluation(result: TrialResult, wname: str, ev: TrialResult) -> None:
+    """Add evaluation ``ev`` in world ``wname`` (``eval/<wname>/...``) to its trial's result."""
+    result.episodes[f"eval/{wname}/pose"] = ev.arrays["pose"]
+    result.episodes[f"eval/{wname}/collision"] = ev.arrays["collision"]
+    for key in EVAL_KEYS:
+        result.summary[f"eval/{wname}/{key}"] = ev.summary[key]
 
 
 def extract_policy(bdata: dict[str, Any]) -> dict[str, np.ndarray]:
@@ -321,9 +336,19 @@ def trial_summary(world: World, arrays: dict[str, np.ndarray], bdata: dict[str, 
 
 
 class SerialExecutor:
-    """Runs trials one after another in this process (fires ``sitframe_step``)."""
+    """Runs trials one after another in this process (fires ``sitframe_step``).
 
-    def map(self, experiment: Experiment, specs: list[TrialSpec]) -> Any:
+    The executor protocol is ``map(experiment, specs)`` yielding one
+    :class:`TrialResult` per spec, in the order of ``specs``, as soon as each
+    is available (so observers can log trial ``k`` before ``k + 1`` ends).
+    Parallel executors (:mod:`sitframe.parallel`) follow the same protocol
+    but run in other processes, where ``sitframe_step`` observers do not fire.
+    """
+
+    #: ``sitframe_step`` observers see every iteration with this executor.
+    fires_step_hooks = True
+
+    def map(self, experiment: Experiment, specs: list[TrialSpec]) -> Iterator[TrialResult]:
         hook = experiment.pm.hook
         step_hook = None
         if hook.sitframe_step.get_hookimpls():
@@ -428,47 +453,111 @@ class Experiment:
             policies=policies or {}, evaluate=evaluate,
             eval_iterations=int(self.cfg["evaluate"]["iterations"]))
 
+    # -- phases (``run`` composes them; a sweep interleaves them across runs) --
+    def begin(self) -> None:
+        """Announce the run to observers (the logger creates, or on resume reopens, the log)."""
+        self.info.extra.setdefault("step_hooks", bool(
+            getattr(self.executor, "fires_step_hooks", True)))
+        self.pm.hook.sitframe_run_start(run=self.info)
+
+    def needs_clusters(self, interpreter_state: dict[str, Any] | None,
+                       collected: Collected | None = None) -> bool:
+        """Whether :meth:`prepare` would collect/cluster (raises if the stages cannot)."""
+        if interpreter_state is not None:
+            return False
+        if collected is None and "collect" not in self.cfg["experiment"]["stages"]:
+            raise InputError("the run needs clusters: include 'collect' and 'cluster' "
+                             "in experiment.stages or reuse clusters from a log",
+                             file=self.source, key="experiment.stages")
+        return True
+
+    def record_collected(self, collected: Collected) -> None:
+        """Hand the collect stage's output to observers."""
+        self.pm.hook.sitframe_stage_end(run=self.info, stage="collect", data={
+            "samples": collected.samples, "poses": collected.poses,
+            "source": collected.source, "worlds": list(collected.worlds)})
+
+    def record_clusters(self, fit: dict[str, Any], state: dict[str, Any]) -> None:
+        """Hand the cluster stage's output to observers."""
+        self.pm.hook.sitframe_stage_end(run=self.info, stage="cluster",
+                                        data={**fit, "state": state})
+
+    def prepare(self, interpreter_state: dict[str, Any] | None = None,
+                collected: Collected | None = None) -> dict[str, Any]:
+        """Collect and cluster (unless ``interpreter_state`` is given); return the state."""
+        if not self.needs_clusters(interpreter_state, collected):
+            return interpreter_state  # type: ignore[return-value]
+        if collected is None:
+            collected = self.collect()
+            self.record_collected(collected)
+        fit, state = self.cluster(collected.samples)
+        self.record_clusters(fit, state)
+        return state
+
+    def trial_specs(self, interpreter_state: dict[str, Any],
+                    policies: dict[str, dict[str, np.ndarray]] | None = None,
+                    trials: list[int] | None = None) -> list[TrialSpec]:
+        """Specs of the learning trials to run (all, or the indices ``trials``)."""
+        stages = self.cfg["experiment"]["stages"]
+        specs = []
+        if "learn" in stages:
+            idx = range(self.info.n_trials) if trials is None else trials
+            specs = [self.trial_spec(k, interpreter_state, policies) for k in idx]
+        return specs
+
+    def trial_done(self, result: TrialResult) -> None:
+        """Hand a finished trial to observers (call in trial order)."""
+        self.pm.hook.sitframe_trial_end(run=self.info, trial=result)
+
+    def finish(self, status: str) -> None:
+        """Tell observers the run ended with ``status`` (complete, aborted, failed)."""
+        self.pm.hook.sitframe_run_end(run=self.info, status=status)
+
     def run(self, *, interpreter_state: dict[str, Any] | None = None,
             collected: Collected | None = None,
             policies: dict[str, dict[str, np.ndarray]] | None = None,
-            trials: list[int] | None = None) -> RunResult:
+            trials: list[int] | None = None,
+            skip: set[int] | frozenset[int] = frozenset()) -> RunResult:
         """Run the configured stages; observers see every stage and trial.
 
         ``interpreter_state`` (e.g. read from an earlier log) skips collect
-        and cluster. ``trials`` restricts which trial indices run (resume).
+        and cluster. ``trials`` restricts which learning-trial indices run;
+        ``skip`` drops any spec (learning trial or episode batch) whose index
+        is in it (resume: the ones already in the log).
+
+        Trials go to ``self.executor``; their results reach the observers
+        (the HDF5 logger) in this process, in trial order, as soon as each
+        trial and all before it have finished. Ctrl-C (KeyboardInterrupt)
+        stops the executor (pending trials are cancelled), leaves the trials
+        already handed to observers in the log, marks the run ``aborted`` and
+        re-raises.
         """
-        hook = self.pm.hook
         t0 = time.perf_counter()
-        stages = self.cfg["experiment"]["stages"]
-        hook.sitframe_run_start(run=self.info)
+        self.begin()
         status = "failed"
         results: list[TrialResult] = []
+        stream = None
         try:
-            if interpreter_state is None:
-                if collected is None and "collect" in stages:
-                    collected = self.collect()
-                    hook.sitframe_stage_end(run=self.info, stage="collect", data={
-                        "samples": collected.samples, "poses": collected.poses,
-                        "source": collected.source, "worlds": list(collected.worlds)})
-                if collected is None:
-                    raise InputError("the run needs clusters: include 'collect' and 'cluster' "
-                                     "in experiment.stages or reuse clusters from a log",
-                                     file=self.source, key="experiment.stages")
-                fit, interpreter_state = self.cluster(collected.samples)
-                hook.sitframe_stage_end(run=self.info, stage="cluster",
-                                        data={**fit, "state": interpreter_state})
-            if "learn" in stages:
-                idx = range(self.info.n_trials) if trials is None else trials
-                specs = [self.trial_spec(k, interpreter_state, policies) for k in idx]
-                for result in self.executor.map(self, specs):
+            start = getattr(self.executor, "start", None)
+            if start is not None and "learn" in self.cfg["experiment"]["stages"]:
+                start(self)  # e.g. warm up worker processes while we collect and cluster
+            interpreter_state = self.prepare(interpreter_state, collected)
+            specs = [s for s in self.trial_specs(interpreter_state, policies, trials)
+                     if s.index not in skip]
+            if specs:
+                stream = self.executor.map(self, specs)
+                for result in stream:
                     results.append(result)
-                    hook.sitframe_trial_end(run=self.info, trial=result)
+                    self.trial_done(result)
             status = "complete"
         except KeyboardInterrupt:
             status = "aborted"
             raise
         finally:
-            hook.sitframe_run_end(run=self.info, status=status)
+            close = getattr(stream, "close", None)
+            if close is not None:
+                close()  # cancels a parallel executor's pending trials
+            self.finish(status)
         return RunResult(self.info, results, time.perf_counter() - t0, status,
                          interpreter_state or {}, np.asarray(self.res.sensor().angles_deg))
 

@@ -1,0 +1,444 @@
+"""Run trials in parallel: a local process pool or a Dask distributed cluster.
+
+Both executors follow the protocol of :class:`sitframe.scheduler.SerialExecutor`:
+``map(experiment, specs)`` yields one :class:`~sitframe.records.TrialResult`
+per spec **in spec order**, each as soon as it and every earlier trial are
+done. Workers only compute: each rebuilds the components from the config and
+the plugin folders (cached per worker, keyed by the config's hash) and
+returns the trial's arrays; the calling process hands them to the observers,
+so exactly one process writes the HDF5 log, in trial order.
+
+Results are bit-identical to a serial run: a trial depends only on its
+:class:`~sitframe.scheduler.TrialSpec` (its seed is spawned from the run seed
+and its index) and on the config, never on which worker runs it or when.
+(Across *machines* this holds as long as they run the same versions of
+sitframe, numpy and the plugins.)
+
+``sitframe_step`` observers fire only in-process (:class:`SerialExecutor`,
+``--workers 1``); with a pool they do not see iterations, and progress
+advances per finished trial.
+
+Start method: worker processes come from a ``forkserver`` (``spawn`` where
+there is none), not from ``fork``. Forking the main process is unsafe here:
+it may hold HDF5 library state mid-write (h5py is not fork-safe) and
+runs threads (a rich progress bar, a Dask client) whose locks a forked child
+would inherit held. The forkserver preloads sitframe once, so a worker
+starts in milliseconds, and the pool is warmed up while the main process
+collects and clusters.
+
+Ctrl-C: workers ignore SIGINT (a terminal sends it to the whole process
+group); the main process cancels pending trials, terminates running workers
+and re-raises, so the run is marked ``aborted`` with finished trials kept.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import dataclasses
+import multiprocessing as mp
+import os
+import signal
+import threading
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from sitframe.config import config_hash, to_toml
+from sitframe.errors import InputError
+
+if TYPE_CHECKING:
+    from sitframe.collect import Collected
+    from sitframe.records import TrialResult
+    from sitframe.scheduler import Experiment, TrialSpec
+
+#: Seconds to wait for a Dask scheduler before giving up.
+DASK_CONNECT_TIMEOUT = 5.0
+
+
+# ---------------------------------------------------------------------------
+# What a worker receives and runs
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Setup:
+    """What a worker needs to rebuild an experiment's components (picklable).
+
+    Attributes
+    ----------
+    key
+        Cache key: hash of the resolved config and the plugin folders.
+    cfg
+        The validated config.
+    source
+        Where the config came from (for messages).
+    plugins_dirs
+        Folders of loose plugin modules to load.
+    """
+
+    key: str
+    cfg: dict[str, Any]
+    source: str | None
+    plugins_dirs: tuple[str, ...]
+
+    @classmethod
+    def of(cls, experiment: Experiment) -> Setup:
+        dirs = tuple(os.path.abspath(d) for d in experiment.plugins_dirs)
+        key = config_hash(to_toml(experiment.cfg) + "\0" + "\0".join(dirs))
+        return cls(key, experiment.cfg, experiment.source, dirs)
+
+
+_cache: dict[str, Experiment] = {}
+_cache_lock = threading.Lock()
+
+
+def _experiment(setup: Setup) -> Experiment:
+    """The worker's experiment for ``setup`` (built once per worker; thread-safe)."""
+    with _cache_lock:
+        exp = _cache.get(setup.key)
+        if exp is None:
+            from sitframe.scheduler import Experiment
+
+            exp = Experiment(setup.cfg, source=setup.source, plugins_dirs=setup.plugins_dirs)
+            if len(_cache) > 16:  # a long-lived Dask worker serving many sweeps
+                _cache.clear()
+            _cache[setup.key] = exp
+        return exp
+
+
+def run_trial(setup: Setup, spec: TrialSpec) -> TrialResult:
+    """Worker entry point: run one trial and return its data."""
+    from sitframe.scheduler import simulate
+
+    return simulate(_experiment(setup).res, spec)
+
+
+def run_clusters(setup: Setup) -> tuple[Collected, dict[str, Any], dict[str, Any]]:
+    """Worker entry point: the collect and cluster stages (``collected, fit, state``)."""
+    exp = _experiment(setup)
+    collected = exp.collect()
+    fit, state = exp.cluster(collected.samples)
+    return collected, fit, state
+
+
+def warm_up(setup: Setup) -> int:
+    """Worker entry point: build the components now; returns the worker's pid."""
+    _experiment(setup)
+    return os.getpid()
+
+
+def _worker_init() -> None:
+    # Ctrl-C in a terminal reaches the whole process group; only the main
+    # process decides what to do about it.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+# ---------------------------------------------------------------------------
+# Executors
+# ---------------------------------------------------------------------------
+
+
+class PoolExecutor:
+    """Shared logic of the parallel executors: ``submit`` plus the ordered ``map``.
+
+    Subclasses provide :meth:`submit`, :meth:`wait_first`, :meth:`cancel`,
+    :attr:`capacity` and :meth:`shutdown`.
+    """
+
+    fires_step_hooks = False
+    #: Tasks the workers can run at once.
+    capacity: int = 1
+
+    def submit(self, fn: Callable[..., Any], *args: Any) -> Any:  # pragma: no cover
+        raise NotImplementedError
+
+    def wait_first(self, futures: Iterable[Any]) -> set[Any]:  # pragma: no cover
+        """Block until at least one of ``futures`` is done; return the done ones."""
+        raise NotImplementedError
+
+    def cancel(self, futures: Iterable[Any]) -> None:  # pragma: no cover
+        raise NotImplementedError
+
+    def start(self, experiment: Experiment) -> None:
+        """Called before the collect stage: a chance to warm the workers up."""
+
+    def map(self, experiment: Experiment, specs: list[TrialSpec]) -> Iterator[TrialResult]:
+        """Run ``specs`` on the workers; yield the results in spec order."""
+        setup = Setup.of(experiment)
+        pipe = TrialPipeline(self)
+        pipe.add_trials((k, setup, spec) for k, spec in enumerate(specs))
+        ready: dict[int, TrialResult] = {}
+        nxt = 0
+        with pipe:
+            for _kind, k, result in pipe:
+                ready[k] = result
+                while nxt in ready:
+                    yield ready.pop(nxt)
+                    nxt += 1
+
+    def shutdown(self, cancel: bool = False) -> None:
+        """Release the workers (``cancel=True``: drop queued and stop running work)."""
+
+    def __enter__(self) -> PoolExecutor:
+        return self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        self.shutdown(cancel=exc_type is not None)
+
+
+def _splittable(spec: TrialSpec) -> bool:
+    """Whether the trial's evaluations can run as separate tasks (not goal batches)."""
+    return bool(spec.evaluate) and getattr(spec, "episodes", None) is None
+
+
+class TrialPipeline:
+    """Feeds trials to a :class:`PoolExecutor` and yields them as they complete.
+
+    Each trial is split into its learning part and its frozen-policy
+    evaluations (:func:`~sitframe.scheduler.evaluation_specs`), which run as
+    separate tasks once the learning part has finished: the work then comes
+    in pieces small enough to keep every worker busy until the end, instead of
+    one worker finishing the last whole trial alone. At most ``window``
+    learning tasks are in flight; evaluations are submitted ahead of further
+    learning tasks, so trials complete roughly in index order (and reach the
+    log early). The evaluations are attached in world order, exactly as
+    :func:`~sitframe.scheduler.simulate` attaches them, so the assembled
+    result is identical to a serial one.
+
+    Iterating yields ``("trial", tag, TrialResult)`` when a trial is complete
+    and ``("call", tag, value)`` when a call added by :meth:`add_call` returns,
+    in completion order. Use it as a context manager: leaving it early (an
+    error, Ctrl-C) cancels every task still pending.
+    """
+
+    def __init__(self, executor: PoolExecutor, window: int | None = None) -> None:
+        self.executor = executor
+        self.window = window or executor.capacity + 1
+        self._queue: deque[tuple[Any, Setup, TrialSpec]] = deque()
+        self._inflight: dict[Any, tuple[str, Any, Any]] = {}
+        self._partial: dict[Any, list[Any]] = {}
+        self._learning = 0
+
+    def add_trials(self, items: Iterable[tuple[Any, Setup, TrialSpec]]) -> None:
+        """Queue trials as ``(tag, setup, spec)``; they start as the window allows."""
+        self._queue.extend(items)
+
+    def add_call(self, tag: Any, fn: Callable[..., Any], *args: Any) -> None:
+        """Submit ``fn(*args)`` now (ahead of queued trials)."""
+        self._inflight[self.executor.submit(fn, *args)] = ("call", tag, None)
+
+    def _fill(self) -> None:
+        while self._queue and self._learning < self.window:
+            tag, setup, spec = self._queue.popleft()
+            learn = dataclasses.replace(spec, evaluate=()) if _splittable(spec) else spec
+            fut = self.executor.submit(run_trial, setup, learn)
+            self._inflight[fut] = ("learn", tag, (setup, spec))
+            self._learning += 1
+
+    def __iter__(self) -> Iterator[tuple[str, Any, Any]]:
+        from sitframe.scheduler import attach_evaluation, evaluation_specs
+
+        while True:
+            self._fill()
+            if not self._inflight:
+                return
+            for fut in self.executor.wait_first(list(self._inflight)):
+                kind, tag, info = self._inflight.pop(fut)
+                value = fut.result()  # re-raises a worker's exception here
+                if kind == "call":
+                    yield "call", tag, value
+                    continue
+                if kind == "learn":
+                    self._learning -= 1
+                    setup, spec = info
+                    evs = evaluation_specs(spec, value.behaviours) if _splittable(spec) else []
+                    if not evs:
+                        yield "trial", tag, value
+                        continue
+                    self._partial[tag] = [value, [None] * len(evs), len(evs),
+                                          [ev.world for ev in evs]]
+                    for i, ev in enumerate(evs):
+                        self._inflight[self.executor.submit(run_trial, setup, ev)] = \
+                            ("eval", tag, i)
+                    continue
+                entry = self._partial[tag]
+                entry[1][info] = value
+                entry[2] -= 1
+                if entry[2] == 0:
+                    result, done, _n, worlds = self._partial.pop(tag)
+                    for world, ev_result in zip(worlds, done, strict=True):
+                        attach_evaluation(result, world, ev_result)
+                    yield "trial", tag, result
+
+    def cancel(self) -> None:
+        """Drop queued trials and cancel every task in flight."""
+        self._queue.clear()
+        if self._inflight:
+            self.executor.cancel(list(self._inflight))
+        self._inflight.clear()
+
+    def __enter__(self) -> TrialPipeline:
+        return self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        if self._inflight or self._queue:
+            self.cancel()
+
+
+def _mp_context() -> mp.context.BaseContext:
+    if "forkserver" in mp.get_all_start_methods():
+        ctx = mp.get_context("forkserver")
+        ctx.set_forkserver_preload(["sitframe.parallel", "sitframe.scheduler"])
+        return ctx
+    return mp.get_context("spawn")
+
+
+class ProcessExecutor(PoolExecutor):
+    """Trials in a local pool of ``workers`` processes (``--workers K``).
+
+    Parameters
+    ----------
+    workers
+        Number of worker processes (at least 1; 1 still uses a subprocess,
+        the CLI uses :class:`~sitframe.scheduler.SerialExecutor` for 1).
+    """
+
+    def __init__(self, workers: int) -> None:
+        if workers < 1:
+            raise InputError(f"must be at least 1, got {workers}", key="--workers")
+        self.workers = int(workers)
+        self._pool: cf.ProcessPoolExecutor | None = None
+
+    @property
+    def pool(self) -> cf.ProcessPoolExecutor:
+        if self._pool is None:
+            self._pool = cf.ProcessPoolExecutor(self.workers, mp_context=_mp_context(),
+                                                initializer=_worker_init)
+        return self._pool
+
+    def start(self, experiment: Experiment) -> None:
+        setup = Setup.of(experiment)
+        for _ in range(self.workers):  # one submit per worker starts them all now
+            self.pool.submit(warm_up, setup)
+
+    @property
+    def capacity(self) -> int:  # type: ignore[override]
+        return self.workers
+
+    def submit(self, fn: Callable[..., Any], *args: Any) -> cf.Future[Any]:
+        return self.pool.submit(fn, *args)
+
+    def wait_first(self, futures: Iterable[Any]) -> set[Any]:
+        return cf.wait(list(futures), return_when=cf.FIRST_COMPLETED).done
+
+    def cancel(self, futures: Iterable[Any]) -> None:
+        futures = list(futures)
+        for f in futures:
+            f.cancel()
+        if any(f.running() for f in futures):
+            self.shutdown(cancel=True)
+
+    def shutdown(self, cancel: bool = False) -> None:
+        pool, self._pool = self._pool, None
+        if pool is None:
+            return
+        if cancel:
+            # Running trials cannot be cancelled: stop their processes (ours, by pid).
+            procs = list(getattr(pool, "_processes", {}).values())
+            pool.shutdown(wait=False, cancel_futures=True)
+            for p in procs:
+                if p.is_alive():
+                    p.terminate()
+            for p in procs:
+                p.join(timeout=5)
+        else:
+            pool.shutdown(wait=True)
+
+
+class DaskExecutor(PoolExecutor):
+    """Trials on an existing Dask distributed cluster (``--scheduler ADDRESS``).
+
+    Every worker needs sitframe (and any third-party plugin packages)
+    installed; loose ``--plugins-dir`` folders must exist at the same path on
+    the workers.
+
+    Parameters
+    ----------
+    address
+        The scheduler's address, e.g. ``tcp://10.0.0.5:8786``.
+    timeout
+        Seconds to wait for the connection before raising :class:`InputError`.
+    """
+
+    def __init__(self, address: str, timeout: float = DASK_CONNECT_TIMEOUT) -> None:
+        try:
+            from distributed import Client
+        except ImportError:
+            raise InputError("--scheduler needs Dask distributed, which is not installed "
+                             "(pip install 'sitframe[dask]')", key="--scheduler") from None
+        self.address = address
+        try:
+            self.client = Client(address, timeout=timeout, set_as_default=False)
+        except Exception as exc:  # noqa: BLE001 - OSError, TimeoutError, ValueError (bad address)
+            msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise InputError(f"cannot reach the Dask scheduler at '{address}' within "
+                             f"{timeout:g} s ({msg})", key="--scheduler") from None
+
+    @property
+    def capacity(self) -> int:  # type: ignore[override]
+        try:
+            return max(1, sum(self.client.nthreads().values()))
+        except Exception:  # noqa: BLE001 - a scheduler that cannot tell: assume one slot
+            return 1
+
+    def submit(self, fn: Callable[..., Any], *args: Any) -> Any:
+        return self.client.submit(fn, *args, pure=False)
+
+    def wait_first(self, futures: Iterable[Any]) -> set[Any]:
+        from distributed import wait
+
+        return set(wait(list(futures), return_when="FIRST_COMPLETED").done)
+
+    def cancel(self, futures: Iterable[Any]) -> None:
+        self.client.cancel(list(futures))
+
+    def shutdown(self, cancel: bool = False) -> None:
+        client, self.client = self.client, None
+        if client is not None:
+            client.close()
+
+
+def make_executor(workers: int | None = None, scheduler: str | None = None,
+                  n_tasks: int | None = None) -> Any:
+    """The executor the CLI options ask for.
+
+    Parameters
+    ----------
+    workers
+        ``--workers``: processes in the local pool; ``None`` = ``os.cpu_count()``.
+        1 (or only one task to run) = in-process serial execution.
+    scheduler
+        ``--scheduler``: a Dask scheduler address (``workers`` must be ``None``).
+    n_tasks
+        How many trials will run (no more workers than that are started).
+    """
+    from sitframe.scheduler import SerialExecutor
+
+    if scheduler is not None:
+        if workers is not None:
+            raise InputError("give either --workers (local processes) or --scheduler "
+                             "(a Dask cluster), not both", key="--workers")
+        return DaskExecutor(scheduler)
+    if workers is not None and workers < 1:
+        raise InputError(f"must be at least 1, got {workers}", key="--workers")
+    k = workers if workers is not None else (os.cpu_count() or 1)
+    if n_tasks is not None:
+        k = min(k, max(n_tasks, 1))
+    if k <= 1:
+        return SerialExecutor()
+    return ProcessExecutor(k)
+
+
+__all__ = ["DaskExecutor", "PoolExecutor", "ProcessExecutor", "Setup", "make_executor",
+           "run_clusters", "run_trial"]

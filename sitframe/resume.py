@@ -1,0 +1,93 @@
+"""Resume an interrupted run from its log (``sitframe run --resume LOG``).
+
+A log left by a killed (``status = "running"``), interrupted (``aborted``)
+or failed run holds everything needed to finish it: the resolved config,
+the run seed, the fitted situations (``/cluster/state``) and every trial that
+finished. Resuming rebuilds the experiment from that config, runs only the
+missing trial indices with the same per-trial seeds (spawned from the run
+seed and the index, see :func:`sitframe.scheduler.stage_seed`), appends them
+and marks the log ``complete``. Every dataset is then bit-for-bit what an
+uninterrupted run with the same seed writes.
+
+Reproducibility needs the same code: if this sitframe resolves the logged
+config differently (its defaults changed, so the config hash differs), the
+resume is refused rather than mixing trials from two configurations.
+Component defaults that the config does not spell out are not in the log;
+keep the versions (root attribute ``versions``) when resuming.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from sitframe.errors import InputError
+from sitframe.logs import open_log
+
+
+def prepare_resume(
+    path: str | os.PathLike[str],
+    *,
+    plugins_dirs: tuple[str, ...] = (),
+    progress: bool = False,
+) -> tuple[Any, dict[str, Any], list[int]]:
+    """Rebuild the experiment of an unfinished log.
+
+    Parameters
+    ----------
+    path
+        The log to resume; it is also the output.
+    plugins_dirs
+        Extra plugin folders (as ``--plugins-dir``); the config's own
+        ``plugins.dirs`` are resolved relative to the original config file.
+    progress
+        Show the progress bar.
+
+    Returns
+    -------
+    (experiment, run_kwargs, missing)
+        Call ``experiment.run(**run_kwargs)`` (``run_kwargs["skip"]`` holds the
+        indices already logged, so only the rest run); ``missing`` lists the
+        learning-trial indices not yet in the log.
+
+    Raises
+    ------
+    InputError
+        The log cannot be read, or this sitframe no longer resolves its config
+        to the same config.
+    """
+    from sitframe.config import validate_config
+    from sitframe.experiment import prepare_experiment
+
+    p = str(path)
+    log = open_log(p)
+    try:
+        cfg = validate_config(log.config, file=p)
+    except InputError as exc:
+        raise InputError(f"the log's config is no longer valid: {exc.message}", file=p,
+                         key=f"config.{exc.key}" if exc.key else "config") from None
+    source = str(log.attrs.get("source", "")) or None
+    base_dir = "."
+    if source and not source.startswith("preset:"):
+        base_dir = str(Path(source).parent)
+    exp, kwargs = prepare_experiment(cfg, source=source, base_dir=base_dir, out=p,
+                                     plugins_dirs=plugins_dirs, progress=progress)
+    logged_hash = str(log.attrs.get("config_hash", ""))
+    if exp.info.config_hash != logged_hash:
+        raise InputError("this sitframe resolves the logged config differently (config hash "
+                         f"{exp.info.config_hash[:12]} != logged {logged_hash[:12]}: defaults "
+                         "changed since the run); resuming would mix two configurations",
+                         file=p, key="config_hash")
+    exp.info.extra["resume"] = True
+    if log.has("cluster/state"):
+        kwargs["interpreter_state"] = log.interpreter_state()
+    have = set(log.trial_indices())
+    kwargs["skip"] = frozenset(have)
+    missing = [k for k in range(exp.info.n_trials) if k not in have]
+    if "learn" not in cfg["experiment"]["stages"]:
+        missing = []
+    return exp, kwargs, missing
+
+
+__all__ = ["prepare_resume"]
