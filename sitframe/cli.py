@@ -81,7 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 #: Subcommands implemented in their own modules: name -> module with ``HELP``,
 #: ``add_arguments(parser)`` and ``main(args) -> int`` (exit status).
-EXTRA_COMMANDS: dict[str, str] = {}
+EXTRA_COMMANDS: dict[str, str] = {"analyse": "sitframe.analysis.commands",
+                                  "replay": "sitframe.analysis.commands_replay"}
 
 
 def main(argv: list[str] | None = None) -> int:
