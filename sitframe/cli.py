@@ -5,6 +5,7 @@
     sitframe run EXPERIMENT [--trials N] [--seed S] [--world W] [--iterations L]
                             [--out LOG] [--clusters-from LOG] [--json]
     sitframe evaluate LOG --world W [--trial K] [--iterations N] [--seed S] [--json]
+                      [--goal-episodes N [--arbiter NAME] [--fusion CONFIG]]
     sitframe world show W [-o PNG]
     sitframe world list
     sitframe presets
@@ -61,6 +62,14 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--trial", type=int, default=0, help="which learning trial's policy")
     e.add_argument("--iterations", type=int, default=1000)
     e.add_argument("--seed", type=int, default=0)
+    e.add_argument("--goal-episodes", type=int, metavar="N",
+                   help="run N random goal episodes: the log's learned rule base fused with "
+                   "goal finding (see --fusion)")
+    e.add_argument("--arbiter", metavar="NAME",
+                   help="arbiter to use instead of the config's (e.g. cdb, priority)")
+    e.add_argument("--fusion", default="goal-finding", metavar="CONFIG",
+                   help="preset or TOML whose behaviours, arbiter and [goal] table the goal "
+                   "episodes use (default: goal-finding)")
     e.add_argument("--json", action="store_true")
 
     w = sub.add_parser("world", help="worlds: draw or list")
@@ -234,9 +243,12 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from sitframe.experiment import evaluate_log
 
     _positive("iterations", args.iterations)
+    _positive("goal-episodes", args.goal_episodes)
     summary = evaluate_log(args.log, world=args.world, trial=args.trial,
                            iterations=args.iterations, seed=args.seed,
-                           plugins_dirs=tuple(args.plugins_dir))
+                           plugins_dirs=tuple(args.plugins_dir),
+                           goal_episodes=args.goal_episodes or 0, arbiter=args.arbiter,
+                           fusion=args.fusion)
     doc = {k: _finite(v) for k, v in summary.items()}
     if args.json:
         print(json.dumps(doc, indent=2, default=_json_default))

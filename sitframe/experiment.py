@@ -99,34 +99,111 @@ def evaluate_log(
     iterations: int = 1000,
     seed: int = 0,
     plugins_dirs: tuple[str, ...] = (),
+    goal_episodes: int = 0,
+    arbiter: str | None = None,
+    fusion: str = "goal-finding",
 ) -> dict[str, Any]:
     """Run trial ``trial``'s frozen policies from a log in ``world``.
 
-    Returns the evaluation summary: ``iterations``, ``collisions``,
-    ``collisions_per_1000``, ``distance_m``, ``mean_speed_m_s``, ``coverage``.
+    Without ``goal_episodes``: one ``iterations``-long run from the world's
+    start. Returns ``iterations``, ``collisions``, ``collisions_per_1000``,
+    ``distance_m``, ``mean_speed_m_s``, ``coverage``, plus whatever the
+    ``metrics(arrays)`` method of each of the log's reward components returns
+    (a reward may define one to score its own behaviour, e.g. the
+    wall-following reward adds ``wall_band_fraction`` and
+    ``wall_distance_rmse_m``). ``arbiter`` replaces the log's arbiter.
+
+    With ``goal_episodes = N``: N random goal episodes
+    (:mod:`sitframe.episodes`) in ``world``. If the log is itself a goal run
+    its config is used; otherwise the behaviours, arbiter and ``[goal]`` table
+    come from the ``fusion`` config (a preset name or a TOML path; default the
+    ``goal-finding`` preset), whose behaviour with a ``policy_from`` is
+    replaced by the log's learned behaviour (its table and its policy), with
+    the log's situations. ``arbiter`` names another arbiter (its own
+    parameters are kept if the fusion config configures that arbiter, else
+    its defaults). Returns ``episodes``, ``success_rate``,
+    ``collisions_per_episode``, ``collision_free_rate``, ``spl``,
+    ``mean_time_s``, ``heading_change_per_m``, ``mean_path_length_m``.
     """
+    from sitframe.config import load_config
+    from sitframe.episodes import STAGE_GOAL, EpisodeConfig, batch_aggregate, is_goal_run
+
     log = open_log(log_path)
     cfg = validate_config(log.config, file=log_path)
-    state = log.interpreter_state()
     tl = log.trial(trial)
     policies = {label: tl.policy(label) for label in tl.behaviours if tl.policy(label)}
     if not policies:
         raise InputError(f"trial {trial} has no learned policy to evaluate", file=log_path,
                          key="trials")
+    if log.has("cluster/state") or not cfg["experiment"]["clusters_from"]:
+        state = log.interpreter_state()
+    else:  # a run that reused situations from another log (e.g. a goal run)
+        state = open_log(cfg["experiment"]["clusters_from"]).interpreter_state()
     pm = get_plugin_manager(plugins_dirs=plugins_dirs)
-    res = Resolved.build(cfg, Registry.collect(pm), log_path)
+    registry = Registry.collect(pm)
+    if arbiter is not None:
+        registry.get("arbiter", arbiter, key="--arbiter")
+    source = log_path
+    if goal_episodes:
+        res0 = Resolved.build(cfg, registry, log_path)
+        if not is_goal_run(res0):
+            cfg, policies, source = _fusion_config(cfg, policies, fusion, log_path,
+                                                   load_config)
+    if arbiter is not None:
+        params = cfg["arbiter"] if cfg["arbiter"].get("component") == arbiter else {}
+        cfg["arbiter"] = {**params, "component": arbiter}
+    res = Resolved.build(cfg, registry, source)
     res.world(world, key="--world")
+    if goal_episodes:
+        g = dict(cfg["goal"], episodes=goal_episodes)
+        ep = EpisodeConfig.from_config({"goal": g}, file=source)
+        spec = TrialSpec(index=trial, seed=stage_seed(seed, STAGE_GOAL, 0), world=world,
+                         iterations=ep.timeout, learn=False, interpreter_state=state,
+                         policies=policies, episodes=ep)
+        result = simulate(res, spec)
+        return {"log": log_path, "world": world, "trial": trial,
+                "arbiter": cfg["arbiter"]["component"], **batch_aggregate(result)}
     spec = TrialSpec(index=trial, seed=stage_seed(seed, STAGE_EVAL, trial), world=world,
                      iterations=iterations, learn=False, interpreter_state=state,
                      policies=policies)
     result = simulate(res, spec)
     s = result.summary
-    return {
+    out = {
         "log": log_path, "world": world, "trial": trial,
         "iterations": s["iterations"], "collisions": s["collisions"],
         "collisions_per_1000": s["collisions_per_1000"], "distance_m": s["distance_m"],
         "mean_speed_m_s": s["mean_speed_m_s"], "coverage": s["coverage"],
     }
+    for _label, (_beh, reward) in res.behaviours().items():
+        metrics = getattr(reward, "metrics", None)
+        if metrics is not None:
+            out.update(metrics(result.arrays))
+    return out
+
+
+def _fusion_config(log_cfg: dict[str, Any], policies: dict[str, dict[str, np.ndarray]],
+                   fusion: str, log_path: str, load_config: Any
+                   ) -> tuple[dict[str, Any], dict[str, dict[str, np.ndarray]], str]:
+    """The fusion config with the log's learned behaviour in its ``policy_from`` slot."""
+    fcfg, fsource, _base = load_config(fusion)
+    slots = [lb for lb, t in fcfg["behaviours"].items() if t.get("policy_from")]
+    if not slots:
+        raise InputError("no behaviour has a policy_from table to receive the log's learned "
+                         "behaviour", file=fsource, key="behaviours")
+    slot = slots[0]
+    want = fcfg["behaviours"][slot]["policy_from"].get("behaviour", slot)
+    src = want if want in policies else next(iter(policies))
+    table = {k: v for k, v in log_cfg["behaviours"][src].items()
+             if k not in ("reward", "reward_params", "policy_from")}
+    behaviours = {}
+    for lb, t in fcfg["behaviours"].items():
+        behaviours[lb] = table if lb == slot else {k: v for k, v in t.items()
+                                                   if k != "policy_from"}
+    fcfg["behaviours"] = behaviours
+    for section in ("sensor", "interpreter", "robot"):
+        fcfg[section] = log_cfg[section]
+    fcfg["experiment"]["clusters_from"] = ""
+    return validate_config(fcfg, file=fsource), {slot: policies[src]}, fsource
 
 
 def rule_base_table(result: Any, trial: int = 0) -> Any:

@@ -38,6 +38,7 @@ import pluggy
 from sitframe import __version__
 from sitframe.collect import Collected, collect_trajectories, collect_wander, concat_collected
 from sitframe.config import config_hash, to_toml
+from sitframe.episodes import check_goal_config, goal_batch_specs, is_goal_run, run_episode_batch
 from sitframe.errors import InputError, PluginError
 from sitframe.metrics import collisions_per_1000, coverage, path_length
 from sitframe.pluginmanager import Registry, get_plugin_manager
@@ -156,6 +157,10 @@ class TrialSpec:
     stop_at_goal
         End the trial as soon as the robot's centre is within the goal radius
         (goal episodes); arrays are then shorter than ``iterations``.
+    episodes
+        A :class:`sitframe.episodes.EpisodeConfig`: the spec is a *batch* of
+        goal episodes in ``world`` (run by :func:`sitframe.episodes.run_episode_batch`),
+        returned as one trial.
     """
 
     index: int
@@ -170,6 +175,7 @@ class TrialSpec:
     start: tuple[float, float, float] | None = None
     goal: tuple[float, float, float] | None = None
     stop_at_goal: bool = False
+    episodes: Any = None
 
 
 def simulate(
@@ -179,6 +185,8 @@ def simulate(
     step_hook: Callable[[StepRecord], Any] | None = None,
 ) -> TrialResult:
     """Run one trial (learning, frozen evaluation or goal episode) and return its arrays."""
+    if spec.episodes is not None:
+        return run_episode_batch(res, spec, step_hook=step_hook)
     rng = np.random.default_rng(spec.seed)
     world = res.world(spec.world)
     goal = world.goal if spec.goal is None else Goal(np.asarray(spec.goal[:2], float),
@@ -410,6 +418,9 @@ class Experiment:
             names += cfg["collect"]["worlds"]
         if "evaluate" in e["stages"]:
             names += cfg["evaluate"]["worlds"]
+        self.goal_run = is_goal_run(self.res)
+        if self.goal_run and "evaluate" in e["stages"]:
+            names += check_goal_config(cfg, self.res, source)
         for name in dict.fromkeys(names):
             key = "experiment.world" if name == e["world"] else "worlds"
             worlds[name] = self.res.world(name, key).text
@@ -446,7 +457,8 @@ class Experiment:
     def trial_spec(self, k: int, interpreter_state: dict[str, Any],
                    policies: dict[str, dict[str, np.ndarray]] | None = None) -> TrialSpec:
         e = self.cfg["experiment"]
-        evaluate = tuple(self.cfg["evaluate"]["worlds"]) if "evaluate" in e["stages"] else ()
+        evaluate = (tuple(self.cfg["evaluate"]["worlds"])
+                    if "evaluate" in e["stages"] and not self.goal_run else ())
         return TrialSpec(
             index=k, seed=stage_seed(self.info.seed, STAGE_TRIALS, k), world=e["world"],
             iterations=int(e["iterations"]), learn=True, interpreter_state=interpreter_state,
@@ -503,6 +515,9 @@ class Experiment:
         if "learn" in stages:
             idx = range(self.info.n_trials) if trials is None else trials
             specs = [self.trial_spec(k, interpreter_state, policies) for k in idx]
+        if self.goal_run and "evaluate" in stages:  # goal episodes: one batch per goal world
+            first = self.info.n_trials if "learn" in stages else 0
+            specs += goal_batch_specs(self, interpreter_state, policies, first)
         return specs
 
     def trial_done(self, result: TrialResult) -> None:

@@ -1,0 +1,197 @@
+"""Goal episodes: pairs, ending at the goal or the timeout, batches, goal runs, evaluate."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from sitframe.cli import main
+from sitframe.config import load_config, preset_text, validate_config
+from sitframe.episodes import (
+    AGGREGATE_KEYS,
+    EpisodeConfig,
+    batch_aggregate,
+    goal_pairs,
+    world_pairs,
+)
+from sitframe.errors import InputError
+from sitframe.experiment import evaluate_log, prepare_experiment
+from sitframe.logs import open_log
+from sitframe.pluginmanager import Registry, get_plugin_manager
+from sitframe.scheduler import Resolved, TrialSpec, simulate
+from sitframe.world import load_world, parse_world
+
+STATE = {"centers": np.array([[0.5] * 8, [3.0] * 8]), "m": 1.2}
+
+
+def goal_only(**arbiter) -> Resolved:
+    cfg = validate_config({
+        "interpreter": {"component": "fcm", "c": 2},
+        "behaviours": {"goal": {"component": "goal"}},
+        "arbiter": {"component": "single", **arbiter},
+    })
+    return Resolved.build(cfg, Registry.collect(get_plugin_manager()))
+
+
+def spec(**kw) -> TrialSpec:
+    base = {"index": 0, "seed": 7, "world": "goal", "iterations": 300, "learn": False,
+            "interpreter_state": STATE}
+    return TrialSpec(**{**base, **kw})
+
+
+def test_episode_ends_at_goal():
+    res = goal_only()
+    r = simulate(res, spec(start=(1.0, 1.0, 0.0), goal=(3.0, 1.0, 0.3), stop_at_goal=True))
+    n = r.arrays["collision"].size
+    assert n < 20
+    assert math.hypot(r.arrays["pose"][-1, 0] - 3.0, r.arrays["pose"][-1, 1] - 1.0) <= 0.3
+    assert r.arrays["pose"].shape == (n + 1, 3)
+
+
+def test_episode_ends_at_timeout_not_at_collision():
+    res = goal_only()
+    # the goal is behind the wall x = 6.5 (y < 3.5): the robot pushes into the wall
+    r = simulate(res, spec(start=(5.5, 1.0, 0.0), goal=(8.0, 1.0, 0.3), stop_at_goal=True,
+                           iterations=25))
+    assert r.arrays["collision"].size == 25
+    assert r.arrays["collision"].sum() > 0
+
+
+def test_random_pairs_are_free_far_apart_and_deterministic():
+    w = load_world("goal")
+    s1, g1 = goal_pairs(w, 6, np.random.default_rng(3), min_distance=3.0)
+    s2, g2 = goal_pairs(w, 6, np.random.default_rng(3), min_distance=3.0)
+    s3, _ = goal_pairs(w, 6, np.random.default_rng(4), min_distance=3.0)
+    np.testing.assert_array_equal(s1, s2)
+    np.testing.assert_array_equal(g1, g2)
+    assert not np.array_equal(s1, s3)
+    assert np.all(np.hypot(*(g1[:, :2] - s1[:, :2]).T) >= 3.0)
+    assert w.is_free(g1[:, :2], 0.25).all() and w.is_free(s1[:, :2], 0.25).all()
+    assert np.all(g1[:, 2] == 0.3)
+    with pytest.raises(InputError, match="min_distance"):
+        goal_pairs(w, 1, np.random.default_rng(0), min_distance=50.0, max_tries=20)
+
+
+def test_world_pairs_need_a_goal():
+    s, g = world_pairs(load_world("goal"), 2)
+    assert g[0].tolist() == [9.0, 7.0, 0.3]
+    with pytest.raises(InputError, match="no \\[goal\\]"):
+        world_pairs(load_world("training"), 1)
+
+
+def test_batch_is_deterministic_and_scored():
+    res = goal_only()
+    ep = EpisodeConfig(episodes=3, timeout=60)
+    a = simulate(res, spec(episodes=ep))
+    b = simulate(res, spec(episodes=ep))
+    agg = batch_aggregate(a)
+    assert set(AGGREGATE_KEYS) <= set(agg)
+    assert json.dumps(agg) == json.dumps(batch_aggregate(b))  # NaN-safe equality
+    assert agg["episodes"] == 3
+    e = a.episodes
+    assert e["success"].shape == (3,) and e["start"].shape == (3, 3)
+    assert a.arrays["collision"].size == e["iterations"].sum()
+    assert e["time_s"].tolist() == (e["iterations"] * 1.5).tolist()
+    assert 0.0 <= agg["spl"] <= agg["success_rate"]
+    assert e["0001"]["iterations"] == e["iterations"][1]
+
+
+def test_episode_config_validation():
+    with pytest.raises(InputError, match="pairs"):
+        EpisodeConfig(pairs="fixed")
+    with pytest.raises(InputError, match="goal.timeout"):
+        validate_config({"behaviours": {"g": {"component": "goal"}}, "goal": {"timeout": 0}})
+
+
+@pytest.mark.parametrize("goal, where", [("[20, 4]", "outside the walls"),
+                                         ("[5.0, 4.0]", "inside an obstacle")])
+def test_goal_outside_or_in_obstacle_is_an_input_error(goal, where):
+    text = load_world("goal").text.replace("position = [9, 7]", f"position = {goal}")
+    with pytest.raises(InputError, match=where):
+        parse_world(text, file="bad.toml")
+
+
+# ---------------------------------------------------------------------------
+# with a (tiny) learned obstacle-avoidance log
+# ---------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def oa_log(tmp_path_factory):
+    d = tmp_path_factory.mktemp("oa")
+    cfg, source, _ = load_config("obstacle-avoidance")
+    cfg["experiment"].update(trials=1, iterations=200, stages=["collect", "cluster", "learn"])
+    cfg["collect"]["worlds"] = ["collect-1", "collect-2"]
+    cfg["interpreter"]["trials"] = 3
+    out = str(d / "oa.h5")
+    exp, kw = prepare_experiment(cfg, source=source, out=out)
+    exp.run(**kw)
+    return out
+
+
+def test_evaluate_goal_episodes(oa_log):
+    r = evaluate_log(oa_log, world="goal", goal_episodes=2)
+    assert set(AGGREGATE_KEYS) <= set(r) and r["episodes"] == 2 and r["arbiter"] == "cdb"
+    p = evaluate_log(oa_log, world="goal", goal_episodes=2, arbiter="priority")
+    assert p["arbiter"] == "priority"
+    with pytest.raises(InputError, match="unknown arbiter 'nope'.*available: cdb, priority"):
+        evaluate_log(oa_log, world="goal", goal_episodes=2, arbiter="nope")
+
+
+def test_cli_evaluate_goal_json_and_errors(oa_log, capsys):
+    assert main(["evaluate", oa_log, "--world", "goal", "--goal-episodes", "2", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    for key in ("episodes", "success_rate", "collisions_per_episode", "spl", "mean_time_s",
+                "heading_change_per_m"):
+        assert key in doc
+    assert main(["evaluate", oa_log, "--world", "goal", "--goal-episodes", "2",
+                 "--arbiter", "nope"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "available: cdb, priority, single" in err[0]
+
+
+def goal_config(tmp_path, oa_log, extra: str = "") -> str:
+    text = preset_text("goal-finding").replace("logs/obstacle-avoidance.h5", oa_log)
+    text = text.replace("episodes = 50", "episodes = 2").replace(
+        'worlds = ["goal", "novel-1", "novel-2"]', 'worlds = ["goal"]')
+    p = tmp_path / "gf.toml"
+    p.write_text(text + extra)
+    return str(p)
+
+
+def test_goal_finding_preset_reads_like_obstacle_avoidance():
+    # the preset reuses the obstacle-avoidance log's situations: same sensor
+    oa = load_config("obstacle-avoidance")[0]
+    assert load_config("goal-finding")[0]["sensor"] == oa["sensor"]
+
+
+def test_goal_run_writes_episodes(tmp_path, oa_log):
+    path = goal_config(tmp_path, oa_log)
+    out = str(tmp_path / "gf.h5")
+    assert main(["run", path, "--out", out, "--json"]) == 0
+    tr = open_log(out).trial(0)
+    assert tr.world == "goal"
+    assert tr.episodes["success"].shape == (2,)
+    assert "0001/success" in tr.episodes
+    assert "eval/goal/success_rate" in tr.summary
+
+
+def test_goal_run_without_goal_in_world_is_an_input_error(tmp_path, oa_log, capsys):
+    path = goal_config(tmp_path, oa_log)
+    text = open(path).read().replace('pairs = "random"', 'pairs = "world"').replace(
+        'worlds = ["goal"]', 'worlds = ["training"]')
+    open(path, "w").write(text)
+    assert main(["run", path, "--out", str(tmp_path / "x.h5")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "goal.worlds[0]" in err[0] and "no [goal]" in err[0]
+
+
+def test_unknown_arbiter_in_config_lists_available(tmp_path, oa_log, capsys):
+    path = goal_config(tmp_path, oa_log)
+    text = open(path).read().replace('component = "cdb"', 'component = "cbd"')
+    open(path, "w").write(text)
+    assert main(["run", path, "--out", str(tmp_path / "x.h5")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "unknown arbiter 'cbd'" in err and "available: cdb, priority, single" in err
