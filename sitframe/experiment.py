@@ -59,6 +59,12 @@ def prepare_experiment(
         path = _resolve_path(clusters_from, base_dir)
         log = open_log(path)
         state = log.interpreter_state()
+        logged_sensor = validate_config(log.config, file=path)["sensor"]
+        if logged_sensor != cfg["sensor"]:
+            raise InputError(
+                f"its situations were fitted on readings of sensor {logged_sensor}, but this "
+                f"config reads {cfg['sensor']}; use the same [sensor] table",
+                file=path, key="sensor")
         interp = exp.res.interpreter()
         try:
             interp.load_state(state)
