@@ -4,12 +4,22 @@
 
     sitframe run EXPERIMENT [--trials N] [--seed S] [--world W] [--iterations L]
                             [--out LOG] [--clusters-from LOG] [--json]
+                            [--workers K | --scheduler ADDRESS]
+    sitframe run --resume LOG [--workers K | --scheduler ADDRESS] [--json]
     sitframe evaluate LOG --world W [--trial K] [--iterations N] [--seed S] [--json]
                       [--goal-episodes N [--arbiter NAME] [--fusion CONFIG]]
     sitframe world show W [-o PNG]
     sitframe world list
     sitframe presets
     sitframe plugins
+    sitframe sweep SWEEP.toml [--workers K | --scheduler ADDRESS] [--out DIR] [--json]
+
+Trials run in a local process pool (``--workers``, default one per core;
+``--workers 1`` runs them in this process, the only mode in which
+per-iteration ``sitframe_step`` observers fire) or on a Dask cluster
+(``--scheduler``); results are bit-identical either way and one process
+writes the log. A killed run's log keeps every finished trial and
+``run --resume LOG`` finishes it.
 
 Errors caused by input (config, world, log, plugin) print one line on stderr
 (``sitframe: error: FILE: KEY: what was wrong; what was expected``) and exit
@@ -46,7 +56,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     r = sub.add_parser("run", help="run an experiment (preset name or TOML config)")
-    r.add_argument("experiment", help="preset name (see `sitframe presets`) or path to a .toml")
+    r.add_argument("experiment", nargs="?",
+                   help="preset name (see `sitframe presets`) or path to a .toml")
     r.add_argument("--trials", type=int, help="number of learning trials")
     r.add_argument("--seed", type=int, help="run seed (trial seeds are derived from it)")
     r.add_argument("--world", help="learning world (shipped name or .toml path)")
@@ -55,6 +66,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--clusters-from", metavar="LOG",
                    help="reuse the fitted situations of LOG (skips collect and cluster)")
     r.add_argument("--json", action="store_true", help="print machine-readable results")
+    add_parallel_arguments(r)
+    r.add_argument("--resume", metavar="LOG",
+                   help="finish the unfinished run logged in LOG (config, seed and situations "
+                   "come from the log; only the missing trials run)")
 
     e = sub.add_parser("evaluate", help="run a log's frozen rule base in a world")
     e.add_argument("log")
@@ -91,7 +106,8 @@ def build_parser() -> argparse.ArgumentParser:
 #: Subcommands implemented in their own modules: name -> module with ``HELP``,
 #: ``add_arguments(parser)`` and ``main(args) -> int`` (exit status).
 EXTRA_COMMANDS: dict[str, str] = {"analyse": "sitframe.analysis.commands",
-                                  "replay": "sitframe.analysis.commands_replay"}
+                                  "replay": "sitframe.analysis.commands_replay",
+                                  "sweep": "sitframe.sweep"}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -135,7 +151,84 @@ def _positive(name: str, value: int | None) -> None:
 # ---------------------------------------------------------------------------
 
 
+def add_parallel_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--workers`` and ``--scheduler`` (shared by ``run`` and ``sweep``)."""
+    parser.add_argument("--workers", type=int, metavar="K",
+                        help="run trials in K local processes (default: the number of CPU "
+                        "cores; 1 = serially in this process, the only mode in which "
+                        "per-iteration observers fire)")
+    parser.add_argument("--scheduler", metavar="ADDRESS",
+                        help="run trials on the Dask distributed cluster at ADDRESS "
+                        "(e.g. tcp://host:8786; needs the 'dask' extra)")
+
+
 def cmd_run(args: argparse.Namespace) -> int:
+    from sitframe.parallel import make_executor
+
+    if args.resume:
+        return _run_resume(args)
+    if not args.experiment:
+        raise InputError("missing EXPERIMENT (a preset name or a .toml config), or give "
+                         "--resume LOG", key="run")
+    exp, kwargs = _prepare_run(args)
+    n_tasks = exp.info.n_trials if "learn" in exp.cfg["experiment"]["stages"] else 0
+    exp.executor = make_executor(args.workers, args.scheduler, n_tasks)
+    result = _execute(exp, kwargs)
+    if args.json:
+        print(json.dumps(run_json(result), indent=2, default=_json_default))
+    else:
+        print_run(result)
+    return 0
+
+
+def _execute(exp: Any, kwargs: dict[str, Any]) -> Any:
+    """``exp.run(**kwargs)``, releasing the executor's workers however it ends."""
+    failed = True
+    try:
+        result = exp.run(**kwargs)
+        failed = False
+        return result
+    finally:
+        shutdown = getattr(exp.executor, "shutdown", None)
+        if shutdown is not None:
+            shutdown(cancel=failed)
+
+
+def _run_resume(args: argparse.Namespace) -> int:
+    from sitframe.parallel import make_executor
+    from sitframe.resume import prepare_resume
+
+    if args.experiment:
+        raise InputError("give either EXPERIMENT or --resume LOG, not both (the log's config "
+                         "is used)", key="--resume")
+    for opt in ("trials", "seed", "world", "iterations", "out", "clusters_from"):
+        if getattr(args, opt) is not None:
+            raise InputError("cannot be combined with --resume (the log's config is used)",
+                             key=f"--{opt.replace('_', '-')}")
+    exp, kwargs, missing = prepare_resume(args.resume, plugins_dirs=tuple(args.plugins_dir),
+                                          progress=not args.json and sys.stderr.isatty())
+    from sitframe.logs import open_log
+
+    if not missing and open_log(args.resume).complete:
+        if args.json:
+            print(json.dumps({"log": args.resume, "status": "complete", "resumed_trials": [],
+                              "trials": []}, indent=2))
+        else:
+            print(f"{args.resume}: already complete; nothing to resume")
+        return 0
+    exp.executor = make_executor(args.workers, args.scheduler, len(missing))
+    result = _execute(exp, kwargs)
+    if args.json:
+        doc = run_json(result)
+        doc["resumed_trials"] = missing
+        print(json.dumps(doc, indent=2, default=_json_default))
+    else:
+        print(f"resumed {args.resume}: ran trial(s) {missing or 'none'}")
+        print_run(result)
+    return 0
+
+
+def _prepare_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
     from sitframe.config import load_config
     from sitframe.experiment import prepare_experiment
 
@@ -150,15 +243,9 @@ def cmd_run(args: argparse.Namespace) -> int:
         if val is not None:
             e[key] = val
     out = args.out or str(Path("logs") / f"{e['name']}.h5")
-    exp, kwargs = prepare_experiment(cfg, source=source, base_dir=base_dir, out=out,
-                                     plugins_dirs=tuple(args.plugins_dir),
-                                     progress=not args.json and sys.stderr.isatty())
-    result = exp.run(**kwargs)
-    if args.json:
-        print(json.dumps(run_json(result), indent=2, default=_json_default))
-    else:
-        print_run(result)
-    return 0
+    return prepare_experiment(cfg, source=source, base_dir=base_dir, out=out,
+                              plugins_dirs=tuple(args.plugins_dir),
+                              progress=not args.json and sys.stderr.isatty())
 
 
 def _json_default(o: Any) -> Any:

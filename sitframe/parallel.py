@@ -286,6 +286,30 @@ class TrialPipeline:
             self.cancel()
 
 
+class InlineExecutor(PoolExecutor):
+    """Runs each task in this process when it is submitted (``--workers 1`` for sweeps).
+
+    Behaves like a one-worker pool, so code written for :class:`TrialPipeline`
+    runs unchanged; ``sitframe_step`` observers do not fire.
+    """
+
+    capacity = 1
+
+    def submit(self, fn: Callable[..., Any], *args: Any) -> cf.Future[Any]:
+        fut: cf.Future[Any] = cf.Future()
+        try:
+            fut.set_result(fn(*args))
+        except Exception as exc:  # noqa: BLE001 - delivered through the future, like a pool
+            fut.set_exception(exc)
+        return fut
+
+    def wait_first(self, futures: Iterable[Any]) -> set[Any]:
+        return {f for f in futures if f.done()}
+
+    def cancel(self, futures: Iterable[Any]) -> None:
+        pass
+
+
 def _mp_context() -> mp.context.BaseContext:
     if "forkserver" in mp.get_all_start_methods():
         ctx = mp.get_context("forkserver")
@@ -410,7 +434,7 @@ class DaskExecutor(PoolExecutor):
 
 
 def make_executor(workers: int | None = None, scheduler: str | None = None,
-                  n_tasks: int | None = None) -> Any:
+                  n_tasks: int | None = None, *, pool: bool = False) -> Any:
     """The executor the CLI options ask for.
 
     Parameters
@@ -422,6 +446,9 @@ def make_executor(workers: int | None = None, scheduler: str | None = None,
         ``--scheduler``: a Dask scheduler address (``workers`` must be ``None``).
     n_tasks
         How many trials will run (no more workers than that are started).
+    pool
+        Always return a :class:`PoolExecutor` (an :class:`InlineExecutor`
+        instead of :class:`~sitframe.scheduler.SerialExecutor` for one worker).
     """
     from sitframe.scheduler import SerialExecutor
 
@@ -436,9 +463,9 @@ def make_executor(workers: int | None = None, scheduler: str | None = None,
     if n_tasks is not None:
         k = min(k, max(n_tasks, 1))
     if k <= 1:
-        return SerialExecutor()
+        return InlineExecutor() if pool else SerialExecutor()
     return ProcessExecutor(k)
 
 
-__all__ = ["DaskExecutor", "PoolExecutor", "ProcessExecutor", "Setup", "make_executor",
-           "run_clusters", "run_trial"]
+__all__ = ["DaskExecutor", "InlineExecutor", "PoolExecutor", "ProcessExecutor", "Setup",
+           "TrialPipeline", "make_executor", "run_clusters", "run_trial"]

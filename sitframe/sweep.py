@@ -1,0 +1,604 @@
+"""Run an experiment over a grid of config values and tabulate the results.
+
+``sitframe sweep SWEEP.toml [--workers K | --scheduler ADDRESS] [--out DIR] [--json]``
+
+A sweep file names a base experiment and a grid over dotted config keys::
+
+    [sweep]
+    name = "ablation"                  # default: the file's stem
+    base = "obstacle-avoidance"        # preset name, or a .toml path relative to this file
+    trials = 11                        # shorthand for experiment.trials (trials per point)
+    seed = 0                           # shorthand for experiment.seed (same seed at every point)
+    out = "logs/sweeps/ablation"       # default logs/sweeps/<name>
+
+    [set]                              # optional: fixed overrides for every point
+    "experiment.iterations" = 5000
+
+    [grid]                             # every combination is one grid point
+    "behaviours.avoid.update" = ["thesis", "standard"]
+    "interpreter.c" = [8, 12, 16]
+
+Put ``"experiment.seed" = [0, 1, 2]`` in the grid to repeat every point with
+several run seeds. Every point keeps the same run seed unless the grid varies
+it, so points that differ only in the learner see the same situations and
+the same trial seeds (a paired comparison).
+
+Output: one HDF5 log per point, ``DIR/<point>.h5`` (point names such as
+``update=thesis_c=8``), and ``DIR/summary.csv`` / ``DIR/summary.md`` with one
+row per point: convergence rate, iterations to convergence (median, IQR),
+collisions per 1000 iterations after convergence (median, IQR; converged
+trials only) and, for every evaluation world, the median collisions per 1000
+and coverage of the frozen rule bases.
+
+All trials of all points go to one pool (or Dask cluster): the collect and
+cluster stages of every point run first as tasks, then the trials (their
+evaluations as separate tasks); each point's log is written by this process
+in trial order as its trials finish. Results are bit-identical to running
+each point with ``sitframe run`` (same seed), whatever the number of workers.
+
+Every key is checked against the base config before anything runs: core
+keys against the known sections, component keys against the component's
+accepted parameters (:func:`sitframe.params.accepted_params`); the closest
+valid key is suggested. Every point's config is then validated and resolved.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import csv
+import itertools
+import json
+import math
+import re
+import sys
+import time
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sitframe.errors import InputError, did_you_mean
+
+HELP = "run an experiment over a grid of config values; one log per point + a summary table"
+
+_SWEEP_KEYS = ("name", "description", "base", "trials", "seed", "out")
+_BEHAVIOUR_META = ("component", "reward", "reward_params", "policy_from")
+
+
+@dataclass
+class Point:
+    """One grid point: its name, the values it sets and its prepared experiment."""
+
+    name: str
+    values: dict[str, Any]
+    log: Path
+    experiment: Any = None
+    run_kwargs: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class Sweep:
+    """A parsed, validated sweep file."""
+
+    name: str
+    file: str
+    base: str
+    base_cfg: dict[str, Any]
+    base_source: str
+    base_dir: str
+    fixed: dict[str, Any]
+    grid: dict[str, list[Any]]
+    out: Path
+    description: str = ""
+    points: list[Point] = field(default_factory=list)
+
+
+# ---------------------------------------------------------------------------
+# Parsing and validation
+# ---------------------------------------------------------------------------
+
+
+def load_sweep(path: str, *, out: str | None = None,
+               plugins_dirs: tuple[str, ...] = ()) -> Sweep:
+    """Read and validate a sweep file; prepare every grid point's experiment.
+
+    Nothing is written. Raises :class:`InputError` (file, key, suggestion)
+    for anything wrong.
+    """
+    from sitframe.config import load_config
+
+    p = Path(path)
+    if not p.is_file():
+        raise InputError("sweep file not found (expected a .toml sweep definition)", file=path)
+    try:
+        raw = tomllib.loads(p.read_text("utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read sweep file: {exc}", file=path) from None
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"not valid TOML: {exc}", file=path) from None
+    for section in raw:
+        if section not in ("sweep", "set", "grid"):
+            raise InputError(f"unknown section{did_you_mean(section, ['sweep', 'set', 'grid'])}"
+                             "; expected sweep, set, grid", file=path, key=section)
+        if not isinstance(raw[section], dict):
+            raise InputError("expected a table", file=path, key=section)
+    head = raw.get("sweep", {})
+    for key in head:
+        if key not in _SWEEP_KEYS:
+            raise InputError(f"unknown key{did_you_mean(key, _SWEEP_KEYS)}; expected one of "
+                             f"{', '.join(_SWEEP_KEYS)}", file=path, key=f"sweep.{key}")
+    if "base" not in head:
+        raise InputError("missing 'base' (a preset name or the path of an experiment .toml)",
+                         file=path, key="sweep.base")
+    base = head["base"]
+    if not isinstance(base, str) or not base:
+        raise InputError(f"expected a preset name or a path, got {base!r}", file=path,
+                         key="sweep.base")
+    name = head.get("name", p.stem)
+    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_.=-]+", name):
+        raise InputError(f"expected a name of letters, digits, '_', '-', '.', got {name!r}",
+                         file=path, key="sweep.name")
+    base_arg = base
+    if base.endswith(".toml") or "/" in base:
+        bp = Path(base)
+        base_arg = str(bp if bp.is_absolute() else p.parent / bp)
+    try:
+        base_cfg, base_source, base_dir = load_config(base_arg)
+    except InputError as exc:
+        if exc.file in (None, base_arg) and exc.key is None:
+            raise InputError(exc.message, file=path, key="sweep.base") from None
+        raise
+    fixed: dict[str, Any] = dict(raw.get("set", {}))
+    for key, short in (("trials", "experiment.trials"), ("seed", "experiment.seed")):
+        if key in head:
+            fixed[short] = head[key]
+    grid = raw.get("grid", {})
+    if not grid:
+        raise InputError("the grid is empty (expected [grid] with at least one "
+                         "\"dotted.key\" = [values])", file=path, key="grid")
+    for key, values in grid.items():
+        if not isinstance(values, list) or not values:
+            raise InputError(f"expected a non-empty list of values, got {values!r}", file=path,
+                             key=f"grid.{key}")
+        if len(set(map(repr, values))) != len(values):
+            raise InputError("values repeat (each grid point must be distinct)", file=path,
+                             key=f"grid.{key}")
+        if key in fixed:
+            raise InputError("is both in [grid] and fixed ([set] or [sweep])", file=path,
+                             key=f"grid.{key}")
+    plugins = _registry(base_cfg, base_dir, plugins_dirs)
+    for where, keys in (("set", fixed), ("grid", grid)):
+        for key in keys:
+            check_key(key, base_cfg, plugins, file=path, where=where)
+    out_dir = Path(out or head.get("out") or Path("logs") / "sweeps" / name)
+    desc = head.get("description", "")
+    sweep = Sweep(name, str(p), base, base_cfg, base_source, base_dir, fixed, dict(grid),
+                  out_dir, desc if isinstance(desc, str) else "")
+    sweep.points = _prepare_points(sweep, plugins_dirs)
+    return sweep
+
+
+def _registry(cfg: dict[str, Any], base_dir: str, plugins_dirs: tuple[str, ...]) -> Any:
+    from sitframe.pluginmanager import Registry, get_plugin_manager
+
+    dirs = tuple(d if Path(d).is_absolute() or base_dir in ("", ".") else str(Path(base_dir) / d)
+                 for d in cfg["plugins"]["dirs"]) + tuple(plugins_dirs)
+    return Registry.collect(get_plugin_manager(plugins_dirs=dirs))
+
+
+def check_key(key: str, cfg: dict[str, Any], registry: Any, *, file: str | None = None,
+              where: str = "grid") -> None:
+    """Check that dotted ``key`` names a setting of ``cfg`` (the resolved base config).
+
+    Core sections accept their known keys; component tables (sensor,
+    interpreter, arbiter, behaviours.LABEL and its reward_params) accept
+    ``component`` and the parameters the component's factory accepts.
+
+    Raises
+    ------
+    InputError
+        Located at ``<where>.<key>`` in ``file``, with the closest valid key.
+    """
+    from sitframe.config import DEFAULTS
+    from sitframe.params import accepted_params
+    from sitframe.robot import RobotParams
+
+    loc = f"{where}.{key}"
+    parts = key.split(".")
+
+    def fail(valid: list[str] | set[str], prefix: str, word: str) -> None:
+        full = sorted(f"{prefix}{v}" for v in valid)
+        hint = did_you_mean(f"{prefix}{word}", full) or did_you_mean(word, sorted(valid))
+        raise InputError(f"'{key}' is not a setting of the base experiment{hint}; valid here: "
+                         f"{', '.join(full[:12])}{' ...' if len(full) > 12 else ''}",
+                         file=file, key=loc)
+
+    def params_of(kind: str, name: str) -> tuple[set[str], bool]:
+        entry = registry.entries.get(kind, {}).get(name)
+        if entry is None:
+            return set(), True
+        return accepted_params(entry.factory)
+
+    sections = list(DEFAULTS)
+    if parts[0] not in DEFAULTS:
+        fail(sections, "", parts[0])
+    sec = parts[0]
+    if sec in ("sensor", "interpreter", "arbiter"):
+        names, var_kw = params_of(sec, cfg[sec]["component"])
+        valid = {"component"} | names
+        if len(parts) != 2 or (parts[1] not in valid and not var_kw):
+            fail(valid, f"{sec}.", ".".join(parts[1:]))
+        return
+    if sec == "behaviours":
+        labels = list(cfg["behaviours"])
+        if len(parts) < 3 or parts[1] not in labels:
+            fail([f"{lb}.component" for lb in labels], "behaviours.", ".".join(parts[1:]))
+        label = parts[1]
+        table = cfg["behaviours"][label]
+        names, var_kw = params_of("behaviour", table["component"])
+        valid = set(_BEHAVIOUR_META) | names
+        if parts[2] == "reward_params":
+            rnames, rvar = params_of("reward", table.get("reward", ""))
+            if len(parts) != 4 or (parts[3] not in rnames and not rvar):
+                fail(rnames, f"behaviours.{label}.reward_params.", ".".join(parts[3:]))
+            return
+        if len(parts) != 3 or (parts[2] not in valid and not var_kw):
+            fail(valid, f"behaviours.{label}.", ".".join(parts[2:]))
+        return
+    if sec == "robot":
+        valid, _ = accepted_params(RobotParams)
+    else:
+        valid = set(DEFAULTS[sec])
+    if len(parts) != 2 or parts[1] not in valid:
+        fail(valid, f"{sec}.", ".".join(parts[1:]))
+
+
+def _set(cfg: dict[str, Any], key: str, value: Any) -> None:
+    parts = key.split(".")
+    d = cfg
+    for part in parts[:-1]:
+        d = d.setdefault(part, {})
+    d[parts[-1]] = copy.deepcopy(value)
+
+
+def _fmt_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return f"{v:g}"
+    if isinstance(v, list | tuple):
+        return "-".join(_fmt_value(x) for x in v)
+    return str(v)
+
+
+def point_names(grid: dict[str, list[Any]]) -> list[tuple[str, dict[str, Any]]]:
+    """Every grid combination as ``(name, {key: value})``, in grid order.
+
+    Names use each key's last part (``c=8``) unless two keys share it, then the
+    full dotted key; characters unsafe in file names become ``-``.
+    """
+    keys = list(grid)
+    last = [k.rsplit(".", 1)[-1] for k in keys]
+    short = {k: (s if last.count(s) == 1 else k) for k, s in zip(keys, last, strict=True)}
+    out = []
+    for combo in itertools.product(*(grid[k] for k in keys)):
+        values = dict(zip(keys, combo, strict=True))
+        name = "_".join(f"{short[k]}={_fmt_value(v)}" for k, v in values.items())
+        out.append((re.sub(r"[^A-Za-z0-9_.=+-]", "-", name), values))
+    return out
+
+
+def _prepare_points(sweep: Sweep, plugins_dirs: tuple[str, ...]) -> list[Point]:
+    from sitframe.config import validate_config
+    from sitframe.experiment import prepare_experiment
+
+    points = []
+    for name, values in point_names(sweep.grid):
+        cfg = copy.deepcopy(sweep.base_cfg)
+        for key, val in {**sweep.fixed, **values}.items():
+            _set(cfg, key, val)
+        cfg["experiment"]["name"] = f"{sweep.name}/{name}"
+        log = sweep.out / f"{name}.h5"
+        where = f"{sweep.file} (point {name})"
+        try:
+            cfg = validate_config(cfg, file=where)
+            exp, kwargs = prepare_experiment(cfg, source=where, base_dir=sweep.base_dir,
+                                             out=str(log), plugins_dirs=plugins_dirs)
+        except InputError as exc:
+            if exc.file == where:
+                raise InputError(exc.message, file=sweep.file,
+                                 key=f"point {name}: {exc.key}" if exc.key else
+                                 f"point {name}") from None
+            raise
+        # Relative paths in the config resolve from the base config's folder
+        # (``run --resume`` on a point's log relies on this).
+        exp.info.extra["source"] = sweep.base_source
+        points.append(Point(name, values, log, exp, kwargs))
+    return points
+
+
+# ---------------------------------------------------------------------------
+# Running
+# ---------------------------------------------------------------------------
+
+
+def run_sweep(sweep: Sweep, executor: Any, *, progress: bool = False) -> dict[str, Any]:
+    """Run every point's stages and trials through ``executor`` (a pool executor).
+
+    Each point's log is written in this process, in trial order, as trials
+    finish. Ctrl-C cancels pending work, marks unfinished points ``aborted``
+    and re-raises.
+
+    Returns
+    -------
+    dict
+        ``{"name", "out", "wall_seconds", "points": [summary row per point]}``.
+    """
+    from sitframe.parallel import Setup, TrialPipeline, run_clusters
+
+    t0 = time.perf_counter()
+    points = sweep.points
+    status = ["running"] * len(points)
+    buffers: list[dict[int, Any]] = [{} for _ in points]
+    expected: list[list[int]] = [[] for _ in points]
+    done: list[int] = [0] * len(points)
+    setups = [Setup.of(pt.experiment) for pt in points]
+    total = sum(pt.experiment.info.n_trials for pt in points
+                if "learn" in pt.experiment.cfg["experiment"]["stages"])
+    bar = _Progress(total, sweep.name) if progress else None
+    pipe = TrialPipeline(executor)
+
+    def add_trials(i: int, state: dict[str, Any]) -> None:
+        pt = points[i]
+        specs = pt.experiment.trial_specs(state, pt.run_kwargs.get("policies"))
+        expected[i] = [s.index for s in specs]
+        pipe.add_trials(((i, s.index), setups[i], s) for s in specs)
+        if not specs:
+            finish(i, "complete")
+
+    def finish(i: int, st: str) -> None:
+        status[i] = st
+        points[i].experiment.finish(st)
+
+    try:
+        with pipe:
+            for i, pt in enumerate(points):
+                exp = pt.experiment
+                exp.begin()
+                state = pt.run_kwargs.get("interpreter_state")
+                if exp.needs_clusters(state):
+                    pipe.add_call(i, run_clusters, setups[i])
+                else:
+                    add_trials(i, state)
+            for kind, tag, value in pipe:
+                if kind == "call":
+                    collected, fit, state = value
+                    exp = points[tag].experiment
+                    exp.record_collected(collected)
+                    exp.record_clusters(fit, state)
+                    add_trials(tag, state)
+                    continue
+                i, k = tag
+                buffers[i][k] = value
+                order = expected[i]
+                while done[i] < len(order) and order[done[i]] in buffers[i]:
+                    points[i].experiment.trial_done(buffers[i].pop(order[done[i]]))
+                    done[i] += 1
+                    if bar is not None:
+                        bar.advance()
+                if done[i] == len(order):
+                    finish(i, "complete")
+    except BaseException as exc:
+        st = "aborted" if isinstance(exc, KeyboardInterrupt) else "failed"
+        for i, s in enumerate(status):
+            if s == "running":
+                finish(i, st)
+        raise
+    finally:
+        if bar is not None:
+            bar.stop()
+    rows = [summarise_point(pt) for pt in points]
+    return {"name": sweep.name, "out": str(sweep.out), "keys": list(sweep.grid),
+            "wall_seconds": round(time.perf_counter() - t0, 3), "points": rows}
+
+
+class _Progress:
+    """A rich progress bar over all trials of the sweep (stderr)."""
+
+    def __init__(self, total: int, name: str) -> None:
+        from rich.console import Console
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+        self.progress = Progress("[progress.description]{task.description}", BarColumn(),
+                                 MofNCompleteColumn(), TimeRemainingColumn(),
+                                 console=Console(stderr=True))
+        self.progress.start()
+        self.task = self.progress.add_task(f"sweep {name}: trials", total=total)
+
+    def advance(self) -> None:
+        self.progress.advance(self.task, 1)
+
+    def stop(self) -> None:
+        self.progress.stop()
+
+
+# ---------------------------------------------------------------------------
+# Summaries
+# ---------------------------------------------------------------------------
+
+
+def _median_iqr(x: np.ndarray) -> tuple[float, float, float]:
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return math.nan, math.nan, math.nan
+    q25, q50, q75 = np.percentile(x, [25, 50, 75])
+    return float(q50), float(q25), float(q75)
+
+
+def summarise_log(path: str | Path) -> dict[str, Any]:
+    """Per-point statistics from a log's summary table (see the module docstring)."""
+    from sitframe.logs import open_log
+
+    log = open_log(path)
+    table = log.summary()
+    names = table.dtype.names or ()
+    n = len(table)
+    row: dict[str, Any] = {"log": str(path), "status": log.status, "trials": n}
+
+    def col(name: str) -> np.ndarray:
+        return np.asarray(table[name], float) if name in names else np.full(n, np.nan)
+
+    conv = col("converged") > 0.5
+    row["convergence_rate"] = float(conv.mean()) if n else math.nan
+    it = col("convergence_iteration")[conv]
+    row["conv_iter_median"], row["conv_iter_q25"], row["conv_iter_q75"] = _median_iqr(it)
+    post = col("collisions_per_1000_after_convergence")[conv]
+    row["post_coll_median"], row["post_coll_q25"], row["post_coll_q75"] = _median_iqr(post)
+    worlds = []
+    for name in names:
+        m = re.fullmatch(r"eval\.(.+)\.collisions_per_1000", name)
+        if m:
+            worlds.append(m.group(1))
+    for w in worlds:
+        row[f"eval_{w}_coll_median"] = _median_iqr(col(f"eval.{w}.collisions_per_1000"))[0]
+        row[f"eval_{w}_coverage_median"] = _median_iqr(col(f"eval.{w}.coverage"))[0]
+    row["eval_worlds"] = worlds
+    return row
+
+
+def summarise_point(pt: Point) -> dict[str, Any]:
+    return {"point": pt.name, **{k: v for k, v in pt.values.items()},
+            **summarise_log(pt.log)}
+
+
+def _num(v: Any, digits: int = 1) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "–"
+    if isinstance(v, float):
+        return f"{v:.{digits}f}"
+    return str(v)
+
+
+def _med_iqr(row: dict[str, Any], prefix: str, digits: int) -> str:
+    med = row[f"{prefix}_median"]
+    if not math.isfinite(med):
+        return "–"
+    return (f"{_num(med, digits)} [{_num(row[f'{prefix}_q25'], digits)}, "
+            f"{_num(row[f'{prefix}_q75'], digits)}]")
+
+
+def write_tables(result: dict[str, Any], out: Path) -> tuple[Path, Path]:
+    """Write ``summary.csv`` and ``summary.md`` for a sweep result; return their paths."""
+    rows = result["points"]
+    keys = result["keys"]
+    worlds: list[str] = []
+    for r in rows:
+        for w in r["eval_worlds"]:
+            if w not in worlds:
+                worlds.append(w)
+    cols = ["point", *keys, "trials", "status", "convergence_rate", "conv_iter_median",
+            "conv_iter_q25", "conv_iter_q75", "post_coll_median", "post_coll_q25",
+            "post_coll_q75"]
+    for w in worlds:
+        cols += [f"eval_{w}_coll_median", f"eval_{w}_coverage_median"]
+    cols.append("log")
+    out.mkdir(parents=True, exist_ok=True)
+    csv_path, md_path = out / "summary.csv", out / "summary.md"
+    with open(csv_path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(cols)
+        for r in rows:
+            w.writerow(["" if (isinstance(r.get(c), float) and not math.isfinite(r[c]))
+                        else r.get(c, "") for c in cols])
+    md_path.write_text(markdown_table(result), encoding="utf-8")
+    return csv_path, md_path
+
+
+def markdown_table(result: dict[str, Any]) -> str:
+    """The sweep's summary as a Markdown table (one row per point)."""
+    rows = result["points"]
+    keys = result["keys"]
+    worlds: list[str] = []
+    for r in rows:
+        for w in r["eval_worlds"]:
+            if w not in worlds:
+                worlds.append(w)
+    short = [k.rsplit(".", 1)[-1] for k in keys]
+    head = [*short, "trials", "converged", "iterations to conv., median [IQR]",
+            "coll./1000 after conv., median [IQR]"]
+    for w in worlds:
+        head += [f"{w}: coll./1000", f"{w}: coverage"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+    for r in rows:
+        cells = [_fmt_value(r[k]) for k in keys]
+        n = r["trials"]
+        rate = r["convergence_rate"]
+        cells.append(str(n))
+        cells.append(f"{round(rate * n)}/{n}" if n else "–")
+        cells.append(_med_iqr(r, "conv_iter", 0))
+        cells.append(_med_iqr(r, "post_coll", 1))
+        for w in worlds:
+            cells.append(_num(r.get(f"eval_{w}_coll_median", math.nan)))
+            cells.append(_num(r.get(f"eval_{w}_coverage_median", math.nan), 2))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+# ---------------------------------------------------------------------------
+# CLI
+# ---------------------------------------------------------------------------
+
+
+def _finite(obj: Any) -> Any:
+    """``obj`` with non-finite floats replaced by ``None`` (valid JSON)."""
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_finite(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from sitframe.cli import add_parallel_arguments
+
+    parser.add_argument("sweep", help="sweep definition (.toml)")
+    parser.add_argument("--out", metavar="DIR",
+                        help="folder for the logs and summary (default [sweep] out, else "
+                        "logs/sweeps/<name>)")
+    parser.add_argument("--json", action="store_true", help="print the summary as JSON")
+    add_parallel_arguments(parser)
+
+
+def main(args: argparse.Namespace) -> int:
+    from sitframe.parallel import make_executor
+
+    if args.workers is not None and args.workers < 1:
+        raise InputError(f"must be at least 1, got {args.workers}", key="--workers")
+    sweep = load_sweep(args.sweep, out=args.out, plugins_dirs=tuple(args.plugins_dir))
+    total = sum(pt.experiment.info.n_trials for pt in sweep.points)
+    executor = make_executor(args.workers, args.scheduler, total, pool=True)
+    failed = True
+    try:
+        result = run_sweep(sweep, executor,
+                           progress=not args.json and sys.stderr.isatty())
+        failed = False
+    finally:
+        executor.shutdown(cancel=failed)
+    csv_path, md_path = write_tables(result, sweep.out)
+    if args.json:
+        doc = _finite({**result, "csv": str(csv_path), "markdown": str(md_path)})
+        print(json.dumps(doc, indent=2, default=str))
+    else:
+        print(markdown_table(result), end="")
+        print(f"{len(sweep.points)} points, {total} trials in {result['wall_seconds']:.1f} s; "
+              f"logs and summary in {sweep.out}")
+    return 0
+
+
+__all__ = ["Sweep", "check_key", "load_sweep", "markdown_table", "point_names", "run_sweep",
+           "summarise_log", "write_tables"]
