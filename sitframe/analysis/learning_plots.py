@@ -171,7 +171,9 @@ def plot_collision_intervals(
 
     Each collision is a stem at the iteration it happened, as tall as the
     number of iterations since the previous collision; the right axis gives
-    the same in minutes of robot time (1 iteration = 1.5 s).
+    the same in minutes of robot time (1 iteration = 1.5 s). A dotted stem with
+    a hollow marker at the end of the run shows the collision-free stretch
+    after the last collision (a lower bound on the next interval).
 
     Parameters
     ----------
@@ -188,22 +190,35 @@ def plot_collision_intervals(
     matplotlib.figure.Figure
     """
     it, iv = intervals.iterations, intervals.intervals
+    L = intervals.n_iterations
+    tail = L - (int(it[-1]) + 1 if it.size else 0)  # collision-free iterations at the end
     fig = Figure(figsize=(_COL, 2.4), layout="constrained")
     ax = fig.add_subplot()
+    top = max(int(iv.max()) if iv.size else 1, tail, 1)
+    if log_scale is None:
+        log_scale = bool(iv.size) and top / max(int(iv.min()), 1) > 100
+    base = 0.8 if log_scale else 0
     if it.size:
-        ax.vlines(it, 0 if not log_scale else 1, iv, color=_C["blue"], lw=0.6)
-        ax.plot(it, iv, "o", ms=1.8, color=_C["blue"], label="collision")
-        if log_scale is None:
-            log_scale = iv.max() / max(iv.min(), 1) > 100
-        if log_scale:
-            ax.set_yscale("log")
-            ax.set_ylim(0.8, iv.max() * 1.6)
-        else:
-            ax.set_ylim(0, iv.max() * 1.08 + 1)
+        ax.vlines(it, base, iv, color=_C["blue"], lw=0.6)
+        ax.plot(it, iv, "o", ms=1.8, color=_C["blue"])
     else:
         ax.text(0.5, 0.5, "no collisions", transform=ax.transAxes, ha="center",
                 fontsize=_FONT)
-    ax.set_xlim(0, max(intervals.n_iterations, 1))
+    if tail > 0 and it.size:
+        ax.vlines([L], base, [tail], color=_C["blue"], lw=0.6, ls=":")
+        ax.plot([L], [tail], "o", ms=3, mfc="white", color=_C["blue"], clip_on=False, zorder=4)
+        ax.annotate(f"{tail} it. collision-free\nto the end", (L, tail), xytext=(-4, 0),
+                    textcoords="offset points", ha="right", va="center",
+                    fontsize=_FONT - 1.5, color=_C["blue"])
+    if log_scale:
+        from matplotlib.ticker import FuncFormatter
+
+        ax.set_yscale("log")
+        ax.set_ylim(base, top * 2.0)
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _p: f"{v:g}"))
+    else:
+        ax.set_ylim(0, top * 1.12 + 1)
+    ax.set_xlim(0, max(L, 1) * 1.02)
     _mark_convergence(ax, convergence, intervals.n_iterations)
     ax.set_xlabel("Iteration of the collision (1 it. = 1.5 s)", fontsize=_FONT)
     ax.set_ylabel("Iterations since previous collision", fontsize=_FONT - 0.5)
@@ -211,6 +226,11 @@ def plot_collision_intervals(
                                                  lambda m: m * 60.0 / ITERATION_S))
     sec.set_ylabel("Minutes of robot time", fontsize=_FONT - 0.5)
     sec.tick_params(labelsize=_FONT - 1)
+    if log_scale:
+        from matplotlib.ticker import FuncFormatter
+
+        sec.set_yscale("log")
+        sec.yaxis.set_major_formatter(FuncFormatter(lambda v, _p: f"{v:g}"))
     _finish(ax, grid="y")
     ax.spines["right"].set_visible(True)
     n = it.size

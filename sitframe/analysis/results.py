@@ -374,6 +374,14 @@ def evaluation_episodes(trial: TrialLog) -> dict[str, dict[str, np.ndarray]]:
     return {w: d for w, d in out.items() if "pose" in d}
 
 
+def _summary(lg: Log) -> np.ndarray:
+    """The root summary table, restricted to trials whose group is in the log."""
+    s = lg.summary()
+    if s.size:
+        s = s[np.isin(s["trial"], lg.trial_indices())]
+    return s
+
+
 def representative_trial(log: LogLike) -> int | None:
     """The trial the per-trial figures show by default.
 
@@ -382,7 +390,7 @@ def representative_trial(log: LogLike) -> int | None:
     trial with the lowest index. None when the log has no finished trial.
     """
     lg = as_log(log)
-    s = lg.summary()
+    s = _summary(lg)
     if s.size == 0:
         return None
     names = s.dtype.names or ()
@@ -650,7 +658,7 @@ def convergence_table(log: LogLike) -> Table:
         and ``<w> coverage`` (fraction of free 0.5 m cells visited).
     """
     lg = as_log(log)
-    s = lg.summary()
+    s = _summary(lg)
     _, worlds = _summary_columns(s)
     conv = _col(s, "converged") > 0.5
     it = np.where(conv, _col(s, "convergence_iteration"), np.nan)
@@ -707,7 +715,7 @@ def compare_runs(a: LogLike, b: LogLike, names: tuple[str, str] | None = None) -
         names = (os.path.basename(la.path), os.path.basename(lb.path))
         if names[0] == names[1]:
             names = (la.path, lb.path)
-    sa, sb = la.summary(), lb.summary()
+    sa, sb = _summary(la), _summary(lb)
     worlds = sorted(set(_summary_columns(sa)[1]) | set(_summary_columns(sb)[1]))
 
     def ms(v: np.ndarray, d: int = 1) -> str:
