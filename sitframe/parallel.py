@@ -420,9 +420,13 @@ class DaskExecutor(PoolExecutor):
         return self.client.submit(fn, *args, pure=False)
 
     def wait_first(self, futures: Iterable[Any]) -> set[Any]:
-        from distributed import wait
+        from distributed import as_completed
 
-        return set(wait(list(futures), return_when="FIRST_COMPLETED").done)
+        futures = list(futures)
+        done = {f for f in futures if f.done()}
+        if not done:  # our client, not a global default one
+            done = {next(iter(as_completed(futures, loop=self.client.loop)))}
+        return done | {f for f in futures if f.done()}
 
     def cancel(self, futures: Iterable[Any]) -> None:
         self.client.cancel(list(futures))
@@ -467,5 +471,43 @@ def make_executor(workers: int | None = None, scheduler: str | None = None,
     return ProcessExecutor(k)
 
 
+def log_contents(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """Every dataset of an HDF5 log and every attribute below the root, by path.
+
+    Root attributes are left out: they describe the run (``created``,
+    ``status``), not its results. Trial attributes (index, seed, world, and
+    the summary scalars) are included as ``"<group>@<attr>"``.
+    """
+    import h5py
+
+    out: dict[str, Any] = {}
+    with h5py.File(path, "r") as f:
+        def visit(name: str, obj: Any) -> None:
+            if isinstance(obj, h5py.Dataset):
+                out[name] = obj[()]
+            for k, v in obj.attrs.items():
+                out[f"{name}@{k}"] = v
+        f.visititems(visit)
+    return out
+
+
+def compare_logs(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> list[str]:
+    """Paths whose contents differ between two logs, bit for bit (empty = identical).
+
+    Compares every dataset (dtype, shape and bytes) and every non-root
+    attribute, as :func:`log_contents` lists them.
+    """
+    import numpy as np
+
+    ca, cb = log_contents(a), log_contents(b)
+    diff = sorted(set(ca) ^ set(cb))
+    for key in sorted(set(ca) & set(cb)):
+        x, y = np.asarray(ca[key]), np.asarray(cb[key])
+        if x.dtype != y.dtype or x.shape != y.shape or x.tobytes() != y.tobytes():
+            diff.append(key)
+    return diff
+
+
 __all__ = ["DaskExecutor", "InlineExecutor", "PoolExecutor", "ProcessExecutor", "Setup",
-           "TrialPipeline", "make_executor", "run_clusters", "run_trial"]
+           "TrialPipeline", "compare_logs", "log_contents", "make_executor", "run_clusters",
+           "run_trial"]

@@ -1,0 +1,141 @@
+"""Parallel trials: a process pool and a Dask cluster give the serial log bit for bit."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+
+import pytest
+
+from sitframe.cli import main
+from sitframe.logs import open_log
+from sitframe.parallel import (
+    InlineExecutor,
+    ProcessExecutor,
+    compare_logs,
+    make_executor,
+)
+from sitframe.scheduler import SerialExecutor
+
+SMALL = """
+[experiment]
+name = "small"
+trials = 5
+iterations = 300
+seed = 11
+
+[collect]
+worlds = ["collect-1", "collect-2"]
+
+[interpreter]
+component = "fcm"
+c = 6
+trials = 4
+
+[behaviours.avoid]
+component = "fuzzy-q"
+reward = "obstacle-avoidance"
+p = 5
+
+[evaluate]
+worlds = ["novel-1", "training"]
+iterations = 100
+"""
+
+
+@pytest.fixture(scope="module")
+def serial_log(tmp_path_factory):
+    d = tmp_path_factory.mktemp("parallel")
+    cfg = d / "small.toml"
+    cfg.write_text(SMALL)
+    out = d / "serial.h5"
+    assert main(["run", str(cfg), "--out", str(out), "--workers", "1", "--json"]) == 0
+    return cfg, out
+
+
+def _run(capsys, *argv):
+    code = main(list(argv))
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    return json.loads(captured.out)
+
+
+def test_process_pool_log_identical_to_serial(serial_log, tmp_path, capsys):
+    cfg, ref = serial_log
+    capsys.readouterr()
+    out = tmp_path / "pool.h5"
+    doc = _run(capsys, "run", str(cfg), "--out", str(out), "--workers", "2", "--json")
+    assert [t["trial"] for t in doc["trials"]] == [0, 1, 2, 3, 4]
+    assert open_log(out).status == "complete"
+    assert compare_logs(ref, out) == []
+    with_eval = open_log(out).trial(3)
+    assert "eval/novel-1/pose" in with_eval.episodes
+    assert with_eval.summary["eval/training/collisions_per_1000"] >= 0
+
+
+def test_dask_cluster_log_identical_to_serial(serial_log, tmp_path, capsys):
+    distributed = pytest.importorskip("distributed")
+    cfg, ref = serial_log
+    capsys.readouterr()
+    out = tmp_path / "dask.h5"
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                  protocol="tcp", host="127.0.0.1",
+                                  dashboard_address=None) as cluster:
+        _run(capsys, "run", str(cfg), "--out", str(out), "--scheduler",
+             cluster.scheduler_address, "--json")
+    assert open_log(out).status == "complete"
+    assert compare_logs(ref, out) == []
+
+
+def test_unreachable_scheduler_fails_fast_one_line(serial_log, tmp_path, capsys):
+    pytest.importorskip("distributed")
+    cfg, _ref = serial_log
+    capsys.readouterr()
+    out = tmp_path / "never.h5"
+    t0 = time.perf_counter()
+    code = main(["run", str(cfg), "--out", str(out), "--scheduler", "tcp://127.0.0.1:9"])
+    elapsed = time.perf_counter() - t0
+    err = capsys.readouterr().err
+    assert code == 2
+    assert elapsed < 15
+    assert err.count("\n") == 1 and "--scheduler: cannot reach the Dask scheduler" in err
+    assert not out.exists()
+
+
+def test_dask_missing_is_a_clear_input_error(serial_log, tmp_path, capsys, monkeypatch):
+    cfg, _ref = serial_log
+    capsys.readouterr()
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import raises ImportError
+    out = tmp_path / "never.h5"
+    assert main(["run", str(cfg), "--out", str(out), "--scheduler", "tcp://127.0.0.1:8786"]) == 2
+    err = capsys.readouterr().err
+    assert "needs Dask distributed" in err and "sitframe[dask]" in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("argv", "pattern"),
+    [
+        (["--workers", "0"], "--workers: must be at least 1"),
+        (["--workers", "2", "--scheduler", "tcp://127.0.0.1:8786"], "not both"),
+    ],
+)
+def test_bad_parallel_options_exit_2(serial_log, tmp_path, capsys, argv, pattern):
+    cfg, _ref = serial_log
+    capsys.readouterr()
+    out = tmp_path / "never.h5"
+    assert main(["run", str(cfg), "--out", str(out), *argv]) == 2
+    err = capsys.readouterr().err
+    assert pattern in err and err.count("\n") == 1
+    assert not out.exists()
+
+
+def test_make_executor_choices():
+    assert isinstance(make_executor(1, None, 10), SerialExecutor)
+    assert isinstance(make_executor(4, None, 1), SerialExecutor)  # one trial: no pool
+    assert isinstance(make_executor(1, None, 10, pool=True), InlineExecutor)
+    ex = make_executor(3, None, 10)
+    assert isinstance(ex, ProcessExecutor) and ex.workers == 3
+    ex = make_executor(8, None, 2)
+    assert isinstance(ex, ProcessExecutor) and ex.workers == 2
