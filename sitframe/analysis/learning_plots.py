@@ -381,7 +381,7 @@ def plot_compare_rewards(
     fig.legend(fontsize=_FONT - 1, loc="outside lower center", ncols=min(len(runs), 3),
                frameon=False)
     _finish(ax, grid="y")
-    ax.set_title(title or "Learning curves: mean over trials, band = interquartile range",
+    ax.set_title(title or "Mean over trials; band = interquartile range",
                  fontsize=_FONT)
     return fig
 
