@@ -296,7 +296,9 @@ def _raycast(
     denom = dx * s.ey - dy * s.ex  # (n, S)  cross(d, e)
     t_num = wx * s.ey - wy * s.ex  # cross(w, e)
     u_num = wx * dy - wy * dx  # cross(w, d)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    # Near-parallel rays give huge quotients (overflow to inf) and exactly
+    # parallel ones 0/0: both are filtered out by ``hit`` below.
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         t = t_num / denom
         u = u_num / denom
     # A hair of tolerance (1e-12) so rays starting on, or grazing the end of,
