@@ -128,10 +128,29 @@ def warm_up(setup: Setup) -> int:
     return os.getpid()
 
 
-def _worker_init() -> None:
-    # Ctrl-C in a terminal reaches the whole process group; only the main
-    # process decides what to do about it.
+def _worker_init(lifeline: Any = None) -> None:
+    """Pool worker set-up: ignore SIGINT, exit when the main process is gone.
+
+    Ctrl-C in a terminal reaches the whole process group; only the main
+    process decides what to do about it. ``lifeline`` is the read end of a
+    pipe whose only write end the main process holds: when the main process
+    dies (even by SIGKILL) the read sees EOF and the worker exits, instead
+    of lingering blocked on the task queue (whose pipe the workers
+    themselves keep open).
+    """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if lifeline is None:
+        return
+
+    def watch() -> None:
+        try:
+            while True:
+                lifeline.recv_bytes()
+        except (EOFError, OSError):
+            pass
+        os._exit(1)
+
+    threading.Thread(target=watch, name="sitframe-lifeline", daemon=True).start()
 
 
 # ---------------------------------------------------------------------------
@@ -333,12 +352,16 @@ class ProcessExecutor(PoolExecutor):
             raise InputError(f"must be at least 1, got {workers}", key="--workers")
         self.workers = int(workers)
         self._pool: cf.ProcessPoolExecutor | None = None
+        self._lifeline: tuple[Any, Any] | None = None
 
     @property
     def pool(self) -> cf.ProcessPoolExecutor:
         if self._pool is None:
-            self._pool = cf.ProcessPoolExecutor(self.workers, mp_context=_mp_context(),
-                                                initializer=_worker_init)
+            ctx = _mp_context()
+            reader, writer = ctx.Pipe(duplex=False)
+            self._lifeline = (reader, writer)  # never written; closed when we exit
+            self._pool = cf.ProcessPoolExecutor(self.workers, mp_context=ctx,
+                                                initializer=_worker_init, initargs=(reader,))
         return self._pool
 
     def start(self, experiment: Experiment) -> None:
@@ -365,6 +388,7 @@ class ProcessExecutor(PoolExecutor):
 
     def shutdown(self, cancel: bool = False) -> None:
         pool, self._pool = self._pool, None
+        lifeline, self._lifeline = self._lifeline, None
         if pool is None:
             return
         if cancel:
@@ -378,6 +402,9 @@ class ProcessExecutor(PoolExecutor):
                 p.join(timeout=5)
         else:
             pool.shutdown(wait=True)
+        if lifeline is not None:
+            for conn in lifeline:
+                conn.close()
 
 
 class DaskExecutor(PoolExecutor):
