@@ -1,0 +1,162 @@
+"""`sitframe sweep`: one log per grid point (identical to `sitframe run`), summary tables,
+one-line errors for bad keys, empty grids and unreachable schedulers."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import pytest
+
+from sitframe.cli import main
+from sitframe.logs import open_log
+from sitframe.parallel import compare_logs
+from sitframe.sweep import point_names
+
+BASE = """
+[experiment]
+name = "base"
+trials = 2
+iterations = 200
+seed = 7
+
+[collect]
+worlds = ["collect-1", "collect-2"]
+
+[interpreter]
+component = "fcm"
+c = 4
+trials = 3
+
+[behaviours.avoid]
+component = "fuzzy-q"
+reward = "obstacle-avoidance"
+p = 5
+
+[evaluate]
+worlds = ["novel-1"]
+iterations = 60
+"""
+
+SWEEP = """
+[sweep]
+name = "mini"
+base = "base.toml"
+trials = 2
+
+[grid]
+"behaviours.avoid.update" = ["thesis", "standard"]
+"interpreter.c" = [4, 5]
+"""
+
+
+@pytest.fixture(scope="module")
+def swept(tmp_path_factory):
+    d = tmp_path_factory.mktemp("sweep")
+    (d / "base.toml").write_text(BASE)
+    (d / "mini.toml").write_text(SWEEP)
+    out = d / "out"
+    assert main(["sweep", str(d / "mini.toml"), "--out", str(out), "--workers", "2",
+                 "--json"]) == 0
+    return d, out
+
+
+def test_sweep_writes_a_log_per_point_and_tables(swept, capsys):
+    _d, out = swept
+    names = ["update=thesis_c=4", "update=thesis_c=5", "update=standard_c=4",
+             "update=standard_c=5"]
+    for name in names:
+        log = open_log(out / f"{name}.h5")
+        assert log.status == "complete"
+        assert log.trial_indices() == [0, 1]
+    assert open_log(out / "update=standard_c=5.h5").config["interpreter"]["c"] == 5
+    assert open_log(out / "update=standard_c=5.h5").config["behaviours"]["avoid"]["update"] \
+        == "standard"
+    with open(out / "summary.csv", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [r["point"] for r in rows] == names
+    assert {"convergence_rate", "conv_iter_median", "conv_iter_q25", "post_coll_median",
+            "eval_novel-1_coll_median", "eval_novel-1_coverage_median"} <= set(rows[0])
+    md = (out / "summary.md").read_text()
+    assert md.count("\n") == 2 + len(names) and "novel-1: coverage" in md
+
+
+def test_sweep_point_equals_plain_run(swept, tmp_path, capsys):
+    d, out = swept
+    cfg = tmp_path / "point.toml"
+    text = BASE.replace("c = 4", "c = 5").replace('p = 5', 'p = 5\nupdate = "standard"')
+    text = text.replace('name = "base"', 'name = "mini/update=standard_c=5"')
+    cfg.write_text(text)
+    ref = tmp_path / "ref.h5"
+    assert main(["run", str(cfg), "--out", str(ref), "--workers", "1", "--json"]) == 0
+    capsys.readouterr()
+    assert compare_logs(ref, out / "update=standard_c=5.h5") == []
+
+
+def test_sweep_json_and_one_worker(swept, tmp_path, capsys):
+    d, out = swept
+    capsys.readouterr()
+    out1 = tmp_path / "one"
+    assert main(["sweep", str(d / "mini.toml"), "--out", str(out1), "--workers", "1",
+                 "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert [p["point"] for p in doc["points"]][0] == "update=thesis_c=4"
+    assert doc["points"][0]["trials"] == 2
+    for name in ("update=thesis_c=4", "update=standard_c=5"):
+        assert compare_logs(out / f"{name}.h5", out1 / f"{name}.h5") == []
+
+
+def test_point_names_use_short_keys_unless_ambiguous():
+    names = [n for n, _v in point_names({"interpreter.c": [8], "behaviours.a.p": [1.5],
+                                         "behaviours.b.p": [2]})]
+    assert names == ["c=8_behaviours.a.p=1.5_behaviours.b.p=2"]
+
+
+@pytest.mark.parametrize(
+    ("grid", "pattern"),
+    [
+        ('"interpreter.cc" = [4, 5]', r"grid.interpreter.cc: .*did you mean 'interpreter.c'"),
+        ('"behaviours.avoid.updat" = ["thesis"]',
+         r"did you mean 'behaviours.avoid.update'"),
+        ('"behaviours.avod.update" = ["thesis"]', r"not a setting of the base experiment"),
+        ('"experiment.iteration" = [10]', r"did you mean 'experiment.iterations'"),
+        ('"robots.radius" = [0.2]', r"did you mean 'robot'"),
+        ('"interpreter.c" = []', r"grid.interpreter.c: expected a non-empty list"),
+        ('"interpreter.c" = [0]', r"point c=0: interpreter"),
+        ("", r"grid: the grid is empty"),
+    ],
+)
+def test_bad_sweeps_one_line_exit_2(swept, tmp_path, capsys, grid, pattern):
+    import re
+
+    d, _out = swept
+    f = tmp_path / "bad.toml"
+    f.write_text(f'[sweep]\nbase = "{d / "base.toml"}"\n[grid]\n{grid}\n')
+    out = tmp_path / "never"
+    capsys.readouterr()
+    assert main(["sweep", str(f), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and re.search(pattern, err), err
+    assert not out.exists()
+
+
+def test_sweep_unreachable_scheduler_exit_2(swept, tmp_path, capsys):
+    pytest.importorskip("distributed")
+    d, _out = swept
+    out = tmp_path / "never"
+    capsys.readouterr()
+    assert main(["sweep", str(d / "mini.toml"), "--out", str(out), "--scheduler",
+                 "tcp://127.0.0.1:9"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cannot reach the Dask scheduler" in err
+    assert not out.exists()
+
+
+def test_sweep_file_errors(tmp_path, capsys):
+    assert main(["sweep", str(tmp_path / "nope.toml")]) == 2
+    assert "sweep file not found" in capsys.readouterr().err
+    f = tmp_path / "s.toml"
+    f.write_text('[sweep]\nbase = "obstacle-avoid"\n[grid]\n"interpreter.c" = [8]\n')
+    assert main(["sweep", str(f)]) == 2
+    err = capsys.readouterr().err
+    assert "did you mean 'obstacle-avoidance'" in err and "sweep.base" in err
