@@ -128,7 +128,7 @@ def warm_up(setup: Setup) -> int:
     return os.getpid()
 
 
-def _worker_init(lifeline: Any = None) -> None:
+def _worker_init(lifeline: Any = None, inherited_writer: Any = None) -> None:
     """Pool worker set-up: ignore SIGINT, exit when the main process is gone.
 
     Ctrl-C in a terminal reaches the whole process group; only the main
@@ -139,6 +139,8 @@ def _worker_init(lifeline: Any = None) -> None:
     themselves keep open).
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if inherited_writer is not None:
+        inherited_writer.close()
     if lifeline is None:
         return
 
@@ -329,12 +331,23 @@ class InlineExecutor(PoolExecutor):
         pass
 
 
-def _mp_context() -> mp.context.BaseContext:
-    if "forkserver" in mp.get_all_start_methods():
-        ctx = mp.get_context("forkserver")
+def start_method() -> str:
+    """The multiprocessing start method of the pool (env ``SITFRAME_START_METHOD`` overrides)."""
+    methods = mp.get_all_start_methods()
+    wanted = os.environ.get("SITFRAME_START_METHOD", "")
+    if wanted:
+        if wanted not in methods:
+            raise InputError(f"unknown start method '{wanted}'; this platform has "
+                             f"{', '.join(methods)}", key="SITFRAME_START_METHOD")
+        return wanted
+    return "forkserver" if "forkserver" in methods else "spawn"
+
+
+def _mp_context(method: str) -> mp.context.BaseContext:
+    ctx = mp.get_context(method)
+    if method == "forkserver":
         ctx.set_forkserver_preload(["sitframe.parallel", "sitframe.scheduler"])
-        return ctx
-    return mp.get_context("spawn")
+    return ctx
 
 
 class ProcessExecutor(PoolExecutor):
@@ -357,15 +370,21 @@ class ProcessExecutor(PoolExecutor):
     @property
     def pool(self) -> cf.ProcessPoolExecutor:
         if self._pool is None:
-            ctx = _mp_context()
+            method = start_method()
+            ctx = _mp_context(method)
             reader, writer = ctx.Pipe(duplex=False)
             self._lifeline = (reader, writer)  # never written; closed when we exit
+            # A forked child inherits the write end too and must close it.
+            initargs = (reader, writer if method == "fork" else None)
             self._pool = cf.ProcessPoolExecutor(self.workers, mp_context=ctx,
-                                                initializer=_worker_init, initargs=(reader,))
+                                                initializer=_worker_init, initargs=initargs)
         return self._pool
 
     def start(self, experiment: Experiment) -> None:
         setup = Setup.of(experiment)
+        if start_method() == "fork":  # children inherit the built components
+            with _cache_lock:
+                _cache.setdefault(setup.key, experiment)
         for _ in range(self.workers):  # one submit per worker starts them all now
             self.pool.submit(warm_up, setup)
 

@@ -1,0 +1,174 @@
+"""Wall time of ``sitframe run`` with 1 vs K workers (and a Dask cluster); identical logs?
+
+::
+
+    python benchmarks/bench_parallel.py                      # 11 trials, 1 vs 2 workers, 3 repeats
+    python benchmarks/bench_parallel.py --repeats 5 --dask   # also through a LocalCluster
+    python benchmarks/bench_parallel.py --kill 20            # kill -9 / --resume tally
+
+Each timing is the whole ``sitframe run`` command (a fresh process: imports,
+collect, cluster, trials, log writing), so the ratio is what a user sees.
+The median over the repeats is reported; serial and parallel runs alternate
+so a change in machine load hits both. ``--kill N`` starts N runs, kills
+each with SIGKILL at a random moment (after at least one trial is in the
+log), checks the log opens, resumes it and compares it bit for bit with an
+uninterrupted run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from sitframe.errors import InputError
+from sitframe.logs import open_log
+from sitframe.parallel import compare_logs
+
+SITFRAME = [sys.executable, "-m", "sitframe.cli"]
+
+
+def timed_run(args: list[str]) -> float:
+    t0 = time.perf_counter()
+    subprocess.run([*SITFRAME, "run", *args, "--json"], check=True, stdout=subprocess.DEVNULL)
+    return time.perf_counter() - t0
+
+
+def bench_workers(experiment: str, trials: int, workers: int, repeats: int, tmp: Path,
+                  dask: bool) -> None:
+    serial, parallel, dask_t = [], [], []
+    identical = True
+    cluster = None
+    if dask:
+        from distributed import LocalCluster
+
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               host="127.0.0.1", dashboard_address=None)
+    try:
+        for r in range(repeats):
+            a, b = tmp / f"serial{r}.h5", tmp / f"parallel{r}.h5"
+            common = [experiment, "--trials", str(trials)]
+            serial.append(timed_run([*common, "--workers", "1", "--out", str(a)]))
+            parallel.append(timed_run([*common, "--workers", str(workers), "--out", str(b)]))
+            identical &= compare_logs(a, b) == []
+            if cluster is not None:
+                c = tmp / f"dask{r}.h5"
+                dask_t.append(timed_run([*common, "--scheduler", cluster.scheduler_address,
+                                         "--out", str(c)]))
+                identical &= compare_logs(a, c) == []
+            print(f"repeat {r + 1}: 1 worker {serial[-1]:.2f} s, {workers} workers "
+                  f"{parallel[-1]:.2f} s" + (f", dask {dask_t[-1]:.2f} s" if dask_t else ""),
+                  flush=True)
+    finally:
+        if cluster is not None:
+            cluster.close()
+    s, p = statistics.median(serial), statistics.median(parallel)
+    print(f"{experiment}, {trials} trials, median of {repeats}: 1 worker {s:.2f} s, "
+          f"{workers} workers {p:.2f} s, speed-up {s / p:.2f}x" +
+          (f", dask ({workers} worker processes) {statistics.median(dask_t):.2f} s"
+           if dask_t else ""))
+    print(f"logs identical (every dataset and trial attribute): {identical}")
+    print(f"load average during the benchmark: {os.getloadavg()}")
+
+
+KILL_CONFIG = """
+[experiment]
+name = "kill"
+trials = 8
+iterations = 400
+seed = 21
+
+[collect]
+worlds = ["collect-1", "collect-2"]
+
+[interpreter]
+component = "fcm"
+c = 6
+trials = 4
+
+[behaviours.avoid]
+component = "fuzzy-q"
+reward = "obstacle-avoidance"
+p = 5
+
+[evaluate]
+worlds = ["novel-1"]
+iterations = 100
+"""
+
+
+def kill_tally(n: int, tmp: Path, seed: int) -> int:
+    rng = np.random.default_rng(seed)
+    cfg = tmp / "kill.toml"
+    cfg.write_text(KILL_CONFIG)
+    ref = tmp / "reference.h5"
+    subprocess.run([*SITFRAME, "run", str(cfg), "--out", str(ref), "--workers", "1", "--json"],
+                   check=True, stdout=subprocess.DEVNULL)
+    opened = reproduced = 0
+    for i in range(n):
+        out = tmp / f"killed{i}.h5"
+        workers = str(rng.choice([1, 2]))
+        proc = subprocess.Popen([*SITFRAME, "run", str(cfg), "--out", str(out), "--workers",
+                                 workers, "--json"], stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
+        while proc.poll() is None:
+            try:
+                if out.exists() and open_log(out).trial_indices():
+                    break
+            except InputError:
+                pass
+            time.sleep(0.01)
+        time.sleep(float(rng.uniform(0.0, 0.6)))
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        try:
+            log = open_log(out)
+            status, have = log.status, log.trial_indices()
+            opened += 1
+        except InputError as exc:
+            print(f"run {i + 1}: log does not open: {exc}")
+            continue
+        subprocess.run([*SITFRAME, "run", "--resume", str(out), "--workers", workers, "--json"],
+                       check=True, stdout=subprocess.DEVNULL)
+        diff = compare_logs(ref, out)
+        ok = not diff and open_log(out).status == "complete"
+        reproduced += ok
+        print(f"run {i + 1:2d} (workers {workers}): killed with status {status!r} and "
+              f"{len(have)}/8 trials; resumed -> {'identical' if ok else f'DIFFERS {diff[:3]}'}",
+              flush=True)
+    print(f"kill -9 tally: {opened}/{n} logs opened, {reproduced}/{n} resumed runs identical "
+          "to the uninterrupted run")
+    return 0 if opened == reproduced == n else 1
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--experiment", default="obstacle-avoidance")
+    ap.add_argument("--trials", type=int, default=11)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--dask", action="store_true", help="also run through a Dask LocalCluster")
+    ap.add_argument("--kill", type=int, metavar="N", help="kill -9 / resume tally of N runs")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the kill moments")
+    args = ap.parse_args()
+    tmp = Path(tempfile.mkdtemp(prefix="sitframe-bench-"))
+    try:
+        if args.kill:
+            return kill_tally(args.kill, tmp, args.seed)
+        bench_workers(args.experiment, args.trials, args.workers, args.repeats, tmp, args.dask)
+        return 0
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
