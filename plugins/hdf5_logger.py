@@ -1,8 +1,16 @@
 """Observer plugin: writes the run to an HDF5 log (layout in :mod:`sitframe.logs`).
 
 It holds no file open: every stage and every finished trial is one
-open-append-flush-close transaction, so a killed run leaves a readable log
-whose root ``status`` says ``running`` (never finished) or ``aborted``.
+copy-on-write transaction (:class:`sitframe.logs.LogWriter`), so a run
+killed at any moment leaves a readable log whose root ``status`` says
+``running`` (never finished) or ``aborted`` (Ctrl-C), with every trial
+written so far intact; ``sitframe run --resume LOG`` finishes it (the run
+then has ``RunInfo.extra["resume"]`` set and the log is reopened, not
+recreated).
+
+Only the process that runs the scheduler calls these hooks: with parallel
+trials the workers return their data and this plugin writes them, in trial
+order, as they finish.
 
 Nothing is written when the run has no output path (``RunInfo.out is None``).
 """

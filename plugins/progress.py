@@ -3,6 +3,10 @@
 Shown only when the run asks for it (``RunInfo.extra["progress"]``; the CLI
 sets it when stderr is a terminal and ``--json`` is not given). Iteration
 updates are throttled to every 100 iterations to keep the loop fast.
+
+When trials run in worker processes (``--workers K > 1``, ``--scheduler``),
+``sitframe_step`` does not fire (``RunInfo.extra["step_hooks"]`` is false):
+only the trials bar is shown, and it advances as each trial is logged.
 """
 
 from __future__ import annotations
@@ -26,14 +30,16 @@ def sitframe_run_start(run: RunInfo) -> None:
     progress.start()
     total = run.n_trials * run.iterations
     _state["progress"] = progress
-    _state["task"] = progress.add_task(f"{run.name}: iterations", total=total)
+    if run.extra.get("step_hooks", True):
+        _state["task"] = progress.add_task(f"{run.name}: iterations", total=total)
     _state["trials"] = progress.add_task(f"{run.name}: trials", total=run.n_trials)
 
 
 @hookimpl
 def sitframe_step(record: StepRecord) -> None:
     progress = _state.get("progress")
-    if progress is not None and record.transition.before.iteration % 100 == 99:
+    if progress is not None and "task" in _state and \
+            record.transition.before.iteration % 100 == 99:
         progress.advance(_state["task"], 100)
 
 
