@@ -496,8 +496,16 @@ class Experiment:
 
     def prepare(self, interpreter_state: dict[str, Any] | None = None,
                 collected: Collected | None = None) -> dict[str, Any]:
-        """Collect and cluster (unless ``interpreter_state`` is given); return the state."""
+        """Collect and cluster (unless ``interpreter_state`` is given); return the state.
+
+        Situations given from elsewhere (``clusters_from``) are still recorded as
+        the cluster stage, so the run's own log is self-contained for
+        ``evaluate`` and ``analyse`` (not again when resuming: the log has them).
+        """
         if not self.needs_clusters(interpreter_state, collected):
+            if not self.info.extra.get("resume"):
+                source = self.cfg["experiment"]["clusters_from"] or "given by the caller"
+                self.record_clusters({"reused_from": source}, interpreter_state)
             return interpreter_state  # type: ignore[return-value]
         if collected is None:
             collected = self.collect()

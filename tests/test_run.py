@@ -175,3 +175,26 @@ def test_speed_needs_a_heading_log(tmp_path, capsys, monkeypatch):
     assert main(["run", "speed"]) == 2
     err = capsys.readouterr().err
     assert "logs/obstacle-avoidance.h5: log file not found" in err
+
+
+def test_reused_situations_are_recorded_and_sensor_must_match(small_run, tmp_path, capsys):
+    cfg, out = small_run
+    if not out.exists():
+        main(["run", str(cfg), "--out", str(out), "--json"])
+        capsys.readouterr()
+    reuse = tmp_path / "reuse.toml"
+    reuse.write_text(SMALL.replace('seed = 3', f'seed = 3\nclusters_from = "{out}"')
+                     .replace("trials = 2", "trials = 1"))
+    log2 = tmp_path / "reuse.h5"
+    _run_json(capsys, "run", str(reuse), "--out", str(log2), "--json")
+    reused = open_log(log2)
+    np.testing.assert_array_equal(reused.interpreter_state()["centers"],
+                                  open_log(out).interpreter_state()["centers"])
+    assert reused.stage("cluster")["reused_from"] == str(out)
+    doc = _run_json(capsys, "evaluate", str(log2), "--world", "novel-1", "--iterations", "50",
+                    "--json")
+    assert doc["iterations"] == 50
+    cone = tmp_path / "cone.toml"
+    cone.write_text(reuse.read_text() + '\n[sensor]\nbeam_width_deg = 20\nrays_per_beam = 3\n')
+    assert main(["run", str(cone), "--out", str(tmp_path / "cone.h5")]) == 2
+    assert "situations were fitted on readings of sensor" in capsys.readouterr().err
