@@ -25,6 +25,7 @@ Config (``[behaviours.LABEL]``)::
     update = "thesis"      # or "standard"
     activation = 0.3
     terminal_on_collision = false
+    min_updates = 0        # convergence also needs every situation updated this often
     q_init = "constant"
     q_init_value = 0.0
 """
@@ -69,6 +70,7 @@ class FuzzyQBehaviour:
         update: str = "thesis",
         activation: float = 0.3,
         terminal_on_collision: bool = False,
+        min_updates: int = 0,
     ) -> None:
         self.singletons: dict[str, np.ndarray] = {
             "heading": np.asarray(P.number_list("headings", list(headings), lo=-90, hi=90))
@@ -86,7 +88,7 @@ class FuzzyQBehaviour:
             temperature_mode=temperature_mode, temperature_decay=temperature_decay,
             temperature_min=temperature_min, q_init=q_init, q_init_value=q_init_value,
             q_init_spread=q_init_spread, update=update, activation=activation,
-            terminal_on_collision=terminal_on_collision,
+            terminal_on_collision=terminal_on_collision, min_updates=min_updates,
         )
         self.learners: dict[str, FuzzyQLearner] = {}
         self.fcs: dict[str, SituationFCS] = {}

@@ -86,6 +86,13 @@ class QLearningParams:
         then a collision's target (-30 + 0.9 V) differs from a safe action's
         (~+27 + 0.9 V) by less than the noise in V, and the learned rule base
         tolerates collisions.
+    min_updates
+        Convergence also requires every situation's rules to have been updated
+        at least this many times (0 = the thesis's criterion alone). A greedy
+        rule base can stay unchanged for ``p`` changes simply because a rare
+        situation was never experienced; this guards against freezing it.
+        A situation the training world never produces then prevents
+        convergence, so keep it small.
     """
 
     alpha: float = 0.3
@@ -102,6 +109,7 @@ class QLearningParams:
     update: str = "thesis"
     activation: float = 0.3
     terminal_on_collision: bool = False
+    min_updates: int = 0
 
     def __post_init__(self) -> None:
         P.number("alpha", self.alpha, lo=0.0, hi=1.0, lo_open=True)
@@ -118,6 +126,7 @@ class QLearningParams:
         P.choice("update", self.update, UPDATE_RULES)
         P.number("activation", self.activation, lo=0.0, hi=1.0)
         P.boolean("terminal_on_collision", self.terminal_on_collision)
+        P.number("min_updates", self.min_updates, lo=0, integer=True)
 
 
 def softmax_choice(
@@ -187,6 +196,7 @@ class FuzzyQLearner:
         self.stable_changes = 0
         self.since_change = 0
         self.n_changes = 0
+        self.updates = np.zeros(c, dtype=np.int64)
         self._rows = np.arange(c)
         # Records: one row per rule-base change (snapshots) and per iteration.
         self._snap_iter: list[int] = [0]
@@ -250,6 +260,7 @@ class FuzzyQLearner:
                 q[active, acts] = cur + prm.alpha * (w * reward + prm.gamma * w * v_next - cur)
             else:
                 q[active, acts] = cur + prm.alpha * w * (reward + prm.gamma * v_next - cur)
+            self.updates[active] += 1
         self.since_change += 1
         if collided or self.since_change >= prm.b:
             self._change(iteration)
@@ -263,7 +274,8 @@ class FuzzyQLearner:
             self.stable_changes = 0
             self.greedy = greedy
         self.n_changes += 1
-        if self.stable_changes >= self.params.p:
+        if self.stable_changes >= self.params.p and (
+                self.params.min_updates == 0 or self.updates.min() >= self.params.min_updates):
             self.converged_at = iteration + 1
             self.rule_base = greedy.copy()
         else:
@@ -293,6 +305,7 @@ class FuzzyQLearner:
             "snapshot_greedy": np.stack(self._snap_greedy).astype(np.int16),
             "rule_base": self.rules_per_iteration[:iterations].copy(),
             "final_rule_base": self.final_rule_base().astype(np.int16),
+            "updates": self.updates.copy(),
             "converged": self.converged_at is not None,
             "convergence_iteration": -1 if self.converged_at is None else int(self.converged_at),
         }

@@ -153,3 +153,17 @@ def test_temperature_anneals_per_rule_base_change():
     assert lr.temperature == 2.0
     lr.update(u, 0.0, u, False, 1)
     assert lr.temperature == 1.5  # floored at temperature_min
+
+
+def test_min_updates_delays_convergence_until_every_situation_was_updated():
+    lr = _learner(b=1, p=2, min_updates=3, activation=0.5)
+    lr.q[:] = [[5.0, 0.0, 0.0], [0.0, 0.0, 5.0]]
+    lr.greedy = lr.q.argmax(axis=1)
+    only_first = np.array([1.0, 0.0])
+    for t in range(6):  # greedy stays stable, but situation 1 is never updated
+        lr.update(only_first, 1.0, only_first, False, t)
+    assert lr.converged_at is None
+    both = np.array([0.5, 0.5])
+    for t in range(6, 9):
+        lr.update(both, 1.0, both, False, t)
+    assert lr.updates.min() >= 3 and lr.converged_at is not None
