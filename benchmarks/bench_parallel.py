@@ -83,8 +83,8 @@ def bench_workers(experiment: str, trials: int, workers: int, repeats: int, tmp:
 KILL_CONFIG = """
 [experiment]
 name = "kill"
-trials = 8
-iterations = 400
+trials = 10
+iterations = 3000
 seed = 21
 
 [collect]
@@ -111,9 +111,11 @@ def kill_tally(n: int, tmp: Path, seed: int) -> int:
     cfg = tmp / "kill.toml"
     cfg.write_text(KILL_CONFIG)
     ref = tmp / "reference.h5"
+    t0 = time.perf_counter()
     subprocess.run([*SITFRAME, "run", str(cfg), "--out", str(ref), "--workers", "1", "--json"],
                    check=True, stdout=subprocess.DEVNULL)
-    opened = reproduced = 0
+    t_ref = time.perf_counter() - t0
+    opened = reproduced = mid_run = 0
     for i in range(n):
         out = tmp / f"killed{i}.h5"
         workers = str(rng.choice([1, 2]))
@@ -127,13 +129,15 @@ def kill_tally(n: int, tmp: Path, seed: int) -> int:
             except InputError:
                 pass
             time.sleep(0.01)
-        time.sleep(float(rng.uniform(0.0, 0.6)))
+        # a random moment in what is left of the run (~1/workers of the serial time)
+        time.sleep(float(rng.uniform(0.0, 0.8 * t_ref / int(workers))))
         proc.send_signal(signal.SIGKILL)
         proc.wait()
         try:
             log = open_log(out)
             status, have = log.status, log.trial_indices()
             opened += 1
+            mid_run += status == "running"
         except InputError as exc:
             print(f"run {i + 1}: log does not open: {exc}")
             continue
@@ -143,10 +147,10 @@ def kill_tally(n: int, tmp: Path, seed: int) -> int:
         ok = not diff and open_log(out).status == "complete"
         reproduced += ok
         print(f"run {i + 1:2d} (workers {workers}): killed with status {status!r} and "
-              f"{len(have)}/8 trials; resumed -> {'identical' if ok else f'DIFFERS {diff[:3]}'}",
+              f"{len(have)}/10 trials; resumed -> {'identical' if ok else f'DIFFERS {diff[:3]}'}",
               flush=True)
-    print(f"kill -9 tally: {opened}/{n} logs opened, {reproduced}/{n} resumed runs identical "
-          "to the uninterrupted run")
+    print(f"kill -9 tally: {opened}/{n} logs opened ({mid_run} killed mid-run, the rest just "
+          f"after finishing), {reproduced}/{n} resumed runs identical to the uninterrupted run")
     return 0 if opened == reproduced == n else 1
 
 

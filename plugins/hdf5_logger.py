@@ -32,6 +32,10 @@ def _writer(run: RunInfo) -> LogWriter | None:
 def sitframe_run_start(run: RunInfo) -> None:
     w = _writer(run)
     if w is not None:
+        if "code_hash" not in run.extra:
+            from sitframe.resume import code_fingerprint
+
+            run.extra["code_hash"] = code_fingerprint(run.plugins)
         w.start(run, resume=bool(run.extra.get("resume")))
 
 

@@ -216,6 +216,10 @@ def _run_resume(args: argparse.Namespace) -> int:
         else:
             print(f"{args.resume}: already complete; nothing to resume")
         return 0
+    if exp.info.extra.get("code_changed"):
+        print(f"sitframe: warning: {args.resume}: the code of sitframe or its plugins changed "
+              "since this run started; the resumed trials may differ from the logged ones",
+              file=sys.stderr)
     exp.executor = make_executor(args.workers, args.scheduler, len(missing))
     result = _execute(exp, kwargs)
     if args.json:

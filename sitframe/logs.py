@@ -173,6 +173,8 @@ class LogWriter:
                     a["versions"] = json.dumps(info.extra.get("versions", {}))
                     a["plugins"] = json.dumps(info.plugins)
                     a["worlds"] = json.dumps(info.worlds)
+                    if info.extra.get("code_hash"):
+                        a["code_hash"] = str(info.extra["code_hash"])
                     f.create_group("trials")
                 os.replace(tmp, self.path)
             except BaseException:

@@ -11,19 +11,49 @@ uninterrupted run with the same seed writes.
 
 Reproducibility needs the same code: if this sitframe resolves the logged
 config differently (its defaults changed, so the config hash differs), the
-resume is refused rather than mixing trials from two configurations.
-Component defaults that the config does not spell out are not in the log;
-keep the versions (root attribute ``versions``) when resuming.
+resume is refused rather than mixing trials from two configurations. If the
+source of sitframe or of a plugin changed since the run started (root
+attribute ``code_hash``, see :func:`code_fingerprint`), the resume goes on
+but ``experiment.info.extra["code_changed"]`` is set and the CLI warns that
+the new trials may not match the logged ones.
 """
 
 from __future__ import annotations
 
+import hashlib
+import importlib.util
 import os
 from pathlib import Path
 from typing import Any
 
 from sitframe.errors import InputError
 from sitframe.logs import open_log
+
+
+def code_fingerprint(plugins: list[dict[str, Any]] | None = None) -> str:
+    """SHA-256 over the source of sitframe, its built-in plugins and loose plugin files.
+
+    Written to the log (root attribute ``code_hash``) so that ``--resume`` can
+    tell when the code changed since the run started (the resumed trials
+    might then differ from the logged ones). Third-party plugin packages are
+    covered by their distribution name and version in the ``plugins`` list.
+    """
+    h = hashlib.sha256()
+    files: list[Path] = []
+    for pkg in ("sitframe", "sitframe.plugins"):
+        spec = importlib.util.find_spec(pkg)
+        for folder in (spec.submodule_search_locations or []) if spec else []:
+            files += sorted(Path(folder).rglob("*.py"))
+    for info in plugins or []:
+        if info.get("file"):
+            files.append(Path(info["file"]))
+        h.update(f"{info.get('name')}={info.get('distribution')}={info.get('version')};".encode())
+    for f in files:
+        try:
+            h.update(f.read_bytes())
+        except OSError:
+            h.update(str(f).encode())
+    return h.hexdigest()
 
 
 def prepare_resume(
@@ -80,6 +110,9 @@ def prepare_resume(
                          "changed since the run); resuming would mix two configurations",
                          file=p, key="config_hash")
     exp.info.extra["resume"] = True
+    logged_code = str(log.attrs.get("code_hash", ""))
+    exp.info.extra["code_changed"] = bool(logged_code) and \
+        logged_code != code_fingerprint(exp.info.plugins)
     if log.has("cluster/state"):
         kwargs["interpreter_state"] = log.interpreter_state()
     have = set(log.trial_indices())

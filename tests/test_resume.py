@@ -156,3 +156,21 @@ def test_resume_missing_log_and_missing_experiment(tmp_path, capsys):
     assert "log file not found" in capsys.readouterr().err
     assert main(["run"]) == 2
     assert "missing EXPERIMENT" in capsys.readouterr().err
+
+
+def test_resume_warns_when_the_code_changed(reference, tmp_path, capsys):
+    import h5py
+
+    _cfg, ref = reference
+    out = tmp_path / "changed.h5"
+    out.write_bytes(ref.read_bytes())
+    with h5py.File(out, "a") as f:
+        assert len(f.attrs["code_hash"]) == 64
+        f.attrs["code_hash"] = "0" * 64
+        f.attrs["status"] = "aborted"
+        del f["trials/0007"]
+    capsys.readouterr()
+    assert main(["run", "--resume", str(out), "--json"]) == 0
+    err = capsys.readouterr().err
+    assert "warning" in err and "code of sitframe or its plugins changed" in err
+    assert open_log(out).status == "complete"
