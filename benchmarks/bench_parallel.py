@@ -76,6 +76,8 @@ def bench_workers(experiment: str, trials: int, workers: int, repeats: int, tmp:
           f"{workers} workers {p:.2f} s, speed-up {s / p:.2f}x" +
           (f", dask ({workers} worker processes) {statistics.median(dask_t):.2f} s"
            if dask_t else ""))
+    print(f"best of {repeats} (least disturbed by other load): 1 worker {min(serial):.2f} s, "
+          f"{workers} workers {min(parallel):.2f} s, speed-up {min(serial) / min(parallel):.2f}x")
     print(f"logs identical (every dataset and trial attribute): {identical}")
     print(f"load average during the benchmark: {os.getloadavg()}")
 
