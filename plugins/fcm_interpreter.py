@@ -13,6 +13,17 @@ Config (``[interpreter]``)::
     m = 1.2        # fuzziness (membership exponent 2/(m-1) = 10)
     trials = 50    # FCM restarts
     sweep = []     # optional list of c values for the validity-vs-c sweep (Fig. 4.5)
+    transform = "range"   # feature space: "range" (thesis), "log" or "inverse"
+    offset = 0.1          # metres, for "log" / "inverse"
+
+Feature space. The thesis clusters raw ranges with the Euclidean distance, so a
+2.5 m difference in a far beam weighs as much as one between touching and
+2.5 m clear: a reading with one beam at 5 cm and the others open lands in
+"open space". ``transform = "log"`` clusters ``ln(r + offset)`` and
+``"inverse"`` clusters the proximity ``1 / (r + offset)``, which spread short
+ranges apart and compress long ones. Live readings are fuzzified in the same
+space. The logged state keeps ``centers`` in metres (for plots and tables)
+and adds ``feature_centers``, which the memberships use.
 """
 
 from __future__ import annotations
@@ -25,6 +36,8 @@ from sitframe import hookimpl
 from sitframe import params as P
 from sitframe.clustering import cluster_trials, sweep_c
 from sitframe.fcm import MembershipFunction
+
+TRANSFORMS = ("range", "log", "inverse")
 
 
 class FCMInterpreter:
@@ -41,6 +54,8 @@ class FCMInterpreter:
         tol: float = 1e-5,
         max_iter: int = 300,
         sweep: list[int] | None = None,
+        transform: str = "range",
+        offset: float = 0.1,
     ) -> None:
         self.c = int(P.number("c", c, lo=2, integer=True))
         self.m = float(P.number("m", m, lo=1.0, lo_open=True))
@@ -49,19 +64,40 @@ class FCMInterpreter:
         self.max_iter = int(P.number("max_iter", max_iter, lo=1, integer=True))
         self.sweep = [int(P.number(f"sweep[{i}]", v, lo=2, integer=True))
                       for i, v in enumerate(sweep or [])]
+        self.transform = P.choice("transform", transform, TRANSFORMS)
+        self.offset = float(P.number("offset", offset, lo=0.0, lo_open=True))
         self.centers: np.ndarray | None = None
+        self.feature_centers: np.ndarray | None = None
 
     @property
     def n_situations(self) -> int:
         return self.c
 
+    def features(self, X: np.ndarray) -> np.ndarray:
+        """Map ranges (metres) to the feature space the clustering works in."""
+        if self.transform == "log":
+            return np.log(X + self.offset)
+        if self.transform == "inverse":
+            return 1.0 / (X + self.offset)
+        return X
+
+    def ranges(self, F: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`features`: feature-space points back to metres."""
+        if self.transform == "log":
+            return np.exp(F) - self.offset
+        if self.transform == "inverse":
+            return 1.0 / F - self.offset
+        return F
+
     def fit(self, X: np.ndarray, rng: np.random.Generator) -> dict[str, Any]:
-        res = cluster_trials(X, self.c, n_trials=self.trials, m=self.m, tol=self.tol,
-                             max_iter=self.max_iter, seed=rng)
-        self.centers = np.asarray(res.centers[res.chosen], dtype=float)
-        self._u = MembershipFunction(self.centers, self.m)
+        res = cluster_trials(self.features(X), self.c, n_trials=self.trials, m=self.m,
+                             tol=self.tol, max_iter=self.max_iter, seed=rng)
+        self.feature_centers = np.asarray(res.centers[res.chosen], dtype=float)
+        self.centers = self.ranges(self.feature_centers)
+        self._u = MembershipFunction(self.feature_centers, self.m)
         out: dict[str, Any] = {
-            "trial_centers": np.asarray(res.centers),
+            "transform": self.transform,
+            "trial_centers": self.ranges(np.asarray(res.centers)),
             "trial_n_iter": np.asarray(res.n_iter),
             "trial_converged": np.asarray(res.converged),
             "chosen": int(res.chosen),
@@ -71,28 +107,39 @@ class FCMInterpreter:
                 [np.asarray(v, float) for v in res.measures.values()]),
         }
         if self.sweep:
-            sw = sweep_c(X, self.sweep, n_trials=self.trials, m=self.m, seed=rng)
+            sw = sweep_c(self.features(X), self.sweep, n_trials=self.trials, m=self.m, seed=rng)
             out["sweep_c"] = np.asarray(self.sweep)
             out["sweep_measures"] = np.column_stack(
                 [np.asarray(sw.measures[k], float) for k in out["measure_names"]])
         return out
 
     def memberships(self, reading: np.ndarray) -> np.ndarray:
-        return self._u(reading)
+        if self.transform == "range":
+            return self._u(reading)
+        return self._u(self.features(reading))
 
     def state(self) -> dict[str, Any]:
         if self.centers is None:
             raise ValueError("the fcm interpreter has not been fitted (no centres)")
-        return {"centers": self.centers, "m": self.m}
+        return {"centers": self.centers, "feature_centers": self.feature_centers, "m": self.m,
+                "transform": self.transform, "offset": self.offset}
 
     def load_state(self, state: dict[str, Any]) -> None:
+        transform = str(state.get("transform", "range"))
+        if transform != self.transform or float(state.get("offset", self.offset)) != self.offset:
+            raise ValueError(f"logged situations use transform '{transform}' (offset "
+                             f"{state.get('offset', self.offset)}), this config "
+                             f"'{self.transform}' (offset {self.offset})")
         centers = np.asarray(state["centers"], dtype=float)
         if centers.ndim != 2 or centers.shape[0] != self.c:
             raise ValueError(f"logged centres have shape {centers.shape}, expected ({self.c}, d) "
                              f"for c = {self.c}")
-        self.centers = centers
         self.m = float(state.get("m", self.m))
-        self._u = MembershipFunction(centers, self.m)
+        self.centers = centers
+        feat = state.get("feature_centers")
+        self.feature_centers = (np.asarray(feat, dtype=float) if feat is not None
+                                else self.features(centers))
+        self._u = MembershipFunction(self.feature_centers, self.m)
 
 
 @hookimpl
