@@ -65,12 +65,7 @@ def prepare_experiment(
                 f"its situations were fitted on readings of sensor {logged_sensor}, but this "
                 f"config reads {cfg['sensor']}; use the same [sensor] table",
                 file=path, key="sensor")
-        interp = exp.res.interpreter()
-        try:
-            interp.load_state(state)
-        except (ValueError, KeyError) as exc:
-            raise InputError(f"its situations do not fit this config's interpreter: {exc}",
-                             file=path, key="cluster/state") from None
+        _check_state(exp.res, state, path)
         kwargs["interpreter_state"] = state
     policies: dict[str, dict[str, np.ndarray]] = {}
     for label, table in cfg["behaviours"].items():
@@ -95,6 +90,16 @@ def prepare_experiment(
     if out and Path(out).exists() and Path(out).is_dir():
         raise InputError("output path is a folder (expected an .h5 file path)", key="--out")
     return exp, kwargs
+
+
+def _check_state(res: Resolved, state: dict[str, Any], path: str) -> None:
+    """Load a logged interpreter state into a fresh interpreter (InputError if it does not fit)."""
+    try:
+        res.interpreter().load_state(state)
+    except (ValueError, KeyError, TypeError) as exc:
+        why = f"missing {exc}" if isinstance(exc, KeyError) else exc
+        raise InputError(f"its situations do not fit this config's interpreter: {why}",
+                         file=path, key="cluster/state") from None
 
 
 def evaluate_log(
@@ -160,6 +165,7 @@ def evaluate_log(
         cfg["arbiter"] = {**params, "component": arbiter}
     res = Resolved.build(cfg, registry, source)
     res.world(world, key="--world")
+    _check_state(res, state, log_path)
     if goal_episodes:
         g = dict(cfg["goal"], episodes=goal_episodes)
         ep = EpisodeConfig.from_config({"goal": g}, file=source)

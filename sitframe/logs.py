@@ -343,22 +343,64 @@ class Log:
 
     @property
     def config(self) -> dict[str, Any]:
-        return tomllib.loads(self.attrs["config"])
+        text = self.attrs.get("config")
+        if not isinstance(text, str):
+            raise InputError("the log has no config (expected the run's TOML in the root "
+                             "attribute 'config')", file=self.path, key="config")
+        try:
+            return tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise InputError(f"the log's config is not valid TOML: {exc}", file=self.path,
+                             key="config") from None
+
+    def _json_attr(self, name: str, default: str, kind: type) -> Any:
+        try:
+            value = json.loads(self.attrs.get(name, default))
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"root attribute is not valid JSON: {exc}", file=self.path,
+                             key=name) from None
+        if not isinstance(value, kind):
+            raise InputError(f"root attribute should hold a JSON {kind.__name__}, got "
+                             f"{type(value).__name__}", file=self.path, key=name)
+        return value
 
     @property
     def worlds(self) -> dict[str, str]:
-        return json.loads(self.attrs.get("worlds", "{}"))
+        return self._json_attr("worlds", "{}", dict)
 
     @property
     def plugins(self) -> list[dict[str, Any]]:
-        return json.loads(self.attrs.get("plugins", "[]"))
+        return self._json_attr("plugins", "[]", list)
 
     @property
     def versions(self) -> dict[str, str]:
-        return json.loads(self.attrs.get("versions", "{}"))
+        return self._json_attr("versions", "{}", dict)
 
-    def _file(self) -> h5py.File:
-        return h5py.File(self.path, "r")
+    @contextmanager
+    def _file(self) -> Iterator[h5py.File]:
+        """Open the log read-only; a damaged file or a missing item becomes an InputError."""
+        try:
+            with h5py.File(self.path, "r") as f:
+                yield f
+        except InputError:
+            raise
+        except (OSError, KeyError, RuntimeError, ValueError, TypeError) as exc:
+            msg = " ".join(str(exc.args[0] if exc.args else exc).split())
+            raise InputError(f"cannot read the log (truncated or corrupted?): {msg}",
+                             file=self.path) from None
+
+    def check(self) -> None:
+        """Read every group's and dataset's header and attributes, and the root JSON attributes.
+
+        Raises an :class:`InputError` naming the log if any is damaged, so a
+        command can fail before it writes anything. Dataset contents are not read.
+        """
+        _ = self.worlds, self.plugins, self.versions
+        def read(_name: str, obj: Any) -> None:  # (returning a value would stop the visit)
+            dict(obj.attrs)
+
+        with self._file() as f:
+            f.visititems(read)
 
     def has(self, group: str) -> bool:
         with self._file() as f:

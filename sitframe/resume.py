@@ -88,12 +88,13 @@ def prepare_resume(
         to the same config.
     """
     from sitframe.config import validate_config
-    from sitframe.experiment import prepare_experiment
+    from sitframe.experiment import _check_state, prepare_experiment
 
     p = str(path)
     log = open_log(p)
+    raw = log.config
     try:
-        cfg = validate_config(log.config, file=p)
+        cfg = validate_config(raw, file=p)
     except InputError as exc:
         raise InputError(f"the log's config is no longer valid: {exc.message}", file=p,
                          key=f"config.{exc.key}" if exc.key else "config") from None
@@ -115,6 +116,7 @@ def prepare_resume(
         logged_code != code_fingerprint(exp.info.plugins)
     if log.has("cluster/state"):
         kwargs["interpreter_state"] = log.interpreter_state()
+        _check_state(exp.res, kwargs["interpreter_state"], p)
     have = set(log.trial_indices())
     kwargs["skip"] = frozenset(have)
     missing = [k for k in range(exp.info.n_trials) if k not in have]

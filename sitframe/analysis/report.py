@@ -220,6 +220,7 @@ def analyse(
     lg = R.as_log(log)
     out = Path(out_dir) if out_dir is not None else Path(lg.path).with_name(
         Path(lg.path).stem + "-analysis")
+    lg.check()  # a damaged log fails here, before the output folder is created
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
