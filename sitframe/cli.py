@@ -141,9 +141,11 @@ def _dispatch(args: argparse.Namespace) -> int:
     raise AssertionError(cmd)  # pragma: no cover - argparse enforces the choices
 
 
-def _positive(name: str, value: int | None) -> None:
+def _positive(name: str, value: int | None, hi: int | None = None) -> None:
     if value is not None and value < 1:
         raise InputError(f"must be at least 1, got {value}", key=f"--{name}")
+    if value is not None and hi is not None and value > hi:
+        raise InputError(f"must be at most {hi}, got {value}", key=f"--{name}")
 
 
 # ---------------------------------------------------------------------------
@@ -247,9 +249,11 @@ def _prepare_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
         if val is not None:
             e[key] = val
     out = args.out or str(Path("logs") / f"{e['name']}.h5")
-    return prepare_experiment(cfg, source=source, base_dir=base_dir, out=out,
-                              plugins_dirs=tuple(args.plugins_dir),
-                              progress=not args.json and sys.stderr.isatty())
+    exp, kwargs = prepare_experiment(cfg, source=source, base_dir=base_dir, out=out,
+                                     plugins_dirs=tuple(args.plugins_dir),
+                                     progress=not args.json and sys.stderr.isatty())
+    exp.needs_clusters(kwargs.get("interpreter_state"))  # stages that cannot run: fail now
+    return exp, kwargs
 
 
 def _json_default(o: Any) -> Any:
@@ -331,10 +335,11 @@ def print_run(result: Any) -> None:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
+    from sitframe.config import MAX_ITERATIONS, MAX_TRIALS
     from sitframe.experiment import evaluate_log
 
-    _positive("iterations", args.iterations)
-    _positive("goal-episodes", args.goal_episodes)
+    _positive("iterations", args.iterations, MAX_ITERATIONS)
+    _positive("goal-episodes", args.goal_episodes, MAX_TRIALS)
     summary = evaluate_log(args.log, world=args.world, trial=args.trial,
                            iterations=args.iterations, seed=args.seed,
                            plugins_dirs=tuple(args.plugins_dir),

@@ -90,6 +90,14 @@ DEFAULTS: dict[str, dict[str, Any]] = {
 }
 
 _CORE_KEYS = {s: set(v) for s, v in DEFAULTS.items() if s not in ("behaviours",)}
+
+#: Upper bounds of the counts (beyond them arrays do not fit in memory or the
+#: log's 64-bit integer attributes cannot hold the value).
+MAX_SEED = 2**63 - 1
+MAX_TRIALS = 100_000
+MAX_ITERATIONS = 10_000_000
+MAX_RATE_HZ = 1000.0
+MIN_RATE_HZ = 0.01
 _COMPONENT_SECTIONS = ("sensor", "interpreter", "arbiter")
 _BEHAVIOUR_META = ("component", "reward", "reward_params", "policy_from")
 
@@ -245,11 +253,14 @@ def _validate_behaviours(value: dict[str, Any], file: str | None) -> dict[str, A
 def _check_core(cfg: dict[str, Any], file: str | None) -> None:
     e = cfg["experiment"]
     _at(P.string, "name", e["name"], file, "experiment")
+    if any(ord(ch) < 32 for ch in e["name"]):
+        raise InputError(f"expected a name without control characters, got {e['name']!r}",
+                         file=file, key="experiment.name")
     if not isinstance(e["description"], str):
         raise InputError("expected a string", file=file, key="experiment.description")
-    _at(P.number, "seed", e["seed"], file, "experiment", lo=0, integer=True)
-    _at(P.number, "trials", e["trials"], file, "experiment", lo=1, integer=True)
-    _at(P.number, "iterations", e["iterations"], file, "experiment", lo=1, integer=True)
+    e["seed"] = _count("seed", e["seed"], file, "experiment", 0, MAX_SEED)
+    e["trials"] = _count("trials", e["trials"], file, "experiment", 1, MAX_TRIALS)
+    e["iterations"] = _count("iterations", e["iterations"], file, "experiment", 1, MAX_ITERATIONS)
     _at(P.number, "default_speed", e["default_speed"], file, "experiment", lo=0.0, lo_open=True)
     _at(P.string, "world", e["world"], file, "experiment")
     if not isinstance(e["clusters_from"], str):
@@ -265,17 +276,27 @@ def _check_core(cfg: dict[str, Any], file: str | None) -> None:
     _at(P.choice, "mode", c["mode"], file, "collect", choices=("trajectory", "wander", "both"))
     _check_names(c["worlds"], file, "collect.worlds")
     _at(P.number, "speed", c["speed"], file, "collect", lo=0.0, lo_open=True)
-    _at(P.number, "rate_hz", c["rate_hz"], file, "collect", lo=0.0, lo_open=True)
-    _at(P.number, "wander_samples", c["wander_samples"], file, "collect", lo=1, integer=True)
+    _at(P.number, "rate_hz", c["rate_hz"], file, "collect", lo=MIN_RATE_HZ, hi=MAX_RATE_HZ)
+    c["wander_samples"] = _count("wander_samples", c["wander_samples"], file, "collect", 1,
+                                 MAX_ITERATIONS)
     v = cfg["evaluate"]
     _check_names(v["worlds"], file, "evaluate.worlds")
-    _at(P.number, "iterations", v["iterations"], file, "evaluate", lo=1, integer=True)
+    v["iterations"] = _count("iterations", v["iterations"], file, "evaluate", 1, MAX_ITERATIONS)
     g = cfg["goal"]
-    _at(P.number, "episodes", g["episodes"], file, "goal", lo=1, integer=True)
-    _at(P.number, "timeout", g["timeout"], file, "goal", lo=1, integer=True)
+    g["episodes"] = _count("episodes", g["episodes"], file, "goal", 1, MAX_TRIALS)
+    g["timeout"] = _count("timeout", g["timeout"], file, "goal", 1, MAX_ITERATIONS)
     _at(P.number, "min_distance", g["min_distance"], file, "goal", lo=0.0)
     _check_names(g["worlds"], file, "goal.worlds")
     _check_names(cfg["plugins"]["dirs"], file, "plugins.dirs", allow_empty=True)
+
+
+def _count(name: str, value: Any, file: str | None, section: str, lo: int, hi: int) -> int:
+    """An integer in [lo, hi] (the upper bound checked apart, so the usual message stays)."""
+    v = int(_at(P.number, name, value, file, section, lo=lo, integer=True))
+    if v > hi:
+        raise InputError(f"expected an integer <= {hi}, got {v}", file=file,
+                         key=f"{section}.{name}")
+    return v
 
 
 def _check_names(value: Any, file: str | None, key: str, allow_empty: bool = False) -> None:

@@ -13,6 +13,7 @@ These glue :mod:`sitframe.config`, :mod:`sitframe.scheduler` and
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -54,6 +55,7 @@ def prepare_experiment(
     exp = Experiment(cfg, source=source, out=out, plugins_dirs=dirs)
     exp.info.extra["progress"] = progress
     kwargs: dict[str, Any] = {}
+    _check_collect(exp, cfg, source)
     clusters_from = cfg["experiment"]["clusters_from"]
     if clusters_from:
         path = _resolve_path(clusters_from, base_dir)
@@ -90,6 +92,42 @@ def prepare_experiment(
     if out and Path(out).exists() and Path(out).is_dir():
         raise InputError("output path is a folder (expected an .h5 file path)", key="--out")
     return exp, kwargs
+
+
+#: Most samples the collect stage may record (beyond this the arrays do not fit in memory).
+MAX_COLLECT_SAMPLES = 10_000_000
+
+
+def _check_collect(exp: Experiment, cfg: dict[str, Any], source: str | None) -> None:
+    """Trajectory collection that cannot work: a world without trajectories, or far too
+    many samples (trajectory length x rate_hz / speed)."""
+    e, c = cfg["experiment"], cfg["collect"]
+    if e["clusters_from"] or "collect" not in e["stages"]:
+        return
+    if c["mode"] in ("wander", "both"):  # wandering holds each command 1/rate_hz seconds
+        try:
+            dataclasses.replace(exp.res.robot, control_period_s=1.0 / float(c["rate_hz"]))
+        except InputError as exc:
+            raise InputError(f"wander mode holds each command 1/rate_hz s: {exc.message}",
+                             file=source, key="collect.rate_hz") from None
+        except (ValueError, TypeError) as exc:
+            raise InputError(f"wander mode holds each command 1/rate_hz s: {exc}",
+                             file=source, key="collect.rate_hz") from None
+    if c["mode"] == "wander":
+        return
+    n = 0.0
+    for i, name in enumerate(c["worlds"]):
+        world = exp.res.world(name, "collect.worlds")
+        if not world.trajectories:
+            raise InputError(f"world '{name}' has no [[trajectories]] to collect along; "
+                             "expected a data-collection room (e.g. collect-1) or collect.mode "
+                             "= \"wander\"", file=source, key=f"collect.worlds[{i}]")
+        length = sum(float(np.hypot(*np.diff(t, axis=0).T).sum()) for t in world.trajectories)
+        n += length * float(c["rate_hz"]) / float(c["speed"])
+    if n > MAX_COLLECT_SAMPLES:
+        raise InputError(f"the trajectories would give about {n:.3g} samples (length x rate_hz "
+                         f"/ speed); expected at most {MAX_COLLECT_SAMPLES}: lower rate_hz or "
+                         "raise speed", file=source, key="collect.rate_hz")
 
 
 def _check_state(res: Resolved, state: dict[str, Any], path: str) -> None:

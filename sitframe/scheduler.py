@@ -451,6 +451,12 @@ class Experiment:
     def cluster(self, samples: np.ndarray) -> tuple[dict[str, Any], dict[str, Any]]:
         rng = np.random.default_rng(stage_seed(self.info.seed, STAGE_CLUSTER))
         interp = self.res.interpreter()
+        c = getattr(interp, "n_situations", None)
+        if isinstance(c, int) and len(samples) < c:
+            raise InputError(f"the collect stage recorded {len(samples)} samples, fewer than the "
+                             f"{c} situations to fit; expected at least {c}: collect more "
+                             "(collect.worlds, collect.rate_hz, collect.mode) or lower c",
+                             file=self.source, key="interpreter.c")
         fit = interp.fit(samples, rng)
         return fit, interp.state()
 
