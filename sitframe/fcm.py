@@ -168,11 +168,22 @@ class FCMResult:
 # ------------------------------------------------------------------------ validation
 
 
-def _check_X(X: object, name: str = "X") -> np.ndarray:
+def _real(X: object, name: str) -> np.ndarray:
+    """``X`` as a float64 array; complex, string and date arrays are a TypeError (not cast)."""
+    kind = getattr(getattr(X, "dtype", None), "kind", None)
     try:
-        arr = np.asarray(X, dtype=np.float64)
+        if kind is None:
+            kind = np.asarray(X).dtype.kind
+        if kind not in "biufO":
+            raise TypeError(f"dtype kind {kind!r}")
+        return np.asarray(X, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be a real numeric array, got {type(X).__name__}") from exc
+        raise TypeError(f"{name} must be a real numeric array, got {type(X).__name__}"
+                        f"{f' of dtype {X.dtype}' if hasattr(X, 'dtype') else ''}") from exc
+
+
+def _check_X(X: object, name: str = "X") -> np.ndarray:
+    arr = _real(X, name)
     if arr.ndim != 2:
         raise ValueError(
             f"{name} must be a 2-D array (samples x features), got {arr.ndim}-D "
@@ -627,7 +638,7 @@ def _fcm_core(ws: _Workspace, V0: np.ndarray, tol: float, max_iter: int) -> FCMR
 
 
 def _check_u(u: object) -> np.ndarray:
-    ua = np.asarray(u, dtype=np.float64)
+    ua = _real(u, "u")
     if ua.ndim != 2 or ua.shape[1] < 2 or ua.shape[0] < 1:
         raise ValueError(f"u must be a 2-D (n, c) membership array with c >= 2, got shape "
                          f"{ua.shape}")
@@ -753,8 +764,11 @@ def validity(
         (see :data:`MEASURE_DIRECTIONS`).
     """
     Xa = _check_X(X)
-    u = np.asarray(result.u, dtype=np.float64)
-    V = np.asarray(result.centers, dtype=np.float64)
+    if not all(hasattr(result, a) for a in ("u", "centers", "m")):
+        raise TypeError(f"result must be an FCMResult (or have u, centers and m), got "
+                        f"{type(result).__name__}")
+    u = _real(result.u, "result.u")
+    V = _real(result.centers, "result.centers")
     if u.ndim != 2 or u.shape[0] != Xa.shape[0]:
         raise ValueError(f"result.u must have shape (n_samples = {Xa.shape[0]}, c), "
                          f"got {u.shape}")
