@@ -14,6 +14,7 @@ These glue :mod:`sitframe.config`, :mod:`sitframe.scheduler` and
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 from typing import Any
 
@@ -99,35 +100,54 @@ MAX_COLLECT_SAMPLES = 10_000_000
 
 
 def _check_collect(exp: Experiment, cfg: dict[str, Any], source: str | None) -> None:
-    """Trajectory collection that cannot work: a world without trajectories, or far too
-    many samples (trajectory length x rate_hz / speed)."""
+    """Data collection that cannot work, found before anything is written: a world without
+    trajectories, far too many samples, a wander rate the robot cannot hold, or fewer
+    samples than situations to fit."""
+    from sitframe.collect import trajectory_poses
+
     e, c = cfg["experiment"], cfg["collect"]
     if e["clusters_from"] or "collect" not in e["stages"]:
         return
+    rate, speed = float(c["rate_hz"]), float(c["speed"])
+    n = 0
     if c["mode"] in ("wander", "both"):  # wandering holds each command 1/rate_hz seconds
         try:
-            dataclasses.replace(exp.res.robot, control_period_s=1.0 / float(c["rate_hz"]))
+            dataclasses.replace(exp.res.robot, control_period_s=1.0 / rate)
         except InputError as exc:
             raise InputError(f"wander mode holds each command 1/rate_hz s: {exc.message}",
                              file=source, key="collect.rate_hz") from None
         except (ValueError, TypeError) as exc:
             raise InputError(f"wander mode holds each command 1/rate_hz s: {exc}",
                              file=source, key="collect.rate_hz") from None
-    if c["mode"] == "wander":
-        return
-    n = 0.0
-    for i, name in enumerate(c["worlds"]):
-        world = exp.res.world(name, "collect.worlds")
-        if not world.trajectories:
-            raise InputError(f"world '{name}' has no [[trajectories]] to collect along; "
-                             "expected a data-collection room (e.g. collect-1) or collect.mode "
-                             "= \"wander\"", file=source, key=f"collect.worlds[{i}]")
-        length = sum(float(np.hypot(*np.diff(t, axis=0).T).sum()) for t in world.trajectories)
-        n += length * float(c["rate_hz"]) / float(c["speed"])
-    if n > MAX_COLLECT_SAMPLES:
-        raise InputError(f"the trajectories would give about {n:.3g} samples (length x rate_hz "
-                         f"/ speed); expected at most {MAX_COLLECT_SAMPLES}: lower rate_hz or "
-                         "raise speed", file=source, key="collect.rate_hz")
+        n += int(c["wander_samples"]) * len(c["worlds"])
+    if c["mode"] in ("trajectory", "both"):
+        turn_step = math.radians(exp.res.robot.max_turn_rate_deg_s) / rate
+        worlds = []
+        estimate = 0.0  # upper bound: samples along the paths + turning on the spot
+        for i, name in enumerate(c["worlds"]):
+            world = exp.res.world(name, "collect.worlds")
+            if not world.trajectories:
+                raise InputError(f"world '{name}' has no [[trajectories]] to collect along; "
+                                 "expected a data-collection room (e.g. collect-1) or "
+                                 "collect.mode = \"wander\"", file=source,
+                                 key=f"collect.worlds[{i}]")
+            for t in world.trajectories:
+                estimate += float(np.hypot(*np.diff(t, axis=0).T).sum()) * rate / speed
+                estimate += len(t) * (math.pi / turn_step if turn_step > 0 else 0.0) + 1
+            worlds.append(world)
+        if estimate > MAX_COLLECT_SAMPLES:
+            raise InputError(f"the trajectories would give about {estimate:.3g} samples "
+                             f"(length x rate_hz / speed, plus turns); expected at most "
+                             f"{MAX_COLLECT_SAMPLES}: lower rate_hz or raise speed",
+                             file=source, key="collect.rate_hz")
+        n += sum(len(trajectory_poses(t, speed / rate, turn_step_rad=turn_step))
+                 for w in worlds for t in w.trajectories)
+    k = getattr(exp.res.interpreter(), "n_situations", None)
+    if isinstance(k, int) and n < k:
+        raise InputError(f"the collect stage would record {n} samples, fewer than the {k} "
+                         f"situations to fit; expected at least {k}: collect more "
+                         "(collect.worlds, collect.rate_hz, collect.mode) or lower c",
+                         file=source, key="interpreter.c")
 
 
 def _check_state(res: Resolved, state: dict[str, Any], path: str) -> None:
