@@ -61,22 +61,29 @@ class SpeedReward:
     (30 cm) and the current one is smaller, ``current - previous`` in cm
     (negative); else ``10 + 0.2 * speed`` with speed in mm/s. The closest
     distance is the smallest sonar range (from the robot's rim).
+
+    ``near_time_s`` (default 0: the thesis's fixed threshold) makes the
+    threshold a stopping distance, ``max(near, speed * near_time_s)``: at
+    0.3 m/s the robot covers 45 cm per 1.5 s iteration, so a fixed 30 cm
+    threshold only fires once it is too late to slow down.
     """
 
     name = "speed"
 
     def __init__(self, *, collision: float = -30.0, near: float = 0.30, base: float = 10.0,
-                 per_mm_s: float = 0.2) -> None:
+                 per_mm_s: float = 0.2, near_time_s: float = 0.0) -> None:
         self.collision = P.number("collision", collision)
         self.near = P.number("near", near, lo=0.0)
         self.base = P.number("base", base)
         self.per_mm_s = P.number("per_mm_s", per_mm_s)
+        self.near_time_s = P.number("near_time_s", near_time_s, lo=0.0)
 
     def __call__(self, tr: Transition) -> float:
         if tr.outcome.collided:
             return self.collision
         prev, cur = tr.before.nearest, tr.after.nearest
-        if prev < self.near and cur < prev:
+        near = max(self.near, self.near_time_s * tr.command.speed_m_s)
+        if prev < near and cur < prev:
             return (cur - prev) * 100.0
         return self.base + self.per_mm_s * tr.command.speed_m_s * 1000.0
 
