@@ -121,7 +121,7 @@ def test_goal_outside_or_in_obstacle_is_an_input_error(goal, where):
 @pytest.fixture(scope="module")
 def oa_log(tmp_path_factory):
     d = tmp_path_factory.mktemp("oa")
-    cfg, source, _ = load_config("obstacle-avoidance")
+    cfg, source, _ = load_config("obstacle-avoidance-12")  # the log goal-finding fuses
     cfg["experiment"].update(trials=1, iterations=200, stages=["collect", "cluster", "learn"])
     cfg["collect"]["worlds"] = ["collect-1", "collect-2"]
     cfg["interpreter"]["trials"] = 3
@@ -153,7 +153,7 @@ def test_cli_evaluate_goal_json_and_errors(oa_log, capsys):
 
 
 def goal_config(tmp_path, oa_log, extra: str = "") -> str:
-    text = preset_text("goal-finding").replace("logs/obstacle-avoidance.h5", oa_log)
+    text = preset_text("goal-finding").replace("logs/obstacle-avoidance-12.h5", oa_log)
     text = text.replace("episodes = 50", "episodes = 2").replace(
         'worlds = ["goal", "novel-1", "novel-2"]', 'worlds = ["goal"]')
     p = tmp_path / "gf.toml"
@@ -162,9 +162,12 @@ def goal_config(tmp_path, oa_log, extra: str = "") -> str:
 
 
 def test_goal_finding_preset_reads_like_obstacle_avoidance():
-    # the preset reuses the obstacle-avoidance log's situations: same sensor
-    oa = load_config("obstacle-avoidance")[0]
-    assert load_config("goal-finding")[0]["sensor"] == oa["sensor"]
+    # the preset reuses the obstacle-avoidance log's situations: same sensor and interpreter
+    oa = load_config("obstacle-avoidance-12")[0]
+    gf = load_config("goal-finding")[0]
+    assert gf["sensor"] == oa["sensor"]
+    assert {k: gf["interpreter"][k] for k in ("c", "m", "transform", "offset")} == \
+        {k: oa["interpreter"][k] for k in ("c", "m", "transform", "offset")}
 
 
 def test_goal_run_writes_episodes(tmp_path, oa_log):
