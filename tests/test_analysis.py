@@ -8,6 +8,7 @@ import shutil
 import h5py
 import numpy as np
 import pytest
+from helpers import small_config
 from matplotlib.figure import Figure
 
 from sitframe import analysis as A
@@ -15,31 +16,7 @@ from sitframe.cli import main
 from sitframe.errors import InputError
 from sitframe.world import parse_world
 
-TINY = """
-[experiment]
-name = "tiny"
-trials = 2
-iterations = 300
-seed = 5
-
-[collect]
-worlds = ["collect-1", "collect-2"]
-
-[interpreter]
-component = "fcm"
-c = 6
-trials = 4
-sweep = [3, 6]
-
-[behaviours.avoid]
-component = "fuzzy-q"
-reward = "obstacle-avoidance"
-p = 5
-
-[evaluate]
-worlds = ["novel-1"]
-iterations = 100
-"""
+TINY = small_config(name="tiny", seed=5, sweep=(3, 6))
 
 
 @pytest.fixture(scope="module")

@@ -7,6 +7,7 @@ import sys
 import time
 
 import pytest
+from helpers import small_config
 
 from sitframe.cli import main
 from sitframe.logs import open_log
@@ -18,30 +19,7 @@ from sitframe.parallel import (
 )
 from sitframe.scheduler import SerialExecutor
 
-SMALL = """
-[experiment]
-name = "small"
-trials = 5
-iterations = 300
-seed = 11
-
-[collect]
-worlds = ["collect-1", "collect-2"]
-
-[interpreter]
-component = "fcm"
-c = 6
-trials = 4
-
-[behaviours.avoid]
-component = "fuzzy-q"
-reward = "obstacle-avoidance"
-p = 5
-
-[evaluate]
-worlds = ["novel-1", "training"]
-iterations = 100
-"""
+SMALL = small_config(trials=5, seed=11, eval_worlds=("novel-1", "training"))
 
 
 @pytest.fixture(scope="module")

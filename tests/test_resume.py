@@ -11,36 +11,14 @@ import time
 
 import numpy as np
 import pytest
+from helpers import small_config
 
 from sitframe.cli import main
 from sitframe.errors import InputError
 from sitframe.logs import open_log
 from sitframe.parallel import compare_logs
 
-CONFIG = """
-[experiment]
-name = "resume"
-trials = 8
-iterations = 300
-seed = 5
-
-[collect]
-worlds = ["collect-1", "collect-2"]
-
-[interpreter]
-component = "fcm"
-c = 6
-trials = 4
-
-[behaviours.avoid]
-component = "fuzzy-q"
-reward = "obstacle-avoidance"
-p = 5
-
-[evaluate]
-worlds = ["novel-1"]
-iterations = 100
-"""
+CONFIG = small_config(name="resume", trials=8, seed=5)
 
 #: Runs the CLI with Python's own SIGINT handler even if the test runner was
 #: started with SIGINT ignored (as background jobs of a non-interactive shell are).

@@ -7,34 +7,12 @@ import json
 import h5py
 import numpy as np
 import pytest
+from helpers import small_config
 
 from sitframe.cli import main
 from sitframe.logs import SCHEMA_VERSION, open_log
 
-SMALL = """
-[experiment]
-name = "small"
-trials = 2
-iterations = 300
-seed = 3
-
-[collect]
-worlds = ["collect-1", "collect-2"]
-
-[interpreter]
-component = "fcm"
-c = 6
-trials = 4
-
-[behaviours.avoid]
-component = "fuzzy-q"
-reward = "obstacle-avoidance"
-p = 5
-
-[evaluate]
-worlds = ["novel-1"]
-iterations = 100
-"""
+SMALL = small_config()
 
 
 @pytest.fixture(scope="module")

@@ -7,36 +7,15 @@ import csv
 import json
 
 import pytest
+from helpers import small_config
 
 from sitframe.cli import main
 from sitframe.logs import open_log
 from sitframe.parallel import compare_logs
 from sitframe.sweep import point_names
 
-BASE = """
-[experiment]
-name = "base"
-trials = 2
-iterations = 200
-seed = 7
-
-[collect]
-worlds = ["collect-1", "collect-2"]
-
-[interpreter]
-component = "fcm"
-c = 4
-trials = 3
-
-[behaviours.avoid]
-component = "fuzzy-q"
-reward = "obstacle-avoidance"
-p = 5
-
-[evaluate]
-worlds = ["novel-1"]
-iterations = 60
-"""
+BASE = small_config(name="base", iterations=200, seed=7, c=4, fcm_trials=3,
+                    eval_iterations=60)
 
 SWEEP = """
 [sweep]

@@ -1,0 +1,45 @@
+"""Shared test helpers: a small, fast run config (seconds, not minutes)."""
+
+from __future__ import annotations
+
+
+def small_config(
+    *,
+    name: str = "small",
+    trials: int = 2,
+    iterations: int = 300,
+    seed: int = 3,
+    c: int = 6,
+    fcm_trials: int = 4,
+    sweep: tuple[int, ...] = (),
+    eval_worlds: tuple[str, ...] = ("novel-1",),
+    eval_iterations: int = 100,
+) -> str:
+    """TOML text of a tiny obstacle-avoidance run: 2 collection rooms, few FCM trials,
+    short learning trials with ``p = 5`` so that they converge, one short evaluation."""
+    sweep_line = f"\nsweep = {list(sweep)}" if sweep else ""
+    worlds = ", ".join(f'"{w}"' for w in eval_worlds)
+    return f"""
+[experiment]
+name = "{name}"
+trials = {trials}
+iterations = {iterations}
+seed = {seed}
+
+[collect]
+worlds = ["collect-1", "collect-2"]
+
+[interpreter]
+component = "fcm"
+c = {c}
+trials = {fcm_trials}{sweep_line}
+
+[behaviours.avoid]
+component = "fuzzy-q"
+reward = "obstacle-avoidance"
+p = 5
+
+[evaluate]
+worlds = [{worlds}]
+iterations = {eval_iterations}
+"""
