@@ -117,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
     except (InputError, PluginError) as exc:
         if os.environ.get("SITFRAME_TRACEBACK"):
             raise
-        print(f"sitframe: error: {exc}", file=sys.stderr)
+        print(f"sitframe: error: {' '.join(str(exc).splitlines())}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("sitframe: interrupted", file=sys.stderr)

@@ -36,8 +36,9 @@ class InputError(SitframeError, ValueError):
         super().__init__(self.__str__())
 
     def __str__(self) -> str:
-        where = ": ".join(p for p in (self.file, self.key) if p)
-        return f"{where}: {self.message}" if where else self.message
+        where = ": ".join(_printable(p) for p in (self.file, self.key) if p)
+        text = f"{where}: {self.message}" if where else self.message
+        return text.replace("\r", "\\r").replace("\n", "\\n")  # always one line
 
     def at(self, *, file: str | None = None, key_prefix: str | None = None) -> InputError:
         """Return a copy located in ``file`` and/or below ``key_prefix``."""
@@ -55,3 +56,9 @@ def did_you_mean(word: str, choices: Iterable[str]) -> str:
     """Return ``" (did you mean 'x'?)"`` for the closest choice, or ``""``."""
     close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
     return f" (did you mean '{close[0]}'?)" if close else ""
+
+
+def _printable(s: str) -> str:
+    """``s``, or its escaped form if it holds control or other unprintable characters
+    (a TOML key or a file name may contain a newline)."""
+    return s if s.isprintable() else s.encode("unicode_escape").decode("ascii")

@@ -65,6 +65,8 @@ from sitframe.errors import InputError, did_you_mean
 HELP = "run an experiment over a grid of config values; one log per point + a summary table"
 
 _SWEEP_KEYS = ("name", "description", "base", "trials", "seed", "out")
+#: Most grid points a sweep may have (each point's experiment is prepared up front).
+MAX_POINTS = 10_000
 _BEHAVIOUR_META = ("component", "reward", "reward_params", "policy_from")
 
 
@@ -169,6 +171,13 @@ def load_sweep(path: str, *, out: str | None = None,
         if key in fixed:
             raise InputError("is both in [grid] and fixed ([set] or [sweep])", file=path,
                              key=f"grid.{key}")
+    n_points = math.prod(len(v) for v in grid.values())
+    if n_points > MAX_POINTS:
+        raise InputError(f"the grid has {n_points} points; expected at most {MAX_POINTS}",
+                         file=path, key="grid")
+    if "out" in head and (not isinstance(head["out"], str) or not head["out"]):
+        raise InputError(f"expected a folder path (string), got {head['out']!r}", file=path,
+                         key="sweep.out")
     plugins = _registry(base_cfg, base_dir, plugins_dirs)
     for where, keys in (("set", fixed), ("grid", grid)):
         for key in keys:

@@ -256,7 +256,20 @@ CASES = [
                       'worlds = ["collect-1"]\nmode = "wander"\nrate_hz = 1000.0')),
     case("regression-name-with-nul", RUN, "c.toml: experiment.name:", "control characters",
          c__toml=_cfg('name = "small"', 'name = "a\\u0000b"')),
+    case("regression-sweep-out-not-a-path", "sweep s.toml", "s.toml: sweep.out:",
+         "expected a folder path", s__toml='[sweep]\nbase = "{D}/small.toml"\nout = 3\n'
+         '[grid]\n"interpreter.c" = [4]\n'),
+    case("regression-sweep-grid-too-large", "sweep s.toml", "s.toml: grid:", "120000 points",
+         s__toml='[sweep]\nbase = "{D}/small.toml"\n[grid]\n'
+         + "".join(f'"{k}" = [{", ".join(str(v) for v in vs)}]\n' for k, vs in
+                   (("experiment.seed", range(50)), ("interpreter.c", range(2, 50)),
+                    ("interpreter.trials", range(1, 51))))),
+    case("sweep-unknown-key", "sweep s.toml", "s.toml: grid.interpreter.cc:",
+         "did you mean 'interpreter.c'",
+         s__toml='[sweep]\nbase = "{D}/small.toml"\n[grid]\n"interpreter.cc" = [4]\n'),
     # ---- world files: every world error ---------------------------------------------------
+    case("regression-world-key-with-newline", "world show w.toml", "w.toml: robot.a\\nb:",
+         "unknown key", w__toml=_world("[robot]", '[robot]\n"a\\nb" = 1')),
     case("world-not-toml", "world show w.toml", "w.toml", "not valid TOML", "line",
          w__toml="name = [\n"),
     case("world-empty", "world show w.toml", "w.toml", "empty", w__toml=""),

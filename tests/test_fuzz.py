@@ -574,3 +574,12 @@ def test_fcm_rejects_non_real_arrays(bad: np.ndarray) -> None:
 def test_validity_rejects_non_results(result: Any) -> None:  # was an AttributeError
     with pytest.raises(TypeError, match="FCMResult"):
         validity(np.zeros((3, 2)), result)
+
+
+def test_error_with_newline_in_key_stays_one_line() -> None:
+    # found by the world fuzzer: a quoted TOML key holding a newline broke the one-line error
+    text = GOOD_WORLD.replace("[robot]", '[robot]\n"a\\nb" = 1')
+    with pytest.raises(InputError) as info:
+        parse_world(text, file=FILE)
+    assert str(info.value) == (f"{FILE}: robot.a\\nb: unknown key 'a\\nb'; expected one of: "
+                               "start, radius")
