@@ -340,6 +340,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
     _positive("iterations", args.iterations, MAX_ITERATIONS)
     _positive("goal-episodes", args.goal_episodes, MAX_TRIALS)
+    if args.seed < 0:
+        raise InputError(f"must be a non-negative integer, got {args.seed}", key="--seed")
     summary = evaluate_log(args.log, world=args.world, trial=args.trial,
                            iterations=args.iterations, seed=args.seed,
                            plugins_dirs=tuple(args.plugins_dir),
@@ -377,8 +379,12 @@ def cmd_world(args: argparse.Namespace) -> int:
     from sitframe.analysis.world_plot import plot_world
 
     fig = plot_world(world)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=150, bbox_inches="tight")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(out, dpi=150, bbox_inches="tight")
+    except OSError as exc:
+        raise InputError(f"cannot write the picture: {exc.strerror or exc}", file=str(out),
+                         key="-o") from None
     print(out)
     return 0
 

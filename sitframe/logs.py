@@ -154,8 +154,13 @@ class LogWriter:
         a killed writer is removed) and only its status is set to ``running``.
         """
         if not resume:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
             tmp = self.part
+            try:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+                h5py.File(tmp, "w").close()
+            except OSError as exc:
+                raise InputError(f"cannot create the log: {exc.strerror or exc}",
+                                 file=str(self.path), key="--out") from None
             try:
                 with h5py.File(tmp, "w") as f:
                     a = f.attrs

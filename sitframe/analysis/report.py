@@ -221,6 +221,12 @@ def analyse(
     out = Path(out_dir) if out_dir is not None else Path(lg.path).with_name(
         Path(lg.path).stem + "-analysis")
     lg.check()  # a damaged log fails here, before the output folder is created
+    if trials not in (None, "all"):  # so does a trial the log does not have
+        have = lg.trial_indices()
+        bad = [int(k) for k in trials if int(k) not in have]  # type: ignore[union-attr]
+        if bad:
+            raise InputError(f"the log has no trial(s) {bad}; it has {_ranges(have)}",
+                             file=lg.path, key="--trial")
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
