@@ -233,6 +233,14 @@ CASES = [
          c__toml=_cfg("p = 5", "p = 5\npolicy_from = {log = 'missing.h5'}")),
     case("plugins-dir-missing", RUN, "nodir", "does not exist",
          c__toml=SMALL + "\n[plugins]\ndirs = ['nodir']\n"),
+    case("plugin-syntax-error", "--plugins-dir pl plugins", "pl/p.py:1", "syntax error",
+         **{"pl/p.py": "def oops(:\n"}),
+    case("plugin-component-raises", "--plugins-dir pl run c.toml", "plugin p (pl/p.py)",
+         "creating arbiter 'boom'", "RuntimeError: kaboom",
+         c__toml=SMALL + "\n[arbiter]\ncomponent = 'boom'\n",
+         **{"pl/p.py": "from sitframe import hookimpl\nclass Boom:\n    name = 'boom'\n"
+                       "    def __init__(self):\n        raise RuntimeError('kaboom')\n"
+                       "@hookimpl\ndef sitframe_arbiters():\n    return [Boom]\n"}),
     # regressions: these wrote a log or escaped as tracebacks before the fixes
     case("regression-stages-without-situations", RUN, "c.toml: experiment.stages:",
          "needs clusters", c__toml=_cfg("seed = 3", 'seed = 3\nstages = ["learn"]')),
@@ -389,6 +397,16 @@ CASES = [
 ]
 
 
+def _write_files(c: Case, where: Path, D: str) -> None:
+    for name, content in c.files.items():
+        path = where / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if isinstance(content, bytes):
+            path.write_bytes(content)
+        else:
+            path.write_text(content.replace("{D}", D))
+
+
 def _snapshot(*dirs: Path) -> dict[str, tuple[int, int]]:
     out = {}
     for d in dirs:
@@ -411,11 +429,7 @@ def test_bad_input_is_rejected_cleanly(c: Case, inputs: Path, tmp_path: Path,
                                        monkeypatch: pytest.MonkeyPatch,
                                        capsys: pytest.CaptureFixture[str]) -> None:
     D = str(inputs)
-    for name, content in c.files.items():
-        if isinstance(content, bytes):
-            (tmp_path / name).write_bytes(content)
-        else:
-            (tmp_path / name).write_text(content.replace("{D}", D))
+    _write_files(c, tmp_path, D)
     monkeypatch.chdir(tmp_path)
     monkeypatch.delenv("SITFRAME_TRACEBACK", raising=False)
     before = _snapshot(tmp_path, inputs)
@@ -449,11 +463,7 @@ def test_real_command_has_no_traceback(cid: str, inputs: Path, tmp_path: Path) -
                              "import sys; from sitframe.cli import main; sys.exit(main())"]
     c = next(c for c in CASES if c.id == cid)
     D = str(inputs)
-    for name, content in c.files.items():
-        if isinstance(content, bytes):
-            (tmp_path / name).write_bytes(content)
-        else:
-            (tmp_path / name).write_text(content.replace("{D}", D))
+    _write_files(c, tmp_path, D)
     before = _snapshot(tmp_path, inputs)
     env = {k: v for k, v in os.environ.items() if k != "SITFRAME_TRACEBACK"}
     proc = subprocess.run(cmd + [a.replace("{D}", D) for a in c.argv], cwd=tmp_path,
