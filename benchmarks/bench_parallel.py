@@ -44,8 +44,14 @@ def timed_run(args: list[str]) -> float:
 
 
 def bench_workers(experiment: str, trials: int, workers: int, repeats: int, tmp: Path,
-                  dask: bool) -> None:
+                  dask: bool, trials_only: bool = False) -> None:
     serial, parallel, dask_t = [], [], []
+    reuse: list[str] = []
+    if trials_only:  # fit the situations once; every timed run then reuses them
+        situations = tmp / "situations.h5"
+        timed_run([experiment, "--trials", "1", "--iterations", "1", "--workers", "1",
+                   "--out", str(situations)])
+        reuse = ["--clusters-from", str(situations)]
     identical = True
     cluster = None
     if dask:
@@ -56,7 +62,7 @@ def bench_workers(experiment: str, trials: int, workers: int, repeats: int, tmp:
     try:
         for r in range(repeats):
             a, b = tmp / f"serial{r}.h5", tmp / f"parallel{r}.h5"
-            common = [experiment, "--trials", str(trials)]
+            common = [experiment, "--trials", str(trials), *reuse]
             serial.append(timed_run([*common, "--workers", "1", "--out", str(a)]))
             parallel.append(timed_run([*common, "--workers", str(workers), "--out", str(b)]))
             identical &= compare_logs(a, b) == []
@@ -72,7 +78,8 @@ def bench_workers(experiment: str, trials: int, workers: int, repeats: int, tmp:
         if cluster is not None:
             cluster.close()
     s, p = statistics.median(serial), statistics.median(parallel)
-    print(f"{experiment}, {trials} trials, median of {repeats}: 1 worker {s:.2f} s, "
+    what = "trials only (situations reused)" if trials_only else "whole command"
+    print(f"{experiment}, {trials} trials, {what}, median of {repeats}: 1 worker {s:.2f} s, "
           f"{workers} workers {p:.2f} s, speed-up {s / p:.2f}x" +
           (f", dask ({workers} worker processes) {statistics.median(dask_t):.2f} s"
            if dask_t else ""))
@@ -163,6 +170,9 @@ def main() -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--dask", action="store_true", help="also run through a Dask LocalCluster")
+    ap.add_argument("--trials-only", action="store_true",
+                    help="reuse situations fitted once (--clusters-from): time the trials and "
+                         "their evaluations, not the serial collect and cluster stages")
     ap.add_argument("--kill", type=int, metavar="N", help="kill -9 / resume tally of N runs")
     ap.add_argument("--seed", type=int, default=0, help="seed of the kill moments")
     args = ap.parse_args()
@@ -170,7 +180,8 @@ def main() -> int:
     try:
         if args.kill:
             return kill_tally(args.kill, tmp, args.seed)
-        bench_workers(args.experiment, args.trials, args.workers, args.repeats, tmp, args.dask)
+        bench_workers(args.experiment, args.trials, args.workers, args.repeats, tmp, args.dask,
+                      args.trials_only)
         return 0
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
