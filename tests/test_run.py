@@ -176,3 +176,23 @@ def test_reused_situations_are_recorded_and_sensor_must_match(small_run, tmp_pat
     cone.write_text(reuse.read_text() + '\n[sensor]\nbeam_width_deg = 20\nrays_per_beam = 3\n')
     assert main(["run", str(cone), "--out", str(tmp_path / "cone.h5")]) == 2
     assert "situations were fitted on readings of sensor" in capsys.readouterr().err
+
+
+def test_same_seed_in_two_separate_processes_is_bit_identical(tmp_path):
+    """Two `sitframe run` processes with different hash seeds write the same datasets."""
+    import os
+    import subprocess
+    import sys
+
+    from sitframe.parallel import compare_logs
+
+    cfg = tmp_path / "small.toml"
+    cfg.write_text(small_config(trials=2, iterations=200))
+    outs = []
+    for hash_seed in ("1", "2"):
+        out = tmp_path / f"run{hash_seed}.h5"
+        env = {**os.environ, "PYTHONHASHSEED": hash_seed}
+        subprocess.run([sys.executable, "-m", "sitframe.cli", "run", str(cfg), "--out", str(out),
+                        "--workers", "1", "--json"], check=True, env=env, capture_output=True)
+        outs.append(out)
+    assert compare_logs(outs[0], outs[1]) == []
