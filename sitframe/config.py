@@ -24,7 +24,10 @@ thesis's Table A.1):
     One table per behaviour: ``component`` (required), optional ``reward``
     (a reward component name: the behaviour learns from it), optional
     ``reward_params`` table, optional ``policy_from = {log = "...", trial = 0,
-    behaviour = "LABEL"}`` to start from a learned policy, then the
+    behaviour = "LABEL"}`` to start from a learned policy (``trial = "best"``
+    picks the trial whose frozen rule base collided least when evaluated in
+    the log's own learning world; see
+    :func:`sitframe.experiment.best_trial`), then the
     behaviour's own parameters.
 ``[arbiter]``
     ``component`` (default ``"single"``) and its parameters.
@@ -244,7 +247,7 @@ def _validate_behaviours(value: dict[str, Any], file: str | None) -> dict[str, A
                                      "; expected log, trial, behaviour",
                                      file=file, key=f"{key}.policy_from.{k}")
             _at(P.string, "log", pf["log"], file, f"{key}.policy_from")
-            if "trial" in pf:
+            if "trial" in pf and pf["trial"] != "best":
                 _at(P.number, "trial", pf["trial"], file, f"{key}.policy_from", lo=0, integer=True)
         out[label] = t
     return out

@@ -22,7 +22,7 @@ import numpy as np
 
 from sitframe.config import validate_config
 from sitframe.errors import InputError
-from sitframe.logs import open_log
+from sitframe.logs import Log, open_log
 from sitframe.pluginmanager import Registry, get_plugin_manager
 from sitframe.scheduler import STAGE_EVAL, Experiment, Resolved, TrialSpec, simulate, stage_seed
 
@@ -77,7 +77,8 @@ def prepare_experiment(
             continue
         path = _resolve_path(pf["log"], base_dir)
         log = open_log(path)
-        trial = log.trial(int(pf.get("trial", 0)))
+        which = pf.get("trial", 0)
+        trial = log.trial(best_trial(log) if which == "best" else int(which))
         src_label = pf.get("behaviour", label)
         if src_label not in trial.behaviours:
             raise InputError(f"trial {trial.index} has no behaviour '{src_label}' (it has "
@@ -158,6 +159,34 @@ def _check_state(res: Resolved, state: dict[str, Any], path: str) -> None:
         why = f"missing {exc}" if isinstance(exc, KeyError) else exc
         raise InputError(f"its situations do not fit this config's interpreter: {why}",
                          file=path, key="cluster/state") from None
+
+
+def best_trial(log: Log) -> int:
+    """The trial whose frozen rule base collided least in the log's learning world.
+
+    Ranked by ``eval/<learning world>/collisions_per_1000`` (the evaluation in
+    the room the robot learned in), then by collisions per 1000 iterations
+    after convergence, then by trial index. Only the learning world is used,
+    never the other evaluation rooms, so choosing a trial this way does not
+    peek at rooms the robot is later tested in.
+
+    Raises
+    ------
+    InputError
+        The log has no trials, or no evaluation in its learning world.
+    """
+    table = log.summary()
+    world = log.config.get("experiment", {}).get("world", "training")
+    column = f"eval.{world}.collisions_per_1000"
+    if table.size == 0 or column not in (table.dtype.names or ()):
+        raise InputError(f"cannot pick the best trial: the log has no evaluation in its learning "
+                         f"world '{world}' (include 'evaluate' and '{world}' in the run)",
+                         file=log.path, key="summary")
+    after = table["collisions_per_1000_after_convergence"] if \
+        "collisions_per_1000_after_convergence" in table.dtype.names else np.zeros(table.size)
+    order = np.lexsort((table["trial"], np.nan_to_num(after, nan=np.inf),
+                        np.nan_to_num(table[column], nan=np.inf)))
+    return int(table["trial"][order[0]])
 
 
 def evaluate_log(

@@ -122,7 +122,9 @@ def test_goal_outside_or_in_obstacle_is_an_input_error(goal, where):
 def oa_log(tmp_path_factory):
     d = tmp_path_factory.mktemp("oa")
     cfg, source, _ = load_config("obstacle-avoidance-12")  # the log goal-finding fuses
-    cfg["experiment"].update(trials=1, iterations=200, stages=["collect", "cluster", "learn"])
+    cfg["experiment"].update(trials=1, iterations=200,
+                             stages=["collect", "cluster", "learn", "evaluate"])
+    cfg["evaluate"].update(worlds=["training"], iterations=50)  # lets trial = "best" rank
     cfg["collect"]["worlds"] = ["collect-1", "collect-2"]
     cfg["interpreter"]["trials"] = 3
     out = str(d / "oa.h5")

@@ -196,3 +196,24 @@ def test_same_seed_in_two_separate_processes_is_bit_identical(tmp_path):
                         "--workers", "1", "--json"], check=True, env=env, capture_output=True)
         outs.append(out)
     assert compare_logs(outs[0], outs[1]) == []
+
+
+def test_best_trial_uses_only_the_learning_world(tmp_path, capsys):
+    from sitframe.errors import InputError
+    from sitframe.experiment import best_trial
+
+    cfg = tmp_path / "best.toml"
+    cfg.write_text(small_config(trials=3, iterations=200, eval_worlds=("training", "novel-1")))
+    out = tmp_path / "best.h5"
+    _run_json(capsys, "run", str(cfg), "--out", str(out), "--workers", "1", "--json")
+    log = open_log(out)
+    table = log.summary()
+    coll = table["eval.training.collisions_per_1000"]
+    assert coll[best_trial(log)] == coll.min()
+    # a log evaluated only in other rooms cannot be ranked without peeking at them
+    other = tmp_path / "other.toml"
+    other.write_text(small_config(trials=1, iterations=100))
+    out2 = tmp_path / "other.h5"
+    _run_json(capsys, "run", str(other), "--out", str(out2), "--workers", "1", "--json")
+    with pytest.raises(InputError, match="no evaluation in its learning world 'training'"):
+        best_trial(open_log(out2))
