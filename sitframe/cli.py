@@ -324,7 +324,7 @@ def print_run(result: Any) -> None:
     if result.trials:
         from sitframe.experiment import rule_base_table
 
-        console.print(rule_base_table(result, 0))
+        console.print(rule_base_table(result))
     if result.info.out:
         console.print(f"log: {result.info.out}")
 

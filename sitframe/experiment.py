@@ -305,34 +305,56 @@ def _fusion_config(log_cfg: dict[str, Any], policies: dict[str, dict[str, np.nda
     return validate_config(fcfg, file=fsource), {slot: policies[src]}, fsource
 
 
-def rule_base_table(result: Any, trial: int = 0) -> Any:
-    """A rich Table of trial ``trial``'s learned rule base with situation descriptions."""
+def _fmt_action(out: str, value: float) -> str:
+    return f"{value:+.0f}°" if out == "heading" else f"{value:.2f} m/s"
+
+
+def rule_base_table(result: Any) -> Any:
+    """A rich Table of the learned rule bases of a run, one row per situation.
+
+    For each learned output: the action most trials chose for the situation
+    and in how many trials (thesis Tables A.2/A.3), and the action of the trial
+    that ``policy_from.trial = "best"`` would pick (fewest collisions when
+    evaluated in the learning world; trial 0 when there is no such
+    evaluation). Situations are described from their prototypes.
+    """
+    from collections import Counter
+
     from rich.table import Table
 
     from sitframe.clustering import describe_prototype
 
-    tr = result.trials[trial]
-    centers = result.interpreter_state.get("centers")
-    table = Table(title=f"rule base of trial {tr.index}")
+    trials = result.trials
+    world = result.info.config["experiment"]["world"]
+    key = f"eval/{world}/collisions_per_1000"
+    ranked = [t for t in trials if key in t.summary]
+    best = min(ranked, key=lambda t: (t.summary[key], np.nan_to_num(
+        t.summary["collisions_per_1000_after_convergence"], nan=np.inf), t.index)) \
+        if ranked else trials[0]
+    why = (f"trial {best.index}: fewest collisions when evaluated in '{world}'" if ranked
+           else f"trial {best.index}: no evaluation in the learning world")
+    table = Table(title=f"learned rule bases of {len(trials)} trials",
+                  caption=f"most trials = the most frequent action (how many trials); {why}")
     table.add_column("situation", justify="right")
     table.add_column("description")
-    outs = []
-    for label, data in tr.behaviours.items():
-        for k in data:
-            if k.startswith("policy/"):
-                outs.append((label, k.split("/", 1)[1]))
-                table.add_column(f"{label}.{k.split('/', 1)[1]}", justify="right")
+    outs = [(label, k.split("/", 1)[1]) for label, data in best.behaviours.items()
+            for k in data if k.startswith("policy/")]
+    for label, out in outs:
+        table.add_column(f"{label}.{out}\nmost trials", justify="right")
+        table.add_column(f"{label}.{out}\ntrial {best.index}", justify="right")
     if not outs:
         return table
-    first = tr.behaviours[outs[0][0]][f"policy/{outs[0][1]}"]
-    angles = result.sensor_angles_deg
-    for i in range(len(first)):
-        desc = describe_prototype(centers[i], angles) if centers is not None else ""
+    centers = result.interpreter_state.get("centers")
+    n_situations = len(best.behaviours[outs[0][0]][f"policy/{outs[0][1]}"])
+    for i in range(n_situations):
+        desc = describe_prototype(centers[i], result.sensor_angles_deg) \
+            if centers is not None else ""
         row = [f"S{i}", desc]
         for label, out in outs:
-            data = tr.behaviours[label]
-            a = int(data[f"policy/{out}"][i])
-            val = data[f"singletons/{out}"][a]
-            row.append(f"{val:+.0f}°" if out == "heading" else f"{val:.2f} m/s")
+            singles = best.behaviours[label][f"singletons/{out}"]
+            votes = Counter(int(t.behaviours[label][f"policy/{out}"][i]) for t in trials)
+            action, count = votes.most_common(1)[0]
+            row.append(f"{_fmt_action(out, singles[action])} ({count}/{len(trials)})")
+            row.append(_fmt_action(out, singles[int(best.behaviours[label][f"policy/{out}"][i])]))
         table.add_row(*row)
     return table
