@@ -28,33 +28,11 @@ from pathlib import Path
 
 import h5py
 import pytest
+from helpers import small_config
 
 from sitframe.cli import main
 
-SMALL = """
-[experiment]
-name = "small"
-trials = 1
-iterations = 100
-seed = 3
-
-[collect]
-worlds = ["collect-1", "collect-2"]
-
-[interpreter]
-component = "fcm"
-c = 6
-trials = 4
-
-[behaviours.avoid]
-component = "fuzzy-q"
-reward = "obstacle-avoidance"
-p = 5
-
-[evaluate]
-worlds = ["novel-1"]
-iterations = 50
-"""
+SMALL = small_config(trials=1, iterations=100, eval_iterations=50)
 
 WORLD = """
 name = "room"
