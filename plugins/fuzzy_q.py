@@ -144,9 +144,7 @@ class FuzzyQBehaviour:
         collided = transition.outcome.collided
         it = transition.before.iteration
         for out, lr in self.learners.items():
-            n_before = len(lr._snap_iter)
-            lr.update(u0, reward, u1, collided, it)
-            if len(lr._snap_iter) != n_before:
+            if lr.update(u0, reward, u1, collided, it):
                 self.fcs[out].set_rules(lr.rule_base)
 
     # -- results ---------------------------------------------------------

@@ -184,9 +184,16 @@ def best_trial(log: Log) -> int:
                          file=log.path, key="summary")
     after = table["collisions_per_1000_after_convergence"] if \
         "collisions_per_1000_after_convergence" in table.dtype.names else np.zeros(table.size)
-    order = np.lexsort((table["trial"], np.nan_to_num(after, nan=np.inf),
-                        np.nan_to_num(table[column], nan=np.inf)))
-    return int(table["trial"][order[0]])
+    return _best_of(table["trial"], table[column], after)
+
+
+def _best_of(index: Any, eval_collisions: Any, after_collisions: Any) -> int:
+    """The rule of :func:`best_trial` on parallel sequences: fewest evaluation
+    collisions, then fewest after convergence, then lowest index (NaN = worst)."""
+    order = np.lexsort((np.asarray(index), np.nan_to_num(np.asarray(after_collisions, float),
+                                                         nan=np.inf),
+                        np.nan_to_num(np.asarray(eval_collisions, float), nan=np.inf)))
+    return int(np.asarray(index)[order[0]])
 
 
 def evaluate_log(
@@ -328,9 +335,11 @@ def rule_base_table(result: Any) -> Any:
     world = result.info.config["experiment"]["world"]
     key = f"eval/{world}/collisions_per_1000"
     ranked = [t for t in trials if key in t.summary]
-    best = min(ranked, key=lambda t: (t.summary[key], np.nan_to_num(
-        t.summary["collisions_per_1000_after_convergence"], nan=np.inf), t.index)) \
-        if ranked else trials[0]
+    best = trials[0]
+    if ranked:
+        k = _best_of([t.index for t in ranked], [t.summary[key] for t in ranked],
+                     [t.summary["collisions_per_1000_after_convergence"] for t in ranked])
+        best = next(t for t in ranked if t.index == k)
     why = (f"trial {best.index}: fewest collisions when evaluated in '{world}'" if ranked
            else f"trial {best.index}: no evaluation in the learning world")
     table = Table(title=f"learned rule bases of {len(trials)} trials",

@@ -92,8 +92,6 @@ class SituationFCS:
 
     def output(self, memberships: np.ndarray) -> float:
         """Crisp output for the (c,) memberships of one reading."""
+        # Max over the rules of each label: label_strengths, as one broadcast.
         strength = (self._onehot * memberships[:, None]).max(axis=0)
-        total = strength.sum()
-        if total <= 0.0:
-            return float(self.singletons.mean())
-        return float(strength @ self.singletons / total)
+        return centre_of_gravity(strength, self.singletons)

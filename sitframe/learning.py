@@ -204,7 +204,6 @@ class FuzzyQLearner:
         self._snap_greedy: list[np.ndarray] = [self.greedy.copy()]
         self._snap_q: list[np.ndarray] = [self.q.copy()]
         self.rules_per_iteration = np.zeros((max_iterations, c), dtype=np.int8)
-        self.q_per_iteration_max = None  # reserved
 
     @property
     def temperature(self) -> float:
@@ -213,10 +212,6 @@ class FuzzyQLearner:
         if prm.temperature_decay == 1.0:
             return prm.temperature
         return max(prm.temperature_min, prm.temperature * prm.temperature_decay ** self.n_changes)
-
-    @property
-    def frozen(self) -> bool:
-        return self.converged_at is not None
 
     def record_rules(self, iteration: int) -> None:
         """Remember the rule base executed at ``iteration``."""
@@ -229,7 +224,7 @@ class FuzzyQLearner:
         u_after: np.ndarray,
         collided: bool,
         iteration: int,
-    ) -> None:
+    ) -> bool:
         """Learn from one iteration, then change the rule base if it is time.
 
         Parameters
@@ -244,9 +239,14 @@ class FuzzyQLearner:
             Whether the iteration ended in a collision (triggers a change).
         iteration
             0-based iteration (for the records).
+
+        Returns
+        -------
+        bool
+            Whether the rule base was changed (so a controller must reload it).
         """
         if self.converged_at is not None:
-            return
+            return False
         prm = self.params
         q = self.q
         active = np.flatnonzero(u_before >= prm.activation) if prm.activation > 0 else self._rows
@@ -264,6 +264,8 @@ class FuzzyQLearner:
         self.since_change += 1
         if collided or self.since_change >= prm.b:
             self._change(iteration)
+            return True
+        return False
 
     def _change(self, iteration: int) -> None:
         self.since_change = 0
@@ -284,12 +286,6 @@ class FuzzyQLearner:
         self._snap_rules.append(self.rule_base.copy())
         self._snap_greedy.append(greedy)
         self._snap_q.append(self.q.copy())
-
-    def freeze(self, rule_base: np.ndarray) -> None:
-        """Execute ``rule_base`` from now on and stop learning (evaluation)."""
-        self.rule_base = np.asarray(rule_base, dtype=np.intp).copy()
-        self.greedy = self.rule_base.copy()
-        self.converged_at = 0
 
     def final_rule_base(self) -> np.ndarray:
         """The greedy rule base (the converged one if learning converged)."""

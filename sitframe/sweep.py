@@ -499,15 +499,16 @@ def _med_iqr(row: dict[str, Any], prefix: str, digits: int) -> str:
             f"{_num(row[f'{prefix}_q75'], digits)}]")
 
 
+def _eval_worlds(rows: list[dict[str, Any]]) -> list[str]:
+    """Every evaluation world of the points, in order of first appearance."""
+    return list(dict.fromkeys(w for r in rows for w in r["eval_worlds"]))
+
+
 def write_tables(result: dict[str, Any], out: Path) -> tuple[Path, Path]:
     """Write ``summary.csv`` and ``summary.md`` for a sweep result; return their paths."""
     rows = result["points"]
     keys = result["keys"]
-    worlds: list[str] = []
-    for r in rows:
-        for w in r["eval_worlds"]:
-            if w not in worlds:
-                worlds.append(w)
+    worlds = _eval_worlds(rows)
     cols = ["point", *keys, "trials", "status", "convergence_rate", "conv_iter_median",
             "conv_iter_q25", "conv_iter_q75", "post_coll_median", "post_coll_q25",
             "post_coll_q75"]
@@ -530,11 +531,7 @@ def markdown_table(result: dict[str, Any]) -> str:
     """The sweep's summary as a Markdown table (one row per point)."""
     rows = result["points"]
     keys = result["keys"]
-    worlds: list[str] = []
-    for r in rows:
-        for w in r["eval_worlds"]:
-            if w not in worlds:
-                worlds.append(w)
+    worlds = _eval_worlds(rows)
     short = [k.rsplit(".", 1)[-1] for k in keys]
     head = [*short, "trials", "converged", "iterations to conv., median [IQR]",
             "coll./1000 after conv., median [IQR]"]
