@@ -34,6 +34,7 @@ import importlib
 import json
 import math
 import os
+import signal
 import sys
 from pathlib import Path
 from typing import Any
@@ -111,9 +112,9 @@ EXTRA_COMMANDS: dict[str, str] = {"analyse": "sitframe.analysis.commands",
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    """Run the command line ``argv``; returns the exit status (2 bad input, 130 Ctrl-C)."""
     try:
-        return _dispatch(args)
+        return _dispatch(build_parser().parse_args(argv))
     except (InputError, PluginError) as exc:
         if os.environ.get("SITFRAME_TRACEBACK"):
             raise
@@ -122,6 +123,19 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("sitframe: interrupted", file=sys.stderr)
         return 130
+
+
+def console_main(argv: list[str] | None = None) -> int:
+    """The ``sitframe`` console script: :func:`main`, then exit without being interruptible.
+
+    Once :func:`main` has returned, the log is complete (or marked aborted);
+    a Ctrl-C that arrives while the interpreter shuts the worker pool down
+    would otherwise kill the process by the signal itself (status -2, as if
+    nothing had been written), so SIGINT is ignored from here on.
+    """
+    status = main(argv)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return status
 
 
 def _dispatch(args: argparse.Namespace) -> int:

@@ -59,6 +59,7 @@ import h5py
 import numpy as np
 
 from sitframe.errors import InputError
+from sitframe.interrupts import deferred_interrupt
 from sitframe.records import RunInfo, TrialResult
 
 SCHEMA = "sitframe-log"
@@ -137,15 +138,16 @@ class LogWriter:
     def _open(self) -> Iterator[h5py.File]:
         """Copy the log, open the copy for appending, publish it atomically on success."""
         tmp = self.part
-        try:
-            shutil.copyfile(self.path, tmp)
-            with h5py.File(tmp, "a") as f:
-                yield f
-                f.flush()
-            os.replace(tmp, self.path)
-        except BaseException:
-            tmp.unlink(missing_ok=True)
-            raise
+        with deferred_interrupt():  # a Ctrl-C lands between transactions, never inside one
+            try:
+                shutil.copyfile(self.path, tmp)
+                with h5py.File(tmp, "a") as f:
+                    yield f
+                    f.flush()
+                os.replace(tmp, self.path)
+            except BaseException:
+                tmp.unlink(missing_ok=True)
+                raise
 
     def start(self, info: RunInfo, *, resume: bool = False) -> None:
         """Create the file with the run's attributes (``status = "running"``).
@@ -154,40 +156,45 @@ class LogWriter:
         a killed writer is removed) and only its status is set to ``running``.
         """
         if not resume:
-            tmp = self.part
-            try:
-                self.path.parent.mkdir(parents=True, exist_ok=True)
-                h5py.File(tmp, "w").close()
-            except OSError as exc:
-                raise InputError(f"cannot create the log: {exc.strerror or exc}",
-                                 file=str(self.path), key="--out") from None
-            try:
-                with h5py.File(tmp, "w") as f:
-                    a = f.attrs
-                    a["schema"] = SCHEMA
-                    a["schema_version"] = SCHEMA_VERSION
-                    a["status"] = "running"
-                    a["name"] = info.name
-                    a["created"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
-                    a["config"] = info.config_text
-                    a["config_hash"] = info.config_hash
-                    a["seed"] = info.seed
-                    a["n_trials"] = info.n_trials
-                    a["iterations"] = info.iterations
-                    a["source"] = str(info.extra.get("source", ""))
-                    a["versions"] = json.dumps(info.extra.get("versions", {}))
-                    a["plugins"] = json.dumps(info.plugins)
-                    a["worlds"] = json.dumps(info.worlds)
-                    if info.extra.get("code_hash"):
-                        a["code_hash"] = str(info.extra["code_hash"])
-                    f.create_group("trials")
-                os.replace(tmp, self.path)
-            except BaseException:
-                tmp.unlink(missing_ok=True)
-                raise
+            with deferred_interrupt():
+                self._create(info)
         else:
             self.part.unlink(missing_ok=True)
             self.set_status("running")
+
+    def _create(self, info: RunInfo) -> None:
+        """Write the new log's root attributes to ``LOG.part`` and publish it."""
+        tmp = self.part
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            h5py.File(tmp, "w").close()
+        except OSError as exc:
+            raise InputError(f"cannot create the log: {exc.strerror or exc}",
+                             file=str(self.path), key="--out") from None
+        try:
+            with h5py.File(tmp, "w") as f:
+                a = f.attrs
+                a["schema"] = SCHEMA
+                a["schema_version"] = SCHEMA_VERSION
+                a["status"] = "running"
+                a["name"] = info.name
+                a["created"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+                a["config"] = info.config_text
+                a["config_hash"] = info.config_hash
+                a["seed"] = info.seed
+                a["n_trials"] = info.n_trials
+                a["iterations"] = info.iterations
+                a["source"] = str(info.extra.get("source", ""))
+                a["versions"] = json.dumps(info.extra.get("versions", {}))
+                a["plugins"] = json.dumps(info.plugins)
+                a["worlds"] = json.dumps(info.worlds)
+                if info.extra.get("code_hash"):
+                    a["code_hash"] = str(info.extra["code_hash"])
+                f.create_group("trials")
+            os.replace(tmp, self.path)
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
 
     def stage(self, stage: str, data: dict[str, Any]) -> None:
         """Write a stage's data under ``/<stage>`` (replacing an earlier one)."""
@@ -385,7 +392,7 @@ class Log:
     def _file(self) -> Iterator[h5py.File]:
         """Open the log read-only; a damaged file or a missing item becomes an InputError."""
         try:
-            with h5py.File(self.path, "r") as f:
+            with deferred_interrupt(), h5py.File(self.path, "r") as f:
                 yield f
         except InputError:
             raise
@@ -483,7 +490,7 @@ def open_log(path: str | os.PathLike[str]) -> Log:
     if not h5py.is_hdf5(p):
         raise InputError("not an HDF5 file (expected a sitframe .h5 log)", file=p)
     try:
-        with h5py.File(p, "r") as f:
+        with deferred_interrupt(), h5py.File(p, "r") as f:
             attrs = {k: _attr(v) for k, v in f.attrs.items()}
     except OSError as exc:
         raise InputError(f"cannot open HDF5 log (truncated or corrupted?): {exc}", file=p) from None

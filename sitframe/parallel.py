@@ -27,8 +27,12 @@ starts in milliseconds, and the pool is warmed up while the main process
 collects and clusters.
 
 Ctrl-C: workers ignore SIGINT (a terminal sends it to the whole process
-group); the main process cancels pending trials, terminates running workers
-and re-raises, so the run is marked ``aborted`` with finished trials kept.
+group); the main process cancels pending trials, asks running workers to
+stop (SIGTERM, which a worker turns into :class:`TaskCancelled` inside the
+task, so it never dies half-way through sending a result, which would leave
+the pool's result pipe holding a partial message and the main process
+hanging at exit), waits for the workers to exit and re-raises, so the run is
+marked ``aborted`` with finished trials kept.
 """
 
 from __future__ import annotations
@@ -46,6 +50,7 @@ from typing import TYPE_CHECKING, Any
 
 from sitframe.config import config_hash, to_toml
 from sitframe.errors import InputError
+from sitframe.interrupts import deferred_interrupt
 
 if TYPE_CHECKING:
     from sitframe.collect import Collected
@@ -128,6 +133,32 @@ def warm_up(setup: Setup) -> int:
     return os.getpid()
 
 
+class TaskCancelled(Exception):
+    """Raised inside a worker's task when the main process cancels the run."""
+
+
+#: Worker-side state: whether a task is running, and whether the run was cancelled.
+_worker_state = {"in_task": False, "cancelled": False}
+
+
+def _run_task(fn: Callable[..., Any], *args: Any) -> Any:
+    """Worker side of every :meth:`ProcessExecutor.submit`: run ``fn`` as a cancellable task."""
+    if _worker_state["cancelled"]:
+        raise TaskCancelled("the run was cancelled")
+    _worker_state["in_task"] = True
+    try:
+        return fn(*args)
+    finally:
+        _worker_state["in_task"] = False
+
+
+def _on_sigterm(_signum: int, _frame: Any) -> None:
+    """SIGTERM in a worker: stop the task in progress (never the pool's own I/O)."""
+    _worker_state["cancelled"] = True
+    if _worker_state["in_task"]:
+        raise TaskCancelled("the run was cancelled")
+
+
 def _worker_init(lifeline: Any = None, inherited_writer: Any = None) -> None:
     """Pool worker set-up: ignore SIGINT, exit when the main process is gone.
 
@@ -139,6 +170,7 @@ def _worker_init(lifeline: Any = None, inherited_writer: Any = None) -> None:
     themselves keep open).
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _on_sigterm)
     if inherited_writer is not None:
         inherited_writer.close()
     if lifeline is None:
@@ -386,14 +418,18 @@ class ProcessExecutor(PoolExecutor):
             with _cache_lock:
                 _cache.setdefault(setup.key, experiment)
         for _ in range(self.workers):  # one submit per worker starts them all now
-            self.pool.submit(warm_up, setup)
+            self.submit(warm_up, setup)
 
     @property
     def capacity(self) -> int:  # type: ignore[override]
         return self.workers
 
     def submit(self, fn: Callable[..., Any], *args: Any) -> cf.Future[Any]:
-        return self.pool.submit(fn, *args)
+        # A submit may start a worker process; a Ctrl-C in the middle would leave
+        # a started process the pool does not know of (it then fails noisily
+        # once the main process is gone), so the interrupt waits until it returns.
+        with deferred_interrupt():
+            return self.pool.submit(_run_task, fn, *args)
 
     def wait_first(self, futures: Iterable[Any]) -> set[Any]:
         return cf.wait(list(futures), return_when=cf.FIRST_COMPLETED).done
@@ -411,16 +447,13 @@ class ProcessExecutor(PoolExecutor):
         if pool is None:
             return
         if cancel:
-            # Running trials cannot be cancelled: stop their processes (ours, by pid).
-            procs = list(getattr(pool, "_processes", {}).values())
-            pool.shutdown(wait=False, cancel_futures=True)
-            for p in procs:
+            # A running task cannot be cancelled through its future: SIGTERM makes
+            # the worker raise TaskCancelled inside it (and fail any later task at
+            # once); the workers then leave through the pool's normal shutdown.
+            for p in list(getattr(pool, "_processes", {}).values()):
                 if p.is_alive():
                     p.terminate()
-            for p in procs:
-                p.join(timeout=5)
-        else:
-            pool.shutdown(wait=True)
+        pool.shutdown(wait=True, cancel_futures=cancel)
         if lifeline is not None:
             for conn in lifeline:
                 conn.close()
@@ -555,5 +588,5 @@ def compare_logs(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> list[s
 
 
 __all__ = ["DaskExecutor", "InlineExecutor", "PoolExecutor", "ProcessExecutor", "Setup",
-           "TrialPipeline", "compare_logs", "log_contents", "make_executor", "run_clusters",
-           "run_trial"]
+           "TaskCancelled", "TrialPipeline", "compare_logs", "log_contents", "make_executor",
+           "run_clusters", "run_trial"]

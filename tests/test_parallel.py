@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import sys
 import time
+from concurrent.futures.process import BrokenProcessPool
 
 import pytest
 from helpers import small_config
@@ -14,6 +15,7 @@ from sitframe.logs import open_log
 from sitframe.parallel import (
     InlineExecutor,
     ProcessExecutor,
+    TaskCancelled,
     compare_logs,
     make_executor,
 )
@@ -117,3 +119,20 @@ def test_make_executor_choices():
     assert isinstance(ex, ProcessExecutor) and ex.workers == 3
     ex = make_executor(8, None, 2)
     assert isinstance(ex, ProcessExecutor) and ex.workers == 2
+
+
+def test_cancel_stops_running_tasks_promptly_and_workers_exit():
+    """Ctrl-C must not wait for running trials, nor hang on a worker killed mid-write."""
+    ex = ProcessExecutor(2)
+    futures = [ex.submit(time.sleep, 60) for _ in range(4)]  # two run, two queued
+    t0 = time.monotonic()
+    while sum(f.running() for f in futures) < 2:
+        assert time.monotonic() - t0 < 60, "workers did not start"
+        time.sleep(0.01)
+    procs = list(ex.pool._processes.values())
+    t0 = time.monotonic()
+    ex.shutdown(cancel=True)
+    assert time.monotonic() - t0 < 20
+    assert all(not p.is_alive() for p in procs)
+    for f in futures:  # (a worker still starting up is simply killed: BrokenProcessPool)
+        assert f.cancelled() or isinstance(f.exception(), TaskCancelled | BrokenProcessPool)

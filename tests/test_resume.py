@@ -23,7 +23,7 @@ CONFIG = small_config(name="resume", trials=8, seed=5)
 #: Runs the CLI with Python's own SIGINT handler even if the test runner was
 #: started with SIGINT ignored (as background jobs of a non-interactive shell are).
 _CLI = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-        "from sitframe.cli import main; sys.exit(main(sys.argv[1:]))")
+        "from sitframe.cli import console_main; sys.exit(console_main(sys.argv[1:]))")
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,59 @@
+"""Ctrl-C during an HDF5 transaction waits for the transaction to finish."""
+
+from __future__ import annotations
+
+import os
+import signal
+
+import pytest
+
+from sitframe.interrupts import deferred_interrupt
+from sitframe.logs import LogWriter, open_log
+from sitframe.records import RunInfo
+
+
+@pytest.fixture
+def default_sigint():
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, old)
+
+
+def test_sigint_inside_block_is_raised_when_the_block_ends(default_sigint):
+    reached_end = False
+    with pytest.raises(KeyboardInterrupt):
+        with deferred_interrupt():
+            os.kill(os.getpid(), signal.SIGINT)
+            reached_end = True
+    assert reached_end
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_no_signal_no_exception_and_handler_restored(default_sigint):
+    with deferred_interrupt(), deferred_interrupt():
+        pass
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_custom_handler_is_left_alone():
+    seen = []
+    old = signal.signal(signal.SIGINT, lambda s, f: seen.append(s))
+    try:
+        with deferred_interrupt():
+            os.kill(os.getpid(), signal.SIGINT)
+        assert seen == [signal.SIGINT]
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
+def test_sigint_during_a_log_transaction_leaves_the_transaction_complete(default_sigint, tmp_path):
+    path = tmp_path / "run.h5"
+    w = LogWriter(path)
+    w.start(RunInfo(name="x", config={}, config_text="", config_hash="", seed=1, out=str(path),
+                    n_trials=1, iterations=1))
+    with pytest.raises(KeyboardInterrupt):
+        with w._open() as f:
+            os.kill(os.getpid(), signal.SIGINT)
+            f.attrs["status"] = "aborted"  # runs: the interrupt is held back
+    assert open_log(path).status == "aborted"
+    assert not w.part.exists()
