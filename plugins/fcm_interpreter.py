@@ -34,7 +34,7 @@ import numpy as np
 
 from sitframe import hookimpl
 from sitframe import params as P
-from sitframe.clustering import cluster_trials, sweep_c
+from sitframe.clustering import TaskMap, cluster_trials, sweep_c
 from sitframe.fcm import MembershipFunction
 
 TRANSFORMS = ("range", "log", "inverse")
@@ -89,9 +89,15 @@ class FCMInterpreter:
             return 1.0 / F - self.offset
         return F
 
-    def fit(self, X: np.ndarray, rng: np.random.Generator) -> dict[str, Any]:
+    def fit(self, X: np.ndarray, rng: np.random.Generator,
+            pmap: TaskMap | None = None) -> dict[str, Any]:
+        """Cluster ``X (n, d)`` [m]: ``trials`` FCM runs, one chosen by the validity measures.
+
+        ``pmap`` (given by the run when it has a worker pool) spreads the FCM
+        trials over the workers; the result is the same without it.
+        """
         res = cluster_trials(self.features(X), self.c, n_trials=self.trials, m=self.m,
-                             tol=self.tol, max_iter=self.max_iter, seed=rng)
+                             tol=self.tol, max_iter=self.max_iter, seed=rng, pmap=pmap)
         self.feature_centers = np.asarray(res.centers[res.chosen], dtype=float)
         self.centers = self.ranges(self.feature_centers)
         self._u = MembershipFunction(self.feature_centers, self.m)

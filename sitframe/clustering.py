@@ -31,8 +31,9 @@ from __future__ import annotations
 import math
 import numbers
 import warnings
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -58,6 +59,9 @@ __all__ = [
     "SweepResult",
     "canonical_order",
     "cluster_trials",
+    "fit_from_inits",
+    "TaskMap",
+    "TrialFits",
     "describe_prototype",
     "rank_trials",
     "select_trial",
@@ -283,6 +287,7 @@ def cluster_trials(
     tol: float = 1e-5,
     max_iter: int = 300,
     seed: int | np.random.Generator | None,
+    pmap: TaskMap | None = None,
 ) -> ClusteringTrials:
     """Run ``n_trials`` FCM trials from different random starts and select one.
 
@@ -306,6 +311,11 @@ def cluster_trials(
     seed : int, numpy.random.Generator or None
         Required keyword (pass None explicitly for fresh OS entropy). A
         Generator is advanced.
+    pmap : TaskMap, optional
+        Runs the trials in parallel: they are split into ``pmap.capacity``
+        contiguous chunks, each fitted by :func:`fit_from_inits` through
+        ``pmap``. All starts are still drawn here, in trial order, so the
+        result is identical to a serial run.
 
     Returns
     -------
@@ -319,22 +329,19 @@ def cluster_trials(
     tol = _check_tol(tol)
     max_iter = _check_int(max_iter, "max_iter", 1)
     rng = _as_generator(seed)
-    ws = _Workspace(Xa, c, mf)
-    centers = np.empty((n_trials, c, d))
     inits = np.empty((n_trials, c, d))
-    n_iter = np.empty(n_trials, dtype=np.int64)
-    converged = np.empty(n_trials, dtype=bool)
-    rows: list[dict[str, float]] = []
     for t in range(n_trials):
         inits[t] = init_centers_from_data(Xa, c, rng)
-        res = _fcm_core(ws, inits[t], tol, max_iter)
-        centers[t] = res.centers
-        n_iter[t] = res.n_iter
-        converged[t] = res.converged
-        row = partition_measures(res.u)
-        row["objective"] = res.objective
-        rows.append(row)
-    measures = {k: np.array([r[k] for r in rows]) for k in MEASURE_DIRECTIONS}
+    chunks = max(1, min(n_trials, int(getattr(pmap, "capacity", 1)))) if pmap else 1
+    bounds = np.linspace(0, n_trials, chunks + 1).astype(int)
+    tasks = [(Xa, inits[a:b], mf, tol, max_iter) for a, b in zip(bounds[:-1], bounds[1:],
+                                                                   strict=True)]
+    parts = pmap(fit_from_inits, tasks) if pmap is not None and chunks > 1 else \
+        [fit_from_inits(*t) for t in tasks]
+    centers = np.concatenate([p.centers for p in parts])
+    n_iter = np.concatenate([p.n_iter for p in parts])
+    converged = np.concatenate([p.converged for p in parts])
+    measures = {k: np.concatenate([p.measures[k] for p in parts]) for k in MEASURE_DIRECTIONS}
     ranks, mean_rank, eligible, fallback = rank_trials(measures)
     if fallback:
         warnings.warn(
@@ -350,6 +357,62 @@ def cluster_trials(
         ranked_measures=RANKED_MEASURES, eligible=eligible, fallback=fallback, rule=rule,
         tol=tol, max_iter=max_iter,
     )
+
+
+class TaskMap:
+    """What :func:`cluster_trials` needs of a parallel executor (a protocol).
+
+    ``pmap(fn, tasks)`` calls ``fn(*args)`` for every ``args`` tuple in
+    ``tasks`` (``fn`` and the arguments must pickle) and returns the results
+    as a list in task order; ``capacity`` is how many tasks run at once.
+    :class:`sitframe.parallel.PoolExecutor` provides one as ``task_map``.
+    """
+
+    capacity: int
+
+    def __call__(self, fn: Callable[..., Any], tasks: Sequence[tuple[Any, ...]]) -> list[Any]:
+        raise NotImplementedError  # pragma: no cover - protocol
+
+
+@dataclass(frozen=True)
+class TrialFits:
+    """FCM results of consecutive trials (one chunk of :func:`cluster_trials`).
+
+    ``centers (T, c, d)``, ``n_iter (T,)``, ``converged (T,)`` and
+    ``measures``: name -> ``(T,)`` (the :func:`~sitframe.fcm.partition_measures`
+    of each final partition plus ``objective``).
+    """
+
+    centers: np.ndarray
+    n_iter: np.ndarray
+    converged: np.ndarray
+    measures: dict[str, np.ndarray]
+
+
+@_ignore_underflow
+def fit_from_inits(X: np.ndarray, inits: np.ndarray, m: float, tol: float,
+                   max_iter: int) -> TrialFits:
+    """Run one FCM trial from each of ``inits (T, c, d)`` on validated ``X (n, d)``.
+
+    The worker-side half of :func:`cluster_trials` (no argument checks: the
+    caller has made them).
+    """
+    T, c, d = inits.shape
+    ws = _Workspace(X, c, m)
+    centers = np.empty((T, c, d))
+    n_iter = np.empty(T, dtype=np.int64)
+    converged = np.empty(T, dtype=bool)
+    rows: list[dict[str, float]] = []
+    for t in range(T):
+        res = _fcm_core(ws, inits[t], tol, max_iter)
+        centers[t] = res.centers
+        n_iter[t] = res.n_iter
+        converged[t] = res.converged
+        row = partition_measures(res.u)
+        row["objective"] = res.objective
+        rows.append(row)
+    return TrialFits(centers, n_iter, converged,
+                     {k: np.array([r[k] for r in rows]) for k in MEASURE_DIRECTIONS})
 
 
 # ----------------------------------------------------------------------------- sweep

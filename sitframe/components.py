@@ -52,7 +52,13 @@ class SituationInterpreter(Protocol):
     def n_situations(self) -> int: ...
 
     def fit(self, X: np.ndarray, rng: np.random.Generator) -> dict[str, Any]:
-        """Fit on collected readings ``X`` (n, d); return arrays/scalars to log."""
+        """Fit on collected readings ``X`` (n, d); return arrays/scalars to log.
+
+        An interpreter whose ``fit`` also accepts a keyword ``pmap`` is given
+        the run's parallel map (:class:`sitframe.clustering.TaskMap`) when the
+        run has a worker pool, and may spread independent work (e.g. FCM
+        trials) over it; the result must not depend on whether it did.
+        """
         ...
 
     def memberships(self, reading: np.ndarray) -> np.ndarray:

@@ -44,7 +44,7 @@ import os
 import signal
 import threading
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -216,6 +216,11 @@ class PoolExecutor:
     def start(self, experiment: Experiment) -> None:
         """Called before the collect stage: a chance to warm the workers up."""
 
+    @property
+    def task_map(self) -> _TaskMap:
+        """This pool as a :class:`~sitframe.clustering.TaskMap` (used by the clustering stage)."""
+        return _TaskMap(self)
+
     def map(self, experiment: Experiment, specs: list[TrialSpec]) -> Iterator[TrialResult]:
         """Run ``specs`` on the workers; yield the results in spec order."""
         setup = Setup.of(experiment)
@@ -238,6 +243,25 @@ class PoolExecutor:
 
     def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
         self.shutdown(cancel=exc_type is not None)
+
+
+class _TaskMap:
+    """``pmap(fn, tasks)``: ``fn(*args)`` for each of ``tasks`` on the pool, results in order."""
+
+    def __init__(self, executor: PoolExecutor) -> None:
+        self.executor = executor
+
+    @property
+    def capacity(self) -> int:
+        return self.executor.capacity
+
+    def __call__(self, fn: Callable[..., Any], tasks: Sequence[tuple[Any, ...]]) -> list[Any]:
+        futures = [self.executor.submit(fn, *args) for args in tasks]
+        try:
+            return [f.result() for f in futures]
+        except BaseException:
+            self.executor.cancel([f for f in futures if not f.done()])
+            raise
 
 
 def _splittable(spec: TrialSpec) -> bool:

@@ -26,6 +26,7 @@ randomness of a trial flows from one :class:`numpy.random.Generator`.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import platform
 import time
 from collections.abc import Callable, Iterator
@@ -448,7 +449,9 @@ class Experiment:
                                         params=self.res.robot))
         return concat_collected(parts)
 
-    def cluster(self, samples: np.ndarray) -> tuple[dict[str, Any], dict[str, Any]]:
+    def cluster(self, samples: np.ndarray,
+                pmap: Any = None) -> tuple[dict[str, Any], dict[str, Any]]:
+        """Fit the interpreter on ``samples``; ``pmap`` is passed on if its ``fit`` takes one."""
         rng = np.random.default_rng(stage_seed(self.info.seed, STAGE_CLUSTER))
         interp = self.res.interpreter()
         c = getattr(interp, "n_situations", None)
@@ -457,7 +460,10 @@ class Experiment:
                              f"{c} situations to fit; expected at least {c}: collect more "
                              "(collect.worlds, collect.rate_hz, collect.mode) or lower c",
                              file=self.source, key="interpreter.c")
-        fit = interp.fit(samples, rng)
+        if pmap is not None and "pmap" in inspect.signature(interp.fit).parameters:
+            fit = interp.fit(samples, rng, pmap=pmap)
+        else:
+            fit = interp.fit(samples, rng)
         return fit, interp.state()
 
     def trial_spec(self, k: int, interpreter_state: dict[str, Any],
@@ -516,7 +522,7 @@ class Experiment:
         if collected is None:
             collected = self.collect()
             self.record_collected(collected)
-        fit, state = self.cluster(collected.samples)
+        fit, state = self.cluster(collected.samples, getattr(self.executor, "task_map", None))
         self.record_clusters(fit, state)
         return state
 
