@@ -76,7 +76,15 @@ class SituationInterpreter(Protocol):
 
 @runtime_checkable
 class Reward(Protocol):
-    """Maps one transition to a scalar reward."""
+    """Maps one transition to a scalar reward.
+
+    Optional: a method ``metrics(arrays) -> dict[str, float]`` that scores a
+    finished trial's per-iteration arrays (``pose``, ``sonar``, ``command``,
+    ``collision``, ... as in the log) by the behaviour's own measure of
+    quality. :func:`sitframe.experiment.evaluate_log` adds what it returns to
+    every evaluation (the wall-following reward reports
+    ``wall_band_fraction`` this way). It is not part of the protocol check.
+    """
 
     name: ClassVar[str]
 

@@ -259,6 +259,14 @@ def _check_core(cfg: dict[str, Any], file: str | None) -> None:
     if any(ord(ch) < 32 for ch in e["name"]):
         raise InputError(f"expected a name without control characters, got {e['name']!r}",
                          file=file, key="experiment.name")
+    # The default log is logs/<name>.h5: a name may nest (sweeps use "sweep/point")
+    # but must stay inside logs/.
+    parts = e["name"].replace("\\", "/").split("/")
+    if e["name"].startswith(("/", "\\")) or any(p in ("", ".", "..") for p in parts) \
+            or ":" in e["name"]:
+        raise InputError(f"expected a name that is a relative path inside logs/ (no leading "
+                         f"'/', no empty, '.' or '..' part, no ':'), got {e['name']!r}",
+                         file=file, key="experiment.name")
     if not isinstance(e["description"], str):
         raise InputError("expected a string", file=file, key="experiment.description")
     e["seed"] = _count("seed", e["seed"], file, "experiment", 0, MAX_SEED)

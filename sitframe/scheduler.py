@@ -123,6 +123,13 @@ class Resolved:
                 if exc.file is None:
                     raise InputError(exc.message, file=self.file, key=key) from None
                 raise
+            w = self._worlds[name]
+            clear = float(w.clearance(w.start[None, :2])[0])
+            if not key.startswith("collect") and clear < self.robot.radius:
+                raise InputError(f"the robot disc (radius {self.robot.radius:g} m) does not fit at "
+                                 f"the start pose of world '{name}' (clearance {clear:.3g} m); "
+                                 f"expected robot.radius <= {clear:.3g} or another world",
+                                 file=self.file, key="robot.radius")
         return self._worlds[name]
 
 

@@ -65,6 +65,7 @@ def plot_world(
         "y [m]" labels, world name as title).
     """
     x0, y0, x1, y1 = world.bounds
+    own = ax is None  # lay out only a figure made here, never the caller's
     if ax is None:
         w, h = x1 - x0, y1 - y0
         scale = 7.0 / max(w, h)
@@ -116,5 +117,6 @@ def plot_world(
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_title(world.name)
-    fig.tight_layout()
+    if own:
+        fig.tight_layout()
     return fig
