@@ -307,10 +307,16 @@ def evaluation_specs(spec: TrialSpec, bdata: dict[str, dict[str, Any]]) -> list[
         for k, wname in enumerate(spec.evaluate)]
 
 
+#: Per-iteration arrays of a frozen-policy evaluation kept in the log (enough to
+#: replay it and to see where and in which situation it collided).
+EVAL_ARRAYS = ("pose", "collision", "contact", "command", "nearest", "sonar", "memberships")
+
+
 def attach_evaluation(result: TrialResult, wname: str, ev: TrialResult) -> None:
     """Add evaluation ``ev`` in world ``wname`` (``eval/<wname>/...``) to its trial's result."""
-    result.episodes[f"eval/{wname}/pose"] = ev.arrays["pose"]
-    result.episodes[f"eval/{wname}/collision"] = ev.arrays["collision"]
+    for key in EVAL_ARRAYS:
+        if key in ev.arrays:
+            result.episodes[f"eval/{wname}/{key}"] = ev.arrays[key]
     for key in EVAL_KEYS:
         result.summary[f"eval/{wname}/{key}"] = ev.summary[key]
 

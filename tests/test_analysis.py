@@ -217,6 +217,16 @@ def test_replay_gif_and_errors(tiny_log, tmp_path, capsys):
     assert "no trial 7" in capsys.readouterr().err
     assert main(["replay", str(tiny_log), "-o", str(tmp_path / "t.avi")]) == 2
     capsys.readouterr()
+    # a frozen-policy evaluation replays too; an unknown world names the ones there are
+    world = A.as_log(tiny_log).config["evaluate"]["worlds"][0]
+    assert main(["replay", str(tiny_log), "--trial", "0", "--eval", world, "--to", "5",
+                 "-o", str(gif)]) == 0
+    with Image.open(gif) as im:
+        assert im.n_frames == 5
+    capsys.readouterr()
+    assert main(["replay", str(tiny_log), "--eval", "atlantis", "-o", str(gif)]) == 2
+    err = capsys.readouterr().err
+    assert "--eval" in err and world in err
     if shutil.which("ffmpeg") is None:
         assert main(["replay", str(tiny_log), "-o", str(tmp_path / "t.mp4")]) == 2
         assert "ffmpeg" in capsys.readouterr().err

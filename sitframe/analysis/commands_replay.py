@@ -1,4 +1,8 @@
-"""Animate a logged learning trial: ``sitframe replay LOG --trial K [--from I --to J] -o FILE``.
+"""Animate a logged trial: ``sitframe replay LOG --trial K [--eval W] [--from I --to J] -o FILE``.
+
+Without ``--eval`` the learning trial is shown; with ``--eval W`` the frozen
+rule base's evaluation run in world ``W`` (logs written since evaluations
+keep their sonar, memberships and commands).
 
 The robot (disc and heading) moves through its world with its sonar rays
 (drawn from the rim to the logged ranges; dashed = nothing within range), the
@@ -19,6 +23,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("log", help="HDF5 log written by `sitframe run`")
     parser.add_argument("--trial", type=int, default=0, metavar="K",
                         help="learning trial to animate (default 0)")
+    parser.add_argument("--eval", dest="eval_world", default=None, metavar="W",
+                        help="animate trial K's frozen-policy evaluation in world W instead")
     parser.add_argument("--from", dest="start", type=int, default=0, metavar="I",
                         help="first iteration (default 0)")
     parser.add_argument("--to", dest="stop", type=int, default=None, metavar="J",
@@ -40,5 +46,5 @@ def main(args: argparse.Namespace) -> int:
         raise InputError(f"must be at least 1, got {args.dpi}", key="--dpi")
     log = open_log(args.log)
     print(replay(log, args.trial, args.output, start=args.start, stop=args.stop, fps=args.fps,
-                 dpi=args.dpi))
+                 dpi=args.dpi, evaluation=args.eval_world))
     return 0

@@ -17,6 +17,7 @@ speed) and the reward. Only the changing artists are updated per frame
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import shutil
@@ -45,6 +46,7 @@ def replay(
     fps: int = 8,
     dpi: int = 110,
     trail: int | None = None,
+    evaluation: str | None = None,
 ) -> str:
     """Write an animation (GIF or MP4) of iterations ``[start, stop)`` of a trial.
 
@@ -65,6 +67,9 @@ def replay(
         Resolution.
     trail
         Iterations of path drawn behind the robot (default: all since ``start``).
+    evaluation
+        World name: animate the trial's frozen-policy evaluation in that world
+        (``episodes/eval/<world>/``) instead of its learning run.
 
     Returns
     -------
@@ -100,11 +105,23 @@ def replay(
         raise InputError(f"must be at least 1, got {fps}", key="--fps")
     lg = R.as_log(log)
     tr = lg.trial(trial)
+    what = f"trial {trial}"
+    if evaluation is not None:
+        prefix = f"eval/{evaluation}/"
+        worlds = sorted({k.split("/")[1] for k in tr.episodes if k.startswith("eval/")})
+        if evaluation not in worlds:
+            raise InputError(f"trial {trial} has no evaluation in world '{evaluation}'; it has "
+                             f"{worlds or 'none'}", file=lg.path, key="--eval")
+        arrays = {k[len(prefix):]: v for k, v in tr.episodes.items() if k.startswith(prefix)}
+        tr = dataclasses.replace(tr, world=evaluation, arrays=arrays,
+                                 summary=tr.summary)
+        what = f"trial {trial}, evaluation in {evaluation}"
     need = [k for k in ("pose", "sonar", "memberships", "command", "collision")
             if k not in tr.arrays]
     if need:
-        raise InputError(f"trial {trial} lacks the arrays {need}", file=lg.path,
-                         key=f"trials/{trial:04d}")
+        raise InputError(f"{what} lacks the arrays {need}" + (
+            " (an older log: its evaluations kept only pose and collision)" if evaluation
+            else ""), file=lg.path, key=f"trials/{trial:04d}")
     pose = np.asarray(tr.arrays["pose"], dtype=np.float64)
     sonar = np.asarray(tr.arrays["sonar"], dtype=np.float64)
     u = np.asarray(tr.arrays["memberships"], dtype=np.float64)
@@ -133,7 +150,8 @@ def replay(
     labels = R.situation_labels(lg)
     if len(labels) != u.shape[1]:
         labels = [f"S{i}" for i in range(u.shape[1])]
-    conv = R.convergence_iteration(tr)
+    conv = 0 if evaluation is not None else R.convergence_iteration(tr)
+    frozen = "frozen (evaluation)" if evaluation is not None else "frozen (converged)"
 
     # ---- static background
     x0, y0, x1, y1 = world.bounds
@@ -143,7 +161,8 @@ def replay(
     ax = fig.add_subplot()
     plot_world(world, ax=ax, show_trajectories=False, show_start=False, robot_radius=radius)
     ax.set_title("")
-    fig.suptitle(f"{lg.attrs.get('name', '')}: trial {trial} in {tr.world}", fontsize=_FONT + 1,
+    title = what if evaluation is not None else f"{what} in {tr.world}"
+    fig.suptitle(f"{lg.attrs.get('name', '')}: {title}", fontsize=_FONT + 1,
                  y=1 - 0.06 / fig.get_figheight(), va="top")
     ax.tick_params(labelsize=_FONT - 1)
     h = fig.get_figheight()
@@ -194,7 +213,7 @@ def replay(
         done = cidx[cidx <= i]
         crosses.set_data(coll_pts[done, 0], coll_pts[done, 1])
         s = int(np.argmax(u[i]))
-        phase = ("learning" if conv is None or i < conv else "frozen (converged)")
+        phase = ("learning" if conv is None or i < conv else frozen)
         rw = f"   reward {reward[i]:+6.1f}" if reward is not None else ""
         text.set_text(
             f"it. {i:5d}  t = {i * 1.5:7.1f} s   {phase}\n"
