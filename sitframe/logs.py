@@ -24,7 +24,10 @@ Layout (schema ``sitframe-log``, version :data:`SCHEMA_VERSION`)::
     /trials/NNNN/episodes/...          evaluation / goal-episode arrays
     /summary              structured table, one row per finished trial
 
-Every dataset has a ``units`` or ``description`` attribute where it helps.
+Every dataset has a ``units`` or ``description`` attribute where it helps,
+and every dataset is stored with a Fletcher-32 checksum per chunk: damaged
+data fails to read (an :class:`InputError` naming the log) instead of being
+returned as wrong numbers; :meth:`Log.check` reads everything.
 
 Crash safety: an HDF5 file left open by a process that dies can be
 unreadable, so the writer never holds the file open across a run. Each stage
@@ -102,9 +105,11 @@ def _write_value(group: h5py.Group, name: str, value: Any) -> None:
             _write_value(sub, str(k), v)
         return
     arr = np.asarray(value)
-    kw: dict[str, Any] = {}
+    # Every dataset carries a Fletcher-32 checksum per chunk, so a flipped byte in
+    # the data makes reading it fail (InputError) instead of returning wrong numbers.
+    kw: dict[str, Any] = {"chunks": True, "fletcher32": True}
     if arr.size >= _COMPRESS_MIN:
-        kw = {"compression": "gzip", "compression_opts": 1, "shuffle": True, "chunks": True}
+        kw.update(compression="gzip", compression_opts=1, shuffle=True)
     if name in group:
         del group[name]
     ds = group.create_dataset(name, data=arr, **kw)
@@ -271,7 +276,7 @@ def _write_summary(f: h5py.File) -> None:
             table[i][c] = float(row.get(c, np.nan))
     if "summary" in f:
         del f["summary"]
-    ds = f.create_dataset("summary", data=table)
+    ds = f.create_dataset("summary", data=table, chunks=True, fletcher32=True)
     ds.attrs["description"] = "one row per finished trial; booleans as 0/1, missing as NaN"
 
 
@@ -402,14 +407,18 @@ class Log:
                              file=self.path) from None
 
     def check(self) -> None:
-        """Read every group's and dataset's header and attributes, and the root JSON attributes.
+        """Read the whole log: every header, attribute and dataset, and the root JSON.
 
-        Raises an :class:`InputError` naming the log if any is damaged, so a
-        command can fail before it writes anything. Dataset contents are not read.
+        Raises an :class:`InputError` naming the log if any part is damaged, so
+        a command can fail before it writes anything. Datasets carry Fletcher-32
+        checksums (logs written since they were added), so damaged *data* is
+        caught here too, not only damaged structure.
         """
         _ = self.worlds, self.plugins, self.versions
         def read(_name: str, obj: Any) -> None:  # (returning a value would stop the visit)
             dict(obj.attrs)
+            if isinstance(obj, h5py.Dataset):
+                obj[()]
 
         with self._file() as f:
             f.visititems(read)
