@@ -61,6 +61,7 @@ def prepare_experiment(
     if clusters_from:
         path = _resolve_path(clusters_from, base_dir)
         log = open_log(path)
+        log.check()  # build on an intact log only (every dataset's checksum)
         state = log.interpreter_state()
         logged_sensor = validate_config(log.config, file=path)["sensor"]
         if logged_sensor != cfg["sensor"]:
@@ -77,6 +78,7 @@ def prepare_experiment(
             continue
         path = _resolve_path(pf["log"], base_dir)
         log = open_log(path)
+        log.check()
         which = pf.get("trial", 0)
         trial = log.trial(best_trial(log) if which == "best" else int(which))
         src_label = pf.get("behaviour", label)
@@ -234,6 +236,7 @@ def evaluate_log(
     from sitframe.episodes import STAGE_GOAL, EpisodeConfig, batch_aggregate, is_goal_run
 
     log = open_log(log_path)
+    log.check()
     cfg = validate_config(log.config, file=log_path)
     tl = log.trial(trial)
     policies = {label: tl.policy(label) for label in tl.behaviours if tl.policy(label)}

@@ -92,6 +92,7 @@ def prepare_resume(
 
     p = str(path)
     log = open_log(p)
+    log.check()  # never append to a damaged log (checksums catch damaged data too)
     raw = log.config
     try:
         cfg = validate_config(raw, file=p)
