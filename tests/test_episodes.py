@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -185,9 +186,9 @@ def test_goal_run_writes_episodes(tmp_path, oa_log):
 
 def test_goal_run_without_goal_in_world_is_an_input_error(tmp_path, oa_log, capsys):
     path = goal_config(tmp_path, oa_log)
-    text = open(path).read().replace('pairs = "random"', 'pairs = "world"').replace(
+    text = Path(path).read_text().replace('pairs = "random"', 'pairs = "world"').replace(
         'worlds = ["goal"]', 'worlds = ["training"]')
-    open(path, "w").write(text)
+    Path(path).write_text(text)
     assert main(["run", path, "--out", str(tmp_path / "x.h5")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "goal.worlds[0]" in err[0] and "no [goal]" in err[0]
@@ -195,8 +196,8 @@ def test_goal_run_without_goal_in_world_is_an_input_error(tmp_path, oa_log, caps
 
 def test_unknown_arbiter_in_config_lists_available(tmp_path, oa_log, capsys):
     path = goal_config(tmp_path, oa_log)
-    text = open(path).read().replace('component = "cdb"', 'component = "cbd"')
-    open(path, "w").write(text)
+    text = Path(path).read_text().replace('component = "cdb"', 'component = "cbd"')
+    Path(path).write_text(text)
     assert main(["run", path, "--out", str(tmp_path / "x.h5")]) == 2
     err = capsys.readouterr().err.strip()
     assert "unknown arbiter 'cbd'" in err and "available: cdb, priority, single" in err

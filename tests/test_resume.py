@@ -68,7 +68,7 @@ def test_kill_9_then_resume_reproduces_uninterrupted_run(reference, tmp_path, ca
     _wait_for_trials(proc, out)
     time.sleep(float(rng.uniform(0.0, 0.3)))
     proc.kill()  # SIGKILL
-    proc.wait(timeout=30)
+    proc.communicate(timeout=30)  # (also closes the stderr pipe)
     log = open_log(out)  # always opens
     assert log.status in ("running", "complete")
     have = log.trial_indices()
