@@ -5,6 +5,7 @@
     python benchmarks/bench_parallel.py                      # 11 trials, 1 vs 2 workers, 3 repeats
     python benchmarks/bench_parallel.py --repeats 5 --dask   # also through a LocalCluster
     python benchmarks/bench_parallel.py --kill 20            # kill -9 / --resume tally
+    python benchmarks/bench_parallel.py --interrupt 40       # Ctrl-C / --resume tally
 
 Each timing is the whole ``sitframe run`` command (a fresh process: imports,
 collect, cluster, trials, log writing), so the ratio is what a user sees.
@@ -12,7 +13,11 @@ The median over the repeats is reported; serial and parallel runs alternate
 so a change in machine load hits both. ``--kill N`` starts N runs, kills
 each with SIGKILL at a random moment (after at least one trial is in the
 log), checks the log opens, resumes it and compares it bit for bit with an
-uninterrupted run.
+uninterrupted run. ``--interrupt N`` sends SIGINT (Ctrl-C) instead, at a
+random moment from start-up on (so also during collect, cluster and worker
+start), and requires every run to end within 60 s with exit 130 and an
+``aborted`` log (or exit 0 and a complete log), no traceback, and a resumed
+log identical to the uninterrupted one.
 """
 
 from __future__ import annotations
@@ -163,6 +168,58 @@ def kill_tally(n: int, tmp: Path, seed: int) -> int:
     return 0 if opened == reproduced == n else 1
 
 
+#: Starts the CLI with Python's SIGINT handler even if this benchmark was
+#: started with SIGINT ignored (as background jobs of a shell are).
+_CLI = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+        "from sitframe.cli import console_main; sys.exit(console_main(sys.argv[1:]))")
+
+
+def interrupt_tally(n: int, tmp: Path, seed: int) -> int:
+    rng = np.random.default_rng(seed)
+    cfg = tmp / "kill.toml"
+    cfg.write_text(KILL_CONFIG)
+    ref = tmp / "reference.h5"
+    t0 = time.perf_counter()
+    subprocess.run([*SITFRAME, "run", str(cfg), "--out", str(ref), "--workers", "1", "--json"],
+                   check=True, stdout=subprocess.DEVNULL)
+    t_ref = time.perf_counter() - t0
+    good = 0
+    outcomes: dict[str, int] = {}
+    for i in range(n):
+        out = tmp / f"interrupted{i}.h5"
+        workers = str(rng.choice([1, 2]))
+        at = float(rng.uniform(0.2, 1.1 * t_ref / int(workers)))
+        proc = subprocess.Popen([sys.executable, "-c", _CLI, "run", str(cfg), "--out", str(out),
+                                 "--workers", workers, "--json"], stdout=subprocess.DEVNULL,
+                                stderr=subprocess.PIPE)
+        time.sleep(at)
+        proc.send_signal(signal.SIGINT)
+        try:
+            _, err = proc.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()
+            print(f"run {i + 1}: HUNG after SIGINT at {at:.2f} s")
+            outcomes["hung"] = outcomes.get("hung", 0) + 1
+            continue
+        status = open_log(out).status if out.exists() else "no log"
+        clean = b"Traceback" not in err and (proc.returncode, status) in (
+            (130, "aborted"), (130, "no log"), (0, "complete"))
+        if clean and status == "aborted":
+            subprocess.run([*SITFRAME, "run", "--resume", str(out), "--workers", workers,
+                            "--json"], check=True, stdout=subprocess.DEVNULL)
+            clean = compare_logs(ref, out) == []
+        key = f"exit {proc.returncode}, {status}" + ("" if clean else " (BAD)")
+        outcomes[key] = outcomes.get(key, 0) + 1
+        good += clean
+        if not clean:
+            print(f"run {i + 1}: SIGINT at {at:.2f} s -> {key}\n{err.decode()[-2000:]}",
+                  flush=True)
+    print(f"Ctrl-C tally over {n} runs (reference run {t_ref:.2f} s): {outcomes}; "
+          f"{good}/{n} clean (aborted logs resumed to the uninterrupted result)")
+    return 0 if good == n else 1
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--experiment", default="obstacle-avoidance")
@@ -174,12 +231,15 @@ def main() -> int:
                     help="reuse situations fitted once (--clusters-from): time the trials and "
                          "their evaluations, not the serial collect and cluster stages")
     ap.add_argument("--kill", type=int, metavar="N", help="kill -9 / resume tally of N runs")
+    ap.add_argument("--interrupt", type=int, metavar="N", help="Ctrl-C / resume tally of N runs")
     ap.add_argument("--seed", type=int, default=0, help="seed of the kill moments")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="sitframe-bench-"))
     try:
         if args.kill:
             return kill_tally(args.kill, tmp, args.seed)
+        if args.interrupt:
+            return interrupt_tally(args.interrupt, tmp, args.seed)
         bench_workers(args.experiment, args.trials, args.workers, args.repeats, tmp, args.dask,
                       args.trials_only)
         return 0
