@@ -27,8 +27,12 @@ Output: one HDF5 log per point, ``DIR/<point>.h5`` (point names such as
 ``update=thesis_c=8``), and ``DIR/summary.csv`` / ``DIR/summary.md`` with one
 row per point: convergence rate, iterations to convergence (median, IQR),
 collisions per 1000 iterations after convergence (median, IQR; converged
-trials only) and, for every evaluation world, the median collisions per 1000
-and coverage of the frozen rule bases.
+trials only) and, for every evaluation world, the median and worst
+collisions per 1000, the share of trials above 10, and the median coverage
+of the frozen rule bases. When the grid varies ``experiment.seed``,
+``DIR/summary-pooled.csv`` / ``.md`` also give one row per setting with the
+same statistics over the trials of all its seeds (a result that does not
+hang on one seed).
 
 All trials of all points go to one pool (or Dask cluster): the collect and
 cluster stages of every point run first as tasks, then the trials (their
@@ -447,18 +451,20 @@ def _median_iqr(x: np.ndarray) -> tuple[float, float, float]:
     return float(q50), float(q25), float(q75)
 
 
-def summarise_log(path: str | Path) -> dict[str, Any]:
-    """Per-point statistics from a log's summary table (see the module docstring)."""
-    from sitframe.logs import open_log
+def summarise_tables(tables: list[np.ndarray]) -> dict[str, Any]:
+    """Statistics of the trials in one or more logs' summary tables, pooled.
 
-    log = open_log(path)
-    table = log.summary()
-    names = table.dtype.names or ()
-    n = len(table)
-    row: dict[str, Any] = {"log": str(path), "status": log.status, "trials": n}
+    Medians and IQRs as in the module docstring; for every evaluation world
+    also the worst trial (``eval_<w>_coll_max``) and the share of trials above
+    10 collisions per 1000 (``eval_<w>_coll_over10``).
+    """
+    n = sum(len(t) for t in tables)
+    row: dict[str, Any] = {"trials": n}
 
     def col(name: str) -> np.ndarray:
-        return np.asarray(table[name], float) if name in names else np.full(n, np.nan)
+        parts = [np.asarray(t[name], float) if name in (t.dtype.names or ())
+                 else np.full(len(t), np.nan) for t in tables]
+        return np.concatenate(parts) if parts else np.empty(0)
 
     conv = col("converged") > 0.5
     row["convergence_rate"] = float(conv.mean()) if n else math.nan
@@ -466,16 +472,59 @@ def summarise_log(path: str | Path) -> dict[str, Any]:
     row["conv_iter_median"], row["conv_iter_q25"], row["conv_iter_q75"] = _median_iqr(it)
     post = col("collisions_per_1000_after_convergence")[conv]
     row["post_coll_median"], row["post_coll_q25"], row["post_coll_q75"] = _median_iqr(post)
-    worlds = []
-    for name in names:
-        m = re.fullmatch(r"eval\.(.+)\.collisions_per_1000", name)
-        if m:
-            worlds.append(m.group(1))
+    worlds: list[str] = []
+    for t in tables:
+        for name in t.dtype.names or ():
+            m = re.fullmatch(r"eval\.(.+)\.collisions_per_1000", name)
+            if m and m.group(1) not in worlds:
+                worlds.append(m.group(1))
     for w in worlds:
-        row[f"eval_{w}_coll_median"] = _median_iqr(col(f"eval.{w}.collisions_per_1000"))[0]
+        c = col(f"eval.{w}.collisions_per_1000")
+        fin = c[np.isfinite(c)]
+        row[f"eval_{w}_coll_median"] = _median_iqr(c)[0]
+        row[f"eval_{w}_coll_max"] = float(fin.max()) if fin.size else math.nan
+        row[f"eval_{w}_coll_over10"] = float(np.mean(fin > 10)) if fin.size else math.nan
         row[f"eval_{w}_coverage_median"] = _median_iqr(col(f"eval.{w}.coverage"))[0]
     row["eval_worlds"] = worlds
     return row
+
+
+def summarise_log(path: str | Path) -> dict[str, Any]:
+    """Per-point statistics from a log's summary table (see the module docstring)."""
+    from sitframe.logs import open_log
+
+    log = open_log(path)
+    return {"log": str(path), "status": log.status, **summarise_tables([log.summary()])}
+
+
+SEED_KEY = "experiment.seed"
+
+
+def pool_over_seeds(result: dict[str, Any]) -> list[dict[str, Any]]:
+    """Rows pooled over the run seeds, when the grid varies ``experiment.seed``.
+
+    Points that differ only in the seed form one row whose statistics are
+    over all their trials (``seeds`` tells how many runs); an empty list when
+    the grid has no seed axis.
+    """
+    from sitframe.logs import open_log
+
+    keys = result["keys"]
+    if SEED_KEY not in keys:
+        return []
+    others = [k for k in keys if k != SEED_KEY]
+    groups: dict[tuple[str, ...], list[dict[str, Any]]] = {}
+    for r in result["points"]:
+        groups.setdefault(tuple(_fmt_value(r[k]) for k in others), []).append(r)
+    rows = []
+    for members in groups.values():
+        tables = [open_log(r["log"]).summary() for r in members]
+        first = members[0]
+        rows.append({"point": ", ".join(f"{k}={_fmt_value(first[k])}" for k in others) or "all",
+                     **{k: first[k] for k in others}, "seeds": len(members),
+                     "status": "complete" if all(r["status"] == "complete" for r in members)
+                     else "incomplete", **summarise_tables(tables)})
+    return rows
 
 
 def summarise_point(pt: Point) -> dict[str, Any]:
@@ -513,33 +562,48 @@ def write_tables(result: dict[str, Any], out: Path) -> tuple[Path, Path]:
             "conv_iter_q25", "conv_iter_q75", "post_coll_median", "post_coll_q25",
             "post_coll_q75"]
     for w in worlds:
-        cols += [f"eval_{w}_coll_median", f"eval_{w}_coverage_median"]
-    cols.append("log")
+        cols += [f"eval_{w}_coll_median", f"eval_{w}_coll_max", f"eval_{w}_coll_over10",
+                 f"eval_{w}_coverage_median"]
     out.mkdir(parents=True, exist_ok=True)
     csv_path, md_path = out / "summary.csv", out / "summary.md"
-    with open(csv_path, "w", newline="", encoding="utf-8") as fh:
+    _write_csv(csv_path, rows, [*cols, "log"])
+    md_path.write_text(markdown_table(result), encoding="utf-8")
+    if result.get("pooled"):
+        pcols = ["point", *[k for k in keys if k != SEED_KEY], "seeds", *cols[len(keys) + 1:]]
+        _write_csv(out / "summary-pooled.csv", result["pooled"], pcols)
+        (out / "summary-pooled.md").write_text(markdown_table(result, pooled=True),
+                                               encoding="utf-8")
+    return csv_path, md_path
+
+
+def _write_csv(path: Path, rows: list[dict[str, Any]], cols: list[str]) -> None:
+    with open(path, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
         w.writerow(cols)
         for r in rows:
             w.writerow(["" if (isinstance(r.get(c), float) and not math.isfinite(r[c]))
                         else r.get(c, "") for c in cols])
-    md_path.write_text(markdown_table(result), encoding="utf-8")
-    return csv_path, md_path
 
 
-def markdown_table(result: dict[str, Any]) -> str:
-    """The sweep's summary as a Markdown table (one row per point)."""
-    rows = result["points"]
-    keys = result["keys"]
+def markdown_table(result: dict[str, Any], *, pooled: bool = False) -> str:
+    """The sweep's summary as a Markdown table (one row per point).
+
+    With ``pooled=True``, the rows of :func:`pool_over_seeds` (one per setting,
+    over all seeds) instead.
+    """
+    rows = result["pooled"] if pooled else result["points"]
+    keys = [k for k in result["keys"] if not (pooled and k == SEED_KEY)]
     worlds = _eval_worlds(rows)
     short = [k.rsplit(".", 1)[-1] for k in keys]
-    head = [*short, "trials", "converged", "iterations to conv., median [IQR]",
-            "coll./1000 after conv., median [IQR]"]
+    head = [*short, *(["seeds"] if pooled else []), "trials", "converged",
+            "iterations to conv., median [IQR]", "coll./1000 after conv., median [IQR]"]
     for w in worlds:
-        head += [f"{w}: coll./1000", f"{w}: coverage"]
+        head += [f"{w}: coll./1000 median (worst)", f"{w}: coverage"]
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
     for r in rows:
         cells = [_fmt_value(r[k]) for k in keys]
+        if pooled:
+            cells.append(str(r["seeds"]))
         n = r["trials"]
         rate = r["convergence_rate"]
         cells.append(str(n))
@@ -547,7 +611,8 @@ def markdown_table(result: dict[str, Any]) -> str:
         cells.append(_med_iqr(r, "conv_iter", 0))
         cells.append(_med_iqr(r, "post_coll", 1))
         for w in worlds:
-            cells.append(_num(r.get(f"eval_{w}_coll_median", math.nan)))
+            cells.append(f"{_num(r.get(f'eval_{w}_coll_median', math.nan))} "
+                         f"({_num(r.get(f'eval_{w}_coll_max', math.nan), 0)})")
             cells.append(_num(r.get(f"eval_{w}_coverage_median", math.nan), 2))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
@@ -595,16 +660,20 @@ def main(args: argparse.Namespace) -> int:
         failed = False
     finally:
         executor.shutdown(cancel=failed)
+    result["pooled"] = pool_over_seeds(result)
     csv_path, md_path = write_tables(result, sweep.out)
     if args.json:
         doc = _finite({**result, "csv": str(csv_path), "markdown": str(md_path)})
         print(json.dumps(doc, indent=2, default=str))
     else:
         print(markdown_table(result), end="")
+        if result["pooled"]:
+            print(f"\npooled over the seeds ({md_path.parent / 'summary-pooled.md'}):")
+            print(markdown_table(result, pooled=True), end="")
         print(f"{len(sweep.points)} points, {total} trials in {result['wall_seconds']:.1f} s; "
               f"logs and summary in {sweep.out}")
     return 0
 
 
-__all__ = ["Sweep", "check_key", "load_sweep", "markdown_table", "point_names", "run_sweep",
-           "summarise_log", "write_tables"]
+__all__ = ["Sweep", "check_key", "load_sweep", "markdown_table", "point_names",
+           "pool_over_seeds", "run_sweep", "summarise_log", "summarise_tables", "write_tables"]

@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import json
 
+import numpy as np
 import pytest
 from helpers import small_config
 
@@ -83,6 +84,28 @@ def test_sweep_json_and_one_worker(swept, tmp_path, capsys):
     assert doc["points"][0]["trials"] == 2
     for name in ("update=thesis_c=4", "update=standard_c=5"):
         assert compare_logs(out / f"{name}.h5", out1 / f"{name}.h5") == []
+
+
+def test_seed_axis_gives_tables_pooled_over_seeds(swept, tmp_path, capsys):
+    d, _out = swept
+    (d / "seeds.toml").write_text(SWEEP.replace('"interpreter.c" = [4, 5]',
+                                                '"experiment.seed" = [1, 2]'))
+    out = tmp_path / "seeds"
+    assert main(["sweep", str(d / "seeds.toml"), "--out", str(out), "--workers", "2",
+                 "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert len(doc["points"]) == 4 and len(doc["pooled"]) == 2
+    for row in doc["pooled"]:  # each setting pools its two seed runs' trials
+        runs = [open_log(p["log"]).summary() for p in doc["points"]
+                if p["behaviours.avoid.update"] == row["behaviours.avoid.update"]]
+        assert row["seeds"] == 2 and row["trials"] == 4
+        coll = np.concatenate([t["eval.novel-1.collisions_per_1000"] for t in runs])
+        assert row["eval_novel-1_coll_max"] == coll.max()
+        assert row["eval_novel-1_coll_median"] == np.median(coll)
+    with open(out / "summary-pooled.csv", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [r["behaviours.avoid.update"] for r in rows] == ["thesis", "standard"]
+    assert "seeds" in (out / "summary-pooled.md").read_text()
 
 
 def test_point_names_use_short_keys_unless_ambiguous():
