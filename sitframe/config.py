@@ -25,8 +25,8 @@ thesis's Table A.1):
     (a reward component name: the behaviour learns from it), optional
     ``reward_params`` table, optional ``policy_from = {log = "...", trial = 0,
     behaviour = "LABEL"}`` to start from a learned policy (``trial = "best"``
-    picks the trial whose frozen rule base collided least when evaluated in
-    the log's own learning world; see
+    picks the trial whose frozen rule base ranked best on collisions and
+    coverage when evaluated in the log's own learning world; see
     :func:`sitframe.experiment.best_trial`), then the
     behaviour's own parameters.
 ``[arbiter]``

@@ -164,13 +164,18 @@ def _check_state(res: Resolved, state: dict[str, Any], path: str) -> None:
 
 
 def best_trial(log: Log) -> int:
-    """The trial whose frozen rule base collided least in the log's learning world.
+    """The trial whose frozen rule base did best in the log's learning world.
 
-    Ranked by ``eval/<learning world>/collisions_per_1000`` (the evaluation in
-    the room the robot learned in), then by collisions per 1000 iterations
-    after convergence, then by trial index. Only the learning world is used,
-    never the other evaluation rooms, so choosing a trial this way does not
-    peek at rooms the robot is later tested in.
+    Quality is judged, as the project judges it everywhere, by collisions
+    *and* coverage: each trial is ranked by ``eval/<learning world>/
+    collisions_per_1000`` (fewest first) and by ``eval/<learning
+    world>/coverage`` (most first), ties sharing their average rank, and the
+    trial with the smallest sum of the two ranks is chosen; ties go to fewer
+    collisions per 1000 iterations after convergence, then to the lowest
+    index. Collisions alone would favour a rule base that loops in one corner
+    of the room (few collisions because it hardly goes anywhere). Only the
+    learning world is used, never the other evaluation rooms, so choosing a
+    trial this way does not peek at rooms the robot is later tested in.
 
     Raises
     ------
@@ -180,21 +185,31 @@ def best_trial(log: Log) -> int:
     table = log.summary()
     world = log.config.get("experiment", {}).get("world", "training")
     column = f"eval.{world}.collisions_per_1000"
-    if table.size == 0 or column not in (table.dtype.names or ()):
+    names = table.dtype.names or ()
+    if table.size == 0 or column not in names:
         raise InputError(f"cannot pick the best trial: the log has no evaluation in its learning "
                          f"world '{world}' (include 'evaluate' and '{world}' in the run)",
                          file=log.path, key="summary")
     after = table["collisions_per_1000_after_convergence"] if \
-        "collisions_per_1000_after_convergence" in table.dtype.names else np.zeros(table.size)
-    return _best_of(table["trial"], table[column], after)
+        "collisions_per_1000_after_convergence" in names else np.zeros(table.size)
+    coverage = table[f"eval.{world}.coverage"] if f"eval.{world}.coverage" in names \
+        else np.zeros(table.size)
+    return _best_of(table["trial"], table[column], coverage, after)
 
 
-def _best_of(index: Any, eval_collisions: Any, after_collisions: Any) -> int:
-    """The rule of :func:`best_trial` on parallel sequences: fewest evaluation
-    collisions, then fewest after convergence, then lowest index (NaN = worst)."""
-    order = np.lexsort((np.asarray(index), np.nan_to_num(np.asarray(after_collisions, float),
-                                                         nan=np.inf),
-                        np.nan_to_num(np.asarray(eval_collisions, float), nan=np.inf)))
+#: How :func:`best_trial` chooses, in one line (shown by ``sitframe run``).
+BEST_TRIAL_RULE = "smallest rank sum of (fewest collisions, most coverage)"
+
+
+def _best_of(index: Any, eval_collisions: Any, coverage: Any, after_collisions: Any) -> int:
+    """The rule of :func:`best_trial` on parallel sequences (NaN ranks worst)."""
+    from sitframe.clustering import average_ranks
+
+    coll = np.nan_to_num(np.asarray(eval_collisions, float), nan=np.inf)
+    cov = np.nan_to_num(np.asarray(coverage, float), nan=-np.inf)
+    score = average_ranks(coll) + average_ranks(-cov)
+    order = np.lexsort((np.asarray(index),
+                        np.nan_to_num(np.asarray(after_collisions, float), nan=np.inf), score))
     return int(np.asarray(index)[order[0]])
 
 
@@ -341,10 +356,11 @@ def rule_base_table(result: Any) -> Any:
     best = trials[0]
     if ranked:
         k = _best_of([t.index for t in ranked], [t.summary[key] for t in ranked],
+                     [t.summary.get(f"eval/{world}/coverage", 0.0) for t in ranked],
                      [t.summary["collisions_per_1000_after_convergence"] for t in ranked])
         best = next(t for t in ranked if t.index == k)
-    why = (f"trial {best.index}: fewest collisions when evaluated in '{world}'" if ranked
-           else f"trial {best.index}: no evaluation in the learning world")
+    why = (f"best trial {best.index}: {BEST_TRIAL_RULE} when evaluated in '{world}'"
+           if ranked else f"trial {best.index}: no evaluation in the learning world")
     table = Table(title=f"learned rule bases of {len(trials)} trials",
                   caption=f"most trials = the most frequent action (how many trials); {why}")
     table.add_column("situation", justify="right")
