@@ -81,7 +81,7 @@ UNITS = {
     "poses": "x [m], y [m], theta [rad]",
 }
 
-_COMPRESS_MIN = 4096  # elements; smaller arrays are stored contiguous
+_COMPRESS_MIN = 1024  # elements; smaller arrays are stored uncompressed
 
 
 def _write_value(group: h5py.Group, name: str, value: Any) -> None:
