@@ -339,9 +339,9 @@ def rule_base_table(result: Any) -> Any:
 
     For each learned output: the action most trials chose for the situation
     and in how many trials (thesis Tables A.2/A.3), and the action of the trial
-    that ``policy_from.trial = "best"`` would pick (fewest collisions when
-    evaluated in the learning world; trial 0 when there is no such
-    evaluation). Situations are described from their prototypes.
+    that ``policy_from.trial = "best"`` would pick (:func:`best_trial`:
+    collisions and coverage when evaluated in the learning world; trial 0
+    when there is no such evaluation). Situations are described from their prototypes.
     """
     from collections import Counter
 
