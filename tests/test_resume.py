@@ -91,7 +91,9 @@ def test_sigint_marks_aborted_exit_130_and_resume_completes(reference, tmp_path,
     _wait_for_trials(proc, out)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=30)
-    if proc.returncode == 0:
+    if proc.returncode == 0 or (out.exists() and open_log(out).status == "complete"):
+        # (the run finished before the signal arrived; a signal just after the log
+        # completed may still exit 130, the log stays complete)
         pytest.skip("the run finished before the signal arrived")
     assert proc.returncode == 130, err
     assert b"interrupted" in err
