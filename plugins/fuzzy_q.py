@@ -26,6 +26,7 @@ Config (``[behaviours.LABEL]``)::
     activation = 0.3
     terminal_on_collision = false
     min_updates = 0        # convergence also needs every situation updated this often
+    tie_break = "first"    # greedy ties (never-updated situations): "first" or "centre"
     q_init = "constant"
     q_init_value = 0.0
 """
@@ -71,6 +72,7 @@ class FuzzyQBehaviour:
         activation: float = 0.3,
         terminal_on_collision: bool = False,
         min_updates: int = 0,
+        tie_break: str = "first",
     ) -> None:
         self.singletons: dict[str, np.ndarray] = {
             "heading": np.asarray(P.number_list("headings", list(headings), lo=-90, hi=90))
@@ -89,6 +91,7 @@ class FuzzyQBehaviour:
             temperature_min=temperature_min, q_init=q_init, q_init_value=q_init_value,
             q_init_spread=q_init_spread, update=update, activation=activation,
             terminal_on_collision=terminal_on_collision, min_updates=min_updates,
+            tie_break=tie_break,
         )
         self.learners: dict[str, FuzzyQLearner] = {}
         self.fcs: dict[str, SituationFCS] = {}

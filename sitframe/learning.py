@@ -93,6 +93,13 @@ class QLearningParams:
         situation was never experienced; this guards against freezing it.
         A situation the training world never produces then prevents
         convergence, so keep it small.
+    tie_break
+        Which of several actions with equal greatest Q the greedy rule base
+        takes: ``"first"`` (the first in the action list, numpy's argmax; the
+        default) or ``"centre"`` (the one nearest the middle of the list, e.g.
+        0 deg in a symmetric heading set). Exact ties arise in situations
+        whose rules were never updated (all still at ``q_init_value``); with
+        ``"first"`` such a situation gets the first heading (+90 deg).
     """
 
     alpha: float = 0.3
@@ -110,6 +117,7 @@ class QLearningParams:
     activation: float = 0.3
     terminal_on_collision: bool = False
     min_updates: int = 0
+    tie_break: str = "first"
 
     def __post_init__(self) -> None:
         P.number("alpha", self.alpha, lo=0.0, hi=1.0, lo_open=True)
@@ -127,6 +135,24 @@ class QLearningParams:
         P.number("activation", self.activation, lo=0.0, hi=1.0)
         P.boolean("terminal_on_collision", self.terminal_on_collision)
         P.number("min_updates", self.min_updates, lo=0, integer=True)
+        P.choice("tie_break", self.tie_break, TIE_BREAKS)
+
+
+TIE_BREAKS = ("first", "centre")
+
+
+def greedy_actions(q: np.ndarray, tie_break: str = "first") -> np.ndarray:
+    """(c,) index of the greatest Q in each row of ``q`` (c, A), ties broken by ``tie_break``.
+
+    ``"first"``: the lowest index (``q.argmax(axis=1)``). ``"centre"``: among
+    the tied actions the one nearest ``(A - 1) / 2``, then the lower index.
+    """
+    if tie_break == "first":
+        return q.argmax(axis=1)
+    a = q.shape[1]
+    closeness = -np.abs(np.arange(a) - (a - 1) / 2.0)
+    score = np.where(q == q.max(axis=1, keepdims=True), closeness, -np.inf)
+    return score.argmax(axis=1)
 
 
 def softmax_choice(
@@ -191,7 +217,7 @@ class FuzzyQLearner:
         else:
             self.q = np.full((c, a), float(params.q_init_value))
         self.rule_base = rng.integers(0, a, size=c)  # thesis Alg. 3 step 5: random rules
-        self.greedy = self.q.argmax(axis=1)
+        self.greedy = greedy_actions(self.q, params.tie_break)
         self.converged_at: int | None = None
         self.stable_changes = 0
         self.since_change = 0
@@ -269,7 +295,7 @@ class FuzzyQLearner:
 
     def _change(self, iteration: int) -> None:
         self.since_change = 0
-        greedy = self.q.argmax(axis=1)
+        greedy = greedy_actions(self.q, self.params.tie_break)
         if np.array_equal(greedy, self.greedy):
             self.stable_changes += 1
         else:
@@ -289,7 +315,8 @@ class FuzzyQLearner:
 
     def final_rule_base(self) -> np.ndarray:
         """The greedy rule base (the converged one if learning converged)."""
-        return self.q.argmax(axis=1) if self.converged_at is None else self.rule_base.copy()
+        return (greedy_actions(self.q, self.params.tie_break) if self.converged_at is None
+                else self.rule_base.copy())
 
     def data(self, iterations: int) -> dict[str, np.ndarray | int | bool]:
         """Arrays to log: snapshots at each rule-base change and per-iteration rules."""

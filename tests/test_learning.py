@@ -167,3 +167,17 @@ def test_min_updates_delays_convergence_until_every_situation_was_updated():
     for t in range(6, 9):
         lr.update(both, 1.0, both, False, t)
     assert lr.updates.min() >= 3 and lr.converged_at is not None
+
+
+def test_greedy_tie_break_first_or_centre():
+    from sitframe.learning import greedy_actions
+
+    q = np.array([[5.0, 5.0, 5.0, 5.0, 5.0],    # never updated: all tied
+                  [1.0, 7.0, 2.0, 7.0, 0.0],    # tie between 1 and 3
+                  [0.0, 1.0, 2.0, 3.0, 9.0]])   # no tie
+    assert greedy_actions(q, "first").tolist() == [0, 1, 4]
+    assert greedy_actions(q, "centre").tolist() == [2, 1, 4]  # equal distance: lower index
+    even = np.zeros((1, 4))
+    assert greedy_actions(even, "centre").tolist() == [1]
+    with pytest.raises(ValueError, match="tie_break"):
+        QLearningParams(tie_break="middle")
