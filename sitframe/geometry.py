@@ -489,9 +489,11 @@ def _point_segment_distance_reference(points: np.ndarray, segments: np.ndarray) 
             lx, ly = x1 - x0, y1 - y0
             length = math.hypot(lx, ly)
             if length > 0.0:
-                along = ((px - x0) * lx + (py - y0) * ly) / length
+                # unit direction first: products with a subnormal length would underflow
+                ux, uy = lx / length, ly / length
+                along = (px - x0) * ux + (py - y0) * uy
                 if 0.0 <= along <= length:
-                    perp = abs((px - x0) * ly - (py - y0) * lx) / length
+                    perp = abs((px - x0) * uy - (py - y0) * ux)
                     best = min(best, perp)
             out[i, j] = best
     return out

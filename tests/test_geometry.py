@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
@@ -86,6 +86,8 @@ def test_ray_parallel_collinear_and_points() -> None:
     segs=segment_arrays(),
     pts=arrays(np.float64, st.tuples(st.integers(1, 6), st.just(2)), elements=mixed),
 )
+# a subnormal-length segment: the reference's cross product used to underflow to 0
+@example(segs=np.array([[0.0, 0.0, 0.0, 5e-324]]), pts=np.array([[0.0, 0.5]]))
 def test_point_segment_distance_matches_reference(segs: np.ndarray, pts: np.ndarray) -> None:
     fast = g.point_segment_distance(pts, segs)
     ref = g._point_segment_distance_reference(pts, segs)
