@@ -297,6 +297,10 @@ def _check_core(cfg: dict[str, Any], file: str | None) -> None:
     g["episodes"] = _count("episodes", g["episodes"], file, "goal", 1, MAX_TRIALS)
     g["timeout"] = _count("timeout", g["timeout"], file, "goal", 1, MAX_ITERATIONS)
     _at(P.number, "min_distance", g["min_distance"], file, "goal", lo=0.0)
+    # checked here, not only when goal episodes run, so a typo never waits for a goal run
+    _at(P.choice, "pairs", g["pairs"], file, "goal", choices=("random", "world"))
+    _at(P.number, "radius", g["radius"], file, "goal", lo=0.0, lo_open=True)
+    _at(P.number, "margin", g["margin"], file, "goal", lo=0.0)
     _check_names(g["worlds"], file, "goal.worlds")
     _check_names(cfg["plugins"]["dirs"], file, "plugins.dirs", allow_empty=True)
 
