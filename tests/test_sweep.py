@@ -162,3 +162,15 @@ def test_sweep_file_errors(tmp_path, capsys):
     assert main(["sweep", str(f)]) == 2
     err = capsys.readouterr().err
     assert "did you mean 'obstacle-avoidance'" in err and "sweep.base" in err
+
+
+@pytest.mark.parametrize("name", ["ablation", "oa12-optimism", "oa8-optimism"])
+def test_shipped_sweeps_load(name):
+    """The sweep files the README cites resolve every point (keys, values, presets)."""
+    from pathlib import Path
+
+    from sitframe.sweep import load_sweep
+
+    path = Path(__file__).resolve().parents[1] / "sweeps" / f"{name}.toml"
+    sweep = load_sweep(str(path))
+    assert len(sweep.points) == {"ablation": 6}.get(name, 40)
