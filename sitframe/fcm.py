@@ -615,11 +615,12 @@ def fcm(
 
 def _fcm_core(ws: _Workspace, V0: np.ndarray, tol: float, max_iter: int) -> FCMResult:
     V = np.array(V0, dtype=np.float64, copy=True)
-    history = np.empty(max_iter)
+    history: list[float] = []  # grows with the iterations run, not max_iter (may be huge)
     converged = False
     it = 0
     while it < max_iter:
-        Vn, history[it] = ws.step(V)
+        Vn, j = ws.step(V)
+        history.append(float(j))
         it += 1
         delta = float(np.max(np.abs(Vn - V)))
         V = Vn
@@ -629,7 +630,7 @@ def _fcm_core(ws: _Workspace, V0: np.ndarray, tol: float, max_iter: int) -> FCMR
     u, objective = ws.finalize(V)
     return FCMResult(
         centers=V, u=u, objective=objective, n_iter=it, converged=converged, m=ws.m,
-        objective_history=history[:it].copy(),
+        objective_history=np.asarray(history, dtype=np.float64),
     )
 
 

@@ -342,3 +342,10 @@ def test_membership_function_matches_memberships(c, m, seed):
     got = np.array([f(x) for x in X])
     np.testing.assert_allclose(got, expected, atol=1e-9)
     np.testing.assert_allclose(got.sum(axis=1), 1.0)
+
+
+def test_huge_max_iter_allocates_nothing_up_front():
+    """max_iter bounds the loop; memory grows with the iterations actually run."""
+    X = np.array([[0.0], [0.0], [1.0]])
+    r = fcm(X, 2, max_iter=3_159_563_044, seed=0)  # found by the fuzzer: 23.5 GiB before
+    assert r.converged and r.objective_history.shape == (r.n_iter,)
