@@ -113,8 +113,10 @@ class SegmentSet:
         self.ex = seg[:, 2] - seg[:, 0]
         self.ey = seg[:, 3] - seg[:, 1]
         len2 = self.ex * self.ex + self.ey * self.ey
-        with np.errstate(divide="ignore"):
-            self.inv_len2 = np.where(len2 > 0.0, 1.0 / np.where(len2 > 0.0, len2, 1.0), 0.0)
+        # Below the smallest normal float 1/len2 would overflow: such a segment
+        # (shorter than ~1e-154 m) is a point.
+        ok = len2 >= np.finfo(np.float64).tiny
+        self.inv_len2 = np.where(ok, 1.0 / np.where(ok, len2, 1.0), 0.0)
         self.lo = np.minimum(seg[:, :2], seg[:, 2:])
         self.hi = np.maximum(seg[:, :2], seg[:, 2:])
 
