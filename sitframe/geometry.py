@@ -373,7 +373,10 @@ def point_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
     px = p[:, 0:1]
     straddle = (y0 > py) != (y1 > py)  # (k, m)
     dy = np.where(y1 != y0, y1 - y0, 1.0)
-    x_cross = x0 + (py - y0) * (x1 - x0) / dy
+    # t = (py - y0) / dy is in [0, 1] on every edge that straddles py, so x_cross
+    # is finite there; elsewhere it may overflow, and is masked by ``straddle``.
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        x_cross = x0 + ((py - y0) / dy) * (x1 - x0)
     crossings = np.count_nonzero(straddle & (px < x_cross), axis=1)
     return (crossings % 2) == 1
 

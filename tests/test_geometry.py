@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -125,3 +126,12 @@ def test_bad_shapes_raise_clearly() -> None:
         g.raycast(np.zeros((2, 2)), np.zeros(3), np.zeros((1, 4)), 1.0)
     with pytest.raises(TypeError):
         g.point_segment_distance([["a", "b"]], np.zeros((1, 4)))
+
+
+def test_point_in_polygon_with_a_nearly_flat_edge_is_quiet():
+    """An edge with a subnormal rise used to overflow (a RuntimeWarning; found by the fuzzer)."""
+    square = np.array([[0.0, 0.0], [2.0, 5e-324], [2.0, 2.0], [0.0, 2.0]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        inside = g.point_in_polygon(np.array([[1.0, 1.0], [3.0, 1.0], [1.0, 1e300]]), square)
+    assert inside.tolist() == [True, False, False]

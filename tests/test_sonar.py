@@ -100,6 +100,7 @@ def test_rim_reading_is_zero_when_touching(box: World) -> None:
     ("kwargs", "name"),
     [({"max_range": 0}, "max_range"), ({"noise_std": -1}, "noise_std"),
      ({"dropout": 1.5}, "dropout"), ({"rays_per_beam": 0}, "rays_per_beam"),
+     ({"rays_per_beam": 2**63}, "rays_per_beam"),  # (found by the fuzzer: an IndexError)
      ({"beam_width_deg": "wide"}, "beam_width_deg"), ({"angles_deg": []}, "angles_deg"),
      ({"robot_radius": float("nan")}, "robot_radius")],
 )
