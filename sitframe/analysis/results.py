@@ -365,7 +365,12 @@ def reward_per_window(reward: np.ndarray, window: int = 50) -> np.ndarray:
 
 
 def evaluation_episodes(trial: TrialLog) -> dict[str, dict[str, np.ndarray]]:
-    """Evaluation runs of a trial: world name -> {``pose`` (n+1, 3), ``collision`` (n,)}."""
+    """Evaluation runs of a trial: world name -> {``pose`` (n+1, 3), ``collision`` (n,), ...}.
+
+    Logs written since evaluations keep more also hold ``contact`` (n, 2),
+    ``command`` (n, 2), ``nearest`` (n,), ``sonar`` (n, d) and ``memberships``
+    (n, c) per world (the evaluation figure marks collisions at the contact).
+    """
     out: dict[str, dict[str, np.ndarray]] = {}
     for key, val in trial.episodes.items():
         parts = key.split("/")
