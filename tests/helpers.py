@@ -43,3 +43,27 @@ p = 5
 worlds = [{worlds}]
 iterations = {eval_iterations}
 """
+
+
+def run_config(folder, config: str, out_name: str, *argv: str):
+    """Write ``config`` to ``folder/<stem>.toml``, ``sitframe run`` it into ``folder/out_name``
+    with ``--json`` plus ``argv``, assert exit 0; return ``(config_path, log_path)``."""
+    from sitframe.cli import main
+
+    cfg = folder / (out_name.rsplit(".", 1)[0] + ".toml")
+    cfg.write_text(config)
+    out = folder / out_name
+    assert main(["run", str(cfg), "--out", str(out), "--json", *argv]) == 0
+    return cfg, out
+
+
+def run_json(capsys, *argv: str):
+    """Run the CLI, assert exit 0 (showing stderr otherwise), return its stdout as JSON."""
+    import json
+
+    from sitframe.cli import main
+
+    code = main(list(argv))
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    return json.loads(captured.out)

@@ -8,7 +8,7 @@ import shutil
 import h5py
 import numpy as np
 import pytest
-from helpers import small_config
+from helpers import run_config, small_config
 from matplotlib.figure import Figure
 
 from sitframe import analysis as A
@@ -21,12 +21,7 @@ TINY = small_config(name="tiny", seed=5, sweep=(3, 6))
 
 @pytest.fixture(scope="module")
 def tiny_log(tmp_path_factory):
-    d = tmp_path_factory.mktemp("analysis")
-    cfg = d / "tiny.toml"
-    cfg.write_text(TINY)
-    out = d / "tiny.h5"
-    assert main(["run", str(cfg), "--out", str(out), "--json"]) == 0
-    return out
+    return run_config(tmp_path_factory.mktemp("analysis"), TINY, "tiny.h5")[1]
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import h5py
 import numpy as np
 import pytest
-from helpers import small_config
+from helpers import run_config, small_config
 
 from sitframe.cli import main
 from sitframe.errors import InputError
@@ -14,12 +14,8 @@ from sitframe.logs import open_log
 
 @pytest.fixture(scope="module")
 def good_log(tmp_path_factory):
-    d = tmp_path_factory.mktemp("integrity")
-    cfg = d / "c.toml"
-    cfg.write_text(small_config(name="integrity", trials=1, seed=3))
-    out = d / "good.h5"
-    assert main(["run", str(cfg), "--out", str(out), "--json"]) == 0
-    return out
+    return run_config(tmp_path_factory.mktemp("integrity"),
+                      small_config(name="integrity", trials=1, seed=3), "good.h5")[1]
 
 
 def _flip_byte_of(path, dataset, tmp_path):

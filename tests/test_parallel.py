@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from concurrent.futures.process import BrokenProcessPool
 
 import pytest
-from helpers import small_config
+from helpers import run_config, run_json, small_config
 
 from sitframe.cli import main
 from sitframe.logs import open_log
@@ -26,26 +25,14 @@ SMALL = small_config(trials=5, seed=11, eval_worlds=("novel-1", "training"))
 
 @pytest.fixture(scope="module")
 def serial_log(tmp_path_factory):
-    d = tmp_path_factory.mktemp("parallel")
-    cfg = d / "small.toml"
-    cfg.write_text(SMALL)
-    out = d / "serial.h5"
-    assert main(["run", str(cfg), "--out", str(out), "--workers", "1", "--json"]) == 0
-    return cfg, out
-
-
-def _run(capsys, *argv):
-    code = main(list(argv))
-    captured = capsys.readouterr()
-    assert code == 0, captured.err
-    return json.loads(captured.out)
+    return run_config(tmp_path_factory.mktemp("parallel"), SMALL, "serial.h5", "--workers", "1")
 
 
 def test_process_pool_log_identical_to_serial(serial_log, tmp_path, capsys):
     cfg, ref = serial_log
     capsys.readouterr()
     out = tmp_path / "pool.h5"
-    doc = _run(capsys, "run", str(cfg), "--out", str(out), "--workers", "2", "--json")
+    doc = run_json(capsys, "run", str(cfg), "--out", str(out), "--workers", "2", "--json")
     assert [t["trial"] for t in doc["trials"]] == [0, 1, 2, 3, 4]
     assert open_log(out).status == "complete"
     assert compare_logs(ref, out) == []
@@ -62,7 +49,7 @@ def test_dask_cluster_log_identical_to_serial(serial_log, tmp_path, capsys):
     with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
                                   protocol="tcp", host="127.0.0.1",
                                   dashboard_address=None) as cluster:
-        _run(capsys, "run", str(cfg), "--out", str(out), "--scheduler",
+        run_json(capsys, "run", str(cfg), "--out", str(out), "--scheduler",
              cluster.scheduler_address, "--json")
     assert open_log(out).status == "complete"
     assert compare_logs(ref, out) == []

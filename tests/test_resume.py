@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 import pytest
-from helpers import small_config
+from helpers import run_config, small_config
 
 from sitframe.cli import main
 from sitframe.errors import InputError
@@ -28,12 +28,8 @@ _CLI = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_han
 
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
-    d = tmp_path_factory.mktemp("resume")
-    cfg = d / "resume.toml"
-    cfg.write_text(CONFIG)
-    ref = d / "reference.h5"
-    assert main(["run", str(cfg), "--out", str(ref), "--workers", "1", "--json"]) == 0
-    return cfg, ref
+    return run_config(tmp_path_factory.mktemp("resume"), CONFIG, "reference.h5",
+                      "--workers", "1")
 
 
 def _start(cfg, out, *extra):

@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import json
-
 import h5py
 import numpy as np
 import pytest
-from helpers import small_config
+from helpers import run_json, small_config
 
 from sitframe.cli import main
 from sitframe.logs import SCHEMA_VERSION, open_log
@@ -24,16 +22,9 @@ def small_run(tmp_path_factory):
     return cfg, out
 
 
-def _run_json(capsys, *argv):
-    code = main(list(argv))
-    captured = capsys.readouterr()
-    assert code == 0, captured.err
-    return json.loads(captured.out)
-
-
 def test_run_json_contract_and_log(small_run, capsys):
     cfg, out = small_run
-    doc = _run_json(capsys, "run", str(cfg), "--out", str(out), "--json")
+    doc = run_json(capsys, "run", str(cfg), "--out", str(out), "--json")
     assert doc["log"] == str(out)
     assert doc["wall_seconds"] > 0
     assert [t["trial"] for t in doc["trials"]] == [0, 1]
@@ -78,7 +69,7 @@ def test_evaluate_json_contract(small_run, capsys):
     if not out.exists():
         main(["run", str(cfg), "--out", str(out), "--json"])
         capsys.readouterr()
-    doc = _run_json(capsys, "evaluate", str(out), "--world", "novel-2", "--trial", "1",
+    doc = run_json(capsys, "evaluate", str(out), "--world", "novel-2", "--trial", "1",
                     "--iterations", "120", "--json")
     assert set(doc) >= {"iterations", "collisions", "collisions_per_1000", "distance_m",
                         "mean_speed_m_s", "coverage"}
@@ -164,12 +155,12 @@ def test_reused_situations_are_recorded_and_sensor_must_match(small_run, tmp_pat
     reuse.write_text(SMALL.replace('seed = 3', f'seed = 3\nclusters_from = "{out}"')
                      .replace("trials = 2", "trials = 1"))
     log2 = tmp_path / "reuse.h5"
-    _run_json(capsys, "run", str(reuse), "--out", str(log2), "--json")
+    run_json(capsys, "run", str(reuse), "--out", str(log2), "--json")
     reused = open_log(log2)
     np.testing.assert_array_equal(reused.interpreter_state()["centers"],
                                   open_log(out).interpreter_state()["centers"])
     assert reused.stage("cluster")["reused_from"] == str(out)
-    doc = _run_json(capsys, "evaluate", str(log2), "--world", "novel-1", "--iterations", "50",
+    doc = run_json(capsys, "evaluate", str(log2), "--world", "novel-1", "--iterations", "50",
                     "--json")
     assert doc["iterations"] == 50
     cone = tmp_path / "cone.toml"
@@ -219,7 +210,7 @@ def test_best_trial_uses_only_the_learning_world(tmp_path, capsys):
     cfg = tmp_path / "best.toml"
     cfg.write_text(small_config(trials=3, iterations=200, eval_worlds=("training", "novel-1")))
     out = tmp_path / "best.h5"
-    _run_json(capsys, "run", str(cfg), "--out", str(out), "--workers", "1", "--json")
+    run_json(capsys, "run", str(cfg), "--out", str(out), "--workers", "1", "--json")
     log = open_log(out)
     table = log.summary()
     coll = table["eval.training.collisions_per_1000"]
@@ -232,6 +223,6 @@ def test_best_trial_uses_only_the_learning_world(tmp_path, capsys):
     other = tmp_path / "other.toml"
     other.write_text(small_config(trials=1, iterations=100))
     out2 = tmp_path / "other.h5"
-    _run_json(capsys, "run", str(other), "--out", str(out2), "--workers", "1", "--json")
+    run_json(capsys, "run", str(other), "--out", str(out2), "--workers", "1", "--json")
     with pytest.raises(InputError, match="no evaluation in its learning world 'training'"):
         best_trial(open_log(out2))
