@@ -120,15 +120,20 @@ iterations = 100
 """
 
 
-def kill_tally(n: int, tmp: Path, seed: int) -> int:
-    rng = np.random.default_rng(seed)
+def reference_run(tmp: Path) -> tuple[Path, Path, float]:
+    """Write KILL_CONFIG and run it uninterrupted with one worker: (config, log, seconds)."""
     cfg = tmp / "kill.toml"
     cfg.write_text(KILL_CONFIG)
     ref = tmp / "reference.h5"
     t0 = time.perf_counter()
     subprocess.run([*SITFRAME, "run", str(cfg), "--out", str(ref), "--workers", "1", "--json"],
                    check=True, stdout=subprocess.DEVNULL)
-    t_ref = time.perf_counter() - t0
+    return cfg, ref, time.perf_counter() - t0
+
+
+def kill_tally(n: int, tmp: Path, seed: int) -> int:
+    rng = np.random.default_rng(seed)
+    cfg, ref, t_ref = reference_run(tmp)
     opened = reproduced = mid_run = 0
     for i in range(n):
         out = tmp / f"killed{i}.h5"
@@ -176,13 +181,7 @@ _CLI = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_han
 
 def interrupt_tally(n: int, tmp: Path, seed: int) -> int:
     rng = np.random.default_rng(seed)
-    cfg = tmp / "kill.toml"
-    cfg.write_text(KILL_CONFIG)
-    ref = tmp / "reference.h5"
-    t0 = time.perf_counter()
-    subprocess.run([*SITFRAME, "run", str(cfg), "--out", str(ref), "--workers", "1", "--json"],
-                   check=True, stdout=subprocess.DEVNULL)
-    t_ref = time.perf_counter() - t0
+    cfg, ref, t_ref = reference_run(tmp)
     good = 0
     outcomes: dict[str, int] = {}
     for i in range(n):

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from sitframe.clustering import SONAR_ANGLES_DEG, ClusteringTrials, SweepResult, describe_prototype
@@ -163,6 +164,18 @@ def _measure_grid(n: int) -> tuple[Figure, np.ndarray]:
     return fig, axes
 
 
+def _style_measure_panel(ax: Axes, key: str, units: str, xlabel: str, n_bad: int) -> None:
+    """Title, labels, grid and the zero line (MinCard) shared by the validity-measure panels."""
+    if key == "min_card":
+        ax.axhline(0, color=OKABE_ITO["black"], lw=0.6, ls="--")
+    ax.set_title(_panel_title(key), fontsize=_FONT - 0.5)
+    ax.set_ylabel(_YLABELS[key].replace("{u}", units), fontsize=_FONT)
+    ax.set_xlabel(xlabel, fontsize=_FONT)
+    ax.tick_params(labelsize=_FONT - 1)
+    ax.grid(lw=0.3, alpha=0.5)
+    _note_nonfinite(ax, n_bad)
+
+
 def plot_measures_by_trial(trials: ClusteringTrials, *, units: str = "m") -> Figure:
     """Every validity measure against trial index, chosen trial highlighted (thesis Fig. 5.1).
 
@@ -196,14 +209,7 @@ def plot_measures_by_trial(trials: ClusteringTrials, *, units: str = "m") -> Fig
         ax.axvline(k, color=OKABE_ITO["vermillion"], lw=0.8, alpha=0.6, zorder=0)
         ax.plot([k], [v[k]], "D", ms=5, color=OKABE_ITO["vermillion"],
                 label=f"chosen (trial {k})", zorder=4)
-        if key == "min_card":
-            ax.axhline(0, color=OKABE_ITO["black"], lw=0.6, ls="--")
-        ax.set_title(_panel_title(key), fontsize=_FONT - 0.5)
-        ax.set_ylabel(_YLABELS[key].replace("{u}", units), fontsize=_FONT)
-        ax.set_xlabel("Trial index", fontsize=_FONT)
-        ax.tick_params(labelsize=_FONT - 1)
-        ax.grid(lw=0.3, alpha=0.5)
-        _note_nonfinite(ax, n_bad)
+        _style_measure_panel(ax, key, units, "Trial index", n_bad)
     handles, lbls = axes[0].get_legend_handles_labels()
     fig.legend(handles, lbls, loc="outside lower center", ncols=len(lbls), fontsize=_FONT,
                frameon=False)
@@ -241,16 +247,9 @@ def plot_measures_by_c(sweep: SweepResult, *, units: str = "m") -> Figure:
         if fb.any():
             ax.plot(cs[fb], v[fb], "o", ms=3, mfc="none", color=OKABE_ITO["vermillion"],
                     label="no trial with MinCard > 0")
-        if key == "min_card":
-            ax.axhline(0, color=OKABE_ITO["black"], lw=0.6, ls="--")
-        ax.set_title(_panel_title(key), fontsize=_FONT - 0.5)
-        ax.set_ylabel(_YLABELS[key].replace("{u}", units), fontsize=_FONT)
-        ax.set_xlabel("Number of clusters $c$", fontsize=_FONT)
+        _style_measure_panel(ax, key, units, "Number of clusters $c$", n_bad)
         if cs.size <= 20:
             ax.set_xticks(cs[:: max(1, math.ceil(cs.size / 7))])
-        ax.tick_params(labelsize=_FONT - 1)
-        ax.grid(lw=0.3, alpha=0.5)
-        _note_nonfinite(ax, n_bad)
     if fb.any():
         handles, lbls = axes[0].get_legend_handles_labels()
         fig.legend(handles, lbls, loc="outside lower center", ncols=len(lbls), fontsize=_FONT,
