@@ -57,11 +57,19 @@ def prepare_experiment(
     exp.info.extra["progress"] = progress
     kwargs: dict[str, Any] = {}
     _check_collect(exp, cfg, source)
+    checked: dict[str, Log] = {}
+
+    def source_log(path: str) -> Log:
+        """Open a log this run builds on, read whole once (checksums): intact logs only."""
+        if path not in checked:
+            checked[path] = open_log(path)
+            checked[path].check()
+        return checked[path]
+
     clusters_from = cfg["experiment"]["clusters_from"]
     if clusters_from:
         path = _resolve_path(clusters_from, base_dir)
-        log = open_log(path)
-        log.check()  # build on an intact log only (every dataset's checksum)
+        log = source_log(path)
         state = log.interpreter_state()
         logged_sensor = validate_config(log.config, file=path)["sensor"]
         if logged_sensor != cfg["sensor"]:
@@ -77,8 +85,7 @@ def prepare_experiment(
         if not pf:
             continue
         path = _resolve_path(pf["log"], base_dir)
-        log = open_log(path)
-        log.check()
+        log = source_log(path)
         which = pf.get("trial", 0)
         trial = log.trial(best_trial(log) if which == "best" else int(which))
         src_label = pf.get("behaviour", label)

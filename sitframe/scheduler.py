@@ -125,6 +125,7 @@ class Resolved:
                 raise
             w = self._worlds[name]
             clear = float(w.clearance(w.start[None, :2])[0])
+            # (collection rooms are driven along their trajectories, not from the start pose)
             if not key.startswith("collect") and clear < self.robot.radius:
                 raise InputError(f"the robot disc (radius {self.robot.radius:g} m) does not fit at "
                                  f"the start pose of world '{name}' (clearance {clear:.3g} m); "

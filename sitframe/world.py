@@ -398,18 +398,7 @@ def parse_world(text: str, *, file: str | None = None) -> World:
     if not isinstance(description, str):
         raise InputError(f"expected a string, got {description!r}", file=file, key="description")
 
-    robot = data["robot"]
-    if not isinstance(robot, dict):
-        raise InputError(
-            f"expected a table [robot] with start = [x, y, heading_deg], got {robot!r}",
-            file=file, key="robot",
-        )
-    _check_keys(robot, _ROBOT_KEYS, "robot", file)
-    if "start" not in robot:
-        raise InputError(
-            "missing required key 'start'; expected start = [x, y, heading_deg]",
-            file=file, key="robot.start",
-        )
+    robot = _table(data, "robot", _ROBOT_KEYS, "start", "[x, y, heading_deg]", file)
     start = _numbers(robot["start"], 3, "robot.start", file, what="[x, y, heading_deg]")
     radius = DEFAULT_ROBOT_RADIUS
     if "radius" in robot:
@@ -426,18 +415,7 @@ def parse_world(text: str, *, file: str | None = None) -> World:
 
     goal = None
     if "goal" in data:
-        g = data["goal"]
-        if not isinstance(g, dict):
-            raise InputError(
-                f"expected a table [goal] with position = [x, y] and radius, got {g!r}",
-                file=file, key="goal",
-            )
-        _check_keys(g, _GOAL_KEYS, "goal", file)
-        if "position" not in g:
-            raise InputError(
-                "missing required key 'position'; expected position = [x, y]",
-                file=file, key="goal.position",
-            )
+        g = _table(data, "goal", _GOAL_KEYS, "position", "[x, y]", file)
         pos = _numbers(g["position"], 2, "goal.position", file, what="[x, y]")
         goal = Goal(_readonly(pos), _positive(g.get("radius", 0.3), "goal.radius", file))
 
@@ -488,6 +466,20 @@ def _is_closed(points: np.ndarray) -> bool:
 
 def _in_obstacle(world: World, xy: np.ndarray) -> bool:
     return any(bool(geo.point_in_polygon(xy, o)[0]) for o in world._regions[1])
+
+
+def _table(data: dict[str, Any], name: str, keys: tuple[str, ...], required: str,
+           shape: str, file: str | None) -> dict[str, Any]:
+    """The table ``[name]`` with only ``keys`` and its ``required`` key (``= shape``) present."""
+    t = data[name]
+    if not isinstance(t, dict):
+        raise InputError(f"expected a table [{name}] with {required} = {shape}, got {t!r}",
+                         file=file, key=name)
+    _check_keys(t, keys, name, file)
+    if required not in t:
+        raise InputError(f"missing required key '{required}'; expected {required} = {shape}",
+                         file=file, key=f"{name}.{required}")
+    return t
 
 
 def _check_start(world: World, xy: np.ndarray, radius: float, *, file: str | None) -> None:

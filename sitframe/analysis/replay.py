@@ -113,8 +113,7 @@ def replay(
             raise InputError(f"trial {trial} has no evaluation in world '{evaluation}'; it has "
                              f"{worlds or 'none'}", file=lg.path, key="--eval")
         arrays = {k[len(prefix):]: v for k, v in tr.episodes.items() if k.startswith(prefix)}
-        tr = dataclasses.replace(tr, world=evaluation, arrays=arrays,
-                                 summary=tr.summary)
+        tr = dataclasses.replace(tr, world=evaluation, arrays=arrays)
         what = f"trial {trial}, evaluation in {evaluation}"
     need = [k for k in ("pose", "sonar", "memberships", "command", "collision")
             if k not in tr.arrays]
