@@ -253,15 +253,20 @@ def analyse(
                          np.asarray(lg.interpreter_state()["centers"]), R.sensor_angles(lg),
                          max_range=R.sensor_max_range(lg),
                          labels=R.situation_labels(lg, numbered=False)))
+        # J_m is in the squared units of the clustered features (see the fcm plugin's transform)
+        transform = str(lg.stage("cluster").get("transform", "range")) \
+            if lg.has("cluster") else "range"
+        units = {"log": "(log m)", "inverse": "(1/m)"}.get(transform, "m")
         if ct is not None:
             W.figure(sec, "measures_by_trial.png",
                      f"Validity measures of the {ct.n_trials} FCM trials, chosen trial "
-                     f"{ct.chosen} marked (Fig. 5.1)", lambda: CP.plot_measures_by_trial(ct))
+                     f"{ct.chosen} marked (Fig. 5.1)",
+                     lambda: CP.plot_measures_by_trial(ct, units=units))
         sw = R.sweep_result(lg)
         if sw is not None:
             W.figure(sec, "measures_by_c.png",
                      "Validity of the chosen partition against the number of clusters c "
-                     "(Fig. 4.5)", lambda: CP.plot_measures_by_c(sw))
+                     "(Fig. 4.5)", lambda: CP.plot_measures_by_c(sw, units=units))
         else:
             rep.skipped.append("measures_by_c.png: the log has no sweep over c "
                                "(set [interpreter] sweep = [2, 3, ...] to record one)")
