@@ -26,10 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from sitframe import hookimpl
+from sitframe import Context, InputError, Proposal, RunContext, hookimpl
 from sitframe import params as P
-from sitframe.errors import InputError
-from sitframe.records import Context, Proposal
 
 
 class SingleArbiter:
@@ -192,6 +190,10 @@ class CDBArbiter:
         self._idx = np.asarray(idx, dtype=np.intp)
         self._sets = np.asarray([abcd for _l, _i, abcd, _k in self.rules])
 
+    def bind(self, run: RunContext) -> None:
+        """Check the rules against the run's behaviour labels before anything runs."""
+        self._bind(list(run.labels))
+
     def weights(self, nearest: float, labels: list[str]) -> np.ndarray:
         """Normalised (k,) behaviour weights for context ``nearest`` [m]."""
         if tuple(labels) != self._labels:
@@ -230,25 +232,32 @@ class PriorityArbiter:
     Parameters
     ----------
     rules
-        Ordered list of tables ``{behaviour = "label", nearest_below = x}`` or
-        ``{behaviour = "label", nearest_above = x}`` or ``{behaviour = "label"}``
-        (always holds) with ``x`` in metres, compared with ``Context.nearest``.
-        If no condition holds, the last rule's behaviour wins. Default: every
-        behaviour but the last (in config order) holds when ``nearest <
-        threshold``; the last always holds -- e.g. ``avoid`` when something is
-        within ``threshold``, else ``goal``.
+        Ordered list of tables ``{behaviour = "label", nearest_below = x}``,
+        ``{behaviour = "label", nearest_above = x}`` (``x`` in metres, compared
+        with ``Context.nearest``), ``{behaviour = "label", activation_above =
+        a}`` (holds when the behaviour's proposal carries an activation >=
+        ``a``, see :class:`sitframe.Proposal`) or ``{behaviour = "label"}``
+        (always holds). If no condition holds, the last rule's behaviour wins.
+        Default: every behaviour but the last (in config order) holds when its
+        proposal's activation is at least ``activation`` -- or, for a behaviour
+        that gives no activation, when ``nearest < threshold``; the last
+        always holds -- e.g. ``avoid`` when something is within ``threshold``
+        (or the avoider says it is needed), else ``goal``.
     threshold
         The distance [m] of the default rules.
+    activation
+        The activation in [0, 1] at which a default rule holds.
 
     The weights are 1 for the winner and 0 for the others.
     """
 
     name = "priority"
-    _CONDS = ("nearest_below", "nearest_above")
+    _CONDS = ("nearest_below", "nearest_above", "activation_above")
 
     def __init__(self, *, rules: Sequence[Mapping[str, Any]] | None = None,
-                 threshold: float = 0.5) -> None:
+                 threshold: float = 0.5, activation: float = 0.5) -> None:
         self.threshold = P.number("threshold", threshold, lo=0.0)
+        self.activation = P.number("activation", activation, lo=0.0, hi=1.0)
         self.rules: list[tuple[str, str | None, float]] | None = None
         if rules is not None:
             if isinstance(rules, str) or not isinstance(rules, Sequence) or not rules:
@@ -266,8 +275,9 @@ class PriorityArbiter:
                                      f"{', '.join(self._CONDS)}, got {', '.join(conds)}", key=key)
                 label = P.string(f"{key}.behaviour", rule["behaviour"])
                 if conds:
-                    self.rules.append((label, conds[0],
-                                       P.number(f"{key}.{conds[0]}", rule[conds[0]], lo=0.0)))
+                    hi = 1.0 if conds[0] == "activation_above" else None
+                    self.rules.append((label, conds[0], P.number(
+                        f"{key}.{conds[0]}", rule[conds[0]], lo=0.0, hi=hi)))
                 else:
                     self.rules.append((label, None, 0.0))
         self._labels: tuple[str, ...] = ()
@@ -275,26 +285,39 @@ class PriorityArbiter:
 
     def _bind(self, labels: list[str]) -> None:
         if self.rules is None:
-            self._bound = [(i, "nearest_below", self.threshold) for i in range(len(labels) - 1)]
+            self._bound = [(i, "default", self.threshold) for i in range(len(labels) - 1)]
             self._bound.append((len(labels) - 1, None, 0.0))
         else:
             self._bound = [(_label_index(labels, lb, f"rules[{i}].behaviour", "priority"), c, x)
                            for i, (lb, c, x) in enumerate(self.rules)]
         self._labels = tuple(labels)
 
-    def winner(self, nearest: float, labels: list[str]) -> int:
-        """Index (in ``labels``) of the behaviour that wins at context ``nearest`` [m]."""
+    def bind(self, run: RunContext) -> None:
+        """Check the rules against the run's behaviour labels before anything runs."""
+        self._bind(list(run.labels))
+
+    def winner(self, nearest: float, labels: list[str],
+               activations: Sequence[float | None] | None = None) -> int:
+        """Index (in ``labels``) of the behaviour that wins at context ``nearest`` [m].
+
+        ``activations`` are the proposals' activations in label order (``None``
+        where a behaviour gives none).
+        """
         if tuple(labels) != self._labels:
             self._bind(labels)
         for i, cond, x in self._bound:
+            act = activations[i] if activations is not None else None
             if cond is None or (cond == "nearest_below" and nearest < x) or \
-                    (cond == "nearest_above" and nearest > x):
+                    (cond == "nearest_above" and nearest > x) or \
+                    (cond == "activation_above" and act is not None and act >= x) or \
+                    (cond == "default" and (nearest < x if act is None
+                                            else act >= self.activation)):
                 return i
         return self._bound[-1][0]
 
     def combine(self, context: Context, proposals: dict[str, Proposal]) -> tuple[Proposal, Any]:
         labels = list(proposals)
-        k = self.winner(context.nearest, labels)
+        k = self.winner(context.nearest, labels, [p.activation for p in proposals.values()])
         w = np.zeros(len(labels))
         w[k] = 1.0
         return proposals[labels[k]], w

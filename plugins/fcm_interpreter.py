@@ -32,10 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from sitframe import hookimpl
+from sitframe import MembershipFunction, TaskMap, cluster_trials, hookimpl, sweep_c
 from sitframe import params as P
-from sitframe.clustering import TaskMap, cluster_trials, sweep_c
-from sitframe.fcm import MembershipFunction
 
 TRANSFORMS = ("range", "log", "inverse")
 

@@ -37,13 +37,21 @@ from typing import Any
 
 import numpy as np
 
-from sitframe import hookimpl
+from sitframe import (
+    Context,
+    FuzzyQLearner,
+    LearnedPolicy,
+    PolicyOutput,
+    Proposal,
+    QLearningParams,
+    SituationFCS,
+    Transition,
+    hookimpl,
+)
 from sitframe import params as P
-from sitframe.fuzzy import SituationFCS
-from sitframe.learning import FuzzyQLearner, QLearningParams
-from sitframe.records import Context, Proposal, Transition
 
 OUTPUTS = ("heading", "speed")
+UNITS = {"heading": "deg", "speed": "m/s"}
 
 
 class FuzzyQBehaviour:
@@ -118,15 +126,22 @@ class FuzzyQBehaviour:
                 raise ValueError(f"output '{out}' is neither learned (learn = [...]) nor given "
                                  "by a learned policy (policy_from)")
 
-    def load_policy(self, policy: dict[str, np.ndarray]) -> None:
-        """Fix outputs to learned rule bases: ``policy['heading']`` etc. (c,) action indices."""
-        for out, rules in policy.items():
+    def load_policy(self, policy: LearnedPolicy) -> None:
+        """Fix outputs to a learned policy's rule bases (outputs this behaviour lacks are ignored).
+
+        Raises ``ValueError`` when the policy's actions for an output differ
+        from this behaviour's singletons: its rule indices would then name
+        other actions than the ones learned.
+        """
+        for out, o in policy.outputs.items():
             if out not in self.singletons:
                 continue
-            rules = np.asarray(rules, dtype=np.intp)
-            if rules.min() < 0 or rules.max() >= self.singletons[out].size:
-                raise ValueError(f"policy for '{out}' indexes {rules.max() + 1} actions, "
-                                 f"but {self.singletons[out].size} are configured")
+            mine = self.singletons[out]
+            if o.actions.shape != mine.shape or not np.array_equal(o.actions, mine):
+                raise ValueError(f"the policy's {out} actions {o.actions.tolist()} differ from "
+                                 f"this behaviour's {out}s {mine.tolist()}; configure the same "
+                                 "singletons as the run that learned it")
+            rules = np.asarray(o.rules, dtype=np.intp)
             self.fixed[out] = rules
             self.learners.pop(out, None)
             if out in self.fcs:
@@ -159,16 +174,58 @@ class FuzzyQBehaviour:
             for k, v in d.items():
                 data[f"{out}/{k}"] = v
             conv_its.append(d["convergence_iteration"])
-        for out, fcs in self.fcs.items():
-            data[f"policy/{out}"] = (self.learners[out].final_rule_base()
-                                     if out in self.learners else fcs.rule_actions).astype(np.int16)
-            data[f"singletons/{out}"] = self.singletons[out]
         if conv_its:
             data["converged"] = all(c >= 0 for c in conv_its)
             data["convergence_iteration"] = max(conv_its) if data["converged"] else -1
         return data
 
+    def policy(self) -> LearnedPolicy:
+        """Each output's rule base: the greedy (or converged) one if learned, else the fixed one."""
+        outs = {}
+        for out, fcs in self.fcs.items():
+            lr = self.learners.get(out)
+            rules = lr.final_rule_base() if lr is not None else fcs.rule_actions
+            outs[out] = PolicyOutput(self.singletons[out], np.asarray(rules).astype(np.int16),
+                                     UNITS[out], None if lr is None else lr.q.copy())
+        return LearnedPolicy(outs)
+
+
+class CrispQBehaviour(FuzzyQBehaviour):
+    """Crisp tabular Q-learning over the *dominant* situation: the baseline without fuzziness.
+
+    The same learner, parameters, exploration (soft-max rule-base changes every
+    ``b`` iterations) and convergence test as ``fuzzy-q``, but the memberships
+    are replaced by a one-hot vector of the dominant situation (the largest
+    membership, first on ties) everywhere: the robot executes the dominant
+    situation's action alone (no blending of rules), and only that situation's
+    rule is updated, with strength 1, towards ``r + gamma max_a Q(s', a)``
+    where ``s'`` is the next dominant situation -- ordinary Q-learning on a
+    discretised state. Comparing it with ``fuzzy-q`` under the same config
+    answers "is the fuzzy part needed?" (README, ``sweeps/fuzzy-vs-crisp.toml``).
+    """
+
+    name = "crisp-q"
+
+    def reset(self, rng: np.random.Generator, n_situations: int, iterations: int) -> None:
+        super().reset(rng, n_situations, iterations)
+        self._eye = np.eye(n_situations)
+
+    def propose(self, context: Context) -> Proposal:
+        return super().propose(_dominant(context, self._eye))
+
+    def learn(self, transition: Transition, reward: float) -> None:
+        before, after = _dominant(transition.before, self._eye), \
+            _dominant(transition.after, self._eye)
+        super().learn(Transition(before, transition.command, transition.outcome, after), reward)
+
+
+def _dominant(context: Context, eye: np.ndarray) -> Context:
+    """``context`` with its memberships replaced by the dominant situation's one-hot row."""
+    return Context(context.iteration, context.pose, context.reading,
+                   eye[int(context.memberships.argmax())], context.nearest, context.world,
+                   context.goal)
+
 
 @hookimpl
 def sitframe_behaviours() -> list[Any]:
-    return [FuzzyQBehaviour]
+    return [FuzzyQBehaviour, CrispQBehaviour]

@@ -26,10 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from sitframe import hookimpl
+from sitframe import Context, InputError, Proposal, Transition, hookimpl
 from sitframe import params as P
-from sitframe.errors import InputError
-from sitframe.records import Context, Proposal, Transition
 
 
 def goal_bearing_deg(pose: np.ndarray, goal_xy: np.ndarray) -> float:

@@ -19,9 +19,7 @@ from __future__ import annotations
 
 import json
 
-from sitframe import hookimpl
-from sitframe.logs import LogWriter
-from sitframe.records import RunInfo, TrialResult
+from sitframe import LogWriter, RunInfo, TrialResult, hookimpl
 
 
 def _writer(run: RunInfo) -> LogWriter | None:
@@ -32,10 +30,6 @@ def _writer(run: RunInfo) -> LogWriter | None:
 def sitframe_run_start(run: RunInfo) -> None:
     w = _writer(run)
     if w is not None:
-        if "code_hash" not in run.extra:
-            from sitframe.resume import code_fingerprint
-
-            run.extra["code_hash"] = code_fingerprint(run.plugins)
         w.start(run, resume=bool(run.extra.get("resume")))
 
 
@@ -61,4 +55,4 @@ def sitframe_trial_end(run: RunInfo, trial: TrialResult) -> None:
 def sitframe_run_end(run: RunInfo, status: str) -> None:
     w = _writer(run)
     if w is not None and w.path.exists():
-        w.set_status(status)
+        w.set_status(status, failure=run.extra.get("failure"))

@@ -13,8 +13,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from sitframe import hookimpl
-from sitframe.records import RunInfo, StepRecord, TrialResult
+from sitframe import RunInfo, StepRecord, TrialResult, hookimpl
 
 _state: dict[str, Any] = {}
 

@@ -27,9 +27,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from sitframe import hookimpl
+from sitframe import Transition, hookimpl
 from sitframe import params as P
-from sitframe.records import Transition
 
 
 class ObstacleAvoidanceReward:

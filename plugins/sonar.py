@@ -9,8 +9,8 @@ floats. To add your own:
    ``__init__`` and validate them there (raise ``ValueError`` naming the
    parameter; the config loader turns it into a one-line error).
 2. Use the world's cached geometry: ``world.segment_set`` holds every wall and
-   obstacle edge; :func:`sitframe.geometry.raycast` casts all rays in one
-   vectorised call.
+   obstacle edge; :func:`sitframe.cast_rays` casts all rays in one vectorised
+   call. Everything a plugin needs is importable from ``sitframe`` itself.
 3. Take all randomness from the ``rng`` you are given (never ``np.random``),
    and draw from it only when an option needs it, so runs stay reproducible.
 4. Register the class from a hook::
@@ -43,7 +43,7 @@ noise ``noise_std`` [m] and a ``dropout`` probability (a dropped beam reads
 ``max_range``, like a lost echo).
 
 >>> import numpy as np
->>> from sitframe.world import load_world
+>>> from sitframe import load_world
 >>> from sitframe.plugins.sonar import SonarRing
 >>> world = load_world("training")
 >>> SonarRing().read(world, world.start, np.random.default_rng(0)).shape
@@ -58,9 +58,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from sitframe import hookimpl
-from sitframe.geometry import _raycast
-from sitframe.world import World
+from sitframe import RunContext, World, cast_rays, hookimpl
 
 __all__ = ["SonarRing", "sitframe_sensors"]
 
@@ -91,7 +89,8 @@ class SonarRing:
     max_range
         Maximum range from the rim [m]; readings clip to it.
     robot_radius
-        Distance from the centre (ray origin) to the rim [m].
+        Distance from the centre (ray origin) to the rim [m]; by default the
+        run's ``robot.radius`` (given at :meth:`bind`).
     beam_width_deg
         Full width of each beam's cone [deg] (0 = a single ray).
     rays_per_beam
@@ -109,7 +108,7 @@ class SonarRing:
         *,
         angles_deg: Sequence[float] = (90, 50, 30, 10, -10, -30, -50, -90),
         max_range: float = 3.0,
-        robot_radius: float = 0.15,
+        robot_radius: float | None = None,
         beam_width_deg: float = 0.0,
         rays_per_beam: int = 1,
         noise_std: float = 0.0,
@@ -125,7 +124,9 @@ class SonarRing:
         self.angles_deg = angles
         self.angles_deg.setflags(write=False)
         self.max_range = _param("max_range", max_range, lo=0.0, lo_open=True)
-        self.robot_radius = _param("robot_radius", robot_radius, lo=0.0)
+        self.robot_radius = 0.15 if robot_radius is None else \
+            _param("robot_radius", robot_radius, lo=0.0)
+        self._radius_given = robot_radius is not None
         self.beam_width_deg = _param("beam_width_deg", beam_width_deg, lo=0.0, hi=180.0)
         if isinstance(rays_per_beam, bool) or not isinstance(rays_per_beam, int | np.integer) \
                 or not 1 <= rays_per_beam <= MAX_RAYS_PER_BEAM:
@@ -141,6 +142,11 @@ class SonarRing:
             spread = np.zeros(1)
         self._ray_rel = np.radians((angles[:, None] + spread[None, :]).reshape(-1))
         self._n = angles.size
+
+    def bind(self, run: RunContext) -> None:
+        """Measure ranges from the run robot's rim unless ``robot_radius`` was given."""
+        if not self._radius_given:
+            self.robot_radius = float(run.robot.radius)
 
     def read(self, world: World, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Read all sonars at ``pose``.
@@ -159,15 +165,9 @@ class SonarRing:
         numpy.ndarray
             (d,) ranges [m] from the rim, in [0, max_range].
         """
-        ang = self._ray_rel + float(pose[2])
-        px = np.array([[float(pose[0])]])
-        py = np.array([[float(pose[1])]])
-        segs = world.segment_set
         reach = self.max_range + self.robot_radius
-        if segs.n:
-            dist = _raycast(px, py, np.cos(ang)[:, None], np.sin(ang)[:, None], segs, reach)
-        else:
-            dist = np.full(ang.shape[0], reach)
+        dist = cast_rays(world.segment_set, pose[0], pose[1], self._ray_rel + float(pose[2]),
+                         reach)
         if self.rays_per_beam > 1:
             dist = dist.reshape(self._n, self.rays_per_beam).min(axis=1)
         # a ray that hit nothing reads exactly max_range (no rounding from - radius)

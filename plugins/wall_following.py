@@ -55,10 +55,10 @@ from typing import Any
 
 import numpy as np
 
-from sitframe import hookimpl
+from sitframe import RunContext, Transition, hookimpl
 from sitframe import params as P
-from sitframe.records import Transition
 
+#: Geometry assumed when the reward is used outside a run (no ``bind``).
 PIONEER_ANGLES = (90.0, 50.0, 30.0, 10.0, -10.0, -30.0, -50.0, -90.0)
 
 
@@ -75,13 +75,13 @@ class WallFollowingReward:
         Subtracted from positive rewards per degree of |heading change|.
     angles_deg
         Bearing of each sensor beam [deg], positive = left, in reading order
-        (default: the Pioneer's 8 front sonars).
+        (default: the run sensor's, given at :meth:`bind`).
     side_min_angle
         Beams with ``|angle| >= side_min_angle`` [deg] measure the wall distance.
     robot_radius
-        Robot disc radius [m] (ranges are from the rim).
+        Robot disc radius [m] (ranges are from the rim; default: the run's).
     max_range
-        Readings at or beyond this [m] saw nothing.
+        Readings at or beyond this [m] saw nothing (default: the sensor's).
     approach_min
         The nearest range must shrink by more than this [m] to count as approaching.
     """
@@ -100,10 +100,10 @@ class WallFollowingReward:
         approach: float = 20.0,
         explore: float = 0.0,
         heading_cost: float = 0.1,
-        angles_deg: Sequence[float] = PIONEER_ANGLES,
+        angles_deg: Sequence[float] | None = None,
         side_min_angle: float = 50.0,
-        robot_radius: float = 0.15,
-        max_range: float = 3.0,
+        robot_radius: float | None = None,
+        max_range: float | None = None,
         approach_min: float = 0.01,
     ) -> None:
         self.near = P.number("near", near, lo=0.0)
@@ -117,12 +117,22 @@ class WallFollowingReward:
         self.approach = P.number("approach", approach)
         self.explore = P.number("explore", explore)
         self.heading_cost = P.number("heading_cost", heading_cost, lo=0.0)
-        angles = np.asarray(P.number_list("angles_deg", list(angles_deg), lo=-180, hi=180))
         self.side_min_angle = P.number("side_min_angle", side_min_angle, lo=0.0, hi=90.0,
                                        lo_open=True)
+        self.approach_min = P.number("approach_min", approach_min, lo=0.0)
+        self.band_centre = 0.5 * (self.near + self.far)
+        self._given = {"angles_deg": angles_deg, "robot_radius": robot_radius,
+                       "max_range": max_range}
+        self._set_geometry(
+            PIONEER_ANGLES if angles_deg is None else angles_deg,
+            0.15 if robot_radius is None else robot_radius,
+            3.0 if max_range is None else max_range)
+
+    def _set_geometry(self, angles_deg: Sequence[float], robot_radius: float,
+                      max_range: float) -> None:
+        angles = np.asarray(P.number_list("angles_deg", list(angles_deg), lo=-180, hi=180))
         self.robot_radius = P.number("robot_radius", robot_radius, lo=0.0)
         self.max_range = P.number("max_range", max_range, lo=0.0, lo_open=True)
-        self.approach_min = P.number("approach_min", approach_min, lo=0.0)
         side = np.abs(angles) >= self.side_min_angle
         if not side.any():
             raise ValueError(f"no beam has |angle| >= side_min_angle ({self.side_min_angle} deg)"
@@ -130,7 +140,18 @@ class WallFollowingReward:
         self.angles_deg = angles
         self._side = np.flatnonzero(side)
         self._sin = np.sin(np.radians(np.abs(angles[side])))
-        self.band_centre = 0.5 * (self.near + self.far)
+
+    def bind(self, run: RunContext) -> None:
+        """Take the beam angles, max range and robot radius from the run unless given."""
+        g = self._given
+        self._set_geometry(
+            run.sensor.angles_deg if g["angles_deg"] is None else g["angles_deg"],
+            run.robot.radius if g["robot_radius"] is None else g["robot_radius"],
+            run.sensor.max_range if g["max_range"] is None else g["max_range"])
+        if self.angles_deg.size != run.sensor.dim:
+            raise ValueError(f"angles_deg has {self.angles_deg.size} beams but the sensor "
+                             f"'{run.sensor.name}' reads {run.sensor.dim}; drop angles_deg "
+                             "to use the sensor's")
 
     # -- wall distance -----------------------------------------------------
     def wall_distances(self, readings: np.ndarray) -> np.ndarray:
@@ -170,7 +191,7 @@ class WallFollowingReward:
 
     # -- evaluation --------------------------------------------------------
     def metrics(self, arrays: dict[str, np.ndarray]) -> dict[str, float]:
-        """Wall-following quality of a trial's per-iteration arrays (``sonar (L, d)``).
+        """Wall-following quality of a trial's per-iteration arrays (``reading (L, d)``).
 
         Returns
         -------
@@ -181,7 +202,7 @@ class WallFollowingReward:
             ``wall_lost_fraction`` (no side beam sees anything),
             ``wall_distance_median_m``; ``d`` is clipped to ``max_range``.
         """
-        d = self.wall_distances(arrays["sonar"])
+        d = self.wall_distances(arrays["reading"] if "reading" in arrays else arrays["sonar"])
         if d.size == 0:
             nan = float("nan")
             return {"wall_band_fraction": nan, "wall_distance_rmse_m": nan,

@@ -9,6 +9,7 @@ to HDF5.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pluggy
 
@@ -26,4 +27,52 @@ if (_checkout / "pyproject.toml").is_file() and (_checkout / "plugins" / "__init
 #: Decorator plugin authors use to implement a hook (``@sitframe.hookimpl``).
 hookimpl = pluggy.HookimplMarker("sitframe")
 
-__all__ = ["__version__", "hookimpl"]
+#: Everything a plugin author needs, importable from ``sitframe`` itself
+#: (``from sitframe import hookimpl, Proposal, Transition``). Loaded on first
+#: use, so ``import sitframe`` (and the CLI's start-up) stays fast.
+_PUBLIC: dict[str, str] = {
+    # component protocols and the run lifecycle
+    "Sensor": "components", "SituationInterpreter": "components", "Reward": "components",
+    "Behaviour": "components", "Arbiter": "components",
+    # records crossing the plugin boundary
+    "Context": "records", "Proposal": "records", "Transition": "records",
+    "StepRecord": "records", "RunInfo": "records", "TrialResult": "records",
+    "RunContext": "records", "TrialInfo": "records", "SensorSpec": "records",
+    "LearnedPolicy": "records", "PolicyOutput": "records",
+    # errors
+    "InputError": "errors", "PluginError": "errors", "PluginFault": "errors",
+    # worlds, robot and geometry
+    "World": "world", "Goal": "world", "load_world": "world",
+    "RobotParams": "robot", "Command": "robot", "StepOutcome": "robot",
+    "cast_rays": "geometry", "raycast": "geometry", "point_segment_distance": "geometry",
+    "min_distance": "geometry",
+    # situations and learning building blocks
+    "fcm": "fcm", "memberships": "fcm", "MembershipFunction": "fcm",
+    "cluster_trials": "clustering", "sweep_c": "clustering", "TaskMap": "clustering",
+    "describe_prototype": "clustering",
+    "SituationFCS": "fuzzy", "FuzzyQLearner": "learning", "QLearningParams": "learning",
+    "greedy_actions": "learning", "softmax_choice": "learning",
+    # logs
+    "open_log": "logs", "LogWriter": "logs",
+}
+
+#: Submodules plugin authors use as namespaces (``from sitframe import params as P``).
+_MODULES = ("params", "hookspecs")
+
+__all__ = ["__version__", "hookimpl", *_PUBLIC, *_MODULES]
+
+
+def __getattr__(name: str) -> Any:
+    import importlib
+
+    if name in _PUBLIC:
+        value = getattr(importlib.import_module(f"sitframe.{_PUBLIC[name]}"), name)
+        globals()[name] = value
+        return value
+    if name in _MODULES:
+        return importlib.import_module(f"sitframe.{name}")
+    raise AttributeError(f"module 'sitframe' has no attribute '{name}'")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -23,7 +23,10 @@ writes the log. A killed run's log keeps every finished trial and
 
 Errors caused by input (config, world, log, plugin) print one line on stderr
 (``sitframe: error: FILE: KEY: what was wrong; what was expected``) and exit
-with status 2, before anything is written. Set ``SITFRAME_TRACEBACK=1`` to see
+with status 2, before anything is written. Plugin code that raises, or returns
+a value that breaks the contract, during a run prints one line naming the
+plugin, component, method, trial and iteration and exits with status 3; the
+log keeps every finished trial and is marked ``failed``. Set ``SITFRAME_TRACEBACK=1`` to see
 the traceback as well. Ctrl-C exits with status 130.
 """
 
@@ -40,7 +43,7 @@ from pathlib import Path
 from typing import Any
 
 from sitframe import __version__
-from sitframe.errors import InputError, PluginError
+from sitframe.errors import PLUGIN_FAULT_EXIT, InputError, PluginError, PluginFault
 
 
 class _Parser(argparse.ArgumentParser):
@@ -112,14 +115,20 @@ EXTRA_COMMANDS: dict[str, str] = {"analyse": "sitframe.analysis.commands",
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line ``argv``; returns the exit status (2 bad input, 130 Ctrl-C)."""
+    """Run the command line ``argv``; returns the exit status.
+
+    0 success, 2 bad input (config, world, log, a plugin that cannot load or
+    breaks the protocol at creation), 3 plugin code failed during the run
+    (:class:`~sitframe.errors.PluginFault`: the log keeps every finished trial
+    and says ``failed``), 130 Ctrl-C.
+    """
     try:
         return _dispatch(build_parser().parse_args(argv))
     except (InputError, PluginError) as exc:
         if os.environ.get("SITFRAME_TRACEBACK"):
             raise
         print(f"sitframe: error: {' '.join(str(exc).splitlines())}", file=sys.stderr)
-        return 2
+        return PLUGIN_FAULT_EXIT if isinstance(exc, PluginFault) else 2
     except KeyboardInterrupt:
         print("sitframe: interrupted", file=sys.stderr)
         return 130
@@ -291,14 +300,8 @@ def run_json(result: Any) -> dict[str, Any]:
     trials = []
     for tr in result.trials:
         s = tr.summary
-        rule_base = {}
-        for label, data in tr.behaviours.items():
-            for k, v in data.items():
-                if k.startswith("policy/"):
-                    out = k.split("/", 1)[1]
-                    singles = data.get(f"singletons/{out}")
-                    rule_base[f"{label}.{out}"] = ([float(singles[i]) for i in v]
-                                                   if singles is not None else list(map(int, v)))
+        rule_base = {f"{label}.{out}": [float(v) for v in o.values()]
+                     for label, pol in tr.policies.items() for out, o in pol.outputs.items()}
         entry = {
             "trial": tr.index,
             "seed": tr.seed,

@@ -1,10 +1,27 @@
 """The small interfaces every component satisfies.
 
 Plugins contribute *factories* (usually classes) through the registration
-hooks in :mod:`sitframe.hookspecs`; the scheduler creates one instance per
-trial from the run config and then calls the methods below directly in its
-loop. These are :class:`typing.Protocol` classes: implement the methods, no
-inheritance needed. See ``plugins/`` for a worked example of each.
+hooks in :mod:`sitframe.hookspecs`; the core creates one instance per trial
+from the run config and calls the methods below directly in its loop. These
+are :class:`typing.Protocol` classes: implement the methods, no inheritance
+needed. See ``plugins/`` for a worked example of each, and ``docs/plugins.md``.
+
+Lifecycle, for every kind (each step optional unless the protocol lists it)::
+
+    factory(**params)          # created from the config table; ValueError/TypeError
+                               # become one line naming the file and key
+    bind(run: RunContext)      # once, before collect: robot, sensor spec, labels,
+                               # number of situations, worlds, seed
+    trial_start(trial: TrialInfo)   # each learning trial and each evaluation
+    ... the loop ...
+    trial_end(trial: TrialInfo) -> dict | None
+                               # arrays/scalars to log under plugins/<plugin>/
+
+The core checks each component against its protocol when it is created (a
+missing method is one line naming plugin, component and method) and checks
+every value that crosses the boundary (:mod:`sitframe.contract`); an exception
+raised in a component during a run is reported as one line naming the plugin,
+the component, the method, the trial and the iteration.
 """
 
 from __future__ import annotations
@@ -14,7 +31,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 import numpy as np
 
 if TYPE_CHECKING:
-    from sitframe.records import Context, Proposal, Transition
+    from sitframe.records import Context, LearnedPolicy, Proposal, Transition
     from sitframe.world import World
 
 
@@ -38,7 +55,12 @@ class Sensor(Protocol):
     max_range: float
 
     def read(self, world: World, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """Return the (d,) reading (metres) for ``pose`` = (x [m], y [m], theta [rad])."""
+        """Return the (d,) reading (metres) for ``pose`` = (x [m], y [m], theta [rad]).
+
+        Must be a float array of exactly ``len(angles_deg)`` finite values
+        (checked). The run logs readings as ``reading`` with this geometry
+        (:class:`sitframe.records.SensorSpec`), whatever the sensor.
+        """
         ...
 
 
@@ -49,7 +71,9 @@ class SituationInterpreter(Protocol):
     name: ClassVar[str]
 
     @property
-    def n_situations(self) -> int: ...
+    def n_situations(self) -> int:
+        """Number ``c`` of situations (known from the config, before ``fit``)."""
+        ...
 
     def fit(self, X: np.ndarray, rng: np.random.Generator) -> dict[str, Any]:
         """Fit on collected readings ``X`` (n, d); return arrays/scalars to log.
@@ -62,7 +86,7 @@ class SituationInterpreter(Protocol):
         ...
 
     def memberships(self, reading: np.ndarray) -> np.ndarray:
-        """Return the (c,) memberships of one (d,) reading; they sum to 1."""
+        """Return the (c,) memberships of one (d,) reading: non-negative, summing to 1 (checked)."""
         ...
 
     def state(self) -> dict[str, Any]:
@@ -76,7 +100,10 @@ class SituationInterpreter(Protocol):
 
 @runtime_checkable
 class Reward(Protocol):
-    """Maps one transition to a scalar reward.
+    """Maps one transition to a scalar reward: a finite real number (checked).
+
+    A stateful reward resets its state in ``trial_start(trial)`` and reads the
+    robot's radius or the sensor geometry from ``bind(run)``.
 
     Optional: a method ``metrics(arrays) -> dict[str, float]`` that scores a
     finished trial's per-iteration arrays (``pose``, ``sonar``, ``command``,
@@ -95,10 +122,18 @@ class Reward(Protocol):
 class Behaviour(Protocol):
     """Proposes a heading change (and optionally a speed) each iteration.
 
-    Lifecycle per trial: [``load_policy``] → ``reset`` → (``propose`` → ``learn``)*
-    → ``trial_data``.
-    ``learn`` is called only when the behaviour has a reward bound in the
-    config and ``learning`` is on.
+    Lifecycle per trial: [``load_policy``] → ``reset`` → ``trial_start`` →
+    (``propose`` → ``learn``)* → ``trial_data`` → ``policy`` → ``trial_end``.
+    ``learn`` is required, and called, only when the behaviour has a reward
+    bound in the config and the trial learns; ``load_policy`` only when the
+    config gives it a policy (``policy_from``) or a frozen evaluation runs.
+
+    A *learned* behaviour is one whose ``policy()`` returns a
+    :class:`sitframe.records.LearnedPolicy` (actions, output names and units,
+    the per-situation rules, optionally Q). The core logs it and every tool
+    (run table, ``--json``, ``evaluate``, ``policy_from``, ``analyse``,
+    ``replay``) reads it from there, so a new learned behaviour is as
+    visible as the built-in ``fuzzy-q``.
     """
 
     name: ClassVar[str]
@@ -112,26 +147,40 @@ class Behaviour(Protocol):
     def learn(self, transition: Transition, reward: float) -> None: ...
 
     def trial_data(self) -> dict[str, Any]:
-        """Arrays (per-iteration or snapshots) and scalars to log for the trial.
+        """Optional. Arrays (per-iteration or snapshots) and scalars to log for the trial.
 
-        Scalars named ``converged`` and ``convergence_iteration`` are used by
-        the summary table and ``run --json``; a learned policy is returned
-        under ``policy/...`` keys and read back by :meth:`load_policy`.
+        Scalars named ``converged`` (bool) and ``convergence_iteration`` (int,
+        -1 if not converged) are used by the summary table and ``run --json``.
+        Written under ``/trials/NNNN/behaviours/<label>/``.
         """
         ...
 
-    def load_policy(self, policy: dict[str, np.ndarray]) -> None:
-        """Fix (part of) the behaviour to a learned policy read back from a log.
+    def policy(self) -> LearnedPolicy | None:
+        """Optional. The policy learned in the trial that just ended (``None``: nothing learned)."""
+        ...
+
+    def load_policy(self, policy: LearnedPolicy) -> None:
+        """Optional. Fix (part of) the behaviour to a learned policy read back from a log.
 
         Called before :meth:`reset`, e.g. to evaluate a frozen rule base or to
-        hold the heading rule base fixed while speed is learned.
+        hold the heading rule base fixed while speed is learned. Outputs the
+        behaviour does not have may be ignored; actions that differ from the
+        behaviour's own should be refused (``ValueError``).
         """
         ...
 
 
 @runtime_checkable
 class Arbiter(Protocol):
-    """Fuses the behaviours' proposals into one command."""
+    """Fuses the behaviours' proposals into one command.
+
+    ``bind(run)`` gives the behaviour labels (``run.labels``) before anything
+    runs: check the arbiter's rules against them there, so a typo is one line
+    before collect starts. An arbiter may *learn* as a behaviour does: give it
+    ``reward = "..."`` (and ``reward_params``) in ``[arbiter]`` and a method
+    ``learn(transition, reward)``; it may also have ``reset``, ``policy`` and
+    ``load_policy`` (a learned policy is logged under the label ``arbiter``).
+    """
 
     name: ClassVar[str]
 

@@ -281,7 +281,7 @@ def run_episode_batch(
     for k, v in agg.items():
         summary[f"eval/{world.name}/{k}"] = v
     return TrialResult(spec.index, spec.seed, world.name, arrays, parts[0].behaviours, summary,
-                       episodes)
+                       episodes, policies=parts[0].policies)
 
 
 def batch_aggregate(result: TrialResult) -> dict[str, float]:
@@ -311,7 +311,7 @@ def check_goal_config(cfg: dict[str, Any], res: Resolved, source: str | None) ->
 
 
 def goal_batch_specs(exp: Any, interpreter_state: dict[str, Any],
-                     policies: dict[str, dict[str, np.ndarray]] | None,
+                     policies: dict[str, Any] | None,
                      first_index: int) -> list[TrialSpec]:
     """One episode-batch spec per world of the config's ``[goal] worlds`` (a goal run).
 

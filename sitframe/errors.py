@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import difflib
 from collections.abc import Iterable
+from typing import Any
 
 
 class SitframeError(Exception):
@@ -50,6 +51,53 @@ class InputError(SitframeError, ValueError):
 
 class PluginError(SitframeError):
     """A plugin failed: names the plugin, its origin and the hook or component."""
+
+
+class TaskCancelled(SitframeError):
+    """Raised inside a worker's task when the main process cancels the run."""
+
+
+#: Exit status of the CLI when plugin code failed during a run (2 is bad input).
+PLUGIN_FAULT_EXIT = 3
+
+
+class PluginFault(PluginError):
+    """Plugin code raised, or returned a value that breaks the contract, during a run.
+
+    The message is one line naming the plugin (distribution and version, or
+    file), the component, the method, the trial and iteration, and what went
+    wrong. The CLI prints it and exits with :data:`PLUGIN_FAULT_EXIT`; the
+    run's log keeps every finished trial, with status ``failed`` and the
+    message in its ``failure`` attribute.
+
+    Parameters
+    ----------
+    message
+        What went wrong (the exception's type and message, or the broken rule).
+    where
+        ``"plugin X (dist 1.0, entry point): behaviour 'fuzzy-q' [behaviours.avoid]"``.
+    method
+        The method that failed (``read``, ``propose``, ``__call__`` ...).
+    trial, iteration
+        Where in the run, if inside the loop.
+    """
+
+    def __init__(self, message: str, *, where: str, method: str, trial: int | None = None,
+                 iteration: int | None = None) -> None:
+        self.message, self.where, self.method = message, where, method
+        self.trial, self.iteration = trial, iteration
+        at = "" if trial is None else f" in trial {trial}" + (
+            "" if iteration is None else f", iteration {iteration}")
+        text = f"{where}: {method}(){at}: {message}"
+        super().__init__(text.replace("\r", "\\r").replace("\n", "\\n"))
+
+    def __reduce__(self) -> tuple[Any, ...]:  # picklable across worker processes
+        return (_fault, (self.message, self.where, self.method, self.trial, self.iteration))
+
+
+def _fault(message: str, where: str, method: str, trial: int | None,
+           iteration: int | None) -> PluginFault:
+    return PluginFault(message, where=where, method=method, trial=trial, iteration=iteration)
 
 
 def did_you_mean(word: str, choices: Iterable[str]) -> str:

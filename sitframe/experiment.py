@@ -24,6 +24,7 @@ from sitframe.config import validate_config
 from sitframe.errors import InputError
 from sitframe.logs import Log, open_log
 from sitframe.pluginmanager import Registry, get_plugin_manager
+from sitframe.records import LearnedPolicy
 from sitframe.scheduler import STAGE_EVAL, Experiment, Resolved, TrialSpec, simulate, stage_seed
 
 
@@ -93,8 +94,8 @@ def prepare_experiment(
             raise InputError(f"trial {trial.index} has no behaviour '{src_label}' (it has "
                              f"{', '.join(trial.behaviours) or 'none'})", file=path,
                              key=f"behaviours.{label}.policy_from.behaviour")
-        policy = trial.policy(src_label)
-        if not policy:
+        policy = _logged_policy(trial, src_label, path)
+        if policy is None:
             raise InputError(f"behaviour '{src_label}' of trial {trial.index} has no learned "
                              "policy (no policy/... datasets)", file=path, key="trials")
         policies[label] = policy
@@ -261,7 +262,8 @@ def evaluate_log(
     log.check()
     cfg = validate_config(log.config, file=log_path)
     tl = log.trial(trial)
-    policies = {label: tl.policy(label) for label in tl.behaviours if tl.policy(label)}
+    policies = {label: p for label in tl.behaviours
+                if (p := _logged_policy(tl, label, log_path)) is not None}
     if not policies:
         raise InputError(f"trial {trial} has no learned policy to evaluate", file=log_path,
                          key="trials")
@@ -312,9 +314,17 @@ def evaluate_log(
     return out
 
 
-def _fusion_config(log_cfg: dict[str, Any], policies: dict[str, dict[str, np.ndarray]],
+def _logged_policy(trial: Any, label: str, path: str) -> LearnedPolicy | None:
+    """A trial's learned policy of ``label``, located at the log on error."""
+    try:
+        return trial.learned_policy(label)
+    except InputError as exc:
+        raise exc.at(file=path) from None
+
+
+def _fusion_config(log_cfg: dict[str, Any], policies: dict[str, LearnedPolicy],
                    fusion: str, log_path: str, load_config: Any
-                   ) -> tuple[dict[str, Any], dict[str, dict[str, np.ndarray]], str]:
+                   ) -> tuple[dict[str, Any], dict[str, LearnedPolicy], str]:
     """The fusion config with the log's learned behaviour in its ``policy_from`` slot."""
     fcfg, fsource, _base = load_config(fusion)
     slots = [lb for lb, t in fcfg["behaviours"].items() if t.get("policy_from")]
@@ -337,8 +347,13 @@ def _fusion_config(log_cfg: dict[str, Any], policies: dict[str, dict[str, np.nda
     return validate_config(fcfg, file=fsource), {slot: policies[src]}, fsource
 
 
-def _fmt_action(out: str, value: float) -> str:
-    return f"{value:+.0f}°" if out == "heading" else f"{value:.2f} m/s"
+def format_action(value: float, unit: str) -> str:
+    """An action value for a table: ``+30°``, ``0.20 m/s``, or the number and its unit."""
+    if unit == "deg":
+        return f"{value:+.0f}°"
+    if unit == "m/s":
+        return f"{value:.2f} m/s"
+    return f"{value:.3g} {unit}".rstrip()
 
 
 def rule_base_table(result: Any) -> Any:
@@ -372,24 +387,24 @@ def rule_base_table(result: Any) -> Any:
                   caption=f"most trials = the most frequent action (how many trials); {why}")
     table.add_column("situation", justify="right")
     table.add_column("description")
-    outs = [(label, k.split("/", 1)[1]) for label, data in best.behaviours.items()
-            for k in data if k.startswith("policy/")]
-    for label, out in outs:
+    outs = [(label, out, o) for label, pol in best.policies.items()
+            for out, o in pol.outputs.items()]
+    for label, out, _o in outs:
         table.add_column(f"{label}.{out}\nmost trials", justify="right")
         table.add_column(f"{label}.{out}\ntrial {best.index}", justify="right")
     if not outs:
         return table
     centers = result.interpreter_state.get("centers")
-    n_situations = len(best.behaviours[outs[0][0]][f"policy/{outs[0][1]}"])
-    for i in range(n_situations):
+    for i in range(outs[0][2].rules.size):
         desc = describe_prototype(centers[i], result.sensor_angles_deg) \
-            if centers is not None else ""
+            if centers is not None and len(result.sensor_angles_deg) == np.shape(centers)[1] \
+            else ""
         row = [f"S{i}", desc]
-        for label, out in outs:
-            singles = best.behaviours[label][f"singletons/{out}"]
-            votes = Counter(int(t.behaviours[label][f"policy/{out}"][i]) for t in trials)
+        for label, out, o in outs:
+            votes = Counter(int(t.policies[label].outputs[out].rules[i]) for t in trials
+                            if label in t.policies)
             action, count = votes.most_common(1)[0]
-            row.append(f"{_fmt_action(out, singles[action])} ({count}/{len(trials)})")
-            row.append(_fmt_action(out, singles[int(best.behaviours[label][f"policy/{out}"][i])]))
+            row.append(f"{format_action(o.actions[action], o.unit)} ({count}/{len(trials)})")
+            row.append(format_action(o.actions[int(o.rules[i])], o.unit))
         table.add_row(*row)
     return table

@@ -281,6 +281,37 @@ def raycast(
                     float(max_range))
 
 
+def cast_rays(segments: SegmentSet, x: float, y: float, angles_rad: np.ndarray,
+              max_range: float) -> np.ndarray:
+    """Fast ray casting from one point, for sensors in the control loop.
+
+    The unchecked core of :func:`raycast` for the common case of a sensor:
+    every ray starts at the robot's centre. Pass ``world.segment_set`` (every
+    wall and obstacle edge, cached by the world).
+
+    Parameters
+    ----------
+    segments
+        The world's :class:`SegmentSet` (``world.segment_set``).
+    x, y
+        Ray origin [m].
+    angles_rad
+        (n,) world-frame ray directions [rad].
+    max_range
+        Rays that hit nothing within ``max_range`` [m] read ``max_range``.
+
+    Returns
+    -------
+    numpy.ndarray
+        (n,) distances [m] in ``[0, max_range]``.
+    """
+    ang = np.asarray(angles_rad, dtype=np.float64)
+    if segments.n == 0:
+        return np.full(ang.shape[0], float(max_range))
+    return _raycast(np.array([[float(x)]]), np.array([[float(y)]]), np.cos(ang)[:, None],
+                    np.sin(ang)[:, None], segments, float(max_range))
+
+
 _EPS = 1e-12
 
 

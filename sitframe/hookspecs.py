@@ -19,13 +19,21 @@ interfaces the created components must satisfy are in
 :mod:`sitframe.components`.
 
 *Observer hooks* (``sitframe_run_start`` ... ``sitframe_run_end``) are called
-by the scheduler as a run progresses. They return nothing; every
-implementation is called. The HDF5 logger and the progress bar are plugins on
-these hooks. Observer hooks are called in the process that writes the run
-(the main process), so an observer never sees a partial trial from a worker.
-``sitframe_step`` is the exception: it fires inside the loop of the process
-that simulates the trial, once per control iteration, and only when some
-plugin implements it (the loop checks once per trial), so keep it cheap.
+by the scheduler as a run progresses. They return nothing (but
+``sitframe_trial_data``); every implementation is called. The HDF5 logger and
+the progress bar are plugins on these hooks. Observer hooks are called in the
+process that writes the run (the main process), so an observer never sees a
+partial trial from a worker. ``sitframe_step`` and ``sitframe_trial_data`` are
+the exceptions: they fire in the process that *simulates* the trial -- the
+main process with ``--workers 1``, else a worker process, which loads the
+same entry-point and ``--plugins-dir`` plugins -- so an observer that
+accumulates per-iteration data there hands it back through
+``sitframe_trial_data`` and it reaches the log with the trial.
+
+Any exception raised by plugin code during a run (a hook, or a component's
+method) is reported as one line naming the plugin, the component or hook, the
+method, the trial and the iteration (:class:`sitframe.errors.PluginFault`);
+the CLI exits with status 3 and the log keeps every finished trial.
 """
 
 from __future__ import annotations
@@ -164,15 +172,38 @@ def sitframe_stage_end(run: RunInfo, stage: str, data: dict[str, Any]) -> None:
 def sitframe_step(record: StepRecord) -> None:
     """One control iteration finished.
 
-    Called inside the simulation loop of the process that runs the trial,
-    after the behaviours learned from the iteration, once per iteration (each
-    is 1.5 s of robot time), only if at least one plugin implements it.
+    Called inside the simulation loop of the process that runs the trial (a
+    worker process when trials run in parallel), after the behaviours learned
+    from the iteration, once per iteration (each is 1.5 s of robot time),
+    only if at least one plugin implements it. Not called in frozen
+    evaluations.
 
     :param record: An immutable :class:`sitframe.records.StepRecord` holding
         references (not copies) to this iteration's arrays. Do not keep it
         beyond the call unless you copy what you need.
 
     All implementations are called; the return value is ignored.
+    """
+
+
+@hookspec
+def sitframe_trial_data(trial: TrialResult) -> dict[str, Any] | None:
+    """Hand per-trial data for the log.
+
+    Called once per learning trial and once per frozen evaluation, in the
+    process that simulated it (like :func:`sitframe_step`), right after the
+    loop and before the trial is sent to the main process.
+
+    :param trial: The finished :class:`sitframe.records.TrialResult` (its
+        per-iteration arrays, behaviour data and summary).
+    :return: ``None``, or a dict of string keys (``/`` makes subgroups) to
+        numpy arrays or scalars. The logger writes it under
+        ``/trials/NNNN/plugins/<plugin>/`` in the same crash-safe transaction
+        as the trial (an evaluation's under ``.../eval/<world>/``), and
+        :meth:`sitframe.logs.Log.trial` returns it as ``TrialLog.plugins``.
+
+    Every implementation is called; each result is kept under its own plugin's
+    name (a key handed twice by one plugin is an error).
     """
 
 
@@ -185,7 +216,8 @@ def sitframe_trial_end(run: RunInfo, trial: TrialResult) -> None:
 
     :param run: The run, as given to :func:`sitframe_run_start`.
     :param trial: The :class:`sitframe.records.TrialResult`: seed, per-
-        iteration arrays, per-behaviour learning data and summary scalars.
+        iteration arrays, per-behaviour learning data, learned policies,
+        plugin data and summary scalars.
 
     All implementations are called; the return value is ignored.
     """
@@ -200,7 +232,8 @@ def sitframe_run_end(run: RunInfo, status: str) -> None:
 
     :param run: The run, as given to :func:`sitframe_run_start`.
     :param status: ``"complete"``, ``"aborted"`` (interrupted, e.g. Ctrl-C) or
-        ``"failed"`` (an error stopped it).
+        ``"failed"`` (an error stopped it; ``run.extra["failure"]`` holds the
+        one-line message when plugin code failed).
 
     All implementations are called; the return value is ignored.
     """

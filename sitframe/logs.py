@@ -5,7 +5,9 @@ Layout (schema ``sitframe-log``, version :data:`SCHEMA_VERSION`)::
     /                     attrs: schema, schema_version, status (running|complete|
                           aborted|failed), name, created, config (TOML text),
                           config_hash, seed, source, versions (JSON), plugins
-                          (JSON list), worlds (JSON name -> TOML text)
+                          (JSON list), worlds (JSON name -> TOML text), sensor
+                          (JSON: name, angles_deg, max_range, unit, dim),
+                          failure (one line, when plugin code failed)
     /collect/             samples (n, d) [m], poses (n, 3) [m, m, rad],
                           source (n,) world index; attrs worlds (JSON)
     /cluster/             trial_centers (T, c, d), trial_measures (T, k) with
@@ -14,14 +16,23 @@ Layout (schema ``sitframe-log``, version :data:`SCHEMA_VERSION`)::
     /cluster/state/       the interpreter's fitted state (e.g. centers, m)
     /trials/NNNN/         one group per learning trial; attrs: index, seed,
                           world, every summary scalar; per-iteration datasets
-                          pose (L+1, 3), sonar (L, d), memberships (L, c),
+                          pose (L+1, 3), reading (L, d) (beams: root attr
+                          sensor; called sonar before contract v2), memberships (L, c),
                           command (L, 2) [deg, m/s], collision (L,),
                           contact (L, 2), nearest (L,), weights (L, k),
                           proposals/<label> (L, 2), reward/<label> (L,)
     /trials/NNNN/behaviours/<label>/   what the behaviour's trial_data() returned
                           (e.g. heading/q_snapshots (K, c, A),
-                          heading/snapshot_iteration (K,), policy/heading (c,))
+                          heading/snapshot_iteration (K,)), and its learned
+                          policy (LearnedPolicy), for every output:
+                          policy/<out> (c,) action index per situation,
+                          actions/<out> (A,) action values, units/<out> attr,
+                          q/<out> (c, A) if the learner keeps Q; a learning
+                          arbiter's under the label "arbiter"
     /trials/NNNN/episodes/...          evaluation / goal-episode arrays
+    /trials/NNNN/plugins/<plugin>/...  per-trial data handed by a plugin's
+                          components (trial_end) or observers
+                          (sitframe_trial_data); an evaluation's under eval/<world>/
     /summary              structured table, one row per finished trial
 
 Every dataset has a ``units`` or ``description`` attribute where it helps,
@@ -63,14 +74,20 @@ import numpy as np
 
 from sitframe.errors import InputError
 from sitframe.interrupts import deferred_interrupt
-from sitframe.records import RunInfo, TrialResult
+from sitframe.records import LearnedPolicy, PolicyOutput, RunInfo, SensorSpec, TrialResult
+
+#: Per-iteration sensor readings (``sonar`` in logs from before contract v2).
+READING = "reading"
+#: Groups of a trial that are not per-iteration arrays.
+_TRIAL_GROUPS = ("summary", "behaviours", "episodes", "plugins")
 
 SCHEMA = "sitframe-log"
 SCHEMA_VERSION = 1
 
 UNITS = {
     "pose": "x [m], y [m], theta [rad]; row L is the pose after the last iteration",
-    "sonar": "range from the robot's rim [m], columns = sensor angles_deg",
+    "reading": "sensor reading [m] (range from the robot's rim for the built-in sensors), "
+               "columns = the beams of attribute angles_deg",
     "memberships": "membership of each situation [0-1], rows sum to 1",
     "command": "heading change [deg, + = left], speed [m/s]",
     "collision": "true if the iteration ended in a collision",
@@ -193,6 +210,8 @@ class LogWriter:
                 a["versions"] = json.dumps(info.extra.get("versions", {}))
                 a["plugins"] = json.dumps(info.plugins)
                 a["worlds"] = json.dumps(info.worlds)
+                if info.extra.get("sensor"):
+                    a["sensor"] = json.dumps(info.extra["sensor"])
                 if info.extra.get("code_hash"):
                     a["code_hash"] = str(info.extra["code_hash"])
                 f.create_group("trials")
@@ -223,9 +242,12 @@ class LogWriter:
                 _write_trial(f, trial, behaviour_labels)
             _write_summary(f)
 
-    def set_status(self, status: str) -> None:
+    def set_status(self, status: str, failure: str | None = None) -> None:
+        """Set the root ``status`` (and ``failure``, the one-line reason a run failed)."""
         with self._open() as f:
             f.attrs["status"] = status
+            if failure:
+                f.attrs["failure"] = failure
 
 
 def _write_trial(f: h5py.File, trial: TrialResult, behaviour_labels: list[str] | None) -> None:
@@ -247,8 +269,20 @@ def _write_trial(f: h5py.File, trial: TrialResult, behaviour_labels: list[str] |
         bg = g.require_group("behaviours").require_group(label)
         for k, v in data.items():
             _write_value(bg, k, v)
+    for label, pol in trial.policies.items():
+        bg = g.require_group("behaviours").require_group(label)
+        for out, o in pol.outputs.items():
+            _write_value(bg, f"policy/{out}", np.asarray(o.rules).astype(np.int16))
+            _write_value(bg, f"actions/{out}", o.actions)
+            _write_value(bg, f"units/{out}", o.unit)
+            if o.q is not None:
+                _write_value(bg, f"q/{out}", np.asarray(o.q, dtype=np.float64))
     for k, v in trial.episodes.items():
         _write_value(g.require_group("episodes"), k, v)
+    for plugin, data in trial.plugin_data.items():
+        pg = g.require_group("plugins").require_group(plugin)
+        for k, v in data.items():
+            _write_value(pg, k, v)
 
 
 def _summary_rows(f: h5py.File) -> tuple[list[str], list[dict[str, Any]]]:
@@ -322,6 +356,8 @@ class TrialLog:
         Behaviour label -> flattened dict of its logged data.
     episodes
         Evaluation / goal-episode arrays.
+    plugins
+        Plugin name -> flattened dict of the data it handed for the trial.
     """
 
     index: int
@@ -331,12 +367,50 @@ class TrialLog:
     arrays: dict[str, np.ndarray]
     behaviours: dict[str, dict[str, Any]]
     episodes: dict[str, Any] = field(default_factory=dict)
+    plugins: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def policy(self, label: str) -> dict[str, np.ndarray]:
-        """The learned policy (``output -> rule base``) of behaviour ``label``."""
+        """The learned rule bases (``output -> (c,) action indices``) of behaviour ``label``."""
         data = self.behaviours[label]
         return {k.split("/", 1)[1]: np.asarray(v) for k, v in data.items()
                 if k.startswith("policy/")}
+
+    def learned_policy(self, label: str) -> LearnedPolicy | None:
+        """The :class:`LearnedPolicy` of behaviour ``label`` (``None`` if it learned none).
+
+        Logs written before contract v2 kept the action values under
+        ``singletons/<output>``; they are read the same way.
+        """
+        data = self.behaviours.get(label, {})
+        outs = {}
+        for out, rules in self.policy(label).items():
+            actions = data.get(f"actions/{out}", data.get(f"singletons/{out}"))
+            if actions is None:
+                continue
+            q = data.get(f"q/{out}", data.get(f"{out}/q"))
+            unit = data.get(f"units/{out}", _OLD_UNITS.get(out, ""))
+            try:
+                outs[out] = PolicyOutput(np.asarray(actions), np.asarray(rules), str(unit),
+                                         None if q is None else np.asarray(q))
+            except (TypeError, ValueError) as exc:
+                raise InputError(f"the logged policy of trial {self.index} is damaged: {exc}",
+                                 key=f"trials/{self.index:04d}/behaviours/{label}/policy/{out}"
+                                 ) from None
+        return LearnedPolicy(outs) if outs else None
+
+    @property
+    def policies(self) -> dict[str, LearnedPolicy]:
+        """Label -> :class:`LearnedPolicy` of every behaviour that learned one."""
+        out = {}
+        for label in self.behaviours:
+            pol = self.learned_policy(label)
+            if pol is not None:
+                out[label] = pol
+        return out
+
+
+#: Units of the built-in outputs in logs written before units were logged.
+_OLD_UNITS = {"heading": "deg", "speed": "m/s"}
 
 
 @dataclass
@@ -392,6 +466,32 @@ class Log:
     @property
     def versions(self) -> dict[str, str]:
         return self._json_attr("versions", "{}", dict)
+
+    @property
+    def failure(self) -> str | None:
+        """The one-line reason the run failed (plugin code), if it did."""
+        v = self.attrs.get("failure")
+        return str(v) if v else None
+
+    @property
+    def sensor(self) -> SensorSpec:
+        """The run sensor's geometry (name, beam angles, max range).
+
+        Logs written before the spec was logged: the ``[sensor]`` table's
+        ``angles_deg`` and ``max_range``, else the Pioneer ring's defaults.
+        """
+        d = self._json_attr("sensor", "{}", dict)
+        if not d:
+            table = self.config.get("sensor", {})
+            d = {"name": table.get("component", "pioneer-sonar"),
+                 "angles_deg": table.get("angles_deg", [90, 50, 30, 10, -10, -30, -50, -90]),
+                 "max_range": table.get("max_range", 3.0)}
+        try:
+            return SensorSpec(str(d["name"]), np.asarray(d["angles_deg"], dtype=np.float64),
+                              float(d["max_range"]), str(d.get("unit", "m")))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"root attribute is not a sensor spec: {exc}", file=self.path,
+                             key="sensor") from None
 
     @contextmanager
     def _file(self) -> Iterator[h5py.File]:
@@ -461,20 +561,26 @@ class Log:
             g = f[name]
             arrays = {}
             for k, item in g.items():
-                if k in ("summary", "behaviours", "episodes"):
+                if k in _TRIAL_GROUPS:
                     continue
                 if isinstance(item, h5py.Group):
-                    for kk, ds in item.items():
-                        arrays[f"{k}/{kk}"] = ds[()]
+                    arrays.update({f"{k}/{kk}": v for kk, v in _read_group(item).items()
+                                   if isinstance(v, np.ndarray)})
                 else:
                     arrays[k] = item[()]
+            if READING not in arrays and "sonar" in arrays:  # a log from before contract v2
+                arrays[READING] = arrays["sonar"]
+            if READING in arrays:  # the name the README showed before contract v2
+                arrays.setdefault("sonar", arrays[READING])
             behaviours = ({lb: _read_group(bg) for lb, bg in g["behaviours"].items()}
                           if "behaviours" in g else {})
             episodes = _read_group(g["episodes"]) if "episodes" in g else {}
+            plugins = ({p: _read_group(pg) for p, pg in g["plugins"].items()}
+                       if "plugins" in g else {})
             summary = dict(_read_group(g["summary"])) if "summary" in g else {}
             summary = {k.replace(".", "/"): v for k, v in summary.items()}
             return TrialLog(int(g.attrs["index"]), int(g.attrs["seed"]), str(g.attrs["world"]),
-                            summary, arrays, behaviours, episodes)
+                            summary, arrays, behaviours, episodes, plugins)
 
     def summary(self) -> np.ndarray:
         """The root summary table (structured array, one row per finished trial)."""

@@ -49,7 +49,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from sitframe.config import config_hash, to_toml
-from sitframe.errors import InputError
+from sitframe.errors import InputError, TaskCancelled
 from sitframe.interrupts import deferred_interrupt
 
 if TYPE_CHECKING:
@@ -114,9 +114,10 @@ def _experiment(setup: Setup) -> Experiment:
 
 def run_trial(setup: Setup, spec: TrialSpec) -> TrialResult:
     """Worker entry point: run one trial and return its data."""
-    from sitframe.scheduler import simulate
+    from sitframe.scheduler import simulate, step_hook_of
 
-    return simulate(_experiment(setup).res, spec)
+    exp = _experiment(setup)  # sitframe_step observers fire here, in the worker
+    return simulate(exp.res, spec, step_hook=step_hook_of(exp.pm))
 
 
 def run_clusters(setup: Setup) -> tuple[Collected, dict[str, Any], dict[str, Any]]:
@@ -131,10 +132,6 @@ def warm_up(setup: Setup) -> int:
     """Worker entry point: build the components now; returns the worker's pid."""
     _experiment(setup)
     return os.getpid()
-
-
-class TaskCancelled(Exception):
-    """Raised inside a worker's task when the main process cancels the run."""
 
 
 #: Worker-side state: whether a task is running, and whether the run was cancelled.
@@ -329,7 +326,7 @@ class TrialPipeline:
                 if kind == "learn":
                     self._learning -= 1
                     setup, spec = info
-                    evs = evaluation_specs(spec, value.behaviours) if _splittable(spec) else []
+                    evs = evaluation_specs(spec, value.policies) if _splittable(spec) else []
                     if not evs:
                         yield "trial", tag, value
                         continue

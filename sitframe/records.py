@@ -27,10 +27,17 @@ class Proposal:
     speed_m_s
         Desired speed in m/s, or ``None`` for "no opinion" (the arbiter then
         uses the run's default speed).
+    activation
+        How much the behaviour's own situation applies now, in [0, 1] (e.g. 1
+        when an avoider sees an obstacle it must turn from, 0 in open space),
+        or ``None`` when the behaviour does not say. Arbiters may use it: the
+        ``priority`` arbiter lets a behaviour with an activation win when the
+        activation reaches its rule's ``activation_above``.
     """
 
     heading_deg: float
     speed_m_s: float | None = None
+    activation: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -169,6 +176,14 @@ class TrialResult:
         ``collisions``, ``collisions_after_convergence``, ...).
     episodes
         Per-episode arrays for goal runs (``success``, ``iterations``, ...), else empty.
+    policies
+        Behaviour label -> the :class:`LearnedPolicy` it ended the trial with
+        (learned behaviours only); the arbiter's, if it learns, under the
+        label ``"arbiter"``.
+    plugin_data
+        Plugin name -> arrays/scalars that plugin handed for the trial
+        (component ``trial_end`` or observer ``sitframe_trial_data``); written
+        to ``/trials/NNNN/plugins/<plugin>/``.
     """
 
     index: int
@@ -178,3 +193,168 @@ class TrialResult:
     behaviours: dict[str, dict[str, Any]]
     summary: dict[str, Any]
     episodes: dict[str, np.ndarray] = field(default_factory=dict)
+    policies: dict[str, LearnedPolicy] = field(default_factory=dict)
+    plugin_data: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    """The geometry of a sensor's reading, known before anything runs.
+
+    Attributes
+    ----------
+    name
+        The sensor's registry name, e.g. ``"pioneer-sonar"``.
+    angles_deg
+        (d,) bearing of each beam relative to the robot's heading [deg],
+        positive = left; any layout (a front arc, a 360 deg ring).
+    max_range
+        Largest reading [m]; a beam that sees nothing reads this.
+    unit
+        Unit of the reading's entries (``"m"`` for range sensors).
+    """
+
+    name: str
+    angles_deg: np.ndarray
+    max_range: float
+    unit: str = "m"
+
+    @property
+    def dim(self) -> int:
+        """Length ``d`` of one reading."""
+        return int(self.angles_deg.size)
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready form (the log's ``sensor`` root attribute)."""
+        return {"name": self.name, "angles_deg": [float(a) for a in self.angles_deg],
+                "max_range": float(self.max_range), "unit": self.unit, "dim": self.dim}
+
+
+@dataclass(frozen=True)
+class RunContext:
+    """What a run is, given to every component's optional ``bind(run)`` before anything runs.
+
+    Attributes
+    ----------
+    robot
+        The robot's :class:`sitframe.robot.RobotParams` (``radius`` [m],
+        ``control_period_s``, speed and turn limits).
+    sensor
+        The run sensor's :class:`SensorSpec`.
+    labels
+        Behaviour labels in config order (the order of proposals and weights).
+    n_situations
+        Number of situations the interpreter produces (``None`` when the
+        interpreter cannot say before it is fitted).
+    worlds
+        Name -> :class:`sitframe.world.World` of every world the run uses.
+    seed
+        The run seed.
+    iterations
+        Iterations per learning trial.
+    default_speed
+        Speed [m/s] used when no behaviour proposes one.
+    component
+        The config key of the component being bound (``"sensor"``,
+        ``"behaviours.avoid"``, ``"behaviours.avoid.reward"``, ``"arbiter"``),
+        so one class can serve several roles.
+    """
+
+    robot: Any
+    sensor: SensorSpec
+    labels: tuple[str, ...]
+    n_situations: int | None
+    worlds: dict[str, Any]
+    seed: int
+    iterations: int
+    default_speed: float
+    component: str = ""
+
+
+@dataclass(frozen=True)
+class TrialInfo:
+    """One trial about to run (or just finished), given to ``trial_start``/``trial_end``.
+
+    Attributes
+    ----------
+    index
+        0-based trial number (evaluations share their learning trial's index).
+    kind
+        ``"learn"`` (a learning trial) or ``"evaluate"`` (a frozen policy run,
+        e.g. in another world or a goal episode).
+    world
+        The world the trial runs in.
+    iterations
+        At most this many control iterations.
+    rng
+        The trial's generator: take all randomness from it.
+    """
+
+    index: int
+    kind: str
+    world: Any
+    iterations: int
+    rng: np.random.Generator
+
+
+@dataclass(frozen=True)
+class PolicyOutput:
+    """One learned output of a situation rule base.
+
+    Attributes
+    ----------
+    actions
+        (A,) the action values the rules choose from (e.g. headings [deg]).
+    rules
+        (c,) index into ``actions`` chosen for each situation.
+    unit
+        Unit of ``actions`` (``"deg"``, ``"m/s"``, or ``""`` for a weighting).
+    q
+        (c, A) action values, if the learner keeps them, else ``None``.
+    """
+
+    actions: np.ndarray
+    rules: np.ndarray
+    unit: str = ""
+    q: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        a = np.asarray(self.actions, dtype=np.float64).reshape(-1)
+        r = np.asarray(self.rules)
+        if r.ndim != 1 or (r.size and not np.issubdtype(r.dtype, np.integer)):
+            raise TypeError(f"PolicyOutput.rules must be a 1-D integer array, got {r.dtype} "
+                            f"shape {r.shape}")
+        if r.size and (r.min() < 0 or r.max() >= a.size):
+            raise ValueError(f"PolicyOutput.rules index {a.size} actions but holds values "
+                             f"{int(r.min())}..{int(r.max())}")
+        if self.q is not None and np.shape(self.q) != (r.size, a.size):
+            raise ValueError(f"PolicyOutput.q must be (c, A) = ({r.size}, {a.size}), got "
+                             f"{np.shape(self.q)}")
+        object.__setattr__(self, "actions", a)
+
+    def values(self) -> np.ndarray:
+        """(c,) the action value of each situation's rule."""
+        return self.actions[np.asarray(self.rules, dtype=np.intp)]
+
+
+@dataclass(frozen=True)
+class LearnedPolicy:
+    """What a learned behaviour (or arbiter) learned: one rule base per output.
+
+    A behaviour that learns returns one from ``policy()`` after a trial; the
+    core logs it (``policy/<output>``, ``actions/<output>``, ``q/<output>``
+    under the behaviour's group), and ``run --json``, the run table,
+    ``evaluate``, ``policy_from``, ``analyse`` and ``replay`` read it back for
+    any behaviour. ``load_policy`` receives one to freeze the behaviour.
+
+    Attributes
+    ----------
+    outputs
+        Output name (e.g. ``"heading"``, ``"speed"``) -> :class:`PolicyOutput`.
+    """
+
+    outputs: dict[str, PolicyOutput]
+
+    def rules(self) -> dict[str, np.ndarray]:
+        """Output -> (c,) action indices (the form ``policy_from`` loads)."""
+        return {k: o.rules for k, o in self.outputs.items()}

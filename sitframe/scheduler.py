@@ -39,11 +39,39 @@ import pluggy
 from sitframe import __version__
 from sitframe.collect import Collected, collect_trajectories, collect_wander, concat_collected
 from sitframe.config import config_hash, to_toml
+from sitframe.contract import (
+    MEMBERSHIP_SUM_TOL,
+    BoundaryError,
+    Origin,
+    call,
+    check_combined,
+    check_data,
+    check_memberships,
+    check_policy,
+    check_proposal,
+    check_protocol,
+    check_reading,
+    check_reward,
+    fault,
+    memberships_mismatch,
+    sensor_spec_mismatch,
+)
 from sitframe.episodes import check_goal_config, goal_batch_specs, is_goal_run, run_episode_batch
-from sitframe.errors import InputError, PluginError
+from sitframe.errors import InputError, PluginError, PluginFault, TaskCancelled
 from sitframe.metrics import collisions_per_1000, coverage, path_length
 from sitframe.pluginmanager import Registry, get_plugin_manager
-from sitframe.records import Context, Proposal, RunInfo, StepRecord, Transition, TrialResult
+from sitframe.records import (
+    Context,
+    LearnedPolicy,
+    Proposal,
+    RunContext,
+    RunInfo,
+    SensorSpec,
+    StepRecord,
+    Transition,
+    TrialInfo,
+    TrialResult,
+)
 from sitframe.robot import Command, RobotParams, step_robot
 from sitframe.world import Goal, World, load_world
 
@@ -59,18 +87,35 @@ def stage_seed(seed: int, stage: int, index: int = 0) -> int:
     return int(ss.generate_state(1, np.uint64)[0])
 
 
+#: Keys of a ``[behaviours.LABEL]`` (or ``[arbiter]``) table that are not component parameters.
+META_KEYS = ("component", "reward", "reward_params", "policy_from")
+
+
 @dataclass
 class Resolved:
-    """A config resolved against a registry: creates fresh components on demand."""
+    """A config resolved against a registry: creates fresh, checked, bound components on demand.
+
+    Every component is checked against its protocol when created and bound
+    to the run (``bind(run)``, :class:`sitframe.records.RunContext`) before it
+    is used; :attr:`origins` names the plugin behind each config key for
+    messages.
+    """
 
     cfg: dict[str, Any]
     registry: Registry
     file: str | None = None
     robot: RobotParams = field(default_factory=RobotParams)
     _worlds: dict[str, World] = field(default_factory=dict)
+    origins: dict[str, Origin] = field(default_factory=dict)
+    run: RunContext | None = None
 
     @classmethod
-    def build(cls, cfg: dict[str, Any], registry: Registry, file: str | None = None) -> Resolved:
+    def build(cls, cfg: dict[str, Any], registry: Registry, file: str | None = None,
+              worlds: tuple[str, ...] = ()) -> Resolved:
+        """Resolve ``cfg``: create and bind each component once, so every mistake is found now.
+
+        ``worlds`` names further worlds the caller will use (e.g. ``--world``).
+        """
         try:
             robot = RobotParams(**cfg["robot"])
         except InputError as exc:
@@ -78,16 +123,65 @@ class Resolved:
         except (ValueError, TypeError) as exc:
             raise InputError(str(exc), file=file, key="robot") from None
         res = cls(cfg, registry, file, robot)
-        # Create each component once now so bad names/params fail before anything runs.
-        res.sensor()
-        res.interpreter()
+        sensor = res._create("sensor", "sensor", cfg["sensor"], bind=False)
+        o = res.origins["sensor"]
+        spec = call(o, "angles_deg", lambda: SensorSpec(
+            str(sensor.name), np.asarray(sensor.angles_deg, dtype=np.float64).reshape(-1),
+            float(sensor.max_range), str(getattr(sensor, "unit", "m"))))
+        interp = res._create("interpreter", "interpreter", cfg["interpreter"], bind=False)
+        c = call(res.origins["interpreter"], "n_situations", lambda: interp.n_situations)
+        if c is not None and (isinstance(c, bool) or not isinstance(c, int | np.integer) or c < 1):
+            raise PluginFault(f"n_situations is {c!r}, expected a positive integer",
+                              where=str(res.origins["interpreter"]), method="n_situations")
+        e = cfg["experiment"]
+        names = [e["world"], *worlds]
+        if "collect" in e["stages"] and not e.get("clusters_from"):
+            names += cfg["collect"]["worlds"]
+        if "evaluate" in e["stages"]:
+            names += cfg["evaluate"]["worlds"]
+        loaded = {}
+        for n in dict.fromkeys(names):
+            loaded[n] = res.world(n, "experiment.world" if n == e["world"] else "worlds")
+        res.run = RunContext(robot, spec, tuple(cfg["behaviours"]), None if c is None else int(c),
+                             loaded, int(e["seed"]), int(e["iterations"]),
+                             float(e["default_speed"]))
+        res._bind(sensor, "sensor")
+        res._check_sensor(sensor, spec, loaded[e["world"]])
+        res._bind(interp, "interpreter")
         res.behaviours()
         res.arbiter()
         return res
 
-    def _create(self, kind: str, section: str, table: dict[str, Any]) -> Any:
-        params = {k: v for k, v in table.items() if k != "component"}
-        return self.registry.create(kind, table["component"], params, file=self.file, key=section)
+    def _check_sensor(self, sensor: Any, spec: SensorSpec, world: World) -> None:
+        """Read once at the learning world's start: the reading must match the declared spec."""
+        o = self.origins["sensor"]
+        reading = call(o, "read", sensor.read, world, world.start.copy(),
+                       np.random.default_rng(0))
+        why = sensor_spec_mismatch(reading, spec.dim)
+        if why is not None:
+            raise PluginFault(why, where=str(o), method="read")
+
+    def _create(self, kind: str, key: str, table: dict[str, Any], *, bind: bool = True,
+                needs: tuple[str, ...] = ()) -> Any:
+        params = {k: v for k, v in table.items() if k not in META_KEYS}
+        comp = self.registry.create(kind, table["component"], params, file=self.file, key=key)
+        entry = self.registry.get(kind, table["component"])
+        origin = Origin(self.registry.describe_plugin(entry.plugin), kind, entry.name, key,
+                        entry.plugin)
+        self.origins[key] = origin
+        check_protocol(comp, origin, needs=needs)
+        if bind:
+            self._bind(comp, key)
+        return comp
+
+    def _bind(self, comp: Any, key: str) -> None:
+        fn = getattr(comp, "bind", None)
+        if fn is None:
+            return
+        try:
+            call(self.origins[key], "bind", fn, dataclasses.replace(self.run, component=key))
+        except InputError as exc:
+            raise exc.at(file=self.file, key_prefix=key) from None
 
     def sensor(self) -> Any:
         return self._create("sensor", "sensor", self.cfg["sensor"])
@@ -96,22 +190,30 @@ class Resolved:
         return self._create("interpreter", "interpreter", self.cfg["interpreter"])
 
     def arbiter(self) -> Any:
-        return self._create("arbiter", "arbiter", self.cfg["arbiter"])
+        table = self.cfg["arbiter"]
+        return self._create("arbiter", "arbiter", table,
+                            needs=("learn",) if "reward" in table else ())
+
+    def arbiter_reward(self) -> Any | None:
+        """The reward the arbiter learns from (``[arbiter] reward = ...``), or ``None``."""
+        table = self.cfg["arbiter"]
+        if "reward" not in table:
+            return None
+        return self._create("reward", "arbiter.reward", {
+            "component": table["reward"], **dict(table.get("reward_params", {}))})
 
     def behaviours(self) -> dict[str, tuple[Any, Any | None]]:
         """Label -> (behaviour, reward or None), in config order."""
         out = {}
         for label, table in self.cfg["behaviours"].items():
             key = f"behaviours.{label}"
-            params = {k: v for k, v in table.items() if k not in
-                      ("component", "reward", "reward_params", "policy_from")}
-            beh = self.registry.create("behaviour", table["component"], params,
-                                       file=self.file, key=key)
+            needs = (("learn",) if "reward" in table else ()) + \
+                (("load_policy",) if "policy_from" in table else ())
+            beh = self._create("behaviour", key, table, needs=needs)
             reward = None
             if "reward" in table:
-                reward = self.registry.create("reward", table["reward"],
-                                              dict(table.get("reward_params", {})),
-                                              file=self.file, key=f"{key}.reward")
+                reward = self._create("reward", f"{key}.reward", {
+                    "component": table["reward"], **dict(table.get("reward_params", {}))})
             out[label] = (beh, reward)
         return out
 
@@ -187,13 +289,42 @@ class TrialSpec:
     episodes: Any = None
 
 
+class _Step:
+    """Where the loop is, for fault messages: the component's origin and the method."""
+
+    __slots__ = ("origin", "method")
+
+    def __init__(self, origin: Origin | None, method: str) -> None:
+        self.origin, self.method = origin, method
+
+
+def step_hook_of(pm: pluggy.PluginManager) -> Callable[[StepRecord], Any] | None:
+    """A function firing ``sitframe_step`` observers, or ``None`` when no plugin implements it."""
+    hook = pm.hook
+    if not hook.sitframe_step.get_hookimpls():
+        return None
+
+    def step_hook(rec: StepRecord) -> None:
+        hook.sitframe_step(record=rec)
+
+    return step_hook
+
+
 def simulate(
     res: Resolved,
     spec: TrialSpec,
     *,
     step_hook: Callable[[StepRecord], Any] | None = None,
 ) -> TrialResult:
-    """Run one trial (learning, frozen evaluation or goal episode) and return its arrays."""
+    """Run one trial (learning, frozen evaluation or goal episode) and return its arrays.
+
+    Raises
+    ------
+    PluginFault
+        Plugin code raised, or returned a value that breaks the contract
+        (:mod:`sitframe.contract`); names the plugin, component, method,
+        trial and iteration.
+    """
     if spec.episodes is not None:
         return run_episode_batch(res, spec, step_hook=step_hook)
     rng = np.random.default_rng(spec.seed)
@@ -204,22 +335,42 @@ def simulate(
     goal_r2 = 0.0 if goal is None else goal.radius ** 2
     sensor = res.sensor()
     interp = res.interpreter()
-    interp.load_state(spec.interpreter_state)
-    c = interp.n_situations
+    og = res.origins  # the component origins, for messages
+    k = spec.index
+    call(og["interpreter"], "load_state", interp.load_state, spec.interpreter_state, trial=k)
+    c = call(og["interpreter"], "n_situations", lambda: int(interp.n_situations), trial=k)
     behaviours = res.behaviours()
     arbiter = res.arbiter()
+    arb_reward = res.arbiter_reward() if spec.learn else None
     L = spec.iterations
     for label, (beh, _r) in behaviours.items():
+        o = og[f"behaviours.{label}"]
         if label in spec.policies:
-            beh.load_policy(spec.policies[label])
-        beh.reset(rng, c, L)
-    learners = [(label, beh, rew) for label, (beh, rew) in behaviours.items()
-                if rew is not None and spec.learn]
+            call(o, "load_policy", beh.load_policy, spec.policies[label], trial=k)
+        call(o, "reset", beh.reset, rng, c, L, trial=k)
+    if "arbiter" in spec.policies and hasattr(arbiter, "load_policy"):
+        call(og["arbiter"], "load_policy", arbiter.load_policy, spec.policies["arbiter"], trial=k)
+    if hasattr(arbiter, "reset"):
+        call(og["arbiter"], "reset", arbiter.reset, rng, c, L, trial=k)
+    learners = [(label, beh, rew, og[f"behaviours.{label}"], og[f"behaviours.{label}.reward"])
+                for label, (beh, rew) in behaviours.items() if rew is not None and spec.learn]
+    if arb_reward is not None:
+        learners.append(("arbiter", arbiter, arb_reward, og["arbiter"], og["arbiter.reward"]))
     labels = list(behaviours)
+    components = [("sensor", sensor), ("interpreter", interp),
+                  *[(f"behaviours.{lb}", b) for lb, (b, _r) in behaviours.items()],
+                  *[(f"behaviours.{lb}.reward", r) for lb, (_b, r) in behaviours.items()
+                    if r is not None],
+                  ("arbiter", arbiter), ("arbiter.reward", arb_reward)]
+    components = [(key, comp) for key, comp in components if comp is not None]
+    tinfo = TrialInfo(k, "learn" if spec.learn else "evaluate", world, L, rng)
+    for key, comp in components:
+        if hasattr(comp, "trial_start"):
+            call(og[key], "trial_start", comp.trial_start, tinfo, trial=k)
     default_speed = float(res.cfg["experiment"]["default_speed"])
     robot = res.robot
 
-    d = len(sensor.angles_deg)
+    d = res.run.sensor.dim
     pose_a = np.empty((L + 1, 3))
     sonar_a = np.empty((L, d))
     u_a = np.empty((L, c))
@@ -229,54 +380,84 @@ def simulate(
     near_a = np.empty(L)
     weights_a = np.empty((L, len(labels)))
     prop_a = {lb: np.empty((L, 2)) for lb in labels}
-    rew_a = {lb: np.empty(L) for lb, _b, _r in learners}
+    rew_a = {lb: np.empty(L) for lb, *_ in learners}
 
+    at_read, at_u = _Step(og["sensor"], "read"), _Step(og["interpreter"], "memberships")
+    at_combine, at_core = _Step(og["arbiter"], "combine"), _Step(None, "step")
+    at_propose = [(lb, beh, _Step(og[f"behaviours.{lb}"], "propose"))
+                  for lb, (beh, _r) in behaviours.items()]
+    at_learn = [(lb, beh, rew, _Step(ob, "learn"), _Step(orw, "__call__"))
+                for lb, beh, rew, ob, orw in learners]
+    step_at = at_read
+    t = 0
     pose = np.array(world.start if spec.start is None else spec.start, dtype=float)
-    reading = sensor.read(world, pose, rng)
-    u = interp.memberships(reading)
-    ctx = Context(0, pose, reading, u, float(reading.min()), world, goal)
     n_done = L
-    for t in range(L):
-        proposals = {lb: beh.propose(ctx) for lb, (beh, _r) in behaviours.items()}
-        prop, weights = arbiter.combine(ctx, proposals)
-        speed = prop.speed_m_s if prop.speed_m_s is not None else default_speed
-        cmd = Command(prop.heading_deg, speed)
-        out = step_robot(world, pose, cmd, robot, rng)
-        pose = out.pose
-        reading2 = sensor.read(world, pose, rng)
-        u2 = interp.memberships(reading2)
-        ctx2 = Context(t + 1, pose, reading2, u2, float(reading2.min()), world, goal)
-        tr = Transition(ctx, cmd, out, ctx2)
-        rewards = {}
-        for lb, beh, rew in learners:
-            r = float(rew(tr))
-            rewards[lb] = r
-            rew_a[lb][t] = r
-            beh.learn(tr, r)
-        pose_a[t] = ctx.pose
-        sonar_a[t] = ctx.reading
-        u_a[t] = ctx.memberships
-        cmd_a[t] = (cmd.heading_change_deg, cmd.speed_m_s)
-        if out.collided:
-            coll_a[t] = True
-            contact_a[t] = out.contact_xy
-        near_a[t] = ctx.nearest
-        weights_a[t] = weights
-        for lb in labels:
-            p = proposals[lb]
-            prop_a[lb][t] = (p.heading_deg, np.nan if p.speed_m_s is None else p.speed_m_s)
-        if step_hook is not None:
-            step_hook(StepRecord(spec.index, tr, proposals, weights, rewards))
-        ctx = ctx2
-        if spec.stop_at_goal and goal_xy is not None and \
-                (pose[0] - goal_xy[0]) ** 2 + (pose[1] - goal_xy[1]) ** 2 <= goal_r2:
-            n_done = t + 1
-            break
+    try:
+        reading = sensor.read(world, pose, rng)
+        check_reading(reading, d)
+        near = _nearest(reading)
+        step_at = at_u
+        u = interp.memberships(reading)
+        check_memberships(u, c)
+        ctx = Context(0, pose, reading, u, near, world, goal)
+        for t in range(L):
+            proposals = {}
+            for lb, beh, step_at in at_propose:  # noqa: B007 - step_at names the caller on a fault
+                proposals[lb] = check_proposal(beh.propose(ctx))
+            step_at = at_combine
+            prop, weights = check_combined(arbiter.combine(ctx, proposals), len(labels))
+            step_at = at_core
+            speed = prop.speed_m_s if prop.speed_m_s is not None else default_speed
+            cmd = Command(prop.heading_deg, speed)
+            out = step_robot(world, pose, cmd, robot, rng)
+            pose = out.pose
+            step_at = at_read
+            reading2 = sensor.read(world, pose, rng)
+            check_reading(reading2, d)
+            near = _nearest(reading2)
+            step_at = at_u
+            u2 = interp.memberships(reading2)
+            check_memberships(u2, c)
+            ctx2 = Context(t + 1, pose, reading2, u2, near, world, goal)
+            tr = Transition(ctx, cmd, out, ctx2)
+            rewards = {}
+            for lb, beh, rew, at_l, step_at in at_learn:
+                r = check_reward(rew(tr))
+                rewards[lb] = r
+                rew_a[lb][t] = r
+                step_at = at_l
+                beh.learn(tr, r)
+            pose_a[t] = ctx.pose
+            sonar_a[t] = ctx.reading
+            u_a[t] = ctx.memberships
+            cmd_a[t] = (cmd.heading_change_deg, cmd.speed_m_s)
+            if out.collided:
+                coll_a[t] = True
+                contact_a[t] = out.contact_xy
+            near_a[t] = ctx.nearest
+            weights_a[t] = weights
+            for lb in labels:
+                p = proposals[lb]
+                prop_a[lb][t] = (p.heading_deg, np.nan if p.speed_m_s is None else p.speed_m_s)
+            if step_hook is not None:
+                step_at = _Step(None, "sitframe_step")
+                step_hook(StepRecord(spec.index, tr, proposals, weights, rewards))
+            ctx = ctx2
+            if spec.stop_at_goal and goal_xy is not None and \
+                    (pose[0] - goal_xy[0]) ** 2 + (pose[1] - goal_xy[1]) ** 2 <= goal_r2:
+                n_done = t + 1
+                break
+    except (KeyboardInterrupt, TaskCancelled, PluginFault):
+        raise
+    except Exception as exc:
+        if step_at.origin is None and step_at.method == "step":
+            raise  # the core's own arithmetic: a bug here, not the plugin's
+        raise _loop_fault(exc, step_at, k, t, res, locals()) from exc
     pose_a[n_done] = pose
-
     n = n_done
+    _check_trial_values(sonar_a[:n], u_a[:n], og, k)
     arrays: dict[str, np.ndarray] = {
-        "pose": pose_a[: n + 1], "sonar": sonar_a[:n], "memberships": u_a[:n],
+        "pose": pose_a[: n + 1], READING: sonar_a[:n], "memberships": u_a[:n],
         "command": cmd_a[:n], "collision": coll_a[:n], "contact": contact_a[:n],
         "nearest": near_a[:n], "weights": weights_a[:n],
     }
@@ -284,33 +465,146 @@ def simulate(
         arrays[f"proposals/{lb}"] = prop_a[lb][:n]
     for lb in rew_a:
         arrays[f"reward/{lb}"] = rew_a[lb][:n]
-    bdata = {lb: beh.trial_data() for lb, (beh, _r) in behaviours.items()}
+    bdata, policies = {}, {}
+    learned = [(lb, b, og[f"behaviours.{lb}"]) for lb, (b, _r) in behaviours.items()]
+    if hasattr(arbiter, "policy"):
+        learned.append(("arbiter", arbiter, og["arbiter"]))
+    for lb, b, o in learned:
+        if hasattr(b, "trial_data"):
+            bdata[lb] = _checked(o, "trial_data", check_data, b.trial_data, k, "trial data")
+        if hasattr(b, "policy"):
+            pol = _checked(o, "policy", lambda p: check_policy(p, c), b.policy, k)
+            if pol is not None:
+                policies[lb] = pol
     summary = trial_summary(world, arrays, bdata, robot)
-    result = TrialResult(spec.index, spec.seed, world.name, arrays, bdata, summary)
-    for ev_spec in evaluation_specs(spec, bdata):
+    result = TrialResult(spec.index, spec.seed, world.name, arrays, bdata, summary,
+                         policies=policies)
+    _collect_plugin_data(result, components, tinfo, og, res)
+    for ev_spec in evaluation_specs(spec, result.policies):
         attach_evaluation(result, ev_spec.world, simulate(res, ev_spec))
     return result
 
 
-def evaluation_specs(spec: TrialSpec, bdata: dict[str, dict[str, Any]]) -> list[TrialSpec]:
+#: Name of the per-iteration sensor readings in a trial's arrays and the log
+#: (sensor-neutral; logs before contract v2 call it ``sonar``, read back as both).
+READING = "reading"
+
+
+def _nearest(reading: np.ndarray) -> float:
+    """The smallest range of a reading; NaN here is the sensor's fault, found at once."""
+    v = float(reading.min())
+    if v != v:  # NaN
+        raise BoundaryError(sensor_spec_mismatch(reading, reading.size) or "returned NaN")
+    return v
+
+
+def _loop_fault(exc: Exception, step_at: _Step, trial: int, t: int, res: Resolved,
+                scope: dict[str, Any]) -> PluginFault:
+    """The fault for ``exc`` raised at ``step_at``; blame a bad upstream value where there is one.
+
+    The loop checks readings and memberships cheaply (type and shape); when a
+    later component fails, the full checks run on this iteration's inputs
+    first, so a NaN reading is blamed on the sensor, not on the behaviour
+    that choked on it.
+    """
+    if step_at.origin is not None and step_at.method != "read":
+        c = res.run.n_situations
+        for name in ("reading2", "reading"):
+            r = scope.get(name)
+            if isinstance(r, np.ndarray) and (why := sensor_spec_mismatch(r, res.run.sensor.dim)):
+                return PluginFault(why, where=str(res.origins["sensor"]), method="read",
+                                   trial=trial, iteration=t)
+        for name in ("u2", "u"):
+            u = scope.get(name)
+            if isinstance(u, np.ndarray) and c is not None and (why := memberships_mismatch(u, c)):
+                return PluginFault(why, where=str(res.origins["interpreter"]),
+                                   method="memberships", trial=trial, iteration=t)
+    if isinstance(exc, BoundaryError):
+        return PluginFault(str(exc), where=str(step_at.origin or "an observer"),
+                           method=step_at.method, trial=trial, iteration=t)
+    return fault(exc, step_at.origin or "an observer (sitframe_step)", step_at.method, trial, t)
+
+
+def _check_trial_values(readings: np.ndarray, u: np.ndarray, origins: dict[str, Origin],
+                        trial: int) -> None:
+    """Vectorised checks of every reading and membership vector of a finished trial."""
+    bad = ~np.isfinite(readings).all(axis=1)
+    if bad.any():
+        t = int(np.argmax(bad))
+        raise PluginFault(sensor_spec_mismatch(readings[t], readings.shape[1]) or "non-finite",
+                          where=str(origins["sensor"]), method="read", trial=trial, iteration=t)
+    bad = ~np.isfinite(u).all(axis=1) | (u < 0).any(axis=1) | \
+        (np.abs(u.sum(axis=1) - 1.0) > MEMBERSHIP_SUM_TOL)
+    if bad.any():
+        t = int(np.argmax(bad))
+        raise PluginFault(memberships_mismatch(u[t], u.shape[1]) or "invalid",
+                          where=str(origins["interpreter"]), method="memberships", trial=trial,
+                          iteration=t)
+
+
+def _checked(origin: Origin, method: str, check: Callable[[Any], Any], fn: Callable[[], Any],
+             trial: int, *what: str) -> Any:
+    value = call(origin, method, fn, trial=trial)
+    try:
+        return check(value, *what)
+    except BoundaryError as exc:
+        raise PluginFault(str(exc), where=str(origin), method=method, trial=trial) from None
+
+
+def _collect_plugin_data(result: TrialResult, components: list[tuple[str, Any]],
+                         tinfo: TrialInfo, origins: dict[str, Origin], res: Resolved) -> None:
+    """Components' ``trial_end`` and observers' ``sitframe_trial_data`` into ``plugin_data``."""
+    k = result.index
+
+    def add(plugin: str, where: str, data: dict[str, Any]) -> None:
+        box = result.plugin_data.setdefault(plugin, {})
+        for key, v in data.items():
+            if key in box:
+                raise PluginFault(f"hands '{key}' for the log, which another component of the "
+                                  f"same plugin already handed", where=where,
+                                  method="trial_end", trial=k)
+            box[key] = v
+
+    for key, comp in components:
+        if hasattr(comp, "trial_end"):
+            o = origins[key]
+            data = _checked(o, "trial_end", check_data, lambda c=comp: c.trial_end(tinfo), k,
+                            "per-trial data")
+            if data:
+                add(o.plugin_name, str(o), data)
+    for impl in res.registry.pm.hook.sitframe_trial_data.get_hookimpls():
+        where = f"plugin {res.registry.describe_plugin(impl.plugin_name)}"
+        try:
+            data = check_data(impl.function(trial=result), "sitframe_trial_data")
+        except BoundaryError as exc:
+            raise PluginFault(str(exc), where=where, method="sitframe_trial_data",
+                              trial=k) from None
+        except (KeyboardInterrupt, TaskCancelled, PluginFault):
+            raise
+        except Exception as exc:  # noqa: BLE001 - an observer's fault is reported, not raw
+            raise fault(exc, where, "sitframe_trial_data", k) from exc
+        if data:
+            add(impl.plugin_name, where, data)
+
+
+def evaluation_specs(spec: TrialSpec, policies: dict[str, LearnedPolicy]) -> list[TrialSpec]:
     """The frozen-policy evaluations of a finished trial (one spec per ``spec.evaluate`` world).
 
-    ``bdata`` is the trial's behaviour data (policies are taken from it).
+    ``policies`` are the trial's learned policies (``TrialResult.policies``).
     Parallel executors run these as separate tasks; :func:`attach_evaluation`
     adds their results to the trial in this order.
     """
     if not spec.evaluate:
         return []
-    policies = {lb: extract_policy(data) for lb, data in bdata.items()}
     return [dataclasses.replace(
         spec, seed=stage_seed(spec.seed % (2**63), STAGE_EVAL, k), world=wname,
-        iterations=spec.eval_iterations, learn=False, policies=policies, evaluate=())
+        iterations=spec.eval_iterations, learn=False, policies=dict(policies), evaluate=())
         for k, wname in enumerate(spec.evaluate)]
 
 
 #: Per-iteration arrays of a frozen-policy evaluation kept in the log (enough to
 #: replay it and to see where and in which situation it collided).
-EVAL_ARRAYS = ("pose", "collision", "contact", "command", "nearest", "sonar", "memberships")
+EVAL_ARRAYS = ("pose", "collision", "contact", "command", "nearest", READING, "memberships")
 
 
 def attach_evaluation(result: TrialResult, wname: str, ev: TrialResult) -> None:
@@ -319,13 +613,15 @@ def attach_evaluation(result: TrialResult, wname: str, ev: TrialResult) -> None:
         if key in ev.arrays:
             result.episodes[f"eval/{wname}/{key}"] = ev.arrays[key]
     for key in EVAL_KEYS:
-        result.summary[f"eval/{wname}/{key}"] = ev.summary[key]
+        result.summary[summary_key("eval", wname, key)] = ev.summary[key]
+    for plugin, data in ev.plugin_data.items():
+        box = result.plugin_data.setdefault(plugin, {})
+        box.update({f"eval/{wname}/{k}": v for k, v in data.items()})
 
 
-def extract_policy(bdata: dict[str, Any]) -> dict[str, np.ndarray]:
-    """The ``policy/<output>`` entries of a behaviour's trial data."""
-    return {k.split("/", 1)[1]: np.asarray(v) for k, v in bdata.items()
-            if k.startswith("policy/")}
+def summary_key(*parts: str) -> str:
+    """The one spelling of a summary key: ``eval/<world>/<metric>`` (``.`` in the log's table)."""
+    return "/".join(parts)
 
 
 def trial_summary(world: World, arrays: dict[str, np.ndarray], bdata: dict[str, dict[str, Any]],
@@ -372,11 +668,7 @@ class SerialExecutor:
     fires_step_hooks = True
 
     def map(self, experiment: Experiment, specs: list[TrialSpec]) -> Iterator[TrialResult]:
-        hook = experiment.pm.hook
-        step_hook = None
-        if hook.sitframe_step.get_hookimpls():
-            def step_hook(rec: StepRecord) -> None:
-                hook.sitframe_step(record=rec)
+        step_hook = step_hook_of(experiment.pm)
         for spec in specs:
             yield simulate(experiment.res, spec, step_hook=step_hook)
 
@@ -444,7 +736,8 @@ class Experiment:
             name=e["name"], config=cfg, config_text=text, config_hash=config_hash(text),
             seed=int(e["seed"]), out=out, n_trials=int(e["trials"]),
             iterations=int(e["iterations"]), plugins=plugins, worlds=worlds,
-            extra={"versions": versions(), "source": source or ""},
+            extra={"versions": versions(), "source": source or "",
+                   "sensor": self.res.run.sensor.as_dict()},
         )
 
     # -- stages ------------------------------------------------------------
@@ -453,15 +746,25 @@ class Experiment:
         rng = np.random.default_rng(stage_seed(self.info.seed, STAGE_COLLECT))
         worlds = [self.res.world(n, "collect.worlds") for n in c["worlds"]]
         sensor = self.res.sensor()
+        o = self.res.origins["sensor"]
         parts = []
         if c["mode"] in ("trajectory", "both"):
-            parts.append(collect_trajectories(worlds, sensor, rng, speed=c["speed"],
-                                              rate_hz=c["rate_hz"], params=self.res.robot))
+            parts.append(call(o, "read", collect_trajectories, worlds, sensor, rng,
+                              speed=c["speed"], rate_hz=c["rate_hz"], params=self.res.robot))
         if c["mode"] in ("wander", "both"):
-            parts.append(collect_wander(worlds, sensor, rng, n_samples=c["wander_samples"],
-                                        speed=c["speed"], rate_hz=c["rate_hz"],
-                                        params=self.res.robot))
-        return concat_collected(parts)
+            parts.append(call(o, "read", collect_wander, worlds, sensor, rng,
+                              n_samples=c["wander_samples"], speed=c["speed"],
+                              rate_hz=c["rate_hz"], params=self.res.robot))
+        collected = concat_collected(parts)
+        why = sensor_spec_mismatch(collected.samples[0], self.res.run.sensor.dim) \
+            if len(collected.samples) else None
+        bad = ~np.isfinite(collected.samples).all(axis=1)
+        if why is None and bad.any():
+            why = sensor_spec_mismatch(collected.samples[int(np.argmax(bad))],
+                                       self.res.run.sensor.dim)
+        if why is not None:
+            raise PluginFault(f"{why} (collect stage)", where=str(o), method="read")
+        return collected
 
     def cluster(self, samples: np.ndarray,
                 pmap: Any = None) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -474,11 +777,18 @@ class Experiment:
                              f"{c} situations to fit; expected at least {c}: collect more "
                              "(collect.worlds, collect.rate_hz, collect.mode) or lower c",
                              file=self.source, key="interpreter.c")
+        o = self.res.origins["interpreter"]
         if pmap is not None and "pmap" in inspect.signature(interp.fit).parameters:
-            fit = interp.fit(samples, rng, pmap=pmap)
+            fit = call(o, "fit", interp.fit, samples, rng, pmap=pmap)
         else:
-            fit = interp.fit(samples, rng)
-        return fit, interp.state()
+            fit = call(o, "fit", interp.fit, samples, rng)
+        state = call(o, "state", interp.state)
+        for what, d in (("fit", fit), ("state", state)):
+            try:
+                check_data(d, "the fitted interpreter, to log")
+            except BoundaryError as exc:
+                raise PluginFault(str(exc), where=str(o), method=what) from None
+        return fit or {}, state
 
     def trial_spec(self, k: int, interpreter_state: dict[str, Any],
                    policies: dict[str, dict[str, np.ndarray]] | None = None) -> TrialSpec:
@@ -496,6 +806,10 @@ class Experiment:
         """Announce the run to observers (the logger creates, or on resume reopens, the log)."""
         self.info.extra.setdefault("step_hooks", bool(
             getattr(self.executor, "fires_step_hooks", True)))
+        if self.out and "code_hash" not in self.info.extra:
+            from sitframe.resume import code_fingerprint  # hashes source files: only for logs
+
+            self.info.extra["code_hash"] = code_fingerprint(self.info.plugins)
         self.pm.hook.sitframe_run_start(run=self.info)
 
     def needs_clusters(self, interpreter_state: dict[str, Any] | None,
@@ -602,13 +916,16 @@ class Experiment:
         except KeyboardInterrupt:
             status = "aborted"
             raise
+        except PluginFault as exc:
+            self.info.extra["failure"] = str(exc)
+            raise
         finally:
             close = getattr(stream, "close", None)
             if close is not None:
                 close()  # cancels a parallel executor's pending trials
             self.finish(status)
         return RunResult(self.info, results, time.perf_counter() - t0, status,
-                         interpreter_state or {}, np.asarray(self.res.sensor().angles_deg))
+                         interpreter_state or {}, self.res.run.sensor.angles_deg)
 
 
 def versions() -> dict[str, str]:

@@ -96,7 +96,7 @@ def test_lookup_and_rule_base_tables_one_row_per_situation(log, trial):
     np.testing.assert_allclose([r[2:9] for r in lt.rows], q)
     rb = A.rule_base_table(log, 0)
     assert [r[0] for r in rb.rows] == list(range(6))
-    singles = trial.behaviours["avoid"]["singletons/heading"]
+    singles = trial.behaviours["avoid"]["actions/heading"]
     assert rb.column("Action [deg]") == [int(singles[i]) for i in trial.policy("avoid")["heading"]]
     assert sum(rb.column("Dominant [%]")) == pytest.approx(100.0)
     md, csv = rb.to_markdown(), rb.to_csv()
@@ -129,7 +129,7 @@ def test_figures_are_figures(log, trial):
         A.plot_measures_by_trial(A.clustering_trials(log)),
         A.plot_measures_by_c(A.sweep_result(log)),
         A.plot_exploration(A.exploration_counts(trial), A.situation_labels(log),
-                           trial.behaviours["avoid"]["singletons/heading"]),
+                           trial.behaviours["avoid"]["actions/heading"]),
         A.plot_collision_intervals(A.collision_intervals(trial.arrays["collision"]), conv),
         A.plot_reward_per_window(trial.arrays["reward/avoid"], 50, conv),
         A.plot_learning_curves({0: trial.arrays["reward/avoid"]}, {0: conv}),

@@ -194,7 +194,7 @@ CASES = [
     case("preset-unknown", "run obstacle-avoid", "unknown experiment 'obstacle-avoid'",
          "did you mean 'obstacle-avoidance", "available presets:", "speed"),
     case("component-unknown-behaviour", RUN, "c.toml: behaviours.avoid:",
-         "unknown behaviour 'fuzzy-qq'", "did you mean 'fuzzy-q'", "available: fuzzy-q",
+         "unknown behaviour 'fuzzy-qq'", "did you mean 'fuzzy-q'", "available: crisp-q, fuzzy-q",
          c__toml=_cfg('component = "fuzzy-q"', 'component = "fuzzy-qq"')),
     case("component-unknown-reward", RUN, "c.toml: behaviours.avoid.reward:",
          "unknown reward 'obstacle'", "available: obstacle-avoidance",

@@ -113,16 +113,18 @@ def replay(
             raise InputError(f"trial {trial} has no evaluation in world '{evaluation}'; it has "
                              f"{worlds or 'none'}", file=lg.path, key="--eval")
         arrays = {k[len(prefix):]: v for k, v in tr.episodes.items() if k.startswith(prefix)}
+        if "reading" not in arrays and "sonar" in arrays:  # a log from before contract v2
+            arrays["reading"] = arrays["sonar"]
         tr = dataclasses.replace(tr, world=evaluation, arrays=arrays)
         what = f"trial {trial}, evaluation in {evaluation}"
-    need = [k for k in ("pose", "sonar", "memberships", "command", "collision")
+    need = [k for k in ("pose", "reading", "memberships", "command", "collision")
             if k not in tr.arrays]
     if need:
         raise InputError(f"{what} lacks the arrays {need}" + (
             " (an older log: its evaluations kept only pose and collision)" if evaluation
             else ""), file=lg.path, key=f"trials/{trial:04d}")
     pose = np.asarray(tr.arrays["pose"], dtype=np.float64)
-    sonar = np.asarray(tr.arrays["sonar"], dtype=np.float64)
+    sonar = np.asarray(tr.arrays["reading"], dtype=np.float64)
     u = np.asarray(tr.arrays["memberships"], dtype=np.float64)
     cmd = np.asarray(tr.arrays["command"], dtype=np.float64)
     coll = np.asarray(tr.arrays["collision"], dtype=bool)

@@ -345,7 +345,7 @@ def _trial_figures(W: _Writer, lg: Log, tr: TrialLog, worlds: dict[str, Any], wi
     def exploration() -> Any:
         lab, out = R.learned_output(tr)
         counts = R.exploration_counts(tr, lab, out)
-        singles = tr.behaviours[lab][f"singletons/{out}"]
+        singles = tr.learned_policy(lab).outputs[out].actions
         return LP.plot_exploration(counts, sit if len(sit) == counts.shape[0] else None,
                                    singles, action_unit="deg" if out == "heading" else "",
                                    title=f"Trial {k}: situation-action pairs over {L} "

@@ -34,7 +34,6 @@ import numpy as np
 
 from sitframe.clustering import (
     SELECTION_RULE,
-    SONAR_ANGLES_DEG,
     ClusteringTrials,
     SweepResult,
     describe_prototype,
@@ -94,18 +93,18 @@ def _section(log: Log, name: str) -> dict[str, Any]:
 
 
 def sensor_angles(log: LogLike) -> np.ndarray:
-    """Sonar bearings [deg, + = left] from the log's ``[sensor]`` config.
+    """Beam bearings [deg, + = left] of the run's sensor, from the log's sensor spec.
 
-    Defaults to the Pioneer 2DX front ring (+90 +50 +30 +10 -10 -30 -50 -90)
-    when the config does not set ``angles_deg``.
+    Any layout (a front arc, a 360 deg ring). Logs written before the spec was
+    logged: the ``[sensor]`` table's ``angles_deg``, else the Pioneer 2DX front
+    ring (:attr:`sitframe.logs.Log.sensor`).
     """
-    angles = _section(as_log(log), "sensor").get("angles_deg", SONAR_ANGLES_DEG)
-    return np.asarray(angles, dtype=np.float64).reshape(-1)
+    return as_log(log).sensor.angles_deg
 
 
 def sensor_max_range(log: LogLike) -> float:
-    """Maximum sonar range [m] from the ``[sensor]`` config (default 3.0)."""
-    return float(_section(as_log(log), "sensor").get("max_range", 3.0))
+    """Maximum range [m] of the run's sensor (:attr:`sitframe.logs.Log.sensor`)."""
+    return as_log(log).sensor.max_range
 
 
 def robot_radius(log: LogLike) -> float:
@@ -230,27 +229,27 @@ def sweep_result(log: LogLike) -> SweepResult | None:
 
 def learned_output(trial: TrialLog, label: str | None = None,
                    output: str = "heading") -> tuple[str, str]:
-    """The (behaviour label, output) whose per-iteration rule base was logged.
+    """The (behaviour label, output) of a learned policy in the trial.
+
+    Any learned behaviour counts: one whose trial logged a learned policy
+    (:class:`sitframe.LearnedPolicy`, ``behaviours/<label>/policy/<output>``).
 
     Parameters
     ----------
     trial
         A trial read with :meth:`sitframe.logs.Log.trial`.
     label
-        Behaviour label; default the first behaviour that logged
-        ``<output>/rule_base`` (i.e. learned ``output``).
+        Behaviour label; default the first behaviour that learned ``output``.
     output
-        Output name (``"heading"`` or ``"speed"``); if ``label`` is None and no
-        behaviour learned ``output``, any learned output is taken.
+        Output name (e.g. ``"heading"`` or ``"speed"``); if ``label`` is None
+        and no behaviour learned ``output``, any learned output is taken.
 
     Raises
     ------
     InputError
         No behaviour of the trial learned anything (or ``label`` did not).
     """
-    learned = [(lb, k.split("/", 1)[0]) for lb, data in trial.behaviours.items()
-               for k in data if k.endswith("/rule_base") and "/" in k
-               and k.count("/") == 1 and not k.startswith(("policy", "snapshot"))]
+    learned = [(lb, out) for lb, pol in trial.policies.items() for out in pol.outputs]
     if label is not None:
         learned = [x for x in learned if x[0] == label]
     pick = [x for x in learned if x[1] == output] or learned
@@ -261,12 +260,16 @@ def learned_output(trial: TrialLog, label: str | None = None,
     return pick[0]
 
 
+def _policy_output(trial: TrialLog, label: str, output: str) -> Any:
+    pol = trial.learned_policy(label)
+    if pol is None or output not in pol.outputs:
+        raise InputError(f"behaviour '{label}' logged no learned {output}",
+                         key=f"behaviours/{label}/policy/{output}")
+    return pol.outputs[output]
+
+
 def _singletons(trial: TrialLog, label: str, output: str) -> np.ndarray:
-    s = trial.behaviours[label].get(f"singletons/{output}")
-    if s is None:
-        raise InputError(f"behaviour '{label}' logged no singletons/{output}",
-                         key=f"behaviours/{label}/singletons/{output}")
-    return np.asarray(s, dtype=np.float64)
+    return _policy_output(trial, label, output).actions
 
 
 def exploration_counts(trial: TrialLog, label: str | None = None, output: str = "heading",
@@ -291,6 +294,10 @@ def exploration_counts(trial: TrialLog, label: str | None = None, output: str = 
     """
     label, output = learned_output(trial, label, output)
     u = np.asarray(trial.arrays["memberships"])
+    if f"{output}/rule_base" not in trial.behaviours[label]:
+        raise InputError(f"behaviour '{label}' logged no per-iteration rule base "
+                         f"('{output}/rule_base', as fuzzy-q does), so the executed actions "
+                         "are unknown", key=f"behaviours/{label}/{output}/rule_base")
     rb = np.asarray(trial.behaviours[label][f"{output}/rule_base"])
     A = _singletons(trial, label, output).size
     n = min(u.shape[0], rb.shape[0])
@@ -566,21 +573,16 @@ def rule_base_table(log: LogLike, trial: int | TrialLog, label: str | None = Non
     lg = as_log(log)
     tr = trial if isinstance(trial, TrialLog) else lg.trial(trial)
     label, output = learned_output(tr, label, output)
-    singles = _singletons(tr, label, output)
-    data = tr.behaviours[label]
-    pol = data.get(f"policy/{output}", data.get(f"{output}/final_rule_base"))
-    q = np.asarray(data[f"{output}/q"], dtype=np.float64) if f"{output}/q" in data else None
-    if pol is None:
-        if q is None:
-            raise InputError(f"behaviour '{label}' logged no policy/{output}",
-                             key=f"behaviours/{label}/policy/{output}")
-        pol = q.argmax(axis=1)
-    pol = np.asarray(pol, dtype=np.intp)
+    po = _policy_output(tr, label, output)
+    singles = po.actions
+    q = None if po.q is None else np.asarray(po.q, dtype=np.float64)
+    pol = np.asarray(po.rules, dtype=np.intp)
     c = pol.size
     labels = _labels_for(lg, c)
-    counts = exploration_counts(tr, label, output).sum(axis=1)
+    u = np.asarray(tr.arrays["memberships"])
+    counts = np.bincount(u.argmax(axis=1), minlength=c) if u.size else np.zeros(c)
     share = 100.0 * counts / max(int(counts.sum()), 1)
-    head = "Action [deg]" if output == "heading" else f"Action ({output})"
+    head = f"Action [{po.unit}]" if po.unit else f"Action ({output})"
     rows = [[i, labels[i], _num(singles[pol[i]]),
              float(q[i].max()) if q is not None else float("nan"), float(share[i])]
             for i in range(c)]
@@ -610,10 +612,7 @@ def rule_bases_across_trials(log: LogLike, label: str | None = None,
     for k in idx:
         tr = lg.trial(k)
         lb, out = learned_output(tr, label, output)
-        data = tr.behaviours[lb]
-        pol = np.asarray(data.get(f"policy/{out}", data.get(f"{out}/final_rule_base")),
-                         dtype=np.intp)
-        acts.append(_singletons(tr, lb, out)[pol])
+        acts.append(_policy_output(tr, lb, out).values())
         conv.append(convergence_iteration(tr, lb) is not None)
     if not acts:
         raise InputError("the log has no finished learning trial", file=lg.path, key="trials")

@@ -1,0 +1,223 @@
+"""The plugin contract enforced: protocol checks at creation, value checks at the boundary.
+
+Every component a run creates is checked against its protocol
+(:mod:`sitframe.components`) as soon as it exists, and every value that
+crosses from plugin code into the core is checked where it crosses: a reading
+has the sensor's declared shape and is finite, memberships are ``c``
+non-negative numbers summing to 1, a proposal is a :class:`Proposal` with a
+finite heading, a reward is a finite real number. Any exception raised inside
+plugin code during a run becomes one :class:`~sitframe.errors.PluginFault`
+naming the plugin, the component, the method, the trial and the iteration.
+
+The per-iteration checks are a type test, a shape test and one
+``math.isfinite`` per value (the reading's and memberships' full range checks
+run once per trial, vectorised, on the logged arrays), so they cost nothing
+measurable in the loop (``benchmarks/bench_trial.py``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from sitframe.errors import InputError, PluginError, PluginFault
+from sitframe.records import LearnedPolicy, Proposal
+
+#: Methods (and attributes) each component kind must have, checked at creation.
+REQUIRED: dict[str, tuple[str, ...]] = {
+    "sensor": ("read", "angles_deg", "max_range"),
+    "interpreter": ("fit", "memberships", "state", "load_state", "n_situations"),
+    "reward": ("__call__",),
+    "behaviour": ("reset", "propose"),
+    "arbiter": ("combine",),
+}
+
+#: Optional lifecycle methods any component may define (called when present).
+LIFECYCLE = ("bind", "trial_start", "trial_end")
+
+#: Tolerance on ``sum(memberships) == 1``.
+MEMBERSHIP_SUM_TOL = 1e-6
+
+
+@dataclass(frozen=True)
+class Origin:
+    """Who a component is, for messages: plugin, kind, registry name, config key."""
+
+    plugin: str
+    kind: str
+    name: str
+    key: str
+    plugin_name: str = ""
+
+    def __str__(self) -> str:
+        return f"plugin {self.plugin}: {self.kind} '{self.name}' [{self.key}]"
+
+
+def check_protocol(obj: Any, origin: Origin, *, needs: tuple[str, ...] = ()) -> None:
+    """Raise a :class:`PluginError` naming the first missing or non-callable member.
+
+    ``needs`` adds members this run needs beyond the protocol (``learn`` for
+    a behaviour with a reward, ``load_policy`` for one given a policy).
+    """
+    for member in REQUIRED[origin.kind] + needs:
+        if member in ("angles_deg", "max_range", "n_situations"):
+            try:
+                getattr(obj, member)
+            except AttributeError:
+                raise PluginError(f"{origin}: has no attribute '{member}' (the {origin.kind} "
+                                  f"protocol in sitframe.components requires it)") from None
+            except Exception as exc:  # noqa: BLE001 - a property that raises is the plugin's
+                raise PluginFault(f"{type(exc).__name__}: {exc}", where=str(origin),
+                                  method=member) from None
+            continue
+        if not callable(getattr(obj, member, None)):
+            raise PluginError(f"{origin}: has no method '{member}' (the {origin.kind} protocol "
+                              "in sitframe.components requires it)")
+    for member in LIFECYCLE:
+        if hasattr(obj, member) and not callable(getattr(obj, member)):
+            raise PluginError(f"{origin}: '{member}' is not a method")
+
+
+def call(origin: Origin, method: str, fn: Callable[..., Any], *args: Any,
+         trial: int | None = None, **kwargs: Any) -> Any:
+    """Call plugin code outside the loop; any exception becomes one :class:`PluginFault`.
+
+    An :class:`InputError` raised by the plugin (bad configuration it found,
+    e.g. in ``bind``) stays an input error, located at the component's key.
+    """
+    try:
+        return fn(*args, **kwargs)
+    except (InputError, PluginFault, KeyboardInterrupt):
+        raise
+    except Exception as exc:  # noqa: BLE001 - any fault in plugin code is reported
+        raise fault(exc, origin, method, trial) from exc
+
+
+def fault(exc: BaseException, origin: Origin | str, method: str, trial: int | None = None,
+          iteration: int | None = None) -> PluginFault:
+    """The :class:`PluginFault` for ``exc`` raised by ``origin.method``."""
+    if isinstance(exc, PluginFault):
+        return exc
+    msg = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+    return PluginFault(msg, where=str(origin), method=method, trial=trial, iteration=iteration)
+
+
+class BoundaryError(Exception):
+    """A value returned by plugin code broke the contract (turned into a PluginFault)."""
+
+
+def sensor_spec_mismatch(reading: Any, d: int) -> str | None:
+    """Why ``reading`` is not a finite (d,) float array, or ``None`` if it is."""
+    if not isinstance(reading, np.ndarray):
+        return f"returned {type(reading).__name__}, expected a numpy array of shape ({d},)"
+    if reading.shape != (d,):
+        return f"returned shape {reading.shape}, expected ({d},) (the sensor's angles_deg)"
+    if not np.issubdtype(reading.dtype, np.floating) and not np.issubdtype(reading.dtype,
+                                                                           np.integer):
+        return f"returned dtype {reading.dtype}, expected floats"
+    bad = ~np.isfinite(reading)
+    if bad.any():
+        return f"returned a non-finite value ({reading[bad][0]}) in beam {int(np.argmax(bad))}"
+    return None
+
+
+def memberships_mismatch(u: Any, c: int) -> str | None:
+    """Why ``u`` is not ``c`` non-negative memberships summing to 1, or ``None``."""
+    if not isinstance(u, np.ndarray):
+        return f"returned {type(u).__name__}, expected a numpy array of shape ({c},)"
+    if u.shape != (c,):
+        return f"returned shape {u.shape}, expected ({c},) (one per situation)"
+    if not np.all(np.isfinite(u)):
+        return "returned a non-finite membership"
+    if u.min() < 0:
+        return f"returned a negative membership ({u.min():g})"
+    if abs(float(u.sum()) - 1.0) > MEMBERSHIP_SUM_TOL:
+        return f"returned memberships summing to {float(u.sum()):.6g}, expected 1"
+    return None
+
+
+def check_reading(reading: Any, d: int) -> None:
+    """Cheap per-iteration test: a (d,) array (values checked per trial, vectorised)."""
+    if reading.__class__ is not np.ndarray or reading.shape != (d,):
+        raise BoundaryError(sensor_spec_mismatch(reading, d))
+
+
+def check_memberships(u: Any, c: int) -> None:
+    """Cheap per-iteration test: a (c,) array (values checked per trial, vectorised)."""
+    if u.__class__ is not np.ndarray or u.shape != (c,):
+        raise BoundaryError(memberships_mismatch(u, c))
+
+
+def check_proposal(p: Any) -> Proposal:
+    """A :class:`Proposal` with a finite heading and a finite or ``None`` speed/activation."""
+    if p.__class__ is not Proposal:
+        raise BoundaryError(f"returned {type(p).__name__} {p!r:.60}, expected a "
+                            "sitframe.Proposal(heading_deg, speed_m_s=None, activation=None)")
+    h = p.heading_deg
+    if not isinstance(h, int | float) or isinstance(h, bool) or not math.isfinite(h):
+        raise BoundaryError(f"returned a Proposal with heading_deg {h!r}, expected a finite "
+                            "number of degrees")
+    s = p.speed_m_s
+    if s is not None and (not isinstance(s, int | float) or isinstance(s, bool)
+                          or not math.isfinite(s) or s < 0):
+        raise BoundaryError(f"returned a Proposal with speed_m_s {s!r}, expected None or a "
+                            "finite number >= 0 [m/s]")
+    a = p.activation
+    if a is not None and (not isinstance(a, int | float) or isinstance(a, bool)
+                          or not 0.0 <= a <= 1.0):
+        raise BoundaryError(f"returned a Proposal with activation {a!r}, expected None or a "
+                            "number in [0, 1]")
+    return p
+
+
+def check_reward(r: Any) -> float:
+    """A finite real number (not a string, not a bool, not NaN)."""
+    if r.__class__ is float or isinstance(r, int | float | np.integer | np.floating) \
+            and not isinstance(r, bool | np.bool_):
+        v = float(r)
+        if math.isfinite(v):
+            return v
+        raise BoundaryError(f"returned {v}, expected a finite reward")
+    raise BoundaryError(f"returned {type(r).__name__} {r!r:.60}, expected a finite real number")
+
+
+def check_combined(out: Any, k: int) -> tuple[Proposal, np.ndarray]:
+    """An arbiter's ``(Proposal, (k,) finite weights)``."""
+    if not isinstance(out, tuple) or len(out) != 2:
+        raise BoundaryError(f"returned {type(out).__name__}, expected a tuple (Proposal, "
+                            f"weights of shape ({k},))")
+    prop, w = out
+    check_proposal(prop)
+    w = np.asarray(w, dtype=np.float64) if not isinstance(w, np.ndarray) else w
+    if w.shape != (k,) or not np.all(np.isfinite(w)):
+        raise BoundaryError(f"returned weights of shape {np.shape(w)}, expected ({k},) finite "
+                            "numbers, one per behaviour")
+    return prop, w
+
+
+def check_policy(p: Any, c: int) -> LearnedPolicy | None:
+    """A behaviour's ``policy()``: ``None`` or a :class:`LearnedPolicy` with ``c`` rules."""
+    if p is None:
+        return None
+    if not isinstance(p, LearnedPolicy):
+        raise BoundaryError(f"returned {type(p).__name__}, expected a sitframe.LearnedPolicy "
+                            "or None")
+    for out, o in p.outputs.items():
+        if o.rules.shape != (c,):
+            raise BoundaryError(f"returned a policy whose '{out}' rules have shape "
+                                f"{o.rules.shape}, expected ({c},) (one rule per situation)")
+    return p
+
+
+def check_data(d: Any, what: str) -> dict[str, Any]:
+    """Per-trial data for the log: a dict of str -> array or scalar."""
+    if d is None:
+        return {}
+    if not isinstance(d, dict) or not all(isinstance(k, str) and k for k in d):
+        raise BoundaryError(f"returned {type(d).__name__}, expected a dict of non-empty "
+                            f"string keys to arrays or scalars ({what})")
+    return d
