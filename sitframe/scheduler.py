@@ -360,7 +360,7 @@ def simulate(
     components = [("sensor", sensor), ("interpreter", interp),
                   *[(f"behaviours.{lb}", b) for lb, (b, _r) in behaviours.items()],
                   *[(f"behaviours.{lb}.reward", r) for lb, (_b, r) in behaviours.items()
-                    if r is not None],
+                    if r is not None and spec.learn],  # (a frozen run uses no reward)
                   ("arbiter", arbiter), ("arbiter.reward", arb_reward)]
     components = [(key, comp) for key, comp in components if comp is not None]
     tinfo = TrialInfo(k, "learn" if spec.learn else "evaluate", world, L, rng)
