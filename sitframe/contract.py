@@ -186,16 +186,20 @@ def check_reward(r: Any) -> float:
 
 
 def check_combined(out: Any, k: int) -> tuple[Proposal, np.ndarray]:
-    """An arbiter's ``(Proposal, (k,) finite weights)``."""
-    if not isinstance(out, tuple) or len(out) != 2:
+    """An arbiter's ``(Proposal, (k,) weights)`` (the weights' values are checked per trial)."""
+    if out.__class__ is not tuple or len(out) != 2:
         raise BoundaryError(f"returned {type(out).__name__}, expected a tuple (Proposal, "
                             f"weights of shape ({k},))")
     prop, w = out
     check_proposal(prop)
-    w = np.asarray(w, dtype=np.float64) if not isinstance(w, np.ndarray) else w
-    if w.shape != (k,) or not np.all(np.isfinite(w)):
-        raise BoundaryError(f"returned weights of shape {np.shape(w)}, expected ({k},) finite "
-                            "numbers, one per behaviour")
+    if w.__class__ is not np.ndarray:
+        try:
+            w = np.asarray(w, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise BoundaryError(f"returned weights {w!r:.60}, expected ({k},) numbers") from None
+    if w.shape != (k,):
+        raise BoundaryError(f"returned weights of shape {w.shape}, expected ({k},), one per "
+                            "behaviour")
     return prop, w
 
 

@@ -455,7 +455,7 @@ def simulate(
         raise _loop_fault(exc, step_at, k, t, res, locals()) from exc
     pose_a[n_done] = pose
     n = n_done
-    _check_trial_values(sonar_a[:n], u_a[:n], og, k)
+    _check_trial_values(sonar_a[:n], u_a[:n], weights_a[:n], og, k)
     arrays: dict[str, np.ndarray] = {
         "pose": pose_a[: n + 1], READING: sonar_a[:n], "memberships": u_a[:n],
         "command": cmd_a[:n], "collision": coll_a[:n], "contact": contact_a[:n],
@@ -525,9 +525,9 @@ def _loop_fault(exc: Exception, step_at: _Step, trial: int, t: int, res: Resolve
     return fault(exc, step_at.origin or "an observer (sitframe_step)", step_at.method, trial, t)
 
 
-def _check_trial_values(readings: np.ndarray, u: np.ndarray, origins: dict[str, Origin],
-                        trial: int) -> None:
-    """Vectorised checks of every reading and membership vector of a finished trial."""
+def _check_trial_values(readings: np.ndarray, u: np.ndarray, weights: np.ndarray,
+                        origins: dict[str, Origin], trial: int) -> None:
+    """Vectorised checks of every reading, membership vector and weight of a finished trial."""
     bad = ~np.isfinite(readings).all(axis=1)
     if bad.any():
         t = int(np.argmax(bad))
@@ -539,6 +539,12 @@ def _check_trial_values(readings: np.ndarray, u: np.ndarray, origins: dict[str, 
         t = int(np.argmax(bad))
         raise PluginFault(memberships_mismatch(u[t], u.shape[1]) or "invalid",
                           where=str(origins["interpreter"]), method="memberships", trial=trial,
+                          iteration=t)
+    bad = ~np.isfinite(weights).all(axis=1)
+    if bad.any():
+        t = int(np.argmax(bad))
+        raise PluginFault(f"returned non-finite weights {weights[t].tolist()}",
+                          where=str(origins["arbiter"]), method="combine", trial=trial,
                           iteration=t)
 
 
