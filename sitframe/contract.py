@@ -39,6 +39,9 @@ REQUIRED: dict[str, tuple[str, ...]] = {
 #: Optional lifecycle methods any component may define (called when present).
 LIFECYCLE = ("bind", "trial_start", "trial_end")
 
+#: Real scalar types accepted for a heading, speed, activation or reward.
+_REAL = (int, float, np.integer, np.floating)
+
 #: Tolerance on ``sum(memberships) == 1``.
 MEMBERSHIP_SUM_TOL = 1e-6
 
@@ -158,16 +161,16 @@ def check_proposal(p: Any) -> Proposal:
         raise BoundaryError(f"returned {type(p).__name__} {p!r:.60}, expected a "
                             "sitframe.Proposal(heading_deg, speed_m_s=None, activation=None)")
     h = p.heading_deg
-    if not isinstance(h, int | float) or isinstance(h, bool) or not math.isfinite(h):
+    if not isinstance(h, _REAL) or isinstance(h, bool) or not math.isfinite(h):
         raise BoundaryError(f"returned a Proposal with heading_deg {h!r}, expected a finite "
                             "number of degrees")
     s = p.speed_m_s
-    if s is not None and (not isinstance(s, int | float) or isinstance(s, bool)
+    if s is not None and (not isinstance(s, _REAL) or isinstance(s, bool)
                           or not math.isfinite(s) or s < 0):
         raise BoundaryError(f"returned a Proposal with speed_m_s {s!r}, expected None or a "
                             "finite number >= 0 [m/s]")
     a = p.activation
-    if a is not None and (not isinstance(a, int | float) or isinstance(a, bool)
+    if a is not None and (not isinstance(a, _REAL) or isinstance(a, bool)
                           or not 0.0 <= a <= 1.0):
         raise BoundaryError(f"returned a Proposal with activation {a!r}, expected None or a "
                             "number in [0, 1]")
@@ -176,8 +179,7 @@ def check_proposal(p: Any) -> Proposal:
 
 def check_reward(r: Any) -> float:
     """A finite real number (not a string, not a bool, not NaN)."""
-    if r.__class__ is float or isinstance(r, int | float | np.integer | np.floating) \
-            and not isinstance(r, bool | np.bool_):
+    if r.__class__ is float or isinstance(r, _REAL) and not isinstance(r, bool | np.bool_):
         v = float(r)
         if math.isfinite(v):
             return v

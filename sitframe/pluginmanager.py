@@ -105,6 +105,13 @@ def get_plugin_manager(
         load_plugins_dir(pm, folder)
     for obj in plugins:
         register(pm, obj)
+    try:  # a hook implementation whose name is no sitframe hook (a typo) is an error
+        pm.check_pending()
+    except pluggy.PluginValidationError as exc:
+        name = pm.get_name(exc.plugin) or "?"
+        who = info[name].describe() if name in info else name
+        raise PluginError(f"plugin {who}: {' '.join(str(exc).split())}; the hooks are listed in "
+                          "sitframe.hookspecs") from None
     return pm
 
 
@@ -201,7 +208,7 @@ def _import_file(file: Path, name: str) -> ModuleType:
         raise PluginError(
             f"plugin file {file}:{exc.lineno}: syntax error: {exc.msg}"
         ) from None
-    except Exception as exc:  # noqa: BLE001
+    except (Exception, SystemExit) as exc:  # noqa: BLE001 - even sys.exit() at import
         sys.modules.pop(mod_name, None)
         line = _traceback_line(exc, file)
         raise PluginError(
@@ -344,7 +351,9 @@ class Registry:
         except InputError as exc:
             raise exc.at(file=file, key_prefix=key) from None
         except (ValueError, TypeError) as exc:
-            raise InputError(str(exc), file=file, key=key) from None
+            raise InputError(f"{exc} ({kind} '{name}' of plugin "
+                             f"{self.describe_plugin(entry.plugin)})", file=file,
+                             key=key) from None
         except Exception as exc:  # noqa: BLE001
             raise PluginError(
                 f"plugin {self.describe_plugin(entry.plugin)}: creating {kind} '{name}' "

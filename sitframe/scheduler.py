@@ -447,8 +447,8 @@ def simulate(
                     (pose[0] - goal_xy[0]) ** 2 + (pose[1] - goal_xy[1]) ** 2 <= goal_r2:
                 n_done = t + 1
                 break
-    except (KeyboardInterrupt, TaskCancelled, PluginFault):
-        raise
+    except (KeyboardInterrupt, TaskCancelled, PluginFault, InputError):
+        raise  # (a plugin's InputError names the input it found wrong)
     except Exception as exc:
         if step_at.origin is None and step_at.method == "step":
             raise  # the core's own arithmetic: a bug here, not the plugin's
@@ -816,7 +816,7 @@ class Experiment:
             from sitframe.resume import code_fingerprint  # hashes source files: only for logs
 
             self.info.extra["code_hash"] = code_fingerprint(self.info.plugins)
-        self.pm.hook.sitframe_run_start(run=self.info)
+        self._notify("sitframe_run_start", run=self.info)
 
     def needs_clusters(self, interpreter_state: dict[str, Any] | None,
                        collected: Collected | None = None) -> bool:
@@ -831,13 +831,13 @@ class Experiment:
 
     def record_collected(self, collected: Collected) -> None:
         """Hand the collect stage's output to observers."""
-        self.pm.hook.sitframe_stage_end(run=self.info, stage="collect", data={
+        self._notify("sitframe_stage_end", run=self.info, stage="collect", data={
             "samples": collected.samples, "poses": collected.poses,
             "source": collected.source, "worlds": list(collected.worlds)})
 
     def record_clusters(self, fit: dict[str, Any], state: dict[str, Any]) -> None:
         """Hand the cluster stage's output to observers."""
-        self.pm.hook.sitframe_stage_end(run=self.info, stage="cluster",
+        self._notify("sitframe_stage_end", run=self.info, stage="cluster",
                                         data={**fit, "state": state})
 
     def prepare(self, interpreter_state: dict[str, Any] | None = None,
@@ -876,11 +876,39 @@ class Experiment:
 
     def trial_done(self, result: TrialResult) -> None:
         """Hand a finished trial to observers (call in trial order)."""
-        self.pm.hook.sitframe_trial_end(run=self.info, trial=result)
+        self._notify("sitframe_trial_end", run=self.info, trial=result)
+
+    def _notify(self, hook_name: str, **kwargs: Any) -> None:
+        """Call an observer hook's implementations, in pluggy's order, each one once.
+
+        An implementation that raises does not stop the others (the logger,
+        which runs last, still writes the finished trial); the first failure
+        is then raised as one :class:`PluginFault` naming its plugin.
+        """
+        hook = getattr(self.pm.hook, hook_name)
+        impls = hook.get_hookimpls()
+        if any(getattr(i, "hookwrapper", False) or getattr(i, "wrapper", False) for i in impls):
+            hook(**kwargs)  # wrappers need pluggy's own call loop
+            return
+        first: BaseException | None = None
+        for impl in reversed(impls):  # pluggy calls the last registered first
+            try:
+                impl.function(*[kwargs[a] for a in impl.argnames])
+            except (KeyboardInterrupt, TaskCancelled):
+                raise
+            except Exception as exc:  # noqa: BLE001 - reported below, naming the plugin
+                if first is None:
+                    where = f"plugin {self.registry.describe_plugin(impl.plugin_name)}"
+                    first = exc if isinstance(exc, InputError | PluginError) else fault(
+                        exc, where, hook_name, getattr(kwargs.get("trial"), "index", None))
+                    if first is not exc:
+                        first.__cause__ = exc
+        if first is not None:
+            raise first
 
     def finish(self, status: str) -> None:
         """Tell observers the run ended with ``status`` (complete, aborted, failed)."""
-        self.pm.hook.sitframe_run_end(run=self.info, status=status)
+        self._notify("sitframe_run_end", run=self.info, status=status)
 
     def run(self, *, interpreter_state: dict[str, Any] | None = None,
             collected: Collected | None = None,
