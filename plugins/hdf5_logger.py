@@ -13,6 +13,8 @@ trials the workers return their data and this plugin writes them, in trial
 order, as they finish.
 
 Nothing is written when the run has no output path (``RunInfo.out is None``).
+The process holds the log's lock (:func:`sitframe.logs.lock_log`) from the
+run's start to its end, so a second writer of the same log is refused.
 """
 
 from __future__ import annotations
@@ -60,5 +62,10 @@ def sitframe_trial_end(run: RunInfo, trial: TrialResult) -> None:
 @hookimpl
 def sitframe_run_end(run: RunInfo, status: str) -> None:
     w = _writer(run)
-    if w is not None and w.path.exists():
-        w.set_status(status)
+    if w is None:
+        return
+    try:
+        if w.path.exists():
+            w.set_status(status)
+    finally:
+        w.release()  # the run is over: another process may write this log now

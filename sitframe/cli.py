@@ -24,7 +24,8 @@ writes the log. A killed run's log keeps every finished trial and
 Errors caused by input (config, world, log, plugin) print one line on stderr
 (``sitframe: error: FILE: KEY: what was wrong; what was expected``) and exit
 with status 2, before anything is written. Set ``SITFRAME_TRACEBACK=1`` to see
-the traceback as well. Ctrl-C exits with status 130.
+the traceback as well. Ctrl-C exits with status 130 and SIGTERM with 143, each
+after marking the log ``aborted`` (``run --resume LOG`` finishes it).
 """
 
 from __future__ import annotations
@@ -111,30 +112,72 @@ EXTRA_COMMANDS: dict[str, str] = {"analyse": "sitframe.analysis.commands",
                                   "sweep": "sitframe.sweep"}
 
 
+#: Commands that read a log given on the command line: an exception while they use its
+#: contents means the log is damaged (valid HDF5, wrong layout), reported in one line.
+_LOG_READERS = ("evaluate", "analyse", "replay")
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line ``argv``; returns the exit status (2 bad input, 130 Ctrl-C)."""
+    """Run the command line ``argv``; returns the exit status.
+
+    2 bad input, 130 Ctrl-C, 143 SIGTERM (the run is marked ``aborted`` in
+    both cases), 141 when stdout is closed early (``| head``; quietly).
+    """
+    from sitframe.interrupts import Terminated, terminate_as_interrupt
+    from sitframe.logs import unlock_log
+
+    args = None
     try:
-        return _dispatch(build_parser().parse_args(argv))
+        with terminate_as_interrupt():
+            args = build_parser().parse_args(argv)
+            return _dispatch(args)
     except (InputError, PluginError) as exc:
         if os.environ.get("SITFRAME_TRACEBACK"):
             raise
         print(f"sitframe: error: {' '.join(str(exc).splitlines())}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("sitframe: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        terminated = isinstance(exc, Terminated)
+        print(f"sitframe: {'terminated' if terminated else 'interrupted'}", file=sys.stderr)
+        return 143 if terminated else 130
+    except BrokenPipeError:
+        _silence_stdout()
+        return 141
+    except (KeyError, IndexError, ValueError, TypeError, AttributeError) as exc:
+        log = getattr(args, "log", None)
+        if os.environ.get("SITFRAME_TRACEBACK") or getattr(args, "command", None) \
+                not in _LOG_READERS or not log:
+            raise
+        msg = " ".join(str(exc).split()) or type(exc).__name__
+        err = InputError(f"the log's contents are damaged or not laid out as a sitframe log "
+                         f"({type(exc).__name__}: {msg})", file=log)
+        print(f"sitframe: error: {err}", file=sys.stderr)
+        return 2
+    finally:
+        unlock_log()  # every log this process was writing: the run is over
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null (its reader went away; flushing it at exit would fail)."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # not a real file (e.g. captured in tests)
+        pass
 
 
 def console_main(argv: list[str] | None = None) -> int:
     """The ``sitframe`` console script: :func:`main`, then exit without being interruptible.
 
     Once :func:`main` has returned, the log is complete (or marked aborted);
-    a Ctrl-C that arrives while the interpreter shuts the worker pool down
-    would otherwise kill the process by the signal itself (status -2, as if
-    nothing had been written), so SIGINT is ignored from here on.
+    a Ctrl-C or SIGTERM that arrives while the interpreter shuts the worker
+    pool down would otherwise kill the process by the signal itself (status
+    -2 or -15, as if nothing had been written), so both are ignored from
+    here on.
     """
     status = main(argv)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     return status
 
 

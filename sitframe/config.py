@@ -52,6 +52,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import importlib.resources
+import re
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -225,6 +226,9 @@ def _validate_behaviours(value: dict[str, Any], file: str | None) -> dict[str, A
     out = {}
     for label, table in value.items():
         key = f"behaviours.{label}"
+        if label in ("", ".") or "/" in label:
+            raise InputError(f"expected a behaviour label that can name an HDF5 group (not "
+                             f"empty, not '.', no '/'), got {label!r}", file=file, key=key)
         if not isinstance(table, dict):
             raise InputError(f"expected a table, got {type(table).__name__}", file=file, key=key)
         if "component" not in table:
@@ -333,7 +337,7 @@ def to_toml(cfg: dict[str, Any]) -> str:
         if isinstance(v, int | float):
             return repr(v)
         if isinstance(v, str):
-            return '"' + v.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
+            return _toml_string(v)
         if isinstance(v, list | tuple):
             return "[" + ", ".join(val(x) for x in v) + "]"
         if isinstance(v, dict):
@@ -359,7 +363,15 @@ def to_toml(cfg: dict[str, Any]) -> str:
 
 
 def _k(key: str) -> str:
-    return key if key.replace("_", "").replace("-", "").isalnum() else f'"{key}"'
+    """A TOML key: bare if it may be (ASCII letters, digits, ``_``, ``-``), else quoted."""
+    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else _toml_string(key)
+
+
+def _toml_string(v: str) -> str:
+    """A TOML basic string holding exactly ``v`` (control characters escaped)."""
+    body = v.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
+    body = re.sub(r"[\x00-\x08\x0b-\x1f\x7f]", lambda m: f"\\u{ord(m.group()):04x}", body)
+    return f'"{body}"'
 
 
 def config_hash(text: str) -> str:
