@@ -232,7 +232,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     exp, kwargs = _prepare_run(args)
     n_tasks = exp.info.n_trials if "learn" in exp.cfg["experiment"]["stages"] else 0
     exp.executor = make_executor(args.workers, args.scheduler, n_tasks)
-    result = _execute(exp, kwargs)
+    result = _execute(exp, kwargs, replacing=True)
     if args.json:
         print(json.dumps(run_json(result), indent=2, default=_json_default))
     else:
@@ -240,10 +240,27 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _execute(exp: Any, kwargs: dict[str, Any]) -> Any:
-    """``exp.run(**kwargs)``, releasing the executor's workers however it ends."""
+def _claim(out: str, *, replacing: bool = False, key: str = "--out") -> None:
+    """Become the log's only writer now (refused, one line, if another process is); with
+    ``replacing``, say on stderr that an existing log will be replaced."""
+    from sitframe.logs import lock_log, open_log
+
+    lock_log(out, key)
+    if replacing and Path(out).is_file():
+        try:
+            what = f"the existing log (status {open_log(out).status})"
+        except InputError:
+            what = "the existing file (not a readable sitframe log)"
+        print(f"sitframe: note: {out}: replacing {what}", file=sys.stderr)
+
+
+def _execute(exp: Any, kwargs: dict[str, Any], *, replacing: bool = False,
+             key: str = "--out") -> Any:
+    """Claim the log (:func:`_claim`), ``exp.run(**kwargs)``, releasing the executor's
+    workers however it ends."""
     failed = True
     try:
+        _claim(exp.out, replacing=replacing, key=key)
         result = exp.run(**kwargs)
         failed = False
         return result
@@ -280,7 +297,7 @@ def _run_resume(args: argparse.Namespace) -> int:
               "since this run started; the resumed trials may differ from the logged ones",
               file=sys.stderr)
     exp.executor = make_executor(args.workers, args.scheduler, len(missing))
-    result = _execute(exp, kwargs)
+    result = _execute(exp, kwargs, key="--resume")
     if args.json:
         doc = run_json(result)
         doc["resumed_trials"] = missing
@@ -303,14 +320,21 @@ def _prepare_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
     e = cfg["experiment"]
     for key in ("trials", "seed", "world", "iterations", "clusters_from"):
         val = getattr(args, key)
-        if val is not None:
-            e[key] = val
+        if val is not None:  # (paths on the command line are relative to the working folder)
+            e[key] = _abspath(val) if key in ("world", "clusters_from") else val
     out = args.out or str(Path("logs") / f"{e['name']}.h5")
     exp, kwargs = prepare_experiment(cfg, source=source, base_dir=base_dir, out=out,
                                      plugins_dirs=tuple(args.plugins_dir),
                                      progress=not args.json and sys.stderr.isatty())
     exp.needs_clusters(kwargs.get("interpreter_state"))  # stages that cannot run: fail now
     return exp, kwargs
+
+
+def _abspath(path: str) -> str:
+    """A command-line path made absolute (config paths resolve against the config's folder);
+    shipped names (no '/', no .toml) stay as they are."""
+    p = Path(path)
+    return str(p.absolute()) if (p.suffix in (".toml", ".h5") or len(p.parts) > 1) else path
 
 
 def _json_default(o: Any) -> Any:

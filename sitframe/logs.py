@@ -141,7 +141,7 @@ def _write_value(group: h5py.Group, name: str, value: Any) -> None:
 _held: dict[str, tuple[int, Path]] = {}
 
 
-def lock_log(path: str | os.PathLike[str]) -> None:
+def lock_log(path: str | os.PathLike[str], key: str = "--out") -> None:
     """Become the only writer of the log at ``path`` (no-op if this process already is).
 
     Takes an exclusive, non-blocking :func:`fcntl.flock` on ``LOG.lock``
@@ -164,14 +164,14 @@ def lock_log(path: str | os.PathLike[str]) -> None:
             fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
         except OSError as exc:
             raise InputError(f"cannot create the lock file '{lock.name}': "
-                             f"{exc.strerror or exc}", file=str(path), key="--out") from None
+                             f"{exc.strerror or exc}", file=str(path), key=key) from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
             os.close(fd)
             raise InputError(f"another sitframe process is writing this log (it holds "
                              f"'{lock.name}'); one log has one writer: wait for that run to end "
-                             "or choose another --out", file=str(path), key="--out") from None
+                             "or choose another --out", file=str(path), key=key) from None
         try:  # the previous holder may have removed the file between our open and flock
             same = os.path.samestat(os.fstat(fd), os.stat(lock, follow_symlinks=False))
         except OSError:
@@ -614,7 +614,7 @@ def open_log(path: str | os.PathLike[str]) -> Log:
         raise InputError(f"not a sitframe log (root attribute schema is "
                          f"{attrs.get('schema')!r}, expected {SCHEMA!r})", file=p)
     version = attrs.get("schema_version")
-    if version != SCHEMA_VERSION:
+    if not isinstance(version, int) or isinstance(version, bool) or version != SCHEMA_VERSION:
         raise InputError(f"unknown log schema version {version!r}; this sitframe reads version "
                          f"{SCHEMA_VERSION}", file=p, key="schema_version")
     return Log(p, attrs)
