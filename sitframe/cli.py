@@ -178,6 +178,11 @@ def console_main(argv: list[str] | None = None) -> int:
     status = main(argv)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    try:
+        sys.stdout.flush()  # now, not at exit, where a closed pipe prints a traceback
+    except BrokenPipeError:
+        _silence_stdout()
+        return 141
     return status
 
 

@@ -127,6 +127,11 @@ def load_config(experiment: str) -> tuple[dict[str, Any], str, str]:
         in error messages, and the folder relative paths are resolved from.
     """
     path = Path(experiment)
+    try:
+        experiment.encode("utf-8")
+    except UnicodeEncodeError:
+        raise InputError("the file name is not UTF-8; the log stores it as UTF-8 text: rename "
+                         "the file", file=experiment) from None
     if experiment.endswith(".toml") or path.exists() or "/" in experiment:
         if not path.is_file():
             raise InputError("config file not found (expected a preset name or a .toml file)",
@@ -191,10 +196,29 @@ def validate_config(raw: dict[str, Any], *, file: str | None = None) -> dict[str
                         f"{', '.join(sorted(known))}", file=file, key=f"{section}.{key}")
             cfg[section].update(value)
     _check_core(cfg, file)
+    _check_utf8(cfg, file, "")
     if not cfg["behaviours"]:
         raise InputError("no behaviours configured (expected at least one [behaviours.LABEL] "
                          "table with a 'component')", file=file, key="behaviours")
     return cfg
+
+
+def _check_utf8(value: Any, file: str | None, key: str) -> None:
+    """Every key and string below ``value`` is valid UTF-8 (the log stores the config as
+    UTF-8 text; a non-UTF-8 file name given on the command line is not)."""
+    items = value.items() if isinstance(value, dict) else \
+        enumerate(value) if isinstance(value, list) else ()
+    for k, v in items:
+        sub = f"{key}.{k}" if isinstance(k, str) and key else f"{key}[{k}]" if key else str(k)
+        for text in (k, v):
+            if isinstance(text, str):
+                try:
+                    text.encode("utf-8")
+                except UnicodeEncodeError:
+                    raise InputError("holds bytes that are not UTF-8 (a non-UTF-8 file name?); "
+                                     "expected UTF-8 text: rename the file", file=file,
+                                     key=sub) from None
+        _check_utf8(v, file, sub)
 
 
 def _at(fn: Any, name: str, value: Any, file: str | None, prefix: str, **kw: Any) -> Any:

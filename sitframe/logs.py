@@ -154,8 +154,8 @@ def lock_log(path: str | os.PathLike[str], key: str = "--out") -> None:
     InputError
         Another process holds the lock, or the lock file cannot be created.
     """
-    key = os.path.realpath(path)
-    if key in _held:
+    real = os.path.realpath(path)
+    if real in _held:
         return
     lock = Path(str(path) + ".lock")
     while True:
@@ -177,7 +177,7 @@ def lock_log(path: str | os.PathLike[str], key: str = "--out") -> None:
         except OSError:
             same = False
         if same:
-            _held[key] = (fd, lock)
+            _held[real] = (fd, lock)
             return
         os.close(fd)
 
@@ -516,6 +516,7 @@ class Log:
     def check(self) -> None:
         """Read the whole log: every header, attribute and dataset, and the root JSON.
 
+        Also checks the layout every reader relies on (:func:`_check_layout`).
         Raises an :class:`InputError` naming the log if any part is damaged, so
         a command can fail before it writes anything. Datasets carry Fletcher-32
         checksums (logs written since they were added), so damaged *data* is
@@ -529,6 +530,7 @@ class Log:
 
         with self._file() as f:
             f.visititems(read)
+            _check_layout(f, self.path)
 
     def has(self, group: str) -> bool:
         with self._file() as f:
@@ -589,6 +591,49 @@ class Log:
             if "summary" not in f:
                 return np.zeros(0, dtype=[("trial", "i4")])
             return f["summary"][()]
+
+
+def _check_layout(f: h5py.File, path: str) -> None:
+    """The parts of the layout that readers index with, checked so that a valid HDF5 file
+    with damaged contents is one clear :class:`InputError` (naming the item), not a wrong
+    figure or a traceback: ``/trials`` holds trial groups, fitted centres are a finite
+    (c, d) array matching the trials' memberships (c) and readings (d), and every learned
+    policy indexes an existing action."""
+    def fail(key: str, what: str) -> None:
+        raise InputError(what, file=path, key=key)
+
+    trials = f.get("trials")
+    if trials is not None and not isinstance(trials, h5py.Group):
+        fail("trials", "expected a group of trial groups, got a dataset")
+    centers = f.get("cluster/state/centers")
+    shape = None
+    if centers is not None:
+        c = np.asarray(centers[()])
+        if c.ndim != 2 or c.dtype.kind not in "fiu" or not np.isfinite(c).all():
+            fail("cluster/state/centers", f"expected a finite (c, d) array of centres, got "
+                 f"shape {c.shape}, dtype {c.dtype}")
+        shape = c.shape
+    for name, g in (trials or {}).items():
+        if not isinstance(g, h5py.Group):
+            fail(f"trials/{name}", "expected a trial group, got a dataset")
+        for ds, axis in (("memberships", 0), ("sonar", 1)):
+            if shape is not None and isinstance(g.get(ds), h5py.Dataset) and \
+                    g[ds].shape[1:] != (shape[axis],):
+                fail(f"trials/{name}/{ds}", f"has shape {g[ds].shape}, which does not fit the "
+                     f"fitted centres' shape {shape}")
+        for label, bg in (g["behaviours"].items() if isinstance(g.get("behaviours"), h5py.Group)
+                          else ()):
+            policy, singles = bg.get("policy"), bg.get("singletons")
+            if not isinstance(policy, h5py.Group) or not isinstance(singles, h5py.Group):
+                continue
+            for out, ds in policy.items():
+                if out not in singles:
+                    continue
+                idx, n = np.asarray(ds[()]), len(singles[out])
+                if idx.dtype.kind not in "iu" or (idx.size and not (0 <= idx.min() <= idx.max()
+                                                                     < n)):
+                    fail(f"trials/{name}/behaviours/{label}/policy/{out}", f"expected action "
+                         f"indices in 0..{n - 1}, got {idx.tolist()}")
 
 
 def open_log(path: str | os.PathLike[str]) -> Log:

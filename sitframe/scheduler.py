@@ -123,7 +123,7 @@ class Resolved:
         (the config file's folder)."""
         if name not in self._worlds:
             path: str | Path = name  # a shipped name
-            if Path(name).suffix == ".toml" or len(Path(name).parts) > 1:
+            if name.endswith(".toml") or "/" in name:
                 path = Path(name)
                 if not path.is_absolute() and self.base_dir not in ("", "."):
                     path = Path(self.base_dir) / path

@@ -370,6 +370,7 @@ def load_world(name_or_path: str | Path | World) -> World:
     path = Path(name_or_path)
     looks_like_path = (
         isinstance(name_or_path, Path) or path.suffix == ".toml" or len(path.parts) > 1
+        or "/" in str(name_or_path)
     )
     if looks_like_path or path.is_file():
         if path.exists() and not path.is_file():
