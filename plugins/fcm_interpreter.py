@@ -40,7 +40,6 @@ from sitframe.fcm import MembershipFunction
 
 TRANSFORMS = ("range", "log", "inverse")
 #: Upper bounds of the counts (beyond them the clustering's arrays do not fit in memory).
-MAX_C = 1024
 MAX_TRIALS = 10_000
 MAX_ITER = 1_000_000
 
@@ -62,13 +61,13 @@ class FCMInterpreter:
         transform: str = "range",
         offset: float = 0.1,
     ) -> None:
-        # (upper bounds keep the trials' arrays in memory: trials x c x d centres each)
-        self.c = int(P.number("c", c, lo=2, hi=MAX_C, integer=True))
+        # (upper bounds keep the trials' arrays in memory; c is bounded by the samples)
+        self.c = int(P.number("c", c, lo=2, integer=True))
         self.m = float(P.number("m", m, lo=1.0, lo_open=True))
         self.trials = int(P.number("trials", trials, lo=1, hi=MAX_TRIALS, integer=True))
         self.tol = float(P.number("tol", tol, lo=0.0, lo_open=True))
         self.max_iter = int(P.number("max_iter", max_iter, lo=1, hi=MAX_ITER, integer=True))
-        self.sweep = [int(P.number(f"sweep[{i}]", v, lo=2, hi=MAX_C, integer=True))
+        self.sweep = [int(P.number(f"sweep[{i}]", v, lo=2, integer=True))
                       for i, v in enumerate(sweep or [])]
         self.transform = P.choice("transform", transform, TRANSFORMS)
         self.offset = float(P.number("offset", offset, lo=0.0, lo_open=True))

@@ -7,7 +7,7 @@ thesis's Table A.1):
     ``name``, ``description``, ``seed`` (int), ``trials`` (learning trials),
     ``iterations`` (l, per trial), ``stages`` (subset of
     ``["collect", "cluster", "learn", "evaluate"]``), ``world`` (the learning
-    world), ``default_speed`` (m/s, when no behaviour proposes a speed),
+    world: a shipped name or a .toml path), ``default_speed`` (m/s, when no behaviour proposes a speed),
     ``clusters_from`` (path of a log whose fitted situations are reused;
     collect and cluster are then skipped).
 ``[robot]``
@@ -40,6 +40,15 @@ thesis's Table A.1):
     :mod:`sitframe.episodes`, which validates the last three).
 ``[plugins]``
     ``dirs``: folders of loose plugin modules, relative to the config file.
+    Every ``*.py`` file in them is imported, i.e. **runs**, when the config
+    is loaded (as pytest imports ``conftest.py``): use only configs you
+    trust. ``run --resume`` does not import folders named only by a log.
+
+Paths in a config (world files, ``clusters_from``, ``policy_from.log``,
+``plugins.dirs``) resolve against the config file's folder; a world given
+as a bare name (no ``/``, no ``.toml``) is a shipped world. Text is stored
+in the log as TOML, so any string round-trips; behaviour labels name HDF5
+groups and may not be empty, ``.`` or contain ``/``.
 
 Component parameters are checked against the component's signature when the
 run resolves its components (unknown names get a did-you-mean); everything

@@ -163,8 +163,8 @@ def lock_log(path: str | os.PathLike[str], key: str = "--out") -> None:
             lock.parent.mkdir(parents=True, exist_ok=True)
             fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
         except OSError as exc:
-            raise InputError(f"cannot create the lock file '{lock.name}': "
-                             f"{exc.strerror or exc}", file=str(path), key=key) from None
+            raise InputError(f"cannot create the log: {exc.strerror or exc} (its lock file "
+                             f"'{lock.name}')", file=str(path), key=key) from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:

@@ -366,7 +366,7 @@ def test_8_planted_symlinks_are_never_written_through(tmp_path, capsys, monkeypa
     assert open_log("logs/small.h5").complete
     os.symlink(victim, tmp_path / "logs" / "other.h5.lock")
     refused(capsys, ["run", "c.toml", "--out", "logs/other.h5"], "other.h5: --out:",
-            "lock file")
+            "cannot create the log", "lock file")
     assert victim.read_text() == "precious"
 
 
