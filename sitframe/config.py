@@ -7,7 +7,8 @@ thesis's Table A.1):
     ``name``, ``description``, ``seed`` (int), ``trials`` (learning trials),
     ``iterations`` (l, per trial), ``stages`` (subset of
     ``["collect", "cluster", "learn", "evaluate"]``), ``world`` (the learning
-    world: a shipped name or a .toml path), ``default_speed`` (m/s, when no behaviour proposes a speed),
+    world: a shipped name or a .toml path), ``default_speed`` (m/s, when no
+    behaviour proposes a speed),
     ``clusters_from`` (path of a log whose fitted situations are reused;
     collect and cluster are then skipped).
 ``[robot]``
