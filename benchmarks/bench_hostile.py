@@ -16,7 +16,10 @@ runs of the kill/interrupt config of ``bench_parallel.py`` (1 or 2 workers)
 and to sweeps of it (2 points), and counts the logs that end ``aborted``
 (exit 143; or ``complete`` with exit 0 when the signal came after the end)
 with no traceback, and how many resume (``run --resume``) to the
-uninterrupted result bit for bit (``sitframe.parallel.compare_logs``).
+uninterrupted result bit for bit (``sitframe.parallel.compare_logs``). A
+signal that arrives while the interpreter is still starting (before any
+sitframe code runs, so before its handler exists) kills the process (exit
+-15); that counts as clean only if nothing was written.
 Prints figures; it is not a test.
 """
 
@@ -106,9 +109,12 @@ def _terminate(cmd: list[str], at: float) -> tuple[int | None, str]:
 
 
 def _settled(code: int | None, err: str, statuses: list[str]) -> bool:
-    """Exit 143 with every log aborted or complete, or exit 0 with every log complete."""
+    """Exit 143 with every log aborted or complete, or exit 0 with every log complete, or
+    killed by the signal (exit -15) before sitframe's code ran, with nothing written."""
     if code is None or "Traceback" in err or "leaked" in err:
         return False
+    if code == -signal.SIGTERM:  # still in interpreter start-up: no handler can exist yet
+        return not statuses
     if code == 143:
         return all(s in ("aborted", "complete") for s in statuses)
     return code == 0 and all(s == "complete" for s in statuses)
@@ -130,7 +136,7 @@ def sigterm_tally(n: int, tmp: Path, seed: int) -> int:
     subprocess.run([*SITFRAME, "sweep", str(tmp / "term.toml"), "--out", str(tmp / "ref-sweep"),
                     "--workers", "2", "--json"], check=True, stdout=subprocess.DEVNULL)
     t_sweep = time.perf_counter() - t0
-    aborted = settled = identical = 0
+    aborted = settled = identical = early = 0
     for i in range(n):
         mode = ["run-1", "run-2", "sweep"][i % 3]
         if mode == "sweep":
@@ -153,6 +159,7 @@ def sigterm_tally(n: int, tmp: Path, seed: int) -> int:
         ok = _settled(code, err, statuses)
         settled += ok
         aborted += ok and code == 143 and "aborted" in statuses
+        early += ok and not statuses
         same = ok and all(_resume(p, workers) and compare_logs(r, p) == [] for p, r in pairs
                           if p.exists())
         identical += same
@@ -161,7 +168,8 @@ def sigterm_tally(n: int, tmp: Path, seed: int) -> int:
               + ("" if ok else f"\n{err[-1500:]}"), flush=True)
     print(f"SIGTERM tally over {n} runs and sweeps (reference run {t_ref:.2f} s, sweep "
           f"{t_sweep:.2f} s): {settled}/{n} ended cleanly (exit 143 with every log 'aborted' "
-          f"or 'complete', or exit 0 after completing; {aborted} mid-run with an 'aborted' log), "
+          f"or 'complete', or exit 0 after completing; {aborted} mid-run with an 'aborted' log, "
+          f"{early} before any log existed), "
           f"{identical}/{n} resumed bit-identically to the uninterrupted result")
     return 0 if settled == identical == n else 1
 
