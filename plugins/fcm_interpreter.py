@@ -28,6 +28,7 @@ and adds ``feature_centers``, which the memberships use.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -36,6 +37,9 @@ from sitframe import MembershipFunction, TaskMap, cluster_trials, hookimpl, swee
 from sitframe import params as P
 
 TRANSFORMS = ("range", "log", "inverse")
+#: Upper bounds of the counts (beyond them the clustering's arrays do not fit in memory).
+MAX_TRIALS = 10_000
+MAX_ITER = 1_000_000
 
 
 class FCMInterpreter:
@@ -55,11 +59,12 @@ class FCMInterpreter:
         transform: str = "range",
         offset: float = 0.1,
     ) -> None:
+        # (upper bounds keep the trials' arrays in memory; c is bounded by the samples)
         self.c = int(P.number("c", c, lo=2, integer=True))
         self.m = float(P.number("m", m, lo=1.0, lo_open=True))
-        self.trials = int(P.number("trials", trials, lo=1, integer=True))
+        self.trials = int(P.number("trials", trials, lo=1, hi=MAX_TRIALS, integer=True))
         self.tol = float(P.number("tol", tol, lo=0.0, lo_open=True))
-        self.max_iter = int(P.number("max_iter", max_iter, lo=1, integer=True))
+        self.max_iter = int(P.number("max_iter", max_iter, lo=1, hi=MAX_ITER, integer=True))
         self.sweep = [int(P.number(f"sweep[{i}]", v, lo=2, integer=True))
                       for i, v in enumerate(sweep or [])]
         self.transform = P.choice("transform", transform, TRANSFORMS)
@@ -138,11 +143,18 @@ class FCMInterpreter:
         if centers.ndim != 2 or centers.shape[0] != self.c:
             raise ValueError(f"logged centres have shape {centers.shape}, expected ({self.c}, d) "
                              f"for c = {self.c}")
-        self.m = float(state.get("m", self.m))
-        self.centers = centers
         feat = state.get("feature_centers")
-        self.feature_centers = (np.asarray(feat, dtype=float) if feat is not None
-                                else self.features(centers))
+        feat = np.asarray(feat, dtype=float) if feat is not None else self.features(centers)
+        m = float(state.get("m", self.m))
+        if feat.shape != centers.shape or not (np.isfinite(centers).all()
+                                               and np.isfinite(feat).all()):
+            raise ValueError(f"logged centres are not finite or their feature_centers have shape "
+                             f"{feat.shape}, expected finite arrays of shape {centers.shape}")
+        if not (math.isfinite(m) and m > 1.0):
+            raise ValueError(f"logged fuzzifier m = {m}, expected a number > 1")
+        self.m = m
+        self.centers = centers
+        self.feature_centers = feat
         self._u = MembershipFunction(self.feature_centers, self.m)
 
 

@@ -18,6 +18,9 @@ Its ``sitframe_trial_end`` and ``sitframe_run_end`` run *last* (``trylast``):
 another observer's ``sitframe_trial_end`` may still add arrays to
 ``trial.plugin_data["<its plugin name>"]``, and they are written in the same
 transaction as the trial.
+
+The process holds the log's lock (:func:`sitframe.logs.lock_log`) from the
+run's start to its end, so a second writer of the same log is refused.
 """
 
 from __future__ import annotations
@@ -59,5 +62,10 @@ def sitframe_trial_end(run: RunInfo, trial: TrialResult) -> None:
 @hookimpl(trylast=True)
 def sitframe_run_end(run: RunInfo, status: str) -> None:
     w = _writer(run)
-    if w is not None and w.path.exists():
-        w.set_status(status, failure=run.extra.get("failure"))
+    if w is None:
+        return
+    try:
+        if w.path.exists():
+            w.set_status(status, failure=run.extra.get("failure"))
+    finally:
+        w.release()  # the run is over: another process may write this log now

@@ -26,8 +26,10 @@ Errors caused by input (config, world, log, plugin) print one line on stderr
 with status 2, before anything is written. Plugin code that raises, or returns
 a value that breaks the contract, during a run prints one line naming the
 plugin, component, method, trial and iteration and exits with status 3; the
-log keeps every finished trial and is marked ``failed``. Set ``SITFRAME_TRACEBACK=1`` to see
-the traceback as well. Ctrl-C exits with status 130.
+log keeps every finished trial and is marked ``failed``. Set
+``SITFRAME_TRACEBACK=1`` to see the traceback as well. Ctrl-C exits with status
+130 and SIGTERM with 143, each after marking the log ``aborted`` (``run --resume
+LOG`` finishes it).
 """
 
 from __future__ import annotations
@@ -114,36 +116,81 @@ EXTRA_COMMANDS: dict[str, str] = {"analyse": "sitframe.analysis.commands",
                                   "sweep": "sitframe.sweep"}
 
 
+#: Commands that read a log given on the command line: an exception while they use its
+#: contents means the log is damaged (valid HDF5, wrong layout), reported in one line.
+_LOG_READERS = ("evaluate", "analyse", "replay")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line ``argv``; returns the exit status.
 
     0 success, 2 bad input (config, world, log, a plugin that cannot load or
     breaks the protocol at creation), 3 plugin code failed during the run
     (:class:`~sitframe.errors.PluginFault`: the log keeps every finished trial
-    and says ``failed``), 130 Ctrl-C.
+    and says ``failed``), 130 Ctrl-C, 143 SIGTERM (the run is marked
+    ``aborted`` in both cases), 141 when stdout is closed early (``| head``;
+    quietly).
     """
+    from sitframe.interrupts import Terminated, terminate_as_interrupt
+    from sitframe.logs import unlock_log
+
+    args = None
     try:
-        return _dispatch(build_parser().parse_args(argv))
+        with terminate_as_interrupt():
+            args = build_parser().parse_args(argv)
+            return _dispatch(args)
     except (InputError, PluginError) as exc:
         if os.environ.get("SITFRAME_TRACEBACK"):
             raise
         print(f"sitframe: error: {' '.join(str(exc).splitlines())}", file=sys.stderr)
         return PLUGIN_FAULT_EXIT if isinstance(exc, PluginFault) else 2
-    except KeyboardInterrupt:
-        print("sitframe: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        terminated = isinstance(exc, Terminated)
+        print(f"sitframe: {'terminated' if terminated else 'interrupted'}", file=sys.stderr)
+        return 143 if terminated else 130
+    except BrokenPipeError:
+        _silence_stdout()
+        return 141
+    except (KeyError, IndexError, ValueError, TypeError, AttributeError) as exc:
+        log = getattr(args, "log", None)
+        if os.environ.get("SITFRAME_TRACEBACK") or getattr(args, "command", None) \
+                not in _LOG_READERS or not log:
+            raise
+        msg = " ".join(str(exc).split()) or type(exc).__name__
+        err = InputError(f"the log's contents are damaged or not laid out as a sitframe log "
+                         f"({type(exc).__name__}: {msg})", file=log)
+        print(f"sitframe: error: {err}", file=sys.stderr)
+        return 2
+    finally:
+        unlock_log()  # every log this process was writing: the run is over
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null (its reader went away; flushing it at exit would fail)."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # not a real file (e.g. captured in tests)
+        pass
 
 
 def console_main(argv: list[str] | None = None) -> int:
     """The ``sitframe`` console script: :func:`main`, then exit without being interruptible.
 
     Once :func:`main` has returned, the log is complete (or marked aborted);
-    a Ctrl-C that arrives while the interpreter shuts the worker pool down
-    would otherwise kill the process by the signal itself (status -2, as if
-    nothing had been written), so SIGINT is ignored from here on.
+    a Ctrl-C or SIGTERM that arrives while the interpreter shuts the worker
+    pool down would otherwise kill the process by the signal itself (status
+    -2 or -15, as if nothing had been written), so both are ignored from
+    here on.
     """
     status = main(argv)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    try:
+        sys.stdout.flush()  # now, not at exit, where a closed pipe prints a traceback
+    except BrokenPipeError:
+        _silence_stdout()
+        return 141
     return status
 
 
@@ -198,7 +245,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     exp, kwargs = _prepare_run(args)
     n_tasks = exp.info.n_trials if "learn" in exp.cfg["experiment"]["stages"] else 0
     exp.executor = make_executor(args.workers, args.scheduler, n_tasks)
-    result = _execute(exp, kwargs)
+    result = _execute(exp, kwargs, replacing=True)
     if args.json:
         print(json.dumps(run_json(result), indent=2, default=_json_default))
     else:
@@ -206,12 +253,29 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _execute(exp: Any, kwargs: dict[str, Any]) -> Any:
-    """``exp.run(**kwargs)``, releasing the executor's workers however it ends."""
+def _claim(out: str, *, replacing: bool = False, key: str = "--out") -> None:
+    """Become the log's only writer now (refused, one line, if another process is); with
+    ``replacing``, say on stderr that an existing log will be replaced."""
+    from sitframe.logs import lock_log, open_log
+
+    lock_log(out, key)
+    if replacing and Path(out).is_file():
+        try:
+            what = f"the existing log (status {open_log(out).status})"
+        except InputError:
+            what = "the existing file (not a readable sitframe log)"
+        print(f"sitframe: note: {out}: replacing {what}", file=sys.stderr)
+
+
+def _execute(exp: Any, kwargs: dict[str, Any], *, replacing: bool = False,
+             key: str = "--out") -> Any:
+    """Claim the log (:func:`_claim`), ``exp.run(**kwargs)``, releasing the executor's
+    workers however it ends."""
     for msg in getattr(exp.pm, "sitframe_clashes", []):
         print(f"sitframe: warning: {msg}", file=sys.stderr)
     failed = True
     try:
+        _claim(exp.out, replacing=replacing, key=key)
         result = exp.run(**kwargs)
         failed = False
         return result
@@ -248,7 +312,7 @@ def _run_resume(args: argparse.Namespace) -> int:
               "since this run started; the resumed trials may differ from the logged ones",
               file=sys.stderr)
     exp.executor = make_executor(args.workers, args.scheduler, len(missing))
-    result = _execute(exp, kwargs)
+    result = _execute(exp, kwargs, key="--resume")
     if args.json:
         doc = run_json(result)
         doc["resumed_trials"] = missing
@@ -271,14 +335,21 @@ def _prepare_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
     e = cfg["experiment"]
     for key in ("trials", "seed", "world", "iterations", "clusters_from"):
         val = getattr(args, key)
-        if val is not None:
-            e[key] = val
+        if val is not None:  # (paths on the command line are relative to the working folder)
+            e[key] = _abspath(val) if key in ("world", "clusters_from") else val
     out = args.out or str(Path("logs") / f"{e['name']}.h5")
     exp, kwargs = prepare_experiment(cfg, source=source, base_dir=base_dir, out=out,
                                      plugins_dirs=tuple(args.plugins_dir),
                                      progress=not args.json and sys.stderr.isatty())
     exp.needs_clusters(kwargs.get("interpreter_state"))  # stages that cannot run: fail now
     return exp, kwargs
+
+
+def _abspath(path: str) -> str:
+    """A command-line path made absolute (config paths resolve against the config's folder);
+    shipped names (no '/', no .toml) stay as they are."""
+    p = Path(path)
+    return str(p.absolute()) if (p.suffix in (".toml", ".h5") or len(p.parts) > 1) else path
 
 
 def _json_default(o: Any) -> Any:

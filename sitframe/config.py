@@ -7,7 +7,8 @@ thesis's Table A.1):
     ``name``, ``description``, ``seed`` (int), ``trials`` (learning trials),
     ``iterations`` (l, per trial), ``stages`` (subset of
     ``["collect", "cluster", "learn", "evaluate"]``), ``world`` (the learning
-    world), ``default_speed`` (m/s, when no behaviour proposes a speed),
+    world: a shipped name or a .toml path), ``default_speed`` (m/s, when no
+    behaviour proposes a speed),
     ``clusters_from`` (path of a log whose fitted situations are reused;
     collect and cluster are then skipped).
 ``[robot]``
@@ -40,6 +41,15 @@ thesis's Table A.1):
     :mod:`sitframe.episodes`, which validates the last three).
 ``[plugins]``
     ``dirs``: folders of loose plugin modules, relative to the config file.
+    Every ``*.py`` file in them is imported, i.e. **runs**, when the config
+    is loaded (as pytest imports ``conftest.py``): use only configs you
+    trust. ``run --resume`` does not import folders named only by a log.
+
+Paths in a config (world files, ``clusters_from``, ``policy_from.log``,
+``plugins.dirs``) resolve against the config file's folder; a world given
+as a bare name (no ``/``, no ``.toml``) is a shipped world. Text is stored
+in the log as TOML, so any string round-trips; behaviour labels name HDF5
+groups and may not be empty, ``.`` or contain ``/``.
 
 Component parameters are checked against the component's signature when the
 run resolves its components (unknown names get a did-you-mean); everything
@@ -52,6 +62,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import importlib.resources
+import re
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -126,6 +137,11 @@ def load_config(experiment: str) -> tuple[dict[str, Any], str, str]:
         in error messages, and the folder relative paths are resolved from.
     """
     path = Path(experiment)
+    try:
+        experiment.encode("utf-8")
+    except UnicodeEncodeError:
+        raise InputError("the file name is not UTF-8; the log stores it as UTF-8 text: rename "
+                         "the file", file=experiment) from None
     if experiment.endswith(".toml") or path.exists() or "/" in experiment:
         if not path.is_file():
             raise InputError("config file not found (expected a preset name or a .toml file)",
@@ -190,10 +206,29 @@ def validate_config(raw: dict[str, Any], *, file: str | None = None) -> dict[str
                         f"{', '.join(sorted(known))}", file=file, key=f"{section}.{key}")
             cfg[section].update(value)
     _check_core(cfg, file)
+    _check_utf8(cfg, file, "")
     if not cfg["behaviours"]:
         raise InputError("no behaviours configured (expected at least one [behaviours.LABEL] "
                          "table with a 'component')", file=file, key="behaviours")
     return cfg
+
+
+def _check_utf8(value: Any, file: str | None, key: str) -> None:
+    """Every key and string below ``value`` is valid UTF-8 (the log stores the config as
+    UTF-8 text; a non-UTF-8 file name given on the command line is not)."""
+    items = value.items() if isinstance(value, dict) else \
+        enumerate(value) if isinstance(value, list) else ()
+    for k, v in items:
+        sub = f"{key}.{k}" if isinstance(k, str) and key else f"{key}[{k}]" if key else str(k)
+        for text in (k, v):
+            if isinstance(text, str):
+                try:
+                    text.encode("utf-8")
+                except UnicodeEncodeError:
+                    raise InputError("holds bytes that are not UTF-8 (a non-UTF-8 file name?); "
+                                     "expected UTF-8 text: rename the file", file=file,
+                                     key=sub) from None
+        _check_utf8(v, file, sub)
 
 
 def _at(fn: Any, name: str, value: Any, file: str | None, prefix: str, **kw: Any) -> Any:
@@ -225,6 +260,9 @@ def _validate_behaviours(value: dict[str, Any], file: str | None) -> dict[str, A
     out = {}
     for label, table in value.items():
         key = f"behaviours.{label}"
+        if label in ("", ".") or "/" in label:
+            raise InputError(f"expected a behaviour label that can name an HDF5 group (not "
+                             f"empty, not '.', no '/'), got {label!r}", file=file, key=key)
         if not isinstance(table, dict):
             raise InputError(f"expected a table, got {type(table).__name__}", file=file, key=key)
         if "component" not in table:
@@ -333,7 +371,7 @@ def to_toml(cfg: dict[str, Any]) -> str:
         if isinstance(v, int | float):
             return repr(v)
         if isinstance(v, str):
-            return '"' + v.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
+            return _toml_string(v)
         if isinstance(v, list | tuple):
             return "[" + ", ".join(val(x) for x in v) + "]"
         if isinstance(v, dict):
@@ -359,7 +397,15 @@ def to_toml(cfg: dict[str, Any]) -> str:
 
 
 def _k(key: str) -> str:
-    return key if key.replace("_", "").replace("-", "").isalnum() else f'"{key}"'
+    """A TOML key: bare if it may be (ASCII letters, digits, ``_``, ``-``), else quoted."""
+    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else _toml_string(key)
+
+
+def _toml_string(v: str) -> str:
+    """A TOML basic string holding exactly ``v`` (control characters escaped)."""
+    body = v.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
+    body = re.sub(r"[\x00-\x08\x0b-\x1f\x7f]", lambda m: f"\\u{ord(m.group()):04x}", body)
+    return f'"{body}"'
 
 
 def config_hash(text: str) -> str:

@@ -14,10 +14,13 @@ These glue :mod:`sitframe.config`, :mod:`sitframe.scheduler` and
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import math
+import os
 from pathlib import Path
 from typing import Any
 
+import h5py
 import numpy as np
 
 from sitframe.config import validate_config
@@ -41,11 +44,22 @@ def prepare_experiment(
     out: str | None = None,
     plugins_dirs: tuple[str, ...] = (),
     progress: bool = False,
+    config_plugins: bool = True,
 ) -> tuple[Experiment, dict[str, Any]]:
     """Validate ``cfg``, resolve its components and the logs it reuses.
 
     Everything that can be wrong with the input is checked here, before a
-    single byte is written.
+    single byte is written. Relative paths in the config (worlds, logs,
+    plugin folders) resolve against ``base_dir``, the config file's folder.
+    What the run reads from other logs is fingerprinted in
+    ``experiment.info.extra["inputs"]`` (written to the log; ``run --resume``
+    compares it).
+
+    Parameters
+    ----------
+    config_plugins
+        Load the config's ``[plugins] dirs`` (False when the config comes
+        from a log: a log alone never decides which code runs).
 
     Returns
     -------
@@ -53,16 +67,22 @@ def prepare_experiment(
         Call ``experiment.run(**run_kwargs)``.
     """
     cfg = validate_config(cfg, file=source)
-    dirs = tuple(_resolve_path(d, base_dir) for d in cfg["plugins"]["dirs"]) + plugins_dirs
-    exp = Experiment(cfg, source=source, out=out, plugins_dirs=dirs)
+    dirs = tuple(_resolve_path(d, base_dir) for d in cfg["plugins"]["dirs"]) \
+        if config_plugins else ()
+    dirs += plugins_dirs
+    exp = Experiment(cfg, source=source, out=out, plugins_dirs=dirs, base_dir=base_dir)
     exp.info.extra["progress"] = progress
     kwargs: dict[str, Any] = {}
     _check_collect(exp, cfg, source)
     checked: dict[str, Log] = {}
+    inputs: dict[str, str] = {}
 
-    def source_log(path: str) -> Log:
+    checked_keys: dict[str, str] = {}
+
+    def source_log(path: str, key: str) -> Log:
         """Open a log this run builds on, read whole once (checksums): intact logs only."""
         if path not in checked:
+            checked_keys[path] = key
             checked[path] = open_log(path)
             checked[path].check()
         return checked[path]
@@ -70,7 +90,7 @@ def prepare_experiment(
     clusters_from = cfg["experiment"]["clusters_from"]
     if clusters_from:
         path = _resolve_path(clusters_from, base_dir)
-        log = source_log(path)
+        log = source_log(path, "experiment.clusters_from")
         state = log.interpreter_state()
         logged_sensor = validate_config(log.config, file=path)["sensor"]
         if logged_sensor != cfg["sensor"]:
@@ -80,13 +100,14 @@ def prepare_experiment(
                 file=path, key="sensor")
         _check_state(exp.res, state, path)
         kwargs["interpreter_state"] = state
-    policies: dict[str, dict[str, np.ndarray]] = {}
+        inputs["clusters_from"] = fingerprint(state)
+    policies: dict[str, LearnedPolicy] = {}
     for label, table in cfg["behaviours"].items():
         pf = table.get("policy_from")
         if not pf:
             continue
         path = _resolve_path(pf["log"], base_dir)
-        log = source_log(path)
+        log = source_log(path, f"behaviours.{label}.policy_from")
         which = pf.get("trial", 0)
         trial = log.trial(best_trial(log) if which == "best" else int(which))
         src_label = pf.get("behaviour", label)
@@ -99,11 +120,50 @@ def prepare_experiment(
             raise InputError(f"behaviour '{src_label}' of trial {trial.index} has no learned "
                              "policy (no policy/... datasets)", file=path, key="trials")
         policies[label] = policy
+        inputs[f"policy_from/{label}"] = fingerprint(
+            {f"{kind}/{out}": getattr(o, kind) for out, o in policy.outputs.items()
+             for kind in ("rules", "actions")})
+    exp.info.extra["inputs"] = inputs
     if policies:
         kwargs["policies"] = policies
-    if out and Path(out).exists() and Path(out).is_dir():
-        raise InputError("output path is a folder (expected an .h5 file path)", key="--out")
+    if out:
+        inputs = {path: f"the log it reads ({what})" for path, what in checked_keys.items()}
+        inputs[source or ""] = "the run's config"
+        for name, w in exp.res._worlds.items():
+            inputs[w.source or ""] = f"world '{name}'"
+        check_out(out, inputs)
     return exp, kwargs
+
+
+def check_out(out: str, inputs: dict[str, str]) -> None:
+    """Refuse an output path that is a folder, one of the run's ``inputs`` (path -> what it
+    is), or an existing file that is not an HDF5 log: the run would destroy it."""
+    p = Path(out)
+    if not p.exists():
+        return
+    if p.is_dir():
+        raise InputError("output path is a folder (expected an .h5 file path)", key="--out")
+    for path, what in inputs.items():
+        try:
+            same = bool(path) and os.path.samefile(p, path)
+        except OSError:
+            same = False
+        if same:
+            raise InputError(f"is {what}; the run would overwrite its own input: choose "
+                             "another --out", file=out, key="--out")
+    if not h5py.is_hdf5(p):
+        raise InputError("exists and is not an HDF5 log; refusing to replace it: choose another "
+                         "--out or remove the file", file=out, key="--out")
+
+
+def fingerprint(arrays: dict[str, Any]) -> str:
+    """SHA-256 over named arrays (name, dtype, shape and bytes, in name order)."""
+    h = hashlib.sha256()
+    for k in sorted(arrays):
+        a = np.ascontiguousarray(arrays[k])
+        h.update(f"{k}\0{a.dtype.str}\0{a.shape}\0".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
 
 
 #: Most samples the collect stage may record (beyond this the arrays do not fit in memory).

@@ -1,4 +1,4 @@
-"""Ctrl-C handling around HDF5 I/O.
+"""Ctrl-C and SIGTERM handling around HDF5 I/O.
 
 A ``KeyboardInterrupt`` raised while h5py is inside one of its C callbacks
 (attribute iteration, visiting items) does not propagate as itself: h5py
@@ -8,6 +8,12 @@ traceback and exit status 1 instead of marking the log aborted and exiting
 130. :func:`deferred_interrupt` holds SIGINT back for the length of one short
 HDF5 transaction and re-raises it as ``KeyboardInterrupt`` when the block
 ends, so every log transaction is atomic with respect to Ctrl-C too.
+
+SIGTERM (``kill PID``, a batch system's time limit) is treated like Ctrl-C
+once :func:`terminate_as_interrupt` is installed (the CLI does): it raises
+:class:`Terminated`, a ``KeyboardInterrupt``, so the run is marked
+``aborted`` the same way, and it is deferred around transactions the same
+way; the CLI then exits with status 143 (128 + SIGTERM) instead of 130.
 """
 
 from __future__ import annotations
@@ -16,19 +22,53 @@ import signal
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import Any
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C (so everything that handles Ctrl-C handles it)."""
+
+
+def raise_terminated(_signum: int, _frame: Any) -> None:
+    """SIGTERM handler: raise :class:`Terminated` in the main thread."""
+    raise Terminated
+
+
+@contextmanager
+def terminate_as_interrupt() -> Iterator[None]:
+    """Within the block, SIGTERM raises :class:`Terminated` (if SIGTERM has its default action).
+
+    The previous handler is restored at the end. Only acts in the main thread.
+    """
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL):
+        yield
+        return
+    signal.signal(signal.SIGTERM, raise_terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 @contextmanager
 def deferred_interrupt() -> Iterator[None]:
-    """Defer SIGINT until the ``with`` block ends, then raise ``KeyboardInterrupt``.
+    """Defer SIGINT (and SIGTERM) until the ``with`` block ends, then raise.
 
-    Only acts in the main thread and only when Python's default SIGINT
-    handler is installed (a program that installed its own handler, or
-    ignores SIGINT, keeps its choice). Nested uses are free: the inner block
-    sees the deferring handler and leaves it alone.
+    SIGINT is deferred only when Python's default SIGINT handler is
+    installed (a program that installed its own handler, or ignores SIGINT,
+    keeps its choice), SIGTERM only when :func:`raise_terminated` handles
+    it. At the end of the block a held SIGTERM raises :class:`Terminated`, a
+    held SIGINT ``KeyboardInterrupt``. Only acts in the main thread. Nested
+    uses are free: the inner block sees the deferring handler and leaves it
+    alone.
     """
-    if (threading.current_thread() is not threading.main_thread()
-            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    handlers = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: raise_terminated}
+    ours = [s for s, h in handlers.items() if signal.getsignal(s) is h]
+    if not ours:
         yield
         return
     received: list[int] = []
@@ -36,13 +76,17 @@ def deferred_interrupt() -> Iterator[None]:
     def hold(signum: int, _frame: object) -> None:
         received.append(signum)
 
-    signal.signal(signal.SIGINT, hold)
+    for s in ours:
+        signal.signal(s, hold)
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+        for s in ours:
+            signal.signal(s, handlers[s])
+        if signal.SIGTERM in received:
+            raise Terminated
         if received:
             raise KeyboardInterrupt
 
 
-__all__ = ["deferred_interrupt"]
+__all__ = ["Terminated", "deferred_interrupt", "raise_terminated", "terminate_as_interrupt"]

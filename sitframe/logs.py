@@ -7,7 +7,10 @@ Layout (schema ``sitframe-log``, version :data:`SCHEMA_VERSION`)::
                           config_hash, seed, source, versions (JSON), plugins
                           (JSON list), worlds (JSON name -> TOML text), sensor
                           (JSON: name, angles_deg, max_range, unit, dim),
-                          failure (one line, when plugin code failed)
+                          failure (one line, when plugin code failed), inputs
+                          (JSON: SHA-256 of what the run read from other logs,
+                          e.g. ``policy_from/<label>``; ``run --resume`` refuses
+                          when any of these, the worlds or the plugins changed)
     /collect/             samples (n, d) [m], poses (n, 3) [m, m, rad],
                           source (n,) world index; attrs worlds (JSON)
     /cluster/             trial_centers (T, c, d), trial_measures (T, k) with
@@ -43,24 +46,40 @@ returned as wrong numbers; :meth:`Log.check` reads everything.
 Crash safety: an HDF5 file left open by a process that dies can be
 unreadable, so the writer never holds the file open across a run. Each stage
 and each finished trial is one short transaction, and transactions are
-copy-on-write: the log is copied to ``LOG.part``, the copy is opened
+copy-on-write: the log is copied to a scratch file in the same folder
+(``LOG.<random>.part``, created with :func:`tempfile.mkstemp`, so a
+pre-existing file or symlink is never written through), the copy is opened
 (append) → written → flushed → closed, and then atomically renamed over the
 log (:func:`os.replace`). A process killed at *any* moment (even inside a
 write) therefore leaves the previous, consistent log (at most a stale
-``LOG.part``, removed by the next transaction or by ``run --resume``), so a
-``kill -9`` costs at most the trial in progress, the file always opens, and
-``status = "running"`` tells the reader it did not complete. Readers never
-block the writer (it never opens the published file for writing). The copy
-makes writing a run of ``N`` trials cost O(N²) bytes copied, which is
-negligible next to simulation for logs up to a few hundred MB. The rename
-protects against process death, not against power loss (no fsync).
+scratch file, removed by the next writer of the log), so a ``kill -9`` costs
+at most the trial in progress, the file always opens, and ``status =
+"running"`` tells the reader it did not complete. A write that fails (e.g.
+a full disk) removes its scratch file and leaves the published log as it
+was. Readers never block the writer (it never opens the published file for
+writing). The copy makes writing a run of ``N`` trials cost O(N²) bytes
+copied, which is negligible next to simulation for logs up to a few hundred
+MB. The rename protects against process death, not against power loss (no
+fsync).
+
+One log has one writer: the writing process holds an exclusive
+:func:`fcntl.flock` on ``LOG.lock`` (beside the log) from its first
+transaction to the end of the run (:func:`lock_log`). A second run, or a
+``run --resume``, on the same log while it is held is refused with an
+:class:`InputError`. The operating system releases the lock when the
+process dies, so a killed writer never leaves it stuck.
 """
 
 from __future__ import annotations
 
+import errno
+import fcntl
+import glob
 import json
 import os
+import re
 import shutil
+import tempfile
 import time
 import tomllib
 from collections.abc import Iterator
@@ -134,6 +153,69 @@ def _write_value(group: h5py.Group, name: str, value: Any) -> None:
         ds.attrs["units"] = UNITS[name]
 
 
+#: Logs this process is the writer of: resolved log path -> (fd of its flocked
+#: ``LOG.lock``, lock file path).
+_held: dict[str, tuple[int, Path]] = {}
+
+
+def lock_log(path: str | os.PathLike[str], key: str = "--out") -> None:
+    """Become the only writer of the log at ``path`` (no-op if this process already is).
+
+    Takes an exclusive, non-blocking :func:`fcntl.flock` on ``LOG.lock``
+    (opened with ``O_NOFOLLOW``: a symlink planted there is refused), held
+    until :func:`unlock_log` or the end of the process (the OS releases it
+    when the process dies, even by SIGKILL).
+
+    Raises
+    ------
+    InputError
+        Another process holds the lock, or the lock file cannot be created.
+    """
+    real = os.path.realpath(path)
+    if real in _held:
+        return
+    lock = Path(str(path) + ".lock")
+    while True:
+        try:
+            lock.parent.mkdir(parents=True, exist_ok=True)
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+        except OSError as exc:
+            raise InputError(f"cannot create the log: {exc.strerror or exc} (its lock file "
+                             f"'{lock.name}')", file=str(path), key=key) from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            raise InputError(f"another sitframe process is writing this log (it holds "
+                             f"'{lock.name}'); one log has one writer: wait for that run to end "
+                             "or choose another --out", file=str(path), key=key) from None
+        try:  # the previous holder may have removed the file between our open and flock
+            same = os.path.samestat(os.fstat(fd), os.stat(lock, follow_symlinks=False))
+        except OSError:
+            same = False
+        if same:
+            _held[real] = (fd, lock)
+            return
+        os.close(fd)
+
+
+def unlock_log(path: str | os.PathLike[str] | None = None) -> None:
+    """Stop being the writer of the log at ``path`` (every log if ``path`` is None)."""
+    keys = list(_held) if path is None else [os.path.realpath(path)]
+    for key in keys:
+        entry = _held.pop(key, None)
+        if entry is not None:
+            fd, lock = entry
+            lock.unlink(missing_ok=True)  # while still held, so no one else holds this file
+            os.close(fd)
+
+
+def _write_error(exc: OSError, path: Path) -> InputError:
+    why = "no space left on device" if exc.errno == errno.ENOSPC else (exc.strerror or str(exc))
+    return InputError(f"cannot write the log ({why}); the log keeps its last complete "
+                      "transaction", file=str(path), key="--out")
+
+
 class LogWriter:
     """Writes one run's log by short copy-on-write transactions.
 
@@ -145,55 +227,71 @@ class LogWriter:
     Notes
     -----
     Every method is one transaction (see the module docstring): the published
-    file at ``path`` is only ever replaced by a complete, closed HDF5 file.
+    file at ``path`` is only ever replaced by a complete, closed HDF5 file,
+    and only by the process holding the log's lock (:func:`lock_log`, taken
+    by the first transaction).
     """
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
         self.path = Path(path)
+        self.part = self.path.with_name(self.path.name + ".part")  # the last scratch file used
 
-    @property
-    def part(self) -> Path:
-        """The scratch copy a transaction writes before it is renamed over the log."""
-        return self.path.with_name(self.path.name + ".part")
+    def _scratch(self) -> Path:
+        """A new, empty scratch file beside the log (unique name, never a symlink)."""
+        lock_log(self.path)
+        fd, name = tempfile.mkstemp(prefix=self.path.name + ".", suffix=".part",
+                                    dir=self.path.parent)
+        os.close(fd)
+        self.part = Path(name)
+        return self.part
+
+    def remove_stale(self) -> None:
+        """Remove scratch files left by a killed writer (call holding the lock)."""
+        lock_log(self.path)
+        mine = re.compile(re.escape(self.path.name) + r"(\.[a-z0-9_]{8})?\.part")
+        for name in glob.glob(glob.escape(str(self.path)) + "*.part"):
+            if mine.fullmatch(Path(name).name):
+                Path(name).unlink(missing_ok=True)
 
     @contextmanager
     def _open(self) -> Iterator[h5py.File]:
         """Copy the log, open the copy for appending, publish it atomically on success."""
-        tmp = self.part
         with deferred_interrupt():  # a Ctrl-C lands between transactions, never inside one
+            tmp: Path | None = None
             try:
+                tmp = self._scratch()
                 shutil.copyfile(self.path, tmp)
                 with h5py.File(tmp, "a") as f:
                     yield f
                     f.flush()
                 os.replace(tmp, self.path)
-            except BaseException:
-                tmp.unlink(missing_ok=True)
+            except BaseException as exc:
+                if tmp is not None:
+                    tmp.unlink(missing_ok=True)
+                if isinstance(exc, OSError):
+                    raise _write_error(exc, self.path) from None
                 raise
 
     def start(self, info: RunInfo, *, resume: bool = False) -> None:
         """Create the file with the run's attributes (``status = "running"``).
 
-        With ``resume=True`` the existing log is kept (a stale ``.part`` left by
-        a killed writer is removed) and only its status is set to ``running``.
+        Takes the log's lock first (:func:`lock_log`). With ``resume=True``
+        the existing log is kept (stale scratch files left by a killed writer
+        are removed) and only its status is set to ``running``.
         """
+        self.remove_stale()
         if not resume:
             with deferred_interrupt():
                 self._create(info)
         else:
-            self.part.unlink(missing_ok=True)
             self.set_status("running")
 
     def _create(self, info: RunInfo) -> None:
-        """Write the new log's root attributes to ``LOG.part`` and publish it."""
-        tmp = self.part
+        """Write the new log's root attributes to a scratch file and publish it."""
+        tmp: Path | None = None
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            h5py.File(tmp, "w").close()
-        except OSError as exc:
-            raise InputError(f"cannot create the log: {exc.strerror or exc}",
-                             file=str(self.path), key="--out") from None
-        try:
+            tmp = self._scratch()
             with h5py.File(tmp, "w") as f:
                 a = f.attrs
                 a["schema"] = SCHEMA
@@ -212,13 +310,22 @@ class LogWriter:
                 a["worlds"] = json.dumps(info.worlds)
                 if info.extra.get("sensor"):
                     a["sensor"] = json.dumps(info.extra["sensor"])
+                a["inputs"] = json.dumps(info.extra.get("inputs", {}))
                 if info.extra.get("code_hash"):
                     a["code_hash"] = str(info.extra["code_hash"])
                 f.create_group("trials")
             os.replace(tmp, self.path)
-        except BaseException:
-            tmp.unlink(missing_ok=True)
+        except BaseException as exc:
+            if tmp is not None:
+                tmp.unlink(missing_ok=True)
+            if isinstance(exc, OSError):
+                raise InputError(f"cannot create the log: {exc.strerror or exc}",
+                                 file=str(self.path), key="--out") from None
             raise
+
+    def release(self) -> None:
+        """Stop being the log's writer (:func:`unlock_log`)."""
+        unlock_log(self.path)
 
     def stage(self, stage: str, data: dict[str, Any]) -> None:
         """Write a stage's data under ``/<stage>`` (replacing an earlier one)."""
@@ -509,6 +616,7 @@ class Log:
     def check(self) -> None:
         """Read the whole log: every header, attribute and dataset, and the root JSON.
 
+        Also checks the layout every reader relies on (:func:`_check_layout`).
         Raises an :class:`InputError` naming the log if any part is damaged, so
         a command can fail before it writes anything. Datasets carry Fletcher-32
         checksums (logs written since they were added), so damaged *data* is
@@ -522,6 +630,7 @@ class Log:
 
         with self._file() as f:
             f.visititems(read)
+            _check_layout(f, self.path)
 
     def has(self, group: str) -> bool:
         with self._file() as f:
@@ -590,6 +699,50 @@ class Log:
             return f["summary"][()]
 
 
+def _check_layout(f: h5py.File, path: str) -> None:
+    """The parts of the layout that readers index with, checked so that a valid HDF5 file
+    with damaged contents is one clear :class:`InputError` (naming the item), not a wrong
+    figure or a traceback: ``/trials`` holds trial groups, fitted centres are a finite
+    (c, d) array matching the trials' memberships (c) and readings (d), and every learned
+    policy indexes an existing action."""
+    def fail(key: str, what: str) -> None:
+        raise InputError(what, file=path, key=key)
+
+    trials = f.get("trials")
+    if trials is not None and not isinstance(trials, h5py.Group):
+        fail("trials", "expected a group of trial groups, got a dataset")
+    centers = f.get("cluster/state/centers")
+    shape = None
+    if centers is not None:
+        c = np.asarray(centers[()])
+        if c.ndim != 2 or c.dtype.kind not in "fiu" or not np.isfinite(c).all():
+            fail("cluster/state/centers", f"expected a finite (c, d) array of centres, got "
+                 f"shape {c.shape}, dtype {c.dtype}")
+        shape = c.shape
+    for name, g in (trials or {}).items():
+        if not isinstance(g, h5py.Group):
+            fail(f"trials/{name}", "expected a trial group, got a dataset")
+        for ds, axis in (("memberships", 0), (READING, 1), ("sonar", 1)):
+            if shape is not None and isinstance(g.get(ds), h5py.Dataset) and \
+                    g[ds].shape[1:] != (shape[axis],):
+                fail(f"trials/{name}/{ds}", f"has shape {g[ds].shape}, which does not fit the "
+                     f"fitted centres' shape {shape}")
+        for label, bg in (g["behaviours"].items() if isinstance(g.get("behaviours"), h5py.Group)
+                          else ()):
+            policy = bg.get("policy")
+            singles = bg.get("actions", bg.get("singletons"))  # (named singletons before v2)
+            if not isinstance(policy, h5py.Group) or not isinstance(singles, h5py.Group):
+                continue
+            for out, ds in policy.items():
+                if out not in singles:
+                    continue
+                idx, n = np.asarray(ds[()]), len(singles[out])
+                if idx.dtype.kind not in "iu" or (idx.size and not (0 <= idx.min() <= idx.max()
+                                                                     < n)):
+                    fail(f"trials/{name}/behaviours/{label}/policy/{out}", f"expected action "
+                         f"indices in 0..{n - 1}, got {idx.tolist()}")
+
+
 def open_log(path: str | os.PathLike[str]) -> Log:
     """Open a sitframe log for reading.
 
@@ -613,7 +766,7 @@ def open_log(path: str | os.PathLike[str]) -> Log:
         raise InputError(f"not a sitframe log (root attribute schema is "
                          f"{attrs.get('schema')!r}, expected {SCHEMA!r})", file=p)
     version = attrs.get("schema_version")
-    if version != SCHEMA_VERSION:
+    if not isinstance(version, int) or isinstance(version, bool) or version != SCHEMA_VERSION:
         raise InputError(f"unknown log schema version {version!r}; this sitframe reads version "
                          f"{SCHEMA_VERSION}", file=p, key="schema_version")
     return Log(p, attrs)

@@ -42,6 +42,7 @@ import dataclasses
 import multiprocessing as mp
 import os
 import signal
+import sys
 import threading
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -80,18 +81,22 @@ class Setup:
         Where the config came from (for messages).
     plugins_dirs
         Folders of loose plugin modules to load.
+    base_dir
+        Absolute folder the config's world paths are relative to.
     """
 
     key: str
     cfg: dict[str, Any]
     source: str | None
     plugins_dirs: tuple[str, ...]
+    base_dir: str = "."
 
     @classmethod
     def of(cls, experiment: Experiment) -> Setup:
         dirs = tuple(os.path.abspath(d) for d in experiment.plugins_dirs)
-        key = config_hash(to_toml(experiment.cfg) + "\0" + "\0".join(dirs))
-        return cls(key, experiment.cfg, experiment.source, dirs)
+        base = os.path.abspath(experiment.base_dir)
+        key = config_hash(to_toml(experiment.cfg) + "\0" + "\0".join((*dirs, base)))
+        return cls(key, experiment.cfg, experiment.source, dirs, base)
 
 
 _cache: dict[str, Experiment] = {}
@@ -105,7 +110,8 @@ def _experiment(setup: Setup) -> Experiment:
         if exp is None:
             from sitframe.scheduler import Experiment
 
-            exp = Experiment(setup.cfg, source=setup.source, plugins_dirs=setup.plugins_dirs)
+            exp = Experiment(setup.cfg, source=setup.source, plugins_dirs=setup.plugins_dirs,
+                             base_dir=setup.base_dir)
             if len(_cache) > 16:  # a long-lived Dask worker serving many sweeps
                 _cache.clear()
             _cache[setup.key] = exp
@@ -502,12 +508,17 @@ class DaskExecutor(PoolExecutor):
             raise InputError("--scheduler needs Dask distributed, which is not installed "
                              "(pip install 'sitframe[dask]')", key="--scheduler") from None
         self.address = address
+        scheme = _check_address(address)
         try:
             self.client = Client(address, timeout=timeout, set_as_default=False)
         except Exception as exc:  # noqa: BLE001 - OSError, TimeoutError, ValueError (bad address)
             msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             raise InputError(f"cannot reach the Dask scheduler at '{address}' within "
                              f"{timeout:g} s ({msg})", key="--scheduler") from None
+        if scheme not in ("tls", "wss", "inproc"):
+            print(f"sitframe: warning: --scheduler {address}: plain {scheme}; Dask unpickles "
+                  "what it receives, so whoever can reach the scheduler can run code here and "
+                  "on the workers: use tls:// on a shared network (see README)", file=sys.stderr)
 
     @property
     def capacity(self) -> int:  # type: ignore[override]
@@ -535,6 +546,26 @@ class DaskExecutor(PoolExecutor):
         client, self.client = self.client, None
         if client is not None:
             client.close()
+
+
+def _check_address(address: str) -> str:
+    """The scheme of a Dask address, or an InputError for a malformed one (checked before a
+    Client exists: a Client that fails half-way prints a traceback when collected)."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+    from distributed.comm.registry import backends
+
+    try:
+        scheme, loc = parse_address(address)
+        if scheme not in backends:
+            raise ValueError(f"unknown scheme '{scheme}'; known: {', '.join(sorted(backends))}")
+        if scheme in ("tcp", "tls", "ws", "wss"):
+            _host, port = parse_host_port(loc, default_port=8786)
+            if not 0 < int(port) < 65536:
+                raise ValueError(f"port {port} out of range 1-65535")
+    except (ValueError, TypeError) as exc:
+        raise InputError(f"malformed Dask scheduler address '{address}' ({exc}); expected e.g. "
+                         "tls://host:8786", key="--scheduler") from None
+    return str(scheme)
 
 
 def make_executor(workers: int | None = None, scheduler: str | None = None,

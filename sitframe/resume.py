@@ -103,14 +103,20 @@ def prepare_resume(
     base_dir = "."
     if source and not source.startswith("preset:"):
         base_dir = str(Path(source).parent)
+    if cfg["plugins"]["dirs"] and not plugins_dirs:
+        raise InputError(f"the logged config loads plugin code from {cfg['plugins']['dirs']}; "
+                         "resuming never runs code that only a log names: pass --plugins-dir "
+                         "DIR for each folder you trust", file=p, key="config.plugins.dirs")
     exp, kwargs = prepare_experiment(cfg, source=source, base_dir=base_dir, out=p,
-                                     plugins_dirs=plugins_dirs, progress=progress)
+                                     plugins_dirs=plugins_dirs, progress=progress,
+                                     config_plugins=False)
     logged_hash = str(log.attrs.get("config_hash", ""))
     if exp.info.config_hash != logged_hash:
         raise InputError("this sitframe resolves the logged config differently (config hash "
                          f"{exp.info.config_hash[:12]} != logged {logged_hash[:12]}: defaults "
                          "changed since the run); resuming would mix two configurations",
                          file=p, key="config_hash")
+    _check_inputs(log, exp)
     exp.info.extra["resume"] = True
     logged_code = str(log.attrs.get("code_hash", ""))
     exp.info.extra["code_changed"] = bool(logged_code) and \
@@ -124,6 +130,35 @@ def prepare_resume(
     if "learn" not in cfg["experiment"]["stages"]:
         missing = []
     return exp, kwargs, missing
+
+
+def _check_inputs(log: Any, exp: Any) -> None:
+    """Refuse to resume when what the logged trials depended on changed since: a world's
+    file, a plugin's version, or what was read from another log (``inputs``)."""
+    p = log.path
+    now = exp.info.worlds
+    for name, text in log.worlds.items():
+        if name in now and now[name] != text:
+            raise InputError(f"world '{name}' changed since the run started (its file differs "
+                             "from the copy in the log); resuming would run trials in two "
+                             "different rooms", file=p, key="worlds")
+    current = {d.get("name"): (d.get("distribution"), d.get("version"))
+               for d in exp.info.plugins}
+    for d in log.plugins:
+        name, was = d.get("name"), (d.get("distribution"), d.get("version"))
+        if name in current and current[name] != was:
+            raise InputError(f"plugin '{name}' is {current[name][1]} now, {was[1]} when the run "
+                             "started; resuming would mix results of two versions", file=p,
+                             key="plugins")
+        if name not in current and d.get("origin") != "plugins-dir":
+            raise InputError(f"plugin '{name}' ({was[0] or d.get('origin')}) that the run used "
+                             "is not installed now", file=p, key="plugins")
+    logged = log._json_attr("inputs", "{}", dict)
+    for key, digest in logged.items():
+        if exp.info.extra.get("inputs", {}).get(key) != digest:
+            raise InputError(f"what the run read for {key} changed since it started (another "
+                             "log was rewritten); resuming would mix two inputs", file=p,
+                             key=f"inputs.{key}")
 
 
 __all__ = ["prepare_resume"]

@@ -31,6 +31,7 @@ import platform
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -108,13 +109,15 @@ class Resolved:
     _worlds: dict[str, World] = field(default_factory=dict)
     origins: dict[str, Origin] = field(default_factory=dict)
     run: RunContext | None = None
+    base_dir: str = "."
 
     @classmethod
     def build(cls, cfg: dict[str, Any], registry: Registry, file: str | None = None,
-              worlds: tuple[str, ...] = ()) -> Resolved:
+              worlds: tuple[str, ...] = (), base_dir: str = ".") -> Resolved:
         """Resolve ``cfg``: create and bind each component once, so every mistake is found now.
 
-        ``worlds`` names further worlds the caller will use (e.g. ``--world``).
+        ``worlds`` names further worlds the caller will use (e.g. ``--world``);
+        relative world paths resolve against ``base_dir`` (the config's folder).
         """
         try:
             robot = RobotParams(**cfg["robot"])
@@ -122,7 +125,7 @@ class Resolved:
             raise exc.at(file=file, key_prefix="robot") from None
         except (ValueError, TypeError) as exc:
             raise InputError(str(exc), file=file, key="robot") from None
-        res = cls(cfg, registry, file, robot)
+        res = cls(cfg, registry, file, robot, base_dir=base_dir)
         sensor = res._create("sensor", "sensor", cfg["sensor"], bind=False)
         o = res.origins["sensor"]
         spec = call(o, "angles_deg", lambda: SensorSpec(
@@ -226,12 +229,21 @@ class Resolved:
         return out
 
     def world(self, name: str, key: str = "experiment.world") -> World:
+        """The world ``name``: a shipped name, or a .toml path relative to :attr:`base_dir`
+        (the config file's folder)."""
         if name not in self._worlds:
+            path: str | Path = name  # a shipped name
+            if name.endswith(".toml") or "/" in name:
+                path = Path(name)
+                if not path.is_absolute() and self.base_dir not in ("", "."):
+                    path = Path(self.base_dir) / path
             try:
-                self._worlds[name] = load_world(name)
+                self._worlds[name] = load_world(path)
             except InputError as exc:
-                if exc.file is None:
-                    raise InputError(exc.message, file=self.file, key=key) from None
+                if exc.file is None or (isinstance(path, Path) and not path.is_file()):
+                    # the path itself is wrong: the config's key is where to fix it
+                    where = f" ({exc.file})" if exc.file else ""
+                    raise InputError(f"{exc.message}{where}", file=self.file, key=key) from None
                 raise
             w = self._worlds[name]
             clear = float(w.clearance(w.start[None, :2])[0])
@@ -718,18 +730,23 @@ class Experiment:
         Runs the trials: anything with ``map(experiment, specs)`` yielding
         :class:`TrialResult` in the order of ``specs``. Default
         :class:`SerialExecutor` (in this process, with ``sitframe_step``).
+    base_dir
+        Folder that world paths in the config are relative to (the config
+        file's folder).
     """
 
     def __init__(self, cfg: dict[str, Any], *, source: str | None = None,
                  pm: pluggy.PluginManager | None = None, out: str | None = None,
-                 plugins_dirs: tuple[str, ...] = (), executor: Any = None) -> None:
+                 plugins_dirs: tuple[str, ...] = (), executor: Any = None,
+                 base_dir: str = ".") -> None:
         self.cfg = cfg
         self.source = source
+        self.base_dir = base_dir
         self.plugins_dirs = tuple(plugins_dirs)
         self.executor = executor or SerialExecutor()
         self.pm = pm or get_plugin_manager(plugins_dirs=plugins_dirs)
         self.registry = Registry.collect(self.pm)
-        self.res = Resolved.build(cfg, self.registry, source)
+        self.res = Resolved.build(cfg, self.registry, source, base_dir=base_dir)
         self.out = out
         text = to_toml(cfg)
         e = cfg["experiment"]

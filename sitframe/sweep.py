@@ -182,6 +182,17 @@ def load_sweep(path: str, *, out: str | None = None,
     if "out" in head and (not isinstance(head["out"], str) or not head["out"]):
         raise InputError(f"expected a folder path (string), got {head['out']!r}", file=path,
                          key="sweep.out")
+    for where, keys in (("set", fixed), ("grid", grid)):
+        if "experiment.name" in keys:
+            raise InputError("a sweep names every point's run itself (<sweep name>/<point>); "
+                             "expected [sweep] name instead", file=path,
+                             key=f"{where}.experiment.name")
+    if "out" in head and out is None:
+        rel = Path(head["out"])
+        if rel.is_absolute() or ".." in rel.parts:
+            raise InputError(f"expected a folder inside the working folder (relative, no '..'), "
+                             f"got {head['out']!r}; give --out DIR on the command line to write "
+                             "elsewhere", file=path, key="sweep.out")
     plugins = _registry(base_cfg, base_dir, plugins_dirs)
     for where, keys in (("set", fixed), ("grid", grid)):
         for key in keys:
@@ -281,26 +292,48 @@ def _fmt_value(v: Any) -> str:
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, float):
-        return f"{v:g}"
+        short = f"{v:g}"
+        return short if float(short) == v else repr(v)  # never two values, one name
     if isinstance(v, list | tuple):
         return "-".join(_fmt_value(x) for x in v)
     return str(v)
 
 
-def point_names(grid: dict[str, list[Any]]) -> list[tuple[str, dict[str, Any]]]:
+def point_names(grid: dict[str, list[Any]], *, file: str | None = None
+                ) -> list[tuple[str, dict[str, Any]]]:
     """Every grid combination as ``(name, {key: value})``, in grid order.
 
     Names use each key's last part (``c=8``) unless two keys share it, then the
-    full dotted key; characters unsafe in file names become ``-``.
+    full dotted key; characters unsafe in file names become ``-``. Floats are
+    written as short as they read back exactly (``0.1``, ``0.1000001``).
+
+    Raises
+    ------
+    InputError
+        Two points get the same name (also when they differ only in case,
+        which a case-insensitive file system would merge), e.g. ``2`` and
+        ``2.0``, or ``"rooms/a.toml"`` and ``"rooms-a.toml"``: their logs would
+        overwrite each other.
     """
     keys = list(grid)
     last = [k.rsplit(".", 1)[-1] for k in keys]
     short = {k: (s if last.count(s) == 1 else k) for k, s in zip(keys, last, strict=True)}
     out = []
+    seen: dict[str, dict[str, Any]] = {}
     for combo in itertools.product(*(grid[k] for k in keys)):
         values = dict(zip(keys, combo, strict=True))
         name = "_".join(f"{short[k]}={_fmt_value(v)}" for k, v in values.items())
-        out.append((re.sub(r"[^A-Za-z0-9_.=+-]", "-", name), values))
+        name = re.sub(r"[^A-Za-z0-9_.=+-]", "-", name)
+        other = seen.setdefault(name.lower(), values)
+        if other is not values:
+            a, b = ([f"{k}={other[k]!r}" for k in keys if other[k] != values[k]
+                     or type(other[k]) is not type(values[k])],
+                    [f"{k}={values[k]!r}" for k in keys if other[k] != values[k]
+                     or type(other[k]) is not type(values[k])])
+            raise InputError(f"grid points {', '.join(a)} and {', '.join(b)} get the same log "
+                             f"name '{name}' (their logs would overwrite each other); expected "
+                             "values that differ in their file-name form", file=file, key="grid")
+        out.append((name, values))
     return out
 
 
@@ -309,7 +342,7 @@ def _prepare_points(sweep: Sweep, plugins_dirs: tuple[str, ...]) -> list[Point]:
     from sitframe.experiment import prepare_experiment
 
     points = []
-    for name, values in point_names(sweep.grid):
+    for name, values in point_names(sweep.grid, file=sweep.file):
         cfg = copy.deepcopy(sweep.base_cfg)
         for key, val in {**sweep.fixed, **values}.items():
             _set(cfg, key, val)
@@ -342,19 +375,23 @@ def run_sweep(sweep: Sweep, executor: Any, *, progress: bool = False) -> dict[st
     """Run every point's stages and trials through ``executor`` (a pool executor).
 
     Each point's log is written in this process, in trial order, as trials
-    finish. Ctrl-C cancels pending work, marks unfinished points ``aborted``
-    and re-raises.
+    finish; this process holds every point log's lock for the whole sweep.
+    Ctrl-C (or SIGTERM) cancels pending work, marks unfinished points
+    ``aborted`` and re-raises.
 
     Returns
     -------
     dict
         ``{"name", "out", "wall_seconds", "points": [summary row per point]}``.
     """
+    from sitframe.logs import lock_log
     from sitframe.parallel import Setup, TrialPipeline, run_clusters
 
     t0 = time.perf_counter()
     points = sweep.points
-    status = ["running"] * len(points)
+    for pt in points:  # one writer per log: refuse before any point writes anything
+        lock_log(pt.log)
+    status = ["pending"] * len(points)
     buffers: list[dict[int, Any]] = [{} for _ in points]
     expected: list[list[int]] = [[] for _ in points]
     done: list[int] = [0] * len(points)
@@ -381,6 +418,7 @@ def run_sweep(sweep: Sweep, executor: Any, *, progress: bool = False) -> dict[st
             for i, pt in enumerate(points):
                 exp = pt.experiment
                 exp.begin()
+                status[i] = "running"
                 state = pt.run_kwargs.get("interpreter_state")
                 if exp.needs_clusters(state):
                     pipe.add_call(i, run_clusters, setups[i])

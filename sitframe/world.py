@@ -75,6 +75,13 @@ _GOAL_KEYS = ("position", "radius")
 _SHAPE_KEYS = ("points", "name")
 _WORLDS_PACKAGE = "sitframe.worlds"
 
+#: Largest coordinate or length [m] a world may use (beyond it distances lose
+#: their precision and squares overflow).
+MAX_COORD = 1e4
+#: Most cells of the 0.5 m coverage grid over a world's bounds (a 1 km x 1 km room).
+MAX_GRID_CELLS = 4_000_000
+COVERAGE_CELL = 0.5
+
 
 @dataclass(frozen=True)
 class Goal:
@@ -180,15 +187,18 @@ class World:
             (k,) bool (clearance not considered; see :meth:`is_free`).
         """
         p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        outer, solids = self._regions
-        if outer is None:
-            x0, y0, x1, y1 = self.bounds
-            ok = (p[:, 0] > x0) & (p[:, 0] < x1) & (p[:, 1] > y0) & (p[:, 1] < y1)
-        else:
-            ok = geo.point_in_polygon(p, outer)
-        for poly in solids:
+        ok = self._inside_outer(p)
+        for poly in self._regions[1]:
             ok &= ~geo.point_in_polygon(p, poly)
         return ok
+
+    def _inside_outer(self, p: np.ndarray) -> np.ndarray:
+        """Which points of ``p`` (k, 2) are inside the outer wall (or the bounds)."""
+        outer = self._regions[0]
+        if outer is None:
+            x0, y0, x1, y1 = self.bounds
+            return (p[:, 0] > x0) & (p[:, 0] < x1) & (p[:, 1] > y0) & (p[:, 1] < y1)
+        return geo.point_in_polygon(p, outer)
 
     def clearance(self, xy: np.ndarray) -> np.ndarray:
         """(k,) distance [m] from each point of ``xy`` (k, 2) to the nearest wall or edge."""
@@ -263,21 +273,55 @@ class World:
 
         The grid has square cells of side ``cell`` [m] anchored at the lower
         left corner of :attr:`bounds`. Reachability is not checked: a free
-        pocket walled off from the start still counts.
+        pocket walled off from the start still counts. The same test as
+        :meth:`is_free`, computed per obstacle and per edge on the cells of
+        its bounding box only (time proportional to the room plus the
+        obstacles, not to their product).
 
         Returns
         -------
         numpy.ndarray
             (n, 2) cell centres [m].
+
+        Raises
+        ------
+        ValueError
+            ``cell`` is not positive or the grid would exceed about
+            :data:`MAX_GRID_CELLS` cells of 0.5 m.
         """
         if not cell > 0:
             raise ValueError(f"cell must be > 0 metres, got {cell!r}")
         x0, y0, x1, y1 = self.bounds
+        n_cells = math.ceil((x1 - x0) / cell) * math.ceil((y1 - y0) / cell)
+        if n_cells > MAX_GRID_CELLS * max(1.0, (COVERAGE_CELL / cell) ** 2):
+            raise ValueError(f"a {cell:g} m grid over the world has {n_cells} cells; expected "
+                             f"at most {MAX_GRID_CELLS} cells of {COVERAGE_CELL:g} m")
         xs = np.arange(x0 + cell / 2, x1, cell)
         ys = np.arange(y0 + cell / 2, y1, cell)
         gx, gy = np.meshgrid(xs, ys)
         c = np.stack([gx.ravel(), gy.ravel()], axis=1)
-        return c[self.is_free(c, radius)]
+
+        def cells_in(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+            """Flat indices of the cells whose centre lies in the box [lo, hi]."""
+            i = np.arange(np.searchsorted(xs, lo[0], "left"), np.searchsorted(xs, hi[0], "right"))
+            j = np.arange(np.searchsorted(ys, lo[1], "left"), np.searchsorted(ys, hi[1], "right"))
+            return (j[:, None] * xs.size + i[None, :]).ravel()
+
+        outer, solids = self._regions
+        ok = self._inside_outer(c)
+        for poly in solids:  # a point outside a polygon's bounding box is outside it
+            idx = cells_in(poly.min(axis=0), poly.max(axis=0))
+            ok[idx] &= ~geo.point_in_polygon(c[idx], poly)
+        seg = self.segments
+        pad = radius * (1 + 1e-9) + 1e-12  # beyond the padded box a cell is farther than radius
+        lo = np.minimum(seg[:, :2], seg[:, 2:]) - pad
+        hi = np.maximum(seg[:, :2], seg[:, 2:]) + pad
+        for k in range(seg.shape[0]):
+            idx = cells_in(lo[k], hi[k])
+            idx = idx[ok[idx]]
+            if idx.size:
+                ok[idx] &= geo.point_segment_distance(c[idx], seg[k:k + 1])[:, 0] >= radius
+        return c[ok]
 
     def with_start(self, pose: np.ndarray) -> World:
         """Return a copy with another start pose (x [m], y [m], theta [rad]), validated."""
@@ -326,8 +370,13 @@ def load_world(name_or_path: str | Path | World) -> World:
     path = Path(name_or_path)
     looks_like_path = (
         isinstance(name_or_path, Path) or path.suffix == ".toml" or len(path.parts) > 1
+        or "/" in str(name_or_path)
     )
     if looks_like_path or path.is_file():
+        if path.exists() and not path.is_file():
+            what = "a folder" if path.is_dir() else "not a regular file"
+            raise InputError(f"the world path is {what}; expected a .toml world file or one of "
+                             f"the shipped worlds: {', '.join(list_worlds())}", file=str(path))
         if not path.is_file():
             raise InputError(
                 f"world file not found; expected an existing .toml file or one of the shipped "
@@ -444,6 +493,7 @@ def parse_world(text: str, *, file: str | None = None) -> World:
         robot_radius=radius,
         meta=meta,
     )
+    _check_extent(world, file)
     _check_start(world, start[:2], radius, file=file)
     if goal is not None:
         gp = goal.position[None, :]
@@ -458,6 +508,36 @@ def parse_world(text: str, *, file: str | None = None) -> World:
 
 
 # ----------------------------------------------------------------------------- validation helpers
+
+
+def _check_extent(world: World, file: str | None) -> None:
+    """A coverage grid of bounded size, obstacles inside the walls, trajectories that stay
+    inside the room without crossing a wall or an obstacle edge."""
+    x0, y0, x1, y1 = world.bounds
+    cells = math.ceil((x1 - x0) / COVERAGE_CELL) * math.ceil((y1 - y0) / COVERAGE_CELL)
+    if cells > MAX_GRID_CELLS:
+        raise InputError(f"the world spans {x1 - x0:g} m x {y1 - y0:g} m, {cells} cells of the "
+                         f"{COVERAGE_CELL:g} m coverage grid; expected at most {MAX_GRID_CELLS} "
+                         "(about 1 km x 1 km)", file=file, key="walls")
+    outer = world._regions[0]
+    if outer is not None:
+        for i, ob in enumerate(world.obstacles):
+            if not geo.point_in_polygon(ob, outer).any():
+                raise InputError("obstacle lies outside the walls; expected every obstacle "
+                                 "inside the outermost closed wall", file=file,
+                                 key=f"obstacles[{i}].points")
+    for i, traj in enumerate(world.trajectories):
+        out = np.flatnonzero(~world.inside(traj))
+        if out.size:
+            raise InputError(f"point {int(out[0])} {traj[out[0]].tolist()} is outside the walls "
+                             "or inside an obstacle; expected a path through free space",
+                             file=file, key=f"trajectories[{i}].points")
+        hits = geo.segments_intersect(geo.polyline_segments(traj), world.segments)
+        if hits.any():
+            j = int(np.flatnonzero(hits.any(axis=1))[0])
+            raise InputError(f"segment {j} ({traj[j].tolist()} -> {traj[j + 1].tolist()}) "
+                             "crosses a wall or an obstacle edge; expected a path through free "
+                             "space", file=file, key=f"trajectories[{i}].points")
 
 
 def _is_closed(points: np.ndarray) -> bool:
@@ -522,6 +602,9 @@ def _number(v: Any, key: str, file: str | None) -> float:
         raise InputError(f"expected a number, got {v!r}", file=file, key=key)
     if not math.isfinite(v):
         raise InputError(f"expected a finite number, got {v!r}", file=file, key=key)
+    if abs(v) > MAX_COORD:
+        raise InputError(f"expected a number within ±{MAX_COORD:g} (metres, or degrees for a "
+                         f"heading), got {v!r}", file=file, key=key)
     return float(v)
 
 

@@ -45,6 +45,7 @@ def main(args: argparse.Namespace) -> int:
     if args.dpi < 1:
         raise InputError(f"must be at least 1, got {args.dpi}", key="--dpi")
     log = open_log(args.log)
+    log.check()  # damaged contents: one line before any drawing
     print(replay(log, args.trial, args.output, start=args.start, stop=args.stop, fps=args.fps,
                  dpi=args.dpi, evaluation=args.eval_world))
     return 0

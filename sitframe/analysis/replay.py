@@ -21,6 +21,7 @@ import dataclasses
 import math
 import os
 import shutil
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -233,12 +234,28 @@ def replay(
         a.set_animated(True)
     canvas.draw()
     background = canvas.copy_from_bbox(fig.bbox)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    frames = _frames(canvas, background, fig, draw, range(start, stop))
-    if suffix == ".gif":
-        _write_gif(out, frames, fps)
-    else:
-        _write_mp4(out, frames, fps, canvas)
+    # written to a scratch file beside ``out`` and renamed: a failure leaves no half file
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        fd, name = tempfile.mkstemp(prefix=f".{out.stem}.", suffix=suffix, dir=out.parent)
+        os.close(fd)
+    except OSError as exc:
+        raise InputError(f"cannot write the animation: {exc.strerror or exc}", file=str(out),
+                         key="-o") from None
+    tmp = Path(name)
+    try:
+        frames = _frames(canvas, background, fig, draw, range(start, stop))
+        if suffix == ".gif":
+            _write_gif(tmp, frames, fps)
+        else:
+            _write_mp4(tmp, frames, fps, canvas)
+        os.replace(tmp, out)
+    except BaseException as exc:
+        tmp.unlink(missing_ok=True)
+        if isinstance(exc, OSError):
+            raise InputError(f"cannot write the animation: {exc.strerror or exc}",
+                             file=str(out), key="-o") from None
+        raise
     return str(out)
 
 

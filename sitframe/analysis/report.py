@@ -24,6 +24,8 @@ analysed as far as they go; what is missing is listed in ``index.md`` and in
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -227,98 +229,115 @@ def analyse(
         if bad:
             raise InputError(f"the log has no trial(s) {bad}; it has {_ranges(have)}",
                              file=lg.path, key="--trial")
+    created = not out.exists()
     try:
         out.mkdir(parents=True, exist_ok=True)
+        # everything is written into a scratch folder inside ``out`` and moved up at the end:
+        # an analysis that fails half-way leaves ``out`` as it was
+        scratch = Path(tempfile.mkdtemp(prefix=".analysis-", suffix=".part", dir=out))
     except OSError as exc:
         raise InputError(f"cannot create the output folder: {exc.strerror}", file=str(out),
                          key="-o") from None
-    rep = AnalysisReport(lg.path, str(out), lg.status)
-    rep.problems = log_problems(lg)
-    W = _Writer(rep, dpi)
-    radius = R.robot_radius(lg)
+    try:
+        rep = AnalysisReport(lg.path, str(scratch), lg.status)
+        rep.problems = log_problems(lg)
+        W = _Writer(rep, dpi)
+        radius = R.robot_radius(lg)
 
-    # ------------------------------------------------------------- clustering
-    if lg.has("cluster"):
-        sec = "Situations (clustering)"
-        try:
-            ct = R.clustering_trials(lg)
-        except _EXPECTED as exc:
-            rep.skipped.append(f"clustering figures: {exc}")
-            ct = None
-        if lg.has("cluster/state/centers"):
-            W.figure(sec, "prototypes.png",
-                     "Cluster prototypes (situations) as polar plots of the 8 sonar ranges "
-                     "(Fig. 5.2)",
-                     lambda: CP.plot_prototypes(
-                         np.asarray(lg.interpreter_state()["centers"]), R.sensor_angles(lg),
-                         max_range=R.sensor_max_range(lg),
-                         labels=R.situation_labels(lg, numbered=False)))
-        # J_m is in the squared units of the clustered features (see the fcm plugin's transform)
-        transform = str(lg.stage("cluster").get("transform", "range")) \
-            if lg.has("cluster") else "range"
-        units = {"log": "(log m)", "inverse": "(1/m)"}.get(transform, "m")
-        if ct is not None:
-            W.figure(sec, "measures_by_trial.png",
-                     f"Validity measures of the {ct.n_trials} FCM trials, chosen trial "
-                     f"{ct.chosen} marked (Fig. 5.1)",
-                     lambda: CP.plot_measures_by_trial(ct, units=units))
-        sw = R.sweep_result(lg)
-        if sw is not None:
-            W.figure(sec, "measures_by_c.png",
-                     "Validity of the chosen partition against the number of clusters c "
-                     "(Fig. 4.5)", lambda: CP.plot_measures_by_c(sw, units=units))
-        else:
-            rep.skipped.append("measures_by_c.png: the log has no sweep over c "
-                               "(set [interpreter] sweep = [2, 3, ...] to record one)")
+        # ------------------------------------------------------------- clustering
+        if lg.has("cluster"):
+            sec = "Situations (clustering)"
+            try:
+                ct = R.clustering_trials(lg)
+            except _EXPECTED as exc:
+                rep.skipped.append(f"clustering figures: {exc}")
+                ct = None
+            if lg.has("cluster/state/centers"):
+                W.figure(sec, "prototypes.png",
+                         "Cluster prototypes (situations) as polar plots of the 8 sonar ranges "
+                         "(Fig. 5.2)",
+                         lambda: CP.plot_prototypes(
+                             np.asarray(lg.interpreter_state()["centers"]), R.sensor_angles(lg),
+                             max_range=R.sensor_max_range(lg),
+                             labels=R.situation_labels(lg, numbered=False)))
+            # J_m is in the squared units of the clustered features (see the fcm plugin's transform)
+            transform = str(lg.stage("cluster").get("transform", "range")) \
+                if lg.has("cluster") else "range"
+            units = {"log": "(log m)", "inverse": "(1/m)"}.get(transform, "m")
+            if ct is not None:
+                W.figure(sec, "measures_by_trial.png",
+                         f"Validity measures of the {ct.n_trials} FCM trials, chosen trial "
+                         f"{ct.chosen} marked (Fig. 5.1)",
+                         lambda: CP.plot_measures_by_trial(ct, units=units))
+            sw = R.sweep_result(lg)
+            if sw is not None:
+                W.figure(sec, "measures_by_c.png",
+                         "Validity of the chosen partition against the number of clusters c "
+                         "(Fig. 4.5)", lambda: CP.plot_measures_by_c(sw, units=units))
+            else:
+                rep.skipped.append("measures_by_c.png: the log has no sweep over c "
+                                   "(set [interpreter] sweep = [2, 3, ...] to record one)")
 
-    # ------------------------------------------------------------- learning
-    idx = lg.trial_indices()
-    if idx:
-        sec = "Learning (all trials)"
-        W.table(sec, "convergence", "Convergence and quality of every trial (Table 5.9)",
-                lambda: R.convergence_table(lg))
-        loaded: dict[int, TrialLog] = {}
+        # ------------------------------------------------------------- learning
+        idx = lg.trial_indices()
+        if idx:
+            sec = "Learning (all trials)"
+            W.table(sec, "convergence", "Convergence and quality of every trial (Table 5.9)",
+                    lambda: R.convergence_table(lg))
+            loaded: dict[int, TrialLog] = {}
 
-        def get(k: int) -> TrialLog:
-            if k not in loaded:
-                loaded[k] = lg.trial(k)
-            return loaded[k]
+            def get(k: int) -> TrialLog:
+                if k not in loaded:
+                    loaded[k] = lg.trial(k)
+                return loaded[k]
 
-        W.table(sec, "rule_bases", "Learned action per situation in every trial, and the most "
-                "frequent one (Tables A.2/A.3)", lambda: R.rule_bases_across_trials(lg))
+            W.table(sec, "rule_bases", "Learned action per situation in every trial, and the most "
+                    "frequent one (Tables A.2/A.3)", lambda: R.rule_bases_across_trials(lg))
 
-        def curves() -> Any:
-            rewards, conv = {}, {}
-            for k in idx:
-                tr = get(k)
-                lab = _reward_label(tr)
-                rewards[k] = tr.arrays[f"reward/{lab}"]
-                conv[k] = R.convergence_iteration(tr)
-            return LP.plot_learning_curves(rewards, conv, window,
-                                           title=f"Mean reward per {window} iterations, "
-                                           f"{len(idx)} trials")
+            def curves() -> Any:
+                rewards, conv = {}, {}
+                for k in idx:
+                    tr = get(k)
+                    lab = _reward_label(tr)
+                    rewards[k] = tr.arrays[f"reward/{lab}"]
+                    conv[k] = R.convergence_iteration(tr)
+                return LP.plot_learning_curves(rewards, conv, window,
+                                               title=f"Mean reward per {window} iterations, "
+                                               f"{len(idx)} trials")
 
-        W.figure(sec, "learning_curves.png", f"Mean reward per {window} iterations of every "
-                 "trial and their mean; dots = convergence", curves)
+            W.figure(sec, "learning_curves.png", f"Mean reward per {window} iterations of every "
+                     "trial and their mean; dots = convergence", curves)
 
-        if trials is None:
-            rt = R.representative_trial(lg)
-            chosen = [rt] if rt is not None else []
-        elif trials == "all":
-            chosen = idx
-        else:
-            chosen = [int(k) for k in trials]  # type: ignore[union-attr]
-            bad = [k for k in chosen if k not in idx]
-            if bad:
-                raise InputError(f"the log has no trial(s) {bad}; it has {_ranges(idx)}",
-                                 file=lg.path, key="--trial")
-        rep.trials = chosen
-        worlds = _worlds(lg)
-        for k in chosen:
-            _trial_figures(W, lg, get(k), worlds, window, path_iterations, radius, LP)
-    rep.seconds = time.perf_counter() - t0
-    _write_index(rep, lg)
-    rep.seconds = time.perf_counter() - t0
+            if trials is None:
+                rt = R.representative_trial(lg)
+                chosen = [rt] if rt is not None else []
+            elif trials == "all":
+                chosen = idx
+            else:
+                chosen = [int(k) for k in trials]  # type: ignore[union-attr]
+                bad = [k for k in chosen if k not in idx]
+                if bad:
+                    raise InputError(f"the log has no trial(s) {bad}; it has {_ranges(idx)}",
+                                     file=lg.path, key="--trial")
+            rep.trials = chosen
+            worlds = _worlds(lg)
+            for k in chosen:
+                _trial_figures(W, lg, get(k), worlds, window, path_iterations, radius, LP)
+        rep.seconds = time.perf_counter() - t0
+        _write_index(rep, lg)
+        rep.seconds = time.perf_counter() - t0
+        for name in sorted(os.listdir(scratch)):
+            os.replace(scratch / name, out / name)
+        scratch.rmdir()
+    except BaseException as exc:
+        shutil.rmtree(scratch, ignore_errors=True)
+        if created:
+            shutil.rmtree(out, ignore_errors=True)
+        if isinstance(exc, OSError):
+            raise InputError(f"cannot write the analysis: {exc.strerror or exc}",
+                             file=str(out), key="-o") from None
+        raise
+    rep.out_dir = str(out)
     return rep
 
 
