@@ -360,6 +360,11 @@ def simulate(
 ) -> TrialResult:
     """Run one trial (learning, frozen evaluation or goal episode) and return its arrays.
 
+    ``step_hook`` fires for learning trials and goal episodes, never for the
+    frozen evaluations of a learning trial (``learn=False`` without
+    ``stop_at_goal``), whichever executor runs them: the serial one runs them
+    here, a pool as separate tasks, and the logs must not differ.
+
     Raises
     ------
     PluginFault
@@ -369,6 +374,8 @@ def simulate(
     """
     if spec.episodes is not None:
         return run_episode_batch(res, spec, step_hook=step_hook)
+    if not spec.learn and not spec.stop_at_goal:
+        step_hook = None  # a frozen evaluation (sitframe_step: "not called" there)
     rng = np.random.default_rng(spec.seed)
     world = res.world(spec.world)
     goal = world.goal if spec.goal is None else Goal(np.asarray(spec.goal[:2], float),

@@ -308,3 +308,23 @@ def test_parameter_error_is_as_documented(tutorial: Tutorial, tmp_path: Path,
     monkeypatch.setenv("SITFRAME_TRACEBACK", "1")  # the traceback instead of the line
     with pytest.raises(ValueError, match=r"sensor\.max_range"):
         main(["--plugins-dir", plugins, "run", "tutorial.toml", "--workers", "1"])
+
+
+def test_same_log_with_two_workers(tutorial: Tutorial, monkeypatch: pytest.MonkeyPatch,
+                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """The plugins load in the workers and the observer's data is what it is serially
+    (regression: a pool fired ``sitframe_step`` in frozen evaluations, a serial run not)."""
+    monkeypatch.chdir(tutorial.root)
+    monkeypatch.delenv("SITFRAME_DISABLE_PLUGIN_AUTOLOAD", raising=False)
+    assert main(["--plugins-dir", "myplugins", "run", "tutorial.toml", "--out",
+                 "logs/tutorial-w2.h5", "--json", "--workers", "2"]) == 0, capsys.readouterr().err
+    serial = open_log(tutorial.root / "logs" / "tutorial.h5")
+    pool = open_log(tutorial.root / "logs" / "tutorial-w2.h5")
+    for k in (0, 1):
+        a, b = serial.trial(k), pool.trial(k)
+        np.testing.assert_array_equal(a.arrays["pose"], b.arrays["pose"])
+        assert a.plugins.keys() == b.plugins.keys()
+        for plugin, data in a.plugins.items():
+            assert data.keys() == b.plugins[plugin].keys(), plugin
+            for key, value in data.items():
+                np.testing.assert_array_equal(value, b.plugins[plugin][key])
