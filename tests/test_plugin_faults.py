@@ -303,6 +303,34 @@ class Bad:
 def sitframe_sensors():
     return [Bad]
 ''', 2, S, "has no method 'read'", add=SENSOR_ADD, fresh=True),
+    fault("sensor-missing-angles", '''
+class Bad:
+    name = "bad"
+    max_range = 3.0
+
+    def read(self, world, pose, rng):
+        return np.zeros(8)
+
+@hookimpl
+def sitframe_sensors():
+    return [Bad]
+''', 2, S, "has no attribute 'angles_deg'", add=SENSOR_ADD, fresh=True),
+    fault("sensor-property-raises", '''
+class Bad(SonarRing):
+    name = "bad"
+
+    @property
+    def max_range(self):
+        raise RuntimeError("not calibrated")
+
+    @max_range.setter
+    def max_range(self, value):
+        pass
+
+@hookimpl
+def sitframe_sensors():
+    return [Bad]
+''', 2, S, "max_range()", "RuntimeError: not calibrated", add=SENSOR_ADD, fresh=True),
     # -- interpreters: memberships are c non-negative numbers summing to 1
     fault("interpreter-memberships-wrong-length",
           interpreter("return np.append(u, 0.0) if self.now else u"), 3,
@@ -331,6 +359,18 @@ class Bad(FCMInterpreter):
 def sitframe_interpreters():
     return [Bad]
 ''', 3, In, "fit()", "LinAlgError: singular", cfg=INTERP, fresh=True),
+    fault("interpreter-fit-returns-a-list", '''
+class Bad(FCMInterpreter):
+    name = "bad"
+
+    def fit(self, X, rng):
+        super().fit(X, rng)
+        return ["centres"]
+
+@hookimpl
+def sitframe_interpreters():
+    return [Bad]
+''', 3, In, "fit()", "returned list, expected a dict", cfg=INTERP, fresh=True),
     fault("interpreter-n-situations-zero", '''
 class Bad(FCMInterpreter):
     name = "bad"
@@ -351,6 +391,14 @@ def sitframe_interpreters():
     fault("behaviour-propose-nan-heading",
           behaviour("return Proposal(math.nan) if self.now else good()"), 3,
           B, "propose() in trial 1", "heading_deg nan", cfg=BEHAVIOUR, trial=1),
+    fault("behaviour-propose-activation-above-1",
+          behaviour("return Proposal(0.0, activation=1.5) if self.now else good()"), 3,
+          B, "propose() in trial 1", "activation 1.5, expected None or a number in [0, 1]",
+          cfg=BEHAVIOUR, trial=1),
+    fault("behaviour-propose-negative-speed",
+          behaviour("return Proposal(0.0, -0.1) if self.now else good()"), 3,
+          B, "propose() in trial 1", "speed_m_s -0.1, expected None or a finite number >= 0",
+          cfg=BEHAVIOUR, trial=1),
     fault("behaviour-propose-raises", behaviour("""
               if self.now:
                   raise ValueError("no rule fires")
@@ -364,6 +412,10 @@ def sitframe_interpreters():
     fault("behaviour-policy-returns-dict",
           behaviour('return {"heading": 1} if self.k == 1 else good()', "policy", ""), 3,
           B, "policy() in trial 1", "returned dict, expected a sitframe.LearnedPolicy",
+          cfg=BEHAVIOUR, trial=1),
+    fault("behaviour-trial-data-empty-key",
+          behaviour('return {"": 1} if self.k == 1 else good()', "trial_data", ""), 3,
+          B, "trial_data() in trial 1", "expected a dict of non-empty string keys",
           cfg=BEHAVIOUR, trial=1),
     fault("behaviour-missing-propose", '''
 class Bad:
@@ -400,6 +452,10 @@ def sitframe_behaviours():
           arbiter("return (good[0], np.ones(3)) if self.now else good"), 3,
           A, "combine() in trial 1", "weights of shape (3,), expected (1,)", add=ARBITER_ADD,
           trial=1),
+    fault("arbiter-returns-a-proposal-only",
+          arbiter("return good[0] if self.now else good"), 3,
+          A, "combine() in trial 1", "returned Proposal, expected a tuple (Proposal, weights",
+          add=ARBITER_ADD, trial=1),
     fault("arbiter-rules-name-unknown-label", "", 2,
           "fault.toml: arbiter.rules[0].behaviour:", "names behaviour 'avod'",
           add='\n[arbiter]\ncomponent = "priority"\nrules = [{behaviour = "avod"}]\n'),
@@ -474,6 +530,26 @@ def sitframe_arbiters():
     fault("reward-raises-in-a-worker", reward("return 1 / 0 if self.k == 0 else 1.0"), 3,
           R, "__call__() in trial 0, iteration 0", "ZeroDivisionError", cfg=REWARD, trial=0,
           argv=("--workers", "2")),
+    fault("worker-fault-keeps-the-earlier-trial", '''
+import time
+
+class Bad(InTrial1, ObstacleAvoidanceReward):
+    name = "bad"
+
+    def __call__(self, tr):
+        if self.k == 0:
+            time.sleep(0.05)  # trial 0 is still running when trial 1 fails
+        if self.now:
+            raise RuntimeError("late")
+        return 1.0
+
+@hookimpl
+def sitframe_rewards():
+    return [Bad]
+''', 3, R, "__call__() in trial 1, iteration 0", "RuntimeError: late", cfg=REWARD, trial=1,
+          argv=("--workers", "2"),
+          xfail="with a worker pool the first fault cancels every trial in flight, so an "
+                "earlier trial that would have finished is lost (a serial run keeps it)"),
     # -- observers of the main process (known defect: a raw traceback, exit 1)
     fault("observer-trial-end-raises", '''
 @hookimpl
