@@ -5,27 +5,105 @@ Prints the median wall time of a 5000-iteration obstacle-avoidance trial
 the trial and without a log, and the logging overhead as a ratio measured in
 the same run. Target (issue 4): <= 2.5 s per trial, logging <= 10 %.
 
+``--against REV`` instead times the learning trial of this checkout and of git
+revision ``REV`` (exported to a temporary folder) in one run, alternating
+fresh processes of each so that load drifts on a shared machine hit both
+alike, and prints the medians and their ratio (issue 11: the checked plugin
+boundary must cost nothing measurable, within 5 % of the previous commit)::
+
     python benchmarks/bench_trial.py [--repeats 5] [--iterations 5000]
+    python benchmarks/bench_trial.py --against HEAD~1 [--repeats 7]
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
+import json
+import os
 import statistics
+import subprocess
+import sys
+import tarfile
 import tempfile
 import time
 from pathlib import Path
 
-from sitframe.config import load_config
-from sitframe.experiment import prepare_experiment
-from sitframe.logs import LogWriter
+ROOT = Path(__file__).resolve().parent.parent
+#: The built-in plugin modules a learning trial needs (loaded by module, so a
+#: revision without a newer entry point still runs).
+PLUGINS = ("sonar", "fcm_interpreter", "fuzzy_q", "rewards", "arbiters")
+
+
+def _time_trials(iterations: int, repeats: int) -> list[float]:
+    """Seconds per learning trial of ``obstacle-avoidance`` with this process's sitframe."""
+    from sitframe.config import load_config, validate_config
+    from sitframe.pluginmanager import get_plugin_manager
+    from sitframe.scheduler import Experiment
+
+    mods = [importlib.import_module(f"sitframe.plugins.{m}") for m in PLUGINS]
+    cfg, source, _ = load_config("obstacle-avoidance")
+    cfg["experiment"].update(trials=1, iterations=iterations, stages=["collect", "cluster"])
+    cfg = validate_config(cfg, file=source)
+
+    def experiment() -> Experiment:
+        return Experiment(cfg, source=source, pm=get_plugin_manager(autoload=False, plugins=mods))
+
+    state = experiment().run().interpreter_state
+    cfg["experiment"]["stages"] = ["learn"]
+    out = []
+    for _ in range(repeats):
+        exp = experiment()
+        t0 = time.perf_counter()
+        exp.run(interpreter_state=state)
+        out.append(time.perf_counter() - t0)
+    return out
+
+
+def _against(rev: str, iterations: int, repeats: int) -> None:
+    with tempfile.TemporaryDirectory() as tmp:
+        old = Path(tmp) / "rev"
+        old.mkdir()
+        archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev], check=True,
+                                 capture_output=True).stdout
+        tar = Path(tmp) / "rev.tar"
+        tar.write_bytes(archive)
+        with tarfile.open(tar) as tf:
+            tf.extractall(old, filter="data")
+        trees = {rev: old, "this checkout": ROOT}
+        times: dict[str, list[float]] = {k: [] for k in trees}
+        for _ in range(repeats):
+            for name, tree in trees.items():  # alternate fresh processes of each
+                env = dict(os.environ, PYTHONPATH=str(tree), SITFRAME_DISABLE_PLUGIN_AUTOLOAD="1")
+                code = (f"import json, sys; sys.path.insert(0, {str(tree)!r}); "
+                        f"sys.path.insert(1, {str(ROOT / 'benchmarks')!r}); import bench_trial; "
+                        f"print(json.dumps(bench_trial._time_trials({iterations}, 3)))")
+                res = subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp,
+                                     capture_output=True, text=True)
+                if res.returncode:
+                    sys.exit(f"{name}: {res.stderr.strip().splitlines()[-1]}")
+                times[name] += json.loads(res.stdout)
+    med = {k: statistics.median(v) for k, v in times.items()}
+    for k, v in med.items():
+        print(f"{k:>14}: median {v:.3f} s per {iterations}-iteration learning trial "
+              f"({len(times[k])} trials in {repeats} processes)")
+    print(f"ratio this checkout / {rev}: {med['this checkout'] / med[rev]:.3f}")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--iterations", type=int, default=5000)
+    ap.add_argument("--against", metavar="REV",
+                    help="compare this checkout's learning trial with git revision REV")
     args = ap.parse_args()
+    if args.against:
+        _against(args.against, args.iterations, args.repeats)
+        return
+
+    from sitframe.config import load_config
+    from sitframe.experiment import prepare_experiment
+    from sitframe.logs import LogWriter
 
     cfg, source, _ = load_config("obstacle-avoidance")
     cfg["experiment"].update(trials=1, iterations=args.iterations, stages=["collect", "cluster"])

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from sitframe import Context, InputError, Proposal, Transition, hookimpl
+from sitframe import Context, InputError, LearnedPolicy, Proposal, Transition, hookimpl
 from sitframe import params as P
 
 
@@ -53,8 +53,8 @@ class GoalBehaviour:
     def reset(self, rng: np.random.Generator, n_situations: int, iterations: int) -> None:
         pass
 
-    def load_policy(self, policy: dict[str, np.ndarray]) -> None:
-        pass
+    def load_policy(self, policy: LearnedPolicy) -> None:
+        pass  # nothing learned: a goal run may still hand it a policy
 
     def propose(self, context: Context) -> Proposal:
         if context.goal is None:

@@ -13,6 +13,11 @@ trials the workers return their data and this plugin writes them, in trial
 order, as they finish.
 
 Nothing is written when the run has no output path (``RunInfo.out is None``).
+
+Its ``sitframe_trial_end`` and ``sitframe_run_end`` run *last* (``trylast``):
+another observer's ``sitframe_trial_end`` may still add arrays to
+``trial.plugin_data["<its plugin name>"]``, and they are written in the same
+transaction as the trial.
 """
 
 from __future__ import annotations
@@ -44,14 +49,14 @@ def sitframe_stage_end(run: RunInfo, stage: str, data: dict) -> None:
     w.stage(stage, data)
 
 
-@hookimpl
+@hookimpl(trylast=True)
 def sitframe_trial_end(run: RunInfo, trial: TrialResult) -> None:
     w = _writer(run)
     if w is not None:
         w.trial(trial, list(run.config.get("behaviours", {})))
 
 
-@hookimpl
+@hookimpl(trylast=True)
 def sitframe_run_end(run: RunInfo, status: str) -> None:
     w = _writer(run)
     if w is not None and w.path.exists():

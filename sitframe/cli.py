@@ -208,6 +208,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _execute(exp: Any, kwargs: dict[str, Any]) -> Any:
     """``exp.run(**kwargs)``, releasing the executor's workers however it ends."""
+    for msg in getattr(exp.pm, "sitframe_clashes", []):
+        print(f"sitframe: warning: {msg}", file=sys.stderr)
     failed = True
     try:
         result = exp.run(**kwargs)
@@ -419,13 +421,15 @@ def cmd_plugins(args: argparse.Namespace) -> int:
     from sitframe.pluginmanager import Registry, get_plugin_manager
 
     pm = get_plugin_manager(plugins_dirs=args.plugins_dir)
-    reg = Registry.collect(pm)
+    reg = Registry.collect(pm, strict=False)  # list everything, clashes marked
     for info, comps in reg.plugins_table():
         print(info.describe())
         for kind, names in comps.items():
             print(f"    {kind:12} {', '.join(names)}")
         if not comps:
             print("    (observer hooks only)")
+    for msg in [*getattr(pm, "sitframe_clashes", []), *reg.clashes]:
+        print(f"CLASH: {msg}")
     return 0
 
 

@@ -39,6 +39,9 @@ REQUIRED: dict[str, tuple[str, ...]] = {
 #: Optional lifecycle methods any component may define (called when present).
 LIFECYCLE = ("bind", "trial_start", "trial_end")
 
+#: Real scalar types accepted for a heading, speed, activation or reward.
+_REAL = (int, float, np.integer, np.floating)
+
 #: Tolerance on ``sum(memberships) == 1``.
 MEMBERSHIP_SUM_TOL = 1e-6
 
@@ -178,16 +181,16 @@ def check_proposal(p: Any) -> Proposal:
         raise BoundaryError(f"returned {type(p).__name__} {p!r:.60}, expected a "
                             "sitframe.Proposal(heading_deg, speed_m_s=None, activation=None)")
     h = p.heading_deg
-    if not isinstance(h, int | float) or isinstance(h, bool) or not math.isfinite(h):
+    if not isinstance(h, _REAL) or isinstance(h, bool) or not math.isfinite(h):
         raise BoundaryError(f"returned a Proposal with heading_deg {h!r}, expected a finite "
                             "number of degrees")
     s = p.speed_m_s
-    if s is not None and (not isinstance(s, int | float) or isinstance(s, bool)
+    if s is not None and (not isinstance(s, _REAL) or isinstance(s, bool)
                           or not math.isfinite(s) or s < 0):
         raise BoundaryError(f"returned a Proposal with speed_m_s {s!r}, expected None or a "
                             "finite number >= 0 [m/s]")
     a = p.activation
-    if a is not None and (not isinstance(a, int | float) or isinstance(a, bool)
+    if a is not None and (not isinstance(a, _REAL) or isinstance(a, bool)
                           or not 0.0 <= a <= 1.0):
         raise BoundaryError(f"returned a Proposal with activation {a!r}, expected None or a "
                             "number in [0, 1]")
@@ -196,8 +199,7 @@ def check_proposal(p: Any) -> Proposal:
 
 def check_reward(r: Any) -> float:
     """A finite real number (not a string, not a bool, not NaN)."""
-    if r.__class__ is float or isinstance(r, int | float | np.integer | np.floating) \
-            and not isinstance(r, bool | np.bool_):
+    if r.__class__ is float or isinstance(r, _REAL) and not isinstance(r, bool | np.bool_):
         v = float(r)
         if math.isfinite(v):
             return v
@@ -206,16 +208,20 @@ def check_reward(r: Any) -> float:
 
 
 def check_combined(out: Any, k: int) -> tuple[Proposal, np.ndarray]:
-    """An arbiter's ``(Proposal, (k,) finite weights)``."""
-    if not isinstance(out, tuple) or len(out) != 2:
+    """An arbiter's ``(Proposal, (k,) weights)`` (the weights' values are checked per trial)."""
+    if out.__class__ is not tuple or len(out) != 2:
         raise BoundaryError(f"returned {type(out).__name__}, expected a tuple (Proposal, "
                             f"weights of shape ({k},))")
     prop, w = out
     check_proposal(prop)
-    w = np.asarray(w, dtype=np.float64) if not isinstance(w, np.ndarray) else w
-    if w.shape != (k,) or not np.all(np.isfinite(w)):
-        raise BoundaryError(f"returned weights of shape {np.shape(w)}, expected ({k},) finite "
-                            "numbers, one per behaviour")
+    if w.__class__ is not np.ndarray:
+        try:
+            w = np.asarray(w, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise BoundaryError(f"returned weights {w!r:.60}, expected ({k},) numbers") from None
+    if w.shape != (k,):
+        raise BoundaryError(f"returned weights of shape {w.shape}, expected ({k},), one per "
+                            "behaviour")
     return prop, w
 
 

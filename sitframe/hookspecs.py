@@ -218,6 +218,9 @@ def sitframe_trial_end(run: RunInfo, trial: TrialResult) -> None:
     :param trial: The :class:`sitframe.records.TrialResult`: seed, per-
         iteration arrays, per-behaviour learning data, learned policies,
         plugin data and summary scalars.
+        An observer may add arrays for the log to
+        ``trial.plugin_data["<its plugin name>"]`` here: the HDF5 logger's
+        implementation runs last and writes them with the trial.
 
     All implementations are called; the return value is ignored.
     """

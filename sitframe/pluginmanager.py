@@ -105,6 +105,13 @@ def get_plugin_manager(
         load_plugins_dir(pm, folder)
     for obj in plugins:
         register(pm, obj)
+    try:  # a hook implementation whose name is no sitframe hook (a typo) is an error
+        pm.check_pending()
+    except pluggy.PluginValidationError as exc:
+        name = pm.get_name(exc.plugin) or "?"
+        who = info[name].describe() if name in info else name
+        raise PluginError(f"plugin {who}: {' '.join(str(exc).split())}; the hooks are listed in "
+                          "sitframe.hookspecs") from None
     return pm
 
 
@@ -126,14 +133,36 @@ def _register_checked(
 
 
 def _load_entry_points(pm: pluggy.PluginManager, info: dict[str, PluginInfo]) -> None:
+    """Register every entry point in group ``sitframe``.
+
+    Two distributions declaring the same entry-point name are both loaded --
+    the second as ``"<name>[<distribution>]"`` -- and the clash is recorded
+    (:data:`ENTRY_POINT_CLASHES` on the manager, shown by ``sitframe plugins``
+    and warned about once per run), instead of one silently winning by
+    install order. The same distribution seen twice on ``sys.path`` (e.g. an
+    editable install next to a built one) is loaded once.
+    """
+    seen: dict[str, tuple[str, str]] = {}  # entry-point name -> (distribution, module)
+    clashes: list[str] = []
+    pm.sitframe_clashes = clashes  # type: ignore[attr-defined]
     for dist in importlib.metadata.distributions():
         for ep in dist.entry_points:
-            if ep.group != GROUP or pm.get_plugin(ep.name) is not None:
-                continue
-            if pm.is_blocked(ep.name):
+            if ep.group != GROUP or pm.is_blocked(ep.name):
                 continue
             dist_name = dist.metadata["name"]
-            pinfo = PluginInfo(ep.name, "entry point", dist_name, dist.version)
+            name = ep.name
+            if name in seen:
+                if seen[name] == (dist_name, ep.value):
+                    continue
+                clashes.append(f"entry point '{name}' is declared by {seen[name][0]} "
+                               f"({seen[name][1]}) and by {dist_name} ({ep.value}); both are "
+                               f"loaded, the second as '{name}[{dist_name}]'")
+                name = f"{name}[{dist_name}]"
+                if pm.get_plugin(name) is not None:
+                    continue
+            else:
+                seen[name] = (dist_name, ep.value)
+            pinfo = PluginInfo(name, "entry point", dist_name, dist.version)
             try:
                 plugin = ep.load()
             except Exception as exc:  # noqa: BLE001 - any import failure is the plugin's
@@ -141,7 +170,7 @@ def _load_entry_points(pm: pluggy.PluginManager, info: dict[str, PluginInfo]) ->
                     f"plugin {pinfo.describe()} failed to import ({ep.value}): "
                     f"{type(exc).__name__}: {exc}"
                 ) from None
-            _register_checked(pm, plugin, ep.name, pinfo)
+            _register_checked(pm, plugin, name, pinfo)
 
 
 def load_plugins_dir(pm: pluggy.PluginManager, folder: str | os.PathLike[str]) -> list[str]:
@@ -179,7 +208,7 @@ def _import_file(file: Path, name: str) -> ModuleType:
         raise PluginError(
             f"plugin file {file}:{exc.lineno}: syntax error: {exc.msg}"
         ) from None
-    except Exception as exc:  # noqa: BLE001
+    except (Exception, SystemExit) as exc:  # noqa: BLE001 - even sys.exit() at import
         sys.modules.pop(mod_name, None)
         line = _traceback_line(exc, file)
         raise PluginError(
@@ -215,9 +244,17 @@ class Registry:
     pm: pluggy.PluginManager
     entries: dict[str, dict[str, Entry]] = field(default_factory=dict)
 
+    #: Component names registered by more than one plugin (``strict=False`` only):
+    #: ``"<kind> '<name>': <plugin> and <plugin>"``.
+    clashes: list[str] = field(default_factory=list)
+
     @classmethod
-    def collect(cls, pm: pluggy.PluginManager) -> Registry:
+    def collect(cls, pm: pluggy.PluginManager, *, strict: bool = True) -> Registry:
         """Call every registration hook and index the factories.
+
+        With ``strict=False`` (``sitframe plugins``) a component name that two
+        plugins register is recorded in :attr:`clashes` (the first plugin
+        keeps it) instead of raised, so everything can still be listed.
 
         Raises
         ------
@@ -256,10 +293,12 @@ class Registry:
                         )
                     if name in reg.entries[kind]:
                         other = reg.describe_plugin(reg.entries[kind][name].plugin)
-                        raise PluginError(
-                            f"{kind} name '{name}' is registered by two plugins: "
-                            f"{other} and {where}"
-                        )
+                        msg = (f"{kind} name '{name}' is registered by two plugins: "
+                               f"{other} and {where}")
+                        if strict:
+                            raise PluginError(msg)
+                        reg.clashes.append(msg)
+                        continue
                     reg.entries[kind][name] = Entry(kind, name, factory, plugin_name)
         return reg
 
@@ -312,7 +351,9 @@ class Registry:
         except InputError as exc:
             raise exc.at(file=file, key_prefix=key) from None
         except (ValueError, TypeError) as exc:
-            raise InputError(str(exc), file=file, key=key) from None
+            raise InputError(f"{exc} ({kind} '{name}' of plugin "
+                             f"{self.describe_plugin(entry.plugin)})", file=file,
+                             key=key) from None
         except Exception as exc:  # noqa: BLE001
             raise PluginError(
                 f"plugin {self.describe_plugin(entry.plugin)}: creating {kind} '{name}' "

@@ -411,7 +411,7 @@ def simulate(
     components = [("sensor", sensor), ("interpreter", interp),
                   *[(f"behaviours.{lb}", b) for lb, (b, _r) in behaviours.items()],
                   *[(f"behaviours.{lb}.reward", r) for lb, (_b, r) in behaviours.items()
-                    if r is not None],
+                    if r is not None and spec.learn],  # (a frozen run uses no reward)
                   ("arbiter", arbiter), ("arbiter.reward", arb_reward)]
     components = [(key, comp) for key, comp in components if comp is not None]
     tinfo = TrialInfo(k, "learn" if spec.learn else "evaluate", world, L, rng)
@@ -498,15 +498,15 @@ def simulate(
                     (pose[0] - goal_xy[0]) ** 2 + (pose[1] - goal_xy[1]) ** 2 <= goal_r2:
                 n_done = t + 1
                 break
-    except (KeyboardInterrupt, TaskCancelled, PluginFault):
-        raise
+    except (KeyboardInterrupt, TaskCancelled, PluginFault, InputError):
+        raise  # (a plugin's InputError names the input it found wrong)
     except Exception as exc:
         if step_at.origin is None and step_at.method == "step":
             raise  # the core's own arithmetic: a bug here, not the plugin's
         raise _loop_fault(exc, step_at, k, t, res, locals()) from exc
     pose_a[n_done] = pose
     n = n_done
-    _check_trial_values(sonar_a[:n], u_a[:n], og, k)
+    _check_trial_values(sonar_a[:n], u_a[:n], weights_a[:n], og, k)
     arrays: dict[str, np.ndarray] = {
         "pose": pose_a[: n + 1], READING: sonar_a[:n], "memberships": u_a[:n],
         "command": cmd_a[:n], "collision": coll_a[:n], "contact": contact_a[:n],
@@ -576,9 +576,9 @@ def _loop_fault(exc: Exception, step_at: _Step, trial: int, t: int, res: Resolve
     return fault(exc, step_at.origin or "an observer (sitframe_step)", step_at.method, trial, t)
 
 
-def _check_trial_values(readings: np.ndarray, u: np.ndarray, origins: dict[str, Origin],
-                        trial: int) -> None:
-    """Vectorised checks of every reading and membership vector of a finished trial."""
+def _check_trial_values(readings: np.ndarray, u: np.ndarray, weights: np.ndarray,
+                        origins: dict[str, Origin], trial: int) -> None:
+    """Vectorised checks of every reading, membership vector and weight of a finished trial."""
     bad = ~np.isfinite(readings).all(axis=1)
     if bad.any():
         t = int(np.argmax(bad))
@@ -590,6 +590,12 @@ def _check_trial_values(readings: np.ndarray, u: np.ndarray, origins: dict[str, 
         t = int(np.argmax(bad))
         raise PluginFault(memberships_mismatch(u[t], u.shape[1]) or "invalid",
                           where=str(origins["interpreter"]), method="memberships", trial=trial,
+                          iteration=t)
+    bad = ~np.isfinite(weights).all(axis=1)
+    if bad.any():
+        t = int(np.argmax(bad))
+        raise PluginFault(f"returned non-finite weights {weights[t].tolist()}",
+                          where=str(origins["arbiter"]), method="combine", trial=trial,
                           iteration=t)
 
 
@@ -861,7 +867,7 @@ class Experiment:
             from sitframe.resume import code_fingerprint  # hashes source files: only for logs
 
             self.info.extra["code_hash"] = code_fingerprint(self.info.plugins)
-        self.pm.hook.sitframe_run_start(run=self.info)
+        self._notify("sitframe_run_start", run=self.info)
 
     def needs_clusters(self, interpreter_state: dict[str, Any] | None,
                        collected: Collected | None = None) -> bool:
@@ -876,13 +882,13 @@ class Experiment:
 
     def record_collected(self, collected: Collected) -> None:
         """Hand the collect stage's output to observers."""
-        self.pm.hook.sitframe_stage_end(run=self.info, stage="collect", data={
+        self._notify("sitframe_stage_end", run=self.info, stage="collect", data={
             "samples": collected.samples, "poses": collected.poses,
             "source": collected.source, "worlds": list(collected.worlds)})
 
     def record_clusters(self, fit: dict[str, Any], state: dict[str, Any]) -> None:
         """Hand the cluster stage's output to observers."""
-        self.pm.hook.sitframe_stage_end(run=self.info, stage="cluster",
+        self._notify("sitframe_stage_end", run=self.info, stage="cluster",
                                         data={**fit, "state": state})
 
     def prepare(self, interpreter_state: dict[str, Any] | None = None,
@@ -921,11 +927,39 @@ class Experiment:
 
     def trial_done(self, result: TrialResult) -> None:
         """Hand a finished trial to observers (call in trial order)."""
-        self.pm.hook.sitframe_trial_end(run=self.info, trial=result)
+        self._notify("sitframe_trial_end", run=self.info, trial=result)
+
+    def _notify(self, hook_name: str, **kwargs: Any) -> None:
+        """Call an observer hook's implementations, in pluggy's order, each one once.
+
+        An implementation that raises does not stop the others (the logger,
+        which runs last, still writes the finished trial); the first failure
+        is then raised as one :class:`PluginFault` naming its plugin.
+        """
+        hook = getattr(self.pm.hook, hook_name)
+        impls = hook.get_hookimpls()
+        if any(getattr(i, "hookwrapper", False) or getattr(i, "wrapper", False) for i in impls):
+            hook(**kwargs)  # wrappers need pluggy's own call loop
+            return
+        first: BaseException | None = None
+        for impl in reversed(impls):  # pluggy calls the last registered first
+            try:
+                impl.function(*[kwargs[a] for a in impl.argnames])
+            except (KeyboardInterrupt, TaskCancelled):
+                raise
+            except Exception as exc:  # noqa: BLE001 - reported below, naming the plugin
+                if first is None:
+                    where = f"plugin {self.registry.describe_plugin(impl.plugin_name)}"
+                    first = exc if isinstance(exc, InputError | PluginError) else fault(
+                        exc, where, hook_name, getattr(kwargs.get("trial"), "index", None))
+                    if first is not exc:
+                        first.__cause__ = exc
+        if first is not None:
+            raise first
 
     def finish(self, status: str) -> None:
         """Tell observers the run ended with ``status`` (complete, aborted, failed)."""
-        self.pm.hook.sitframe_run_end(run=self.info, status=status)
+        self._notify("sitframe_run_end", run=self.info, status=status)
 
     def run(self, *, interpreter_state: dict[str, Any] | None = None,
             collected: Collected | None = None,
