@@ -193,10 +193,18 @@ class Resolved:
         fn = getattr(comp, "bind", None)
         if fn is None:
             return
+        o = self.origins[key]
         try:
-            call(self.origins[key], "bind", fn, dataclasses.replace(self.run, component=key))
+            fn(dataclasses.replace(self.run, component=key))
         except InputError as exc:
             raise exc.at(file=self.file, key_prefix=key) from None
+        except (ValueError, TypeError) as exc:  # the component's parameters do not fit the run
+            raise InputError(f"{exc} ({o.kind} '{o.name}' of plugin {o.plugin}, at bind)",
+                             file=self.file, key=key) from None
+        except (KeyboardInterrupt, PluginFault):
+            raise
+        except Exception as exc:  # noqa: BLE001 - any other fault in plugin code
+            raise fault(exc, o, "bind") from exc
 
     def sensor(self) -> Any:
         return self._create("sensor", "sensor", self.cfg["sensor"])
