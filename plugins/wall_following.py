@@ -55,7 +55,7 @@ from typing import Any
 
 import numpy as np
 
-from sitframe import InputError, RunContext, Transition, hookimpl
+from sitframe import RunContext, Transition, hookimpl
 from sitframe import params as P
 
 #: Geometry assumed when the reward is used outside a run (no ``bind``).
@@ -144,19 +144,14 @@ class WallFollowingReward:
     def bind(self, run: RunContext) -> None:
         """Take the beam angles, max range and robot radius from the run unless given."""
         g = self._given
-        try:  # a geometry that does not fit the run is the config's mistake: an InputError
-            self._set_geometry(
-                run.sensor.angles_deg if g["angles_deg"] is None else g["angles_deg"],
-                run.robot.radius if g["robot_radius"] is None else g["robot_radius"],
-                run.sensor.max_range if g["max_range"] is None else g["max_range"])
-        except InputError:
-            raise
-        except ValueError as exc:
-            raise InputError(str(exc)) from None
+        self._set_geometry(
+            run.sensor.angles_deg if g["angles_deg"] is None else g["angles_deg"],
+            run.robot.radius if g["robot_radius"] is None else g["robot_radius"],
+            run.sensor.max_range if g["max_range"] is None else g["max_range"])
         if self.angles_deg.size != run.sensor.dim:
-            raise InputError(f"angles_deg has {self.angles_deg.size} beams but the sensor "
+            raise ValueError(f"angles_deg has {self.angles_deg.size} beams but the sensor "
                              f"'{run.sensor.name}' reads {run.sensor.dim}; drop angles_deg "
-                             "to use the sensor's", key="angles_deg")
+                             "to use the sensor's")
 
     # -- wall distance -----------------------------------------------------
     def wall_distances(self, readings: np.ndarray) -> np.ndarray:
