@@ -80,9 +80,11 @@ def _set(name: str, value: Any) -> tuple[float, float, float, float]:
 
 
 def _label_index(labels: list[str], label: str, key: str, arbiter: str) -> int:
+    # ``key`` is relative to the [arbiter] table: the core prefixes "arbiter." (and the
+    # config file) to an InputError raised in ``bind``
     if label not in labels:
         raise InputError(f"the '{arbiter}' arbiter names behaviour '{label}', but the run's "
-                         f"behaviours are: {', '.join(labels)}", key=f"arbiter.{key}")
+                         f"behaviours are: {', '.join(labels)}", key=key)
     return labels.index(label)
 
 
@@ -182,7 +184,7 @@ class CDBArbiter:
                 if i >= len(labels):
                     raise InputError(f"{len(self.sets)} context sets but only {len(labels)} "
                                      f"behaviours ({', '.join(labels)}); give rules = "
-                                     "{set = \"behaviour\"}", key="arbiter.rules")
+                                     "{set = \"behaviour\"}", key="rules")
                 idx.append(i)
             else:
                 idx.append(_label_index(labels, label, f"{key}", "cdb"))

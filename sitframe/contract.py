@@ -109,6 +109,26 @@ def fault(exc: BaseException, origin: Origin | str, method: str, trial: int | No
     return PluginFault(msg, where=str(origin), method=method, trial=trial, iteration=iteration)
 
 
+def blame(exc: BaseException, impls: list[Any]) -> str | None:
+    """The plugin name of the hook implementation (of ``impls``) that raised ``exc``.
+
+    pluggy calls every implementation in one call, so the raiser is found on
+    the traceback: the innermost frame running one of the implementations'
+    functions. ``None`` if none is on it.
+    """
+    codes = {}
+    for impl in impls:
+        code = getattr(getattr(impl.function, "__func__", impl.function), "__code__", None)
+        if code is not None:
+            codes[code] = impl.plugin_name
+    name = None
+    tb = exc.__traceback__
+    while tb is not None:
+        name = codes.get(tb.tb_frame.f_code, name)
+        tb = tb.tb_next
+    return name
+
+
 class BoundaryError(Exception):
     """A value returned by plugin code broke the contract (turned into a PluginFault)."""
 

@@ -30,6 +30,7 @@ import inspect
 import platform
 import time
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -44,6 +45,7 @@ from sitframe.contract import (
     MEMBERSHIP_SUM_TOL,
     BoundaryError,
     Origin,
+    blame,
     call,
     check_combined,
     check_data,
@@ -118,7 +120,20 @@ class Resolved:
 
         ``worlds`` names further worlds the caller will use (e.g. ``--world``);
         relative world paths resolve against ``base_dir`` (the config's folder).
+
+        Plugin code that fails here (a property or ``bind`` that raises, a
+        first reading that breaks the sensor's spec) fails before anything
+        runs or is written: it is a :class:`PluginError` (CLI exit 2), not a
+        :class:`PluginFault` of a run (exit 3, a log marked failed).
         """
+        try:
+            return cls._build(cfg, registry, file, worlds, base_dir)
+        except PluginFault as exc:
+            raise PluginError(str(exc)) from exc
+
+    @classmethod
+    def _build(cls, cfg: dict[str, Any], registry: Registry, file: str | None,
+               worlds: tuple[str, ...], base_dir: str) -> Resolved:
         try:
             robot = RobotParams(**cfg["robot"])
         except InputError as exc:
@@ -318,14 +333,41 @@ class _Step:
         self.origin, self.method = origin, method
 
 
+@contextmanager
+def _in_trial(trial: int) -> Iterator[None]:
+    """Name ``trial`` in a fault raised while the trial creates and binds its components."""
+    try:
+        yield
+    except PluginFault as exc:
+        if exc.trial is not None:
+            raise
+        raise PluginFault(exc.message, where=exc.where, method=exc.method,
+                          trial=trial) from exc
+
+
 def step_hook_of(pm: pluggy.PluginManager) -> Callable[[StepRecord], Any] | None:
-    """A function firing ``sitframe_step`` observers, or ``None`` when no plugin implements it."""
+    """A function firing ``sitframe_step`` observers, or ``None`` when no plugin implements it.
+
+    An observer that raises is a :class:`PluginFault` naming its plugin (the
+    one whose ``sitframe_step`` is on the traceback), the trial and the iteration.
+    """
     hook = pm.hook
-    if not hook.sitframe_step.get_hookimpls():
+    impls = hook.sitframe_step.get_hookimpls()
+    if not impls:
         return None
+    info = getattr(pm, "sitframe_info", {})
 
     def step_hook(rec: StepRecord) -> None:
-        hook.sitframe_step(record=rec)
+        try:
+            hook.sitframe_step(record=rec)
+        except (KeyboardInterrupt, TaskCancelled, PluginFault):
+            raise
+        except Exception as exc:  # noqa: BLE001 - an observer's fault is reported, not raw
+            name = blame(exc, impls)
+            where = (f"plugin {info[name].describe() if name in info else name}"
+                     if name else "an observer")
+            raise fault(exc, where, "sitframe_step", rec.trial,
+                        rec.transition.before.iteration) from exc
 
     return step_hook
 
@@ -338,6 +380,11 @@ def simulate(
 ) -> TrialResult:
     """Run one trial (learning, frozen evaluation or goal episode) and return its arrays.
 
+    ``step_hook`` fires for learning trials and goal episodes, never for the
+    frozen evaluations of a learning trial (``learn=False`` without
+    ``stop_at_goal``), whichever executor runs them: the serial one runs them
+    here, a pool as separate tasks, and the logs must not differ.
+
     Raises
     ------
     PluginFault
@@ -347,21 +394,25 @@ def simulate(
     """
     if spec.episodes is not None:
         return run_episode_batch(res, spec, step_hook=step_hook)
+    if not spec.learn and not spec.stop_at_goal:
+        step_hook = None  # a frozen evaluation (sitframe_step: "not called" there)
     rng = np.random.default_rng(spec.seed)
     world = res.world(spec.world)
     goal = world.goal if spec.goal is None else Goal(np.asarray(spec.goal[:2], float),
                                                      float(spec.goal[2]))
     goal_xy = None if goal is None else goal.position
     goal_r2 = 0.0 if goal is None else goal.radius ** 2
-    sensor = res.sensor()
-    interp = res.interpreter()
-    og = res.origins  # the component origins, for messages
     k = spec.index
+    with _in_trial(k):  # each trial creates and binds its own components
+        sensor = res.sensor()
+        interp = res.interpreter()
+    og = res.origins  # the component origins, for messages
     call(og["interpreter"], "load_state", interp.load_state, spec.interpreter_state, trial=k)
     c = call(og["interpreter"], "n_situations", lambda: int(interp.n_situations), trial=k)
-    behaviours = res.behaviours()
-    arbiter = res.arbiter()
-    arb_reward = res.arbiter_reward() if spec.learn else None
+    with _in_trial(k):
+        behaviours = res.behaviours()
+        arbiter = res.arbiter()
+        arb_reward = res.arbiter_reward() if spec.learn else None
     L = spec.iterations
     for label, (beh, _r) in behaviours.items():
         o = og[f"behaviours.{label}"]
