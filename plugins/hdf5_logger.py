@@ -39,6 +39,7 @@ def sitframe_run_start(run: RunInfo) -> None:
     w = _writer(run)
     if w is not None:
         w.start(run, resume=bool(run.extra.get("resume")))
+        run.extra["log_started"] = True  # only a log this run started gets its status
 
 
 @hookimpl
@@ -65,7 +66,7 @@ def sitframe_run_end(run: RunInfo, status: str) -> None:
     if w is None:
         return
     try:
-        if w.path.exists():
+        if run.extra.get("log_started") and w.path.exists():
             w.set_status(status, failure=run.extra.get("failure"))
     finally:
         w.release()  # the run is over: another process may write this log now

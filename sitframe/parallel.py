@@ -50,7 +50,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from sitframe.config import config_hash, to_toml
-from sitframe.errors import InputError, TaskCancelled
+from sitframe.errors import InputError, PluginFault, TaskCancelled
 from sitframe.interrupts import deferred_interrupt
 
 if TYPE_CHECKING:
@@ -267,6 +267,14 @@ class _TaskMap:
             raise
 
 
+def _earlier(tag: Any, other: Any) -> bool:
+    """Whether task ``tag`` comes before ``other`` in release order (tags of one kind)."""
+    try:
+        return bool(tag < other)
+    except TypeError:
+        return False
+
+
 def _splittable(spec: TrialSpec) -> bool:
     """Whether the trial's evaluations can run as separate tasks (not goal batches)."""
     return bool(spec.evaluate) and getattr(spec, "episodes", None) is None
@@ -319,13 +327,31 @@ class TrialPipeline:
     def __iter__(self) -> Iterator[tuple[str, Any, Any]]:
         from sitframe.scheduler import attach_evaluation, evaluation_specs
 
+        failure: tuple[Any, PluginFault] | None = None  # (tag, fault) of the earliest fault
         while True:
             self._fill()
             if not self._inflight:
+                if failure is not None:
+                    raise failure[1]
                 return
             for fut in self.executor.wait_first(list(self._inflight)):
                 kind, tag, info = self._inflight.pop(fut)
-                value = fut.result()  # re-raises a worker's exception here
+                try:
+                    value = fut.result()  # re-raises a worker's exception here
+                except PluginFault as exc:
+                    # Plugin code failed in this trial. Trials before it still finish and
+                    # reach the log (as in a serial run); nothing after it starts, and
+                    # what is already running is waited for but dropped.
+                    if kind == "learn":
+                        self._learning -= 1
+                    if failure is None or _earlier(tag, failure[0]):
+                        failure = (tag, exc)
+                    self._queue = deque(q for q in self._queue if _earlier(q[0], failure[0]))
+                    continue
+                if failure is not None and not _earlier(tag, failure[0]):
+                    if kind == "learn":
+                        self._learning -= 1
+                    continue
                 if kind == "call":
                     yield "call", tag, value
                     continue

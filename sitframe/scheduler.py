@@ -968,6 +968,11 @@ class Experiment:
             return
         first: BaseException | None = None
         for impl in reversed(impls):  # pluggy calls the last registered first
+            if first is not None and hook_name == "sitframe_run_end":
+                # an observer that fails at the end fails the run: the later ones
+                # (the logger runs last) record it
+                kwargs["status"] = "failed"
+                self.info.extra.setdefault("failure", str(first))
             try:
                 impl.function(*[kwargs[a] for a in impl.argnames])
             except (KeyboardInterrupt, TaskCancelled):
@@ -1006,11 +1011,11 @@ class Experiment:
         re-raises.
         """
         t0 = time.perf_counter()
-        self.begin()
         status = "failed"
         results: list[TrialResult] = []
         stream = None
         try:
+            self.begin()
             start = getattr(self.executor, "start", None)
             if start is not None and "learn" in self.cfg["experiment"]["stages"]:
                 start(self)  # e.g. warm up worker processes while we collect and cluster

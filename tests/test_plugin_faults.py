@@ -554,9 +554,7 @@ class Bad(InTrial1, ObstacleAvoidanceReward):
 def sitframe_rewards():
     return [Bad]
 ''', 3, R, "__call__() in trial 1, iteration 0", "RuntimeError: late", cfg=REWARD, trial=1,
-          argv=("--workers", "2"),
-          xfail="with a worker pool the first fault cancels every trial in flight, so an "
-                "earlier trial that would have finished is lost (a serial run keeps it)"),
+          argv=("--workers", "2")),
     # -- observers of the main process
     fault("observer-trial-end-raises", '''
 @hookimpl
@@ -575,16 +573,12 @@ def sitframe_stage_end(run, stage, data):
 @hookimpl
 def sitframe_run_start(run):
     raise RuntimeError("no terminal")
-''', 3, "p.py", "sitframe_run_start()", "RuntimeError: no terminal",
-          xfail="Experiment.run calls begin() outside its try: the log, created by the logger "
-                "(which still runs), stays 'running' with no failure, though the exit is 3"),
+''', 3, "p.py", "sitframe_run_start()", "RuntimeError: no terminal"),
     fault("observer-run-end-raises", '''
 @hookimpl
 def sitframe_run_end(run, status):
     raise RuntimeError("cannot save the plot")
-''', 3, "p.py", "sitframe_run_end()", "RuntimeError: cannot save the plot", kept=2,
-          xfail="the logger's run_end (called last) marks the log 'complete' and no failure is "
-                "recorded, though the exit is 3"),
+''', 3, "p.py", "sitframe_run_end()", "RuntimeError: cannot save the plot", kept=2),
 ]
 
 
