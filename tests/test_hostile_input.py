@@ -593,3 +593,48 @@ def test_12_sigterm_aborts_like_ctrl_c_and_resumes_identically(tmp_path, workers
         subprocess.run([sys.executable, "-m", "sitframe.cli", "run", "--resume", str(out),
                         "--workers", workers, "--json"], check=True, stdout=subprocess.DEVNULL)
     assert compare_logs(ref, out) == []
+
+
+def _sweep_file(folder: Path, trials: int = 2, iterations: int = 100) -> Path:
+    (folder / "base.toml").write_text(small_config(name="b", trials=trials, iterations=iterations,
+                                                   eval_iterations=50))
+    (folder / "s.toml").write_text(f'[sweep]\nname = "s"\nbase = "base.toml"\ntrials = {trials}\n'
+                                   '\n[grid]\n"behaviours.avoid.p" = [4, 5]\n')
+    return folder / "s.toml"
+
+
+def test_1_sweep_refuses_a_point_log_another_process_writes(tmp_path, capsys):
+    sweep = _sweep_file(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    fd = _hold_lock(out / "p=5.h5")
+    try:
+        refused(capsys, ["sweep", sweep, "--out", out, "--workers", "1"], "p=5.h5: --out:",
+                "another sitframe process")
+    finally:
+        os.close(fd)
+    assert sorted(p.name for p in out.iterdir()) == ["p=5.h5.lock"]  # (the test's own lock)
+
+
+def test_12_sigterm_aborts_a_sweep(tmp_path):
+    sweep = _sweep_file(tmp_path, trials=4, iterations=1500)
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-c", _CLI, "sweep", str(sweep), "--out", str(out),
+                             "--workers", "2", "--json"], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE)
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < 60 and proc.poll() is None:
+        try:
+            if any(open_log(p).trial_indices() for p in out.glob("*.h5")):
+                break
+        except Exception:  # noqa: BLE001 - not created yet
+            pass
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGTERM)
+    err = proc.communicate(timeout=60)[1].decode()
+    statuses = [open_log(p).status for p in sorted(out.glob("*.h5"))]
+    assert proc.returncode in (143, 0) and "Traceback" not in err, err
+    if proc.returncode == 143:
+        assert err.strip().splitlines() == ["sitframe: terminated"]
+        assert "aborted" in statuses and set(statuses) <= {"aborted", "complete"}
+    assert not list(out.glob("*.part")) and not list(out.glob("*.lock"))
