@@ -5,8 +5,9 @@ sets it when stderr is a terminal and ``--json`` is not given). Iteration
 updates are throttled to every 100 iterations to keep the loop fast.
 
 When trials run in worker processes (``--workers K > 1``, ``--scheduler``),
-``sitframe_step`` does not fire (``RunInfo.extra["step_hooks"]`` is false):
-only the trials bar is shown, and it advances as each trial is logged.
+``sitframe_step`` fires in the workers, where this plugin has no bar
+(``RunInfo.extra["step_hooks"]`` is false in the main process): only the
+trials bar is shown, and it advances as each trial is logged.
 """
 
 from __future__ import annotations
