@@ -18,6 +18,12 @@ A sweep file names a base experiment and a grid over dotted config keys::
     "behaviours.avoid.update" = ["thesis", "standard"]
     "interpreter.c" = [8, 12, 16]
 
+A component table (``sensor``, ``interpreter``, ``arbiter``,
+``behaviours.LABEL``) may also be varied whole, one table per value, to compare
+components with different parameters (``sweeps/sensors.toml``)::
+
+    "sensor" = [{ component = "pioneer-sonar", rays_per_beam = 5 }, { component = "laser" }]
+
 Put ``"experiment.seed" = [0, 1, 2]`` in the grid to repeat every point with
 several run seeds. Every point keeps the same run seed unless the grid varies
 it, so points that differ only in the learner see the same situations and
@@ -239,6 +245,9 @@ def check_key(key: str, cfg: dict[str, Any], registry: Any, *, file: str | None 
     if parts[0] not in DEFAULTS:
         fail(sections, "", parts[0])
     sec = parts[0]
+    if key in ("sensor", "interpreter", "arbiter") or (
+            sec == "behaviours" and len(parts) == 2 and parts[1] in cfg["behaviours"]):
+        return  # a whole component table per value; each point's config is validated
     if sec in ("sensor", "interpreter", "arbiter"):
         names, var_kw = params_of(sec, cfg[sec]["component"])
         valid = {"component"} | names
@@ -284,6 +293,9 @@ def _fmt_value(v: Any) -> str:
         return f"{v:g}"
     if isinstance(v, list | tuple):
         return "-".join(_fmt_value(x) for x in v)
+    if isinstance(v, dict):  # a component table: its component, then its parameters
+        return " ".join([str(v.get("component", "default")),
+                         *(f"{k}={_fmt_value(x)}" for k, x in v.items() if k != "component")])
     return str(v)
 
 
