@@ -521,7 +521,7 @@ def _check_proto(center: object, angles_deg: object) -> tuple[np.ndarray, np.nda
     a = np.asarray(angles_deg, dtype=np.float64)
     if v.ndim != 1 or a.ndim != 1 or v.shape != a.shape or v.size < 1:
         raise ValueError(f"center and angles_deg must be 1-D arrays of the same length (one "
-                         f"range per sonar), got shapes {v.shape} and {a.shape}")
+                         f"range per beam), got shapes {v.shape} and {a.shape}")
     if not (np.all(np.isfinite(v)) and np.all(np.isfinite(a))):
         raise ValueError("center and angles_deg must be finite")
     return v, a
@@ -642,7 +642,7 @@ def canonical_order(
 ) -> np.ndarray:
     """A deterministic order of prototypes, so that tables and figures are stable.
 
-    Each prototype's obstacle *proximity* per sonar is ``max(max_range - r, 0)``.
+    Each prototype's obstacle *proximity* per beam is ``max(max_range - r, 0)``.
     Prototypes are sorted by total proximity (open space first, dead ends
     last), ties broken by the proximity-weighted mean bearing (left first),
     then by the ranges themselves (lexicographically).
