@@ -521,7 +521,7 @@ def _check_proto(center: object, angles_deg: object) -> tuple[np.ndarray, np.nda
     a = np.asarray(angles_deg, dtype=np.float64)
     if v.ndim != 1 or a.ndim != 1 or v.shape != a.shape or v.size < 1:
         raise ValueError(f"center and angles_deg must be 1-D arrays of the same length (one "
-                         f"range per sonar), got shapes {v.shape} and {a.shape}")
+                         f"range per beam), got shapes {v.shape} and {a.shape}")
     if not (np.all(np.isfinite(v)) and np.all(np.isfinite(a))):
         raise ValueError("center and angles_deg must be finite")
     return v, a
@@ -535,38 +535,49 @@ def describe_prototype(
     far: float = 0.8,
     lane: float = 0.4,
 ) -> str:
-    """Short description of a sonar prototype, for tables and plot titles.
+    """Short description of a range prototype, for tables and plot titles.
 
-    Each range ``r`` at bearing ``a`` (degrees, positive = left) is a hit at
-    forward distance ``r cos a`` and lateral offset ``r sin a`` (metres):
+    Works for any beam layout (bearings are taken modulo 360 deg). Each range
+    ``r`` at bearing ``a`` (degrees, positive = left) is a hit at forward
+    distance ``r cos a`` and lateral offset ``r sin a`` (metres). Sectors:
 
-    - *ahead* = the smallest forward distance of the hits of the frontal sonars
+    - *ahead* = the smallest forward distance of the hits of the frontal beams
       (``|a| <= 35``) that lie in the robot's lane (``|r sin a| <= lane``);
       ``inf`` if none does (e.g. the +-30 deg sonars seeing corridor walls);
-    - *left* / *right* = the smallest range of the sonars with ``a >= 45`` /
-      ``a <= -45``; the *side* sonars are those with ``|a| >= 70``.
+    - *left* / *right* = the smallest range of the beams with
+      ``45 <= a <= 110`` / ``-110 <= a <= -45``; the *side* beams are those
+      with ``70 <= |a| <= 110``;
+    - *behind* = the smallest range of the beams with ``|a| > 110``.
 
-    A value is *blocked* below ``near`` and *close* below ``far``. Rules, first
-    match wins:
+    A value is *blocked* below ``near`` and *close* below ``far``. When the
+    layout covers ahead, left and right (the Pioneer front ring, a 180 deg
+    laser, a 360 deg ring), rules, first match wins:
 
     - ahead, left and right all below ``far`` -> ``"dead end"``;
     - ahead below ``far``:
       both sides open -> ``"front blocked"`` (``"obstacle ahead"`` if it is
       only close), followed by ``", left open"`` or ``", right open"`` for the
-      side whose mean range (over all ``a > 0`` / ``a < 0`` sonars) is larger by
-      at least 0.25 m;
-      left below ``far`` -> ``"left corner"`` if the left side sonar is below
+      side whose mean range (over the beams with ``0 < a <= 110`` /
+      ``-110 <= a < 0``) is larger by at least 0.25 m;
+      left below ``far`` -> ``"left corner"`` if a left side beam is below
       ``far``, else ``"obstacle front-left"``; the same on the right;
     - ahead open: left and right below ``far`` -> ``"corridor"``; left below
-      ``far`` -> ``"wall on left"`` (``"obstacle front-left"`` if the side sonar
-      is open); the same on the right; otherwise ``"open space"``.
+      ``far`` -> ``"wall on left"`` (``"obstacle front-left"`` if the side
+      beams are open); the same on the right; behind below ``far`` ->
+      ``"obstacle behind"``; otherwise ``"open space"``.
+
+    A layout that misses one of ahead, left and right gets the covered
+    sectors that are close, joined by ``", "`` (``"front blocked"`` /
+    ``"obstacle ahead"``, ``"obstacle left"``, ``"obstacle right"``,
+    ``"obstacle behind"``), or ``"nothing close in view"``: it never calls
+    open what it cannot see.
 
     Parameters
     ----------
     center : array_like, shape (d,)
-        One prototype: a range per sonar, metres.
+        One prototype: a range per beam, metres.
     angles_deg : array_like, shape (d,), default Pioneer 2DX front ring
-        Sonar bearings, degrees, positive = left (counter-clockwise).
+        Beam bearings, degrees, positive = left (counter-clockwise).
     near, far : float, metres
         Thresholds, ``0 < near < far``.
     lane : float, metres
@@ -582,23 +593,32 @@ def describe_prototype(
                          f"far={far}")
     if not lane > 0:
         raise ValueError(f"lane must be > 0 (metres), got {lane}")
+    a = (a + 180.0) % 360.0 - 180.0  # [-180, 180)
     rad = np.deg2rad(a)
     fwd, lat = v * np.cos(rad), v * np.sin(rad)
-    in_lane = (np.abs(a) <= 35) & (np.abs(lat) <= lane)
+    frontal = np.abs(a) <= 35
+    in_lane = frontal & (np.abs(lat) <= lane)
     ahead = float(fwd[in_lane].min()) if in_lane.any() else math.inf
 
     def level(mask: np.ndarray) -> float:
         return float(v[mask].min()) if mask.any() else math.inf
 
-    left, right = level(a >= 45), level(a <= -45)
-    left_side, right_side = level(a >= 70), level(a <= -70)
+    is_left, is_right = (a >= 45) & (a <= 110), (a <= -45) & (a >= -110)
+    left, right, behind = level(is_left), level(is_right), level(np.abs(a) > 110)
+    left_side, right_side = level(is_left & (a >= 70)), level(is_right & (a <= -70))
+    if not (frontal.any() and is_left.any() and is_right.any()):
+        close = [("front blocked" if ahead < near else "obstacle ahead", ahead),
+                 ("obstacle left", left), ("obstacle right", right),
+                 ("obstacle behind", behind)]
+        return ", ".join(w for w, r in close if r < far) or "nothing close in view"
     if ahead < far and left < far and right < far:
         return "dead end"
     if ahead < far:
         if left >= far and right >= far:
             head = "front blocked" if ahead < near else "obstacle ahead"
-            lm = float(v[a > 0].mean()) if (a > 0).any() else 0.0
-            rm = float(v[a < 0].mean()) if (a < 0).any() else 0.0
+            lh, rh = (a > 0) & (a <= 110), (a < 0) & (a >= -110)
+            lm = float(v[lh].mean()) if lh.any() else 0.0
+            rm = float(v[rh].mean()) if rh.any() else 0.0
             if abs(lm - rm) >= 0.25:
                 return f"{head}, {'left' if lm > rm else 'right'} open"
             return head
@@ -611,7 +631,7 @@ def describe_prototype(
         return "wall on left" if left_side < far else "obstacle front-left"
     if right < far:
         return "wall on right" if right_side < far else "obstacle front-right"
-    return "open space"
+    return "obstacle behind" if behind < far else "open space"
 
 
 def canonical_order(
@@ -622,7 +642,7 @@ def canonical_order(
 ) -> np.ndarray:
     """A deterministic order of prototypes, so that tables and figures are stable.
 
-    Each prototype's obstacle *proximity* per sonar is ``max(max_range - r, 0)``.
+    Each prototype's obstacle *proximity* per beam is ``max(max_range - r, 0)``.
     Prototypes are sorted by total proximity (open space first, dead ends
     last), ties broken by the proximity-weighted mean bearing (left first),
     then by the ranges themselves (lexicographically).

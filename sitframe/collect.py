@@ -135,9 +135,11 @@ def collect_wander(
 ) -> Collected:
     """Random exploration with reflexive avoidance (``wander`` mode)."""
     params = dataclasses.replace(params or RobotParams(), control_period_s=1.0 / rate_hz)
-    angles = np.asarray(sensor.angles_deg, dtype=float)
-    front = np.abs(angles) <= 30
-    left, right = angles > 0, angles < 0
+    # Any beam layout: the frontal beams (at least the one nearest the heading) and
+    # the left and right halves; the beam straight behind (+-180 deg) is neither.
+    angles = (np.asarray(sensor.angles_deg, dtype=float) + 180.0) % 360.0 - 180.0
+    front = np.abs(angles) <= max(30.0, float(np.abs(angles).min()))
+    left, right = angles > 0, (angles < 0) & (angles > -180.0)
     samples, poses, source = [], [], []
     for wi, world in enumerate(worlds):
         pose = world.start.copy()
@@ -147,13 +149,18 @@ def collect_wander(
             poses.append(pose)
             source.append(wi)
             if reading[front].min() < 0.6:
-                side = 1.0 if reading[left].mean() >= reading[right].mean() else -1.0
+                side = 1.0 if _mean(reading, left) >= _mean(reading, right) else -1.0
                 turn = side * rng.uniform(60.0, 90.0)
             else:
                 turn = float(np.clip(rng.normal(0.0, 25.0), -90.0, 90.0))
             pose = step_robot(world, pose, Command(turn, speed), params, rng).pose
     return Collected(np.asarray(samples), np.asarray(poses), np.asarray(source, dtype=np.int16),
                      tuple(w.name for w in worlds))
+
+
+def _mean(reading: np.ndarray, beams: np.ndarray) -> float:
+    """Mean range of ``beams`` (a mask), 0 when the layout has none there."""
+    return float(reading[beams].mean()) if beams.any() else 0.0
 
 
 def concat_collected(parts: list[Collected]) -> Collected:

@@ -18,6 +18,12 @@ A sweep file names a base experiment and a grid over dotted config keys::
     "behaviours.avoid.update" = ["thesis", "standard"]
     "interpreter.c" = [8, 12, 16]
 
+A component table (``sensor``, ``interpreter``, ``arbiter``,
+``behaviours.LABEL``) may also be varied whole, one table per value, to compare
+components with different parameters (``sweeps/sensors.toml``)::
+
+    "sensor" = [{ component = "pioneer-sonar", rays_per_beam = 5 }, { component = "laser" }]
+
 Put ``"experiment.seed" = [0, 1, 2]`` in the grid to repeat every point with
 several run seeds. Every point keeps the same run seed unless the grid varies
 it, so points that differ only in the learner see the same situations and
@@ -27,7 +33,7 @@ Output: one HDF5 log per point, ``DIR/<point>.h5`` (point names such as
 ``update=thesis_c=8``), and ``DIR/summary.csv`` / ``DIR/summary.md`` with one
 row per point: convergence rate, iterations to convergence (median, IQR),
 collisions per 1000 iterations after convergence (median, IQR; converged
-trials only) and, for every evaluation world, the median and worst
+trials only) and, for every evaluation world, the median, IQR and worst
 collisions per 1000, the share of trials above 10, and the median coverage
 of the frozen rule bases. When the grid varies ``experiment.seed``,
 ``DIR/summary-pooled.csv`` / ``.md`` also give one row per setting with the
@@ -250,6 +256,9 @@ def check_key(key: str, cfg: dict[str, Any], registry: Any, *, file: str | None 
     if parts[0] not in DEFAULTS:
         fail(sections, "", parts[0])
     sec = parts[0]
+    if key in ("sensor", "interpreter", "arbiter") or (
+            sec == "behaviours" and len(parts) == 2 and parts[1] in cfg["behaviours"]):
+        return  # a whole component table per value; each point's config is validated
     if sec in ("sensor", "interpreter", "arbiter"):
         names, var_kw = params_of(sec, cfg[sec]["component"])
         valid = {"component"} | names
@@ -296,6 +305,9 @@ def _fmt_value(v: Any) -> str:
         return short if float(short) == v else repr(v)  # never two values, one name
     if isinstance(v, list | tuple):
         return "-".join(_fmt_value(x) for x in v)
+    if isinstance(v, dict):  # a component table: its component, then its parameters
+        return " ".join([str(v.get("component", "default")),
+                         *(f"{k}={_fmt_value(x)}" for k, x in v.items() if k != "component")])
     return str(v)
 
 
@@ -519,7 +531,8 @@ def summarise_tables(tables: list[np.ndarray]) -> dict[str, Any]:
     for w in worlds:
         c = col(f"eval.{w}.collisions_per_1000")
         fin = c[np.isfinite(c)]
-        row[f"eval_{w}_coll_median"] = _median_iqr(c)[0]
+        (row[f"eval_{w}_coll_median"], row[f"eval_{w}_coll_q25"],
+         row[f"eval_{w}_coll_q75"]) = _median_iqr(c)
         row[f"eval_{w}_coll_max"] = float(fin.max()) if fin.size else math.nan
         row[f"eval_{w}_coll_over10"] = float(np.mean(fin > 10)) if fin.size else math.nan
         row[f"eval_{w}_coverage_median"] = _median_iqr(col(f"eval.{w}.coverage"))[0]
@@ -600,8 +613,8 @@ def write_tables(result: dict[str, Any], out: Path) -> tuple[Path, Path]:
             "conv_iter_q25", "conv_iter_q75", "post_coll_median", "post_coll_q25",
             "post_coll_q75"]
     for w in worlds:
-        cols += [f"eval_{w}_coll_median", f"eval_{w}_coll_max", f"eval_{w}_coll_over10",
-                 f"eval_{w}_coverage_median"]
+        cols += [f"eval_{w}_coll_median", f"eval_{w}_coll_q25", f"eval_{w}_coll_q75",
+                 f"eval_{w}_coll_max", f"eval_{w}_coll_over10", f"eval_{w}_coverage_median"]
     out.mkdir(parents=True, exist_ok=True)
     csv_path, md_path = out / "summary.csv", out / "summary.md"
     _write_csv(csv_path, rows, [*cols, "log"])
@@ -636,7 +649,7 @@ def markdown_table(result: dict[str, Any], *, pooled: bool = False) -> str:
     head = [*short, *(["seeds"] if pooled else []), "trials", "converged",
             "iterations to conv., median [IQR]", "coll./1000 after conv., median [IQR]"]
     for w in worlds:
-        head += [f"{w}: coll./1000 median (worst)", f"{w}: coverage"]
+        head += [f"{w}: coll./1000 median [IQR] (worst)", f"{w}: > 10", f"{w}: coverage"]
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
     for r in rows:
         cells = [_fmt_value(r[k]) for k in keys]
@@ -649,8 +662,10 @@ def markdown_table(result: dict[str, Any], *, pooled: bool = False) -> str:
         cells.append(_med_iqr(r, "conv_iter", 0))
         cells.append(_med_iqr(r, "post_coll", 1))
         for w in worlds:
-            cells.append(f"{_num(r.get(f'eval_{w}_coll_median', math.nan))} "
+            cells.append(f"{_med_iqr(r, f'eval_{w}_coll', 1)} "
                          f"({_num(r.get(f'eval_{w}_coll_max', math.nan), 0)})")
+            over = r.get(f"eval_{w}_coll_over10", math.nan)
+            cells.append(f"{over:.0%}" if math.isfinite(over) else "–")
             cells.append(_num(r.get(f"eval_{w}_coverage_median", math.nan), 2))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

@@ -201,7 +201,7 @@ CASES = [
          c__toml=_cfg('reward = "obstacle-avoidance"', 'reward = "obstacle"')),
     case("component-unknown-arbiter", RUN, "c.toml: arbiter:", "did you mean 'cdb'",
          "available: cdb", c__toml=SMALL + "\n[arbiter]\ncomponent = 'cbd'\n"),
-    case("component-unknown-sensor", RUN, "c.toml: sensor:", "available: pioneer-sonar",
+    case("component-unknown-sensor", RUN, "c.toml: sensor:", "available: laser, pioneer-sonar",
          c__toml=SMALL + "\n[sensor]\ncomponent = 'sonar'\n"),
     case("component-unknown-interpreter", RUN, "c.toml: interpreter:", "available: fcm",
          c__toml=_cfg('component = "fcm"', 'component = "kmeans"')),

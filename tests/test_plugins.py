@@ -13,7 +13,7 @@ from sitframe.errors import InputError, PluginError
 from sitframe.pluginmanager import Registry, get_plugin_manager, register
 
 BUILTIN_COMPONENTS = {
-    "sensor": {"pioneer-sonar"},
+    "sensor": {"pioneer-sonar", "laser"},
     "interpreter": {"fcm"},
     "reward": {"obstacle-avoidance", "speed"},
     "behaviour": {"fuzzy-q"},

@@ -125,6 +125,8 @@ def test_point_names_use_short_keys_unless_ambiguous():
         ('"robots.radius" = [0.2]', r"did you mean 'robot'"),
         ('"interpreter.c" = []', r"grid.interpreter.c: expected a non-empty list"),
         ('"interpreter.c" = [0]', r"point c=0: interpreter"),
+        ('"sensor" = [{ component = "laser", beams = 0 }]',
+         r"point sensor=laser-beams=0: sensor.beams: expected an integer"),
         ("", r"grid: the grid is empty"),
     ],
 )
@@ -164,7 +166,8 @@ def test_sweep_file_errors(tmp_path, capsys):
     assert "did you mean 'obstacle-avoidance'" in err and "sweep.base" in err
 
 
-@pytest.mark.parametrize("name", ["ablation", "oa12-optimism", "oa8-optimism"])
+@pytest.mark.parametrize("name", ["ablation", "oa12-optimism", "oa8-optimism", "sensors",
+                                  "sensors-beams"])
 def test_shipped_sweeps_load(name):
     """The sweep files the README cites resolve every point (keys, values, presets)."""
     from pathlib import Path
@@ -173,4 +176,10 @@ def test_shipped_sweeps_load(name):
 
     path = Path(__file__).resolve().parents[1] / "sweeps" / f"{name}.toml"
     sweep = load_sweep(str(path))
-    assert len(sweep.points) == {"ablation": 6}.get(name, 40)
+    assert len(sweep.points) == {"ablation": 6, "sensors": 20, "sensors-beams": 10}.get(name, 40)
+    if name == "sensors":  # a whole [sensor] table per value, replacing the base's
+        sonar, laser = sweep.points[0], sweep.points[-1]
+        assert sonar.name == "sensor=pioneer-sonar-beam_width_deg=25-rays_per_beam=5_seed=0"
+        assert laser.name == "sensor=laser-fov_deg=180-beams=16-max_range=4_seed=9"
+        assert laser.experiment.cfg["sensor"] == {"component": "laser", "fov_deg": 180,
+                                                  "beams": 16, "max_range": 4.0}

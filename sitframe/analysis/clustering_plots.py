@@ -69,20 +69,23 @@ def plot_prototypes(
     ncols: int | None = None,
     first_index: int = 0,
 ) -> Figure:
-    """Each cluster prototype as a polar plot of its sonar ranges (thesis Fig. 5.2).
+    """Each cluster prototype as a polar plot of its ranges, one per beam (thesis Fig. 5.2).
 
     Front is up and left is left (bearings counter-clockwise from the heading);
     each beam is drawn from the robot (the black triangle at the centre, pointing
-    along the heading) to its range, the free space they enclose is shaded.
+    along the heading) to its range, the free space they enclose is shaded. Any
+    beam layout: a front arc (all ``|bearing| <= 100`` deg, e.g. the Pioneer
+    ring or a 180 deg laser) gets the front half-disc, anything wider the full
+    circle, with gridlines every 45 deg.
 
     Parameters
     ----------
     centers : array_like, shape (c, d)
-        Prototypes: one range per sonar, metres (clipped to ``max_range`` for drawing).
+        Prototypes: one range per beam, metres (clipped to ``max_range`` for drawing).
     angles_deg : array_like, shape (d,)
-        Sonar bearings, degrees, positive = left; default the Pioneer 2DX front ring.
+        Beam bearings, degrees, positive = left; default the Pioneer 2DX front ring.
     max_range : float, metres
-        Sonar maximum range = radial axis limit.
+        The sensor's maximum range = radial axis limit.
     labels : list of str, optional
         One description per prototype; default :func:`describe_prototype`.
     ncols : int, optional
@@ -110,33 +113,38 @@ def plot_prototypes(
     if ncols < 1:
         raise ValueError(f"ncols must be >= 1, got {ncols}")
     nrows = math.ceil(c / ncols)
-    fig = Figure(figsize=(1.75 * ncols + 0.2, 1.45 * nrows + 0.35), layout="constrained")
+    a = (a + 180.0) % 360.0 - 180.0  # [-180, 180)
     order = np.argsort(a)
     th = np.deg2rad(a[order])
+    ring = bool(np.any(np.abs(a) > 100))  # beyond the front half-disc: draw the full circle
+    fig = Figure(figsize=(1.75 * ncols + 0.2, (2.0 if ring else 1.45) * nrows + 0.35),
+                 layout="constrained")
     ticks = np.arange(1.0, max_range + 1e-9, 1.0)
     for i in range(c):
         ax = fig.add_subplot(nrows, ncols, i + 1, projection="polar")
         ax.set_theta_zero_location("N")
         ax.set_theta_direction(1)  # counter-clockwise: positive bearings to the left
-        ax.set_thetamin(-100)
-        ax.set_thetamax(100)
+        ax.set_thetamin(-180 if ring else -100)
+        ax.set_thetamax(180 if ring else 100)
         ax.set_ylim(0, max_range)
         r = np.clip(V[i, order], 0.0, max_range)
-        ax.fill(np.r_[0.0, th, 0.0], np.r_[0.0, r, 0.0], color=OKABE_ITO["sky_blue"],
-                alpha=0.35, lw=0)
+        # the free space: a fan from the robot, or (a ring) the polygon closed behind it
+        ft, fr = (np.r_[th, th[0] + 2 * np.pi], np.r_[r, r[0]]) if ring else \
+            (np.r_[0.0, th, 0.0], np.r_[0.0, r, 0.0])
+        ax.fill(ft, fr, color=OKABE_ITO["sky_blue"], alpha=0.35, lw=0)
         for t, rr in zip(th, r, strict=True):
             ax.plot([t, t], [0, rr], color=OKABE_ITO["blue"], lw=0.9)
         ax.plot(th, r, "o", color=OKABE_ITO["blue"], ms=3, zorder=3)
         ax.plot([0], [0], marker="^", color=OKABE_ITO["black"], ms=6, zorder=4)
-        ax.set_xticks(np.deg2rad([-90, -45, 0, 45, 90]))
+        ax.set_xticks(np.deg2rad(np.arange(-135, 181, 45) if ring else [-90, -45, 0, 45, 90]))
         ax.set_xticklabels([])
         ax.set_yticks(ticks)
         ax.set_yticklabels([f"{t:g}" for t in ticks[:-1]] + [f"{ticks[-1]:g} m"])
         ax.tick_params(axis="y", labelsize=_FONT - 2, pad=0)
-        ax.set_rlabel_position(-97)
+        ax.set_rlabel_position(-146 if ring else -97)
         ax.grid(lw=0.4, alpha=0.6)
         ax.set_title(f"S{i + first_index}: {labels[i]}", fontsize=_FONT, pad=2)
-    fig.suptitle("Cluster prototypes: sonar ranges (m), front up, left on the left",
+    fig.suptitle("Cluster prototypes: range per beam (m), front up, left on the left",
                  fontsize=_FONT + 1)
     return fig
 

@@ -1,4 +1,4 @@
-"""Animate a logged learning trial: the robot, its sonar rays, situation and command.
+"""Animate a logged learning trial: the robot, its sensor rays, situation and command.
 
 From Python::
 
@@ -6,7 +6,7 @@ From Python::
     replay("logs/obstacle-avoidance.h5", trial=0, start=1000, stop=1200, out="t0.gif")
 
 Each frame is one iteration (1.5 s of robot time): the robot disc with its
-heading line at the pose the iteration started from, the 8 sonar rays drawn
+heading line at the pose the iteration started from, the sensor's rays drawn
 from the rim to the logged ranges (a ray at maximum range is drawn dashed:
 nothing was seen), the path so far, collisions as crosses at the contact
 point, and a text box with the iteration, the dominant situation (largest
@@ -186,7 +186,7 @@ def replay(
     from matplotlib.lines import Line2D
 
     fig.legend(handles=[
-        Line2D([], [], color=C["bluish_green"], lw=1, marker="o", ms=2.5, label="sonar echo"),
+        Line2D([], [], color=C["bluish_green"], lw=1, marker="o", ms=2.5, label="echo"),
         Line2D([], [], color="0.6", lw=1, ls=(0, (2, 2)), label="no echo (max range)"),
         Line2D([], [], color=C["blue"], lw=1, label="path"),
         Line2D([], [], ls="", marker="x", ms=5, mew=1.3, color=C["vermillion"],

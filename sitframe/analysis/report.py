@@ -252,13 +252,18 @@ def analyse(
             except _EXPECTED as exc:
                 rep.skipped.append(f"clustering figures: {exc}")
                 ct = None
-            if lg.has("cluster/state/centers"):
+            try:
+                spec = lg.sensor  # any beam layout: the sensor's own bearings and range
+            except InputError as exc:
+                rep.skipped.append(f"prototypes.png: {exc}")
+                spec = None
+            if spec is not None and lg.has("cluster/state/centers"):
                 W.figure(sec, "prototypes.png",
-                         "Cluster prototypes (situations) as polar plots of the 8 sonar ranges "
-                         "(Fig. 5.2)",
+                         f"Cluster prototypes (situations) as polar plots of the {spec.dim} "
+                         f"'{spec.name}' ranges (Fig. 5.2)",
                          lambda: CP.plot_prototypes(
-                             np.asarray(lg.interpreter_state()["centers"]), R.sensor_angles(lg),
-                             max_range=R.sensor_max_range(lg),
+                             np.asarray(lg.interpreter_state()["centers"]), spec.angles_deg,
+                             max_range=spec.max_range,
                              labels=R.situation_labels(lg, numbered=False)))
             # J_m is in the squared units of the clustered features (see the fcm plugin's transform)
             transform = str(lg.stage("cluster").get("transform", "range")) \
