@@ -9,7 +9,7 @@ sitframe's own ``pyproject.toml``), from loose ``.py`` files in a
 
 There are two kinds of hook:
 
-*Registration hooks* (``sitframe_sensors`` ... ``sitframe_arbiters``) are called
+*Registration hooks* (``sitframe_sensors`` ... ``sitframe_protocols``) are called
 once per run, when the run resolves its components. Each returns a list of
 *component factories*: classes (or callables) with a unique string attribute
 ``name``, called with the keyword parameters of the component's config table.
@@ -128,6 +128,28 @@ def sitframe_arbiters() -> list[Any]:
 
     :return: A list of factories with unique ``name`` attributes, called with
         the keys of the config's ``[arbiter]`` table.
+
+    All implementations are called; their lists are merged.
+    """
+
+
+@hookspec
+def sitframe_protocols() -> list[Any]:
+    """Register evaluation-protocol factories.
+
+    Called once per run, when components are resolved. A protocol says how the
+    evaluate stage scores a run's behaviours in episodes: where each episode
+    starts (and its goal), when it ends early (Gymnasium's *terminated*; the
+    iteration limit is *truncation*) and how finished episodes are scored; see
+    :class:`sitframe.components.EvaluationProtocol`. A run uses the protocol
+    that one of its components names in a class attribute
+    ``evaluation_protocol`` (the built-in ``goal`` behaviour names
+    ``"goal-episodes"``); without one, each learning trial's frozen policy is
+    evaluated in the ``[evaluate] worlds``.
+
+    :return: A list of factories with unique ``name`` attributes and a class
+        attribute ``table``: the config table whose keys (except ``worlds``,
+        the worlds to run a batch of episodes in) are the parameters.
 
     All implementations are called; their lists are merged.
     """

@@ -276,8 +276,8 @@ def _earlier(tag: Any, other: Any) -> bool:
 
 
 def _splittable(spec: TrialSpec) -> bool:
-    """Whether the trial's evaluations can run as separate tasks (not goal batches)."""
-    return bool(spec.evaluate) and getattr(spec, "episodes", None) is None
+    """Whether the trial's evaluations can run as separate tasks (a learning trial's can)."""
+    return bool(spec.evaluate) and spec.learn
 
 
 class TrialPipeline:

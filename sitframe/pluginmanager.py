@@ -41,6 +41,7 @@ KINDS: dict[str, str] = {
     "reward": "sitframe_rewards",
     "behaviour": "sitframe_behaviours",
     "arbiter": "sitframe_arbiters",
+    "protocol": "sitframe_protocols",
 }
 
 
