@@ -23,6 +23,8 @@ from typing import Any
 import h5py
 import numpy as np
 
+from sitframe.clustering import average_ranks, describe_prototype
+from sitframe.collect import trajectory_poses
 from sitframe.config import load_config, validate_config
 from sitframe.errors import InputError
 from sitframe.logs import Log, open_log
@@ -183,8 +185,6 @@ def _check_collect(exp: Experiment, cfg: dict[str, Any], source: str | None) -> 
     """Data collection that cannot work, found before anything is written: a world without
     trajectories, far too many samples, a wander rate the robot cannot hold, or fewer
     samples than situations to fit."""
-    from sitframe.collect import trajectory_poses
-
     e, c = cfg["experiment"], cfg["collect"]
     if e["clusters_from"] or "collect" not in e["stages"]:
         return
@@ -280,8 +280,6 @@ BEST_TRIAL_RULE = "smallest rank sum of (fewest collisions, most coverage)"
 
 def _best_of(index: Any, eval_collisions: Any, coverage: Any, after_collisions: Any) -> int:
     """The rule of :func:`best_trial` on parallel sequences (NaN ranks worst)."""
-    from sitframe.clustering import average_ranks
-
     coll = np.nan_to_num(np.asarray(eval_collisions, float), nan=np.inf)
     cov = np.nan_to_num(np.asarray(coverage, float), nan=-np.inf)
     score = average_ranks(coll) + average_ranks(-cov)
@@ -440,8 +438,6 @@ def rule_base_table(result: Any) -> Any:
     from collections import Counter
 
     from rich.table import Table
-
-    from sitframe.clustering import describe_prototype
 
     trials = result.trials
     world = result.info.config["experiment"]["world"]

@@ -231,7 +231,7 @@ def sitframe_trial_data(trial: TrialResult) -> dict[str, Any] | None:
 
 @hookspec
 def sitframe_trial_end(run: RunInfo, trial: TrialResult) -> None:
-    """One learning trial (or evaluation/goal episode batch) finished.
+    """One learning trial (or a batch of an evaluation protocol's episodes) finished.
 
     Called in the main process, in trial order, with the complete per-iteration
     arrays of the trial, whether it was simulated here or in a worker.

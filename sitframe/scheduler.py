@@ -1020,7 +1020,7 @@ class Experiment:
         self.info.extra.setdefault("step_hooks", bool(
             getattr(self.executor, "fires_step_hooks", True)))
         if self.out and "code_hash" not in self.info.extra:
-            from sitframe.resume import code_fingerprint  # hashes source files: only for logs
+            from sitframe.logs import code_fingerprint  # h5py: imported only when a run logs
 
             self.info.extra["code_hash"] = code_fingerprint(self.info.plugins)
         self._notify("sitframe_run_start", run=self.info)
