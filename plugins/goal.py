@@ -46,7 +46,6 @@ class GoalBehaviour:
     """Propose the heading change towards the goal, clipped to ``+-max_turn_deg``."""
 
     name = "goal"
-    requires_goal = True
     evaluation_protocol = "goal-episodes"
 
     def __init__(self, *, max_turn_deg: float = 90.0) -> None:

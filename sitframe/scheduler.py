@@ -612,8 +612,8 @@ def run_batch(res: Resolved, spec: TrialSpec, *,
     episodes' arrays concatenated (``pose`` has one extra row per episode;
     ``episodes["first_iteration"]`` gives each one's first row), the
     per-episode figures (one array per key, and one ``NNNN`` group per
-    episode) and the summary of :func:`trial_summary`'s keys over all
-    episodes plus the protocol's aggregates as ``eval/<world>/<key>``.
+    episode) and the summary (:func:`trial_summary` over all episodes) with
+    the protocol's aggregates as ``eval/<world>/<key>``.
     """
     k = spec.index
     with _in_trial(k):
@@ -624,7 +624,13 @@ def run_batch(res: Resolved, spec: TrialSpec, *,
     rng = np.random.default_rng(ss.spawn(1)[0])
     starts, goals = call(o, "episode_starts", proto.episode_starts, world, rng, res.robot,
                          trial=k)
+    starts = np.asarray(starts, dtype=float)
     n = len(starts)
+    if starts.shape != (n, 3) or n < 1 or (goals is not None and np.shape(goals) != (n, 3)):
+        raise PluginFault(f"returned starts of shape {starts.shape} and goals of shape "
+                          f"{None if goals is None else np.shape(goals)}; expected (n, 3) "
+                          "each (goals may be None), n >= 1", where=str(o),
+                          method="episode_starts", trial=k)
     seeds = np.random.SeedSequence(spec.seed % 2**64, spawn_key=(1,)).generate_state(n, np.uint64)
     parts: list[TrialResult] = []
     figures: list[dict[str, Any]] = []
@@ -635,10 +641,12 @@ def run_batch(res: Resolved, spec: TrialSpec, *,
                                  goal=goal, protocol=None)
         r = simulate(res, ep, step_hook=step_hook, protocol=proto)
         parts.append(r)
-        figures.append(call(o, "score_episode", proto.score_episode, r.arrays, starts[e],
-                            None if goals is None else goals[e], res.robot, trial=k))
+        figures.append(_checked(o, "score_episode", check_data, lambda r=r, e=e: (
+            proto.score_episode(r.arrays, starts[e], None if goals is None else goals[e],
+                                res.robot)), k, "per-episode figures"))
     per_ep = {key: np.asarray([f[key] for f in figures]) for key in figures[0]}
-    scores = call(o, "aggregate", proto.aggregate, per_ep, trial=k)
+    scores = _checked(o, "aggregate", check_data, lambda: proto.aggregate(per_ep), k,
+                      "the batch's scores")
     arrays = {key: np.concatenate([p.arrays[key] for p in parts]) for key in parts[0].arrays}
     first = np.cumsum([0] + [int(p.arrays["collision"].size) for p in parts[:-1]])
     episodes: dict[str, Any] = {**per_ep, "start": starts}
@@ -649,20 +657,9 @@ def run_batch(res: Resolved, spec: TrialSpec, *,
         episodes[f"{e:04d}"] = row = {**f, "start": starts[e]}
         if goals is not None:
             row["goal"] = goals[e]
-    coll = arrays["collision"]
-    summary: dict[str, Any] = {
-        "iterations": int(coll.size),
-        "converged": False,
-        "convergence_iteration": -1,
-        "collisions": int(coll.sum()),
-        "collisions_per_1000": float(coll.sum() * 1000.0 / coll.size),
-        "collisions_before_convergence": int(coll.sum()),
-        "collisions_per_1000_after_convergence": float("nan"),
-        "distance_m": float(np.asarray([path_length(p.arrays["pose"][:, :2])
-                                        for p in parts]).sum()),
-        "mean_speed_m_s": float(arrays["command"][:, 1].mean()),
-        "coverage": coverage(world, arrays["pose"][:, :2], radius=res.robot.radius),
-    }
+    summary = trial_summary(world, arrays, {}, res.robot)  # (nothing converges here)
+    summary["distance_m"] = float(np.asarray(  # (not across the jumps between episodes)
+        [path_length(p.arrays["pose"][:, :2]) for p in parts]).sum())
     for key, v in scores.items():
         summary[summary_key("eval", world.name, key)] = v
     return TrialResult(k, spec.seed, world.name, arrays, parts[0].behaviours, summary,
