@@ -221,7 +221,9 @@ class EvaluationProtocol(Protocol):
         The iteration limit of an episode (Gymnasium's *truncation*).
 
     An optional ``check_world(world)`` raises :class:`sitframe.errors.InputError`
-    for a world the protocol cannot use, before anything runs.
+    for a world the protocol cannot use, before anything runs. A parameter
+    ``episodes`` (episodes per batch) is what ``sitframe evaluate LOG
+    --goal-episodes N`` sets.
     """
 
     name: ClassVar[str]

@@ -197,8 +197,9 @@ def sitframe_step(record: StepRecord) -> None:
     Called inside the simulation loop of the process that runs the trial (a
     worker process when trials run in parallel), after the behaviours learned
     from the iteration, once per iteration (each is 1.5 s of robot time),
-    only if at least one plugin implements it. Not called in frozen
-    evaluations.
+    only if at least one plugin implements it. Not called in the evaluations
+    of a learning trial (frozen runs or batches of an evaluation protocol's
+    episodes); called in the episodes of a batch that is a trial of its own.
 
     :param record: An immutable :class:`sitframe.records.StepRecord` holding
         references (not copies) to this iteration's arrays. Do not keep it

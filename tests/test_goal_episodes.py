@@ -206,6 +206,7 @@ def test_learning_goal_run_evaluates_each_trials_learned_policy():
     (Before, the episodes ran as extra trials after the learning trials with the
     untrained behaviour: the rule base all zeros.)
     """
+    from sitframe.parallel import InlineExecutor
     from sitframe.scheduler import Experiment, evaluation_specs
 
     cfg = validate_config({
@@ -223,6 +224,11 @@ def test_learning_goal_run_evaluates_each_trials_learned_policy():
     exp = Experiment(cfg)
     result = exp.run(interpreter_state=STATE)
     assert [t.index for t in result.trials] == [0, 1]  # no extra batch with an untrained policy
+    # a pool runs the batches as separate tasks (TrialPipeline) and attaches them the same way
+    pooled = Experiment(cfg, executor=InlineExecutor()).run(interpreter_state=STATE)
+    for t, p in zip(result.trials, pooled.trials, strict=True):
+        assert json.dumps(t.summary, default=str) == json.dumps(p.summary, default=str)
+        np.testing.assert_array_equal(t.episodes["eval/goal/pose"], p.episodes["eval/goal/pose"])
     rules = [t.policies["avoid"].outputs["heading"].rules for t in result.trials]
     assert any(r.any() for r in rules)  # learned: not the all-zeros rule base
     for t in result.trials:
