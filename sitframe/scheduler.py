@@ -557,11 +557,9 @@ def simulate(
                 step_at = _Step(None, "sitframe_step")
                 step_hook(StepRecord(spec.index, tr, proposals, weights, rewards))
             ctx = ctx2
-            if at_end is not None:
-                step_at = at_end
-                if protocol.terminated(ctx):
-                    n_done = t + 1
-                    break
+            if at_end is not None and (step_at := at_end) and protocol.terminated(ctx):
+                n_done = t + 1
+                break
     except (KeyboardInterrupt, TaskCancelled, PluginFault, InputError):
         raise  # (a plugin's InputError names the input it found wrong)
     except Exception as exc:
