@@ -7,10 +7,11 @@ heading, wrapped to (-180, 180] degrees and clipped to ``+-max_turn_deg``
 (turn left). It has no opinion on speed (``None``: the run's default speed).
 
 The goal comes from the context (:attr:`sitframe.records.Context.goal`):
-the world's ``[goal]`` or the goal of the current goal episode
-(:mod:`sitframe.episodes`). The class attribute ``requires_goal = True``
-tells the scheduler that a run with this behaviour is a *goal run*: its
-evaluate stage runs goal episodes.
+the world's ``[goal]`` or the goal of the current goal episode. The class
+attribute ``evaluation_protocol = "goal-episodes"`` makes a run with this
+behaviour a *goal run*: its evaluate stage runs the goal episodes of the
+``goal-episodes`` protocol (``plugins/goal_episodes.py``) in the ``[goal]
+worlds``, with the ``[goal]`` table as the protocol's parameters.
 
 Config::
 
@@ -45,7 +46,7 @@ class GoalBehaviour:
     """Propose the heading change towards the goal, clipped to ``+-max_turn_deg``."""
 
     name = "goal"
-    requires_goal = True
+    evaluation_protocol = "goal-episodes"
 
     def __init__(self, *, max_turn_deg: float = 90.0) -> None:
         self.max_turn_deg = P.number("max_turn_deg", max_turn_deg, lo=0.0, hi=90.0)

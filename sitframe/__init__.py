@@ -33,7 +33,7 @@ hookimpl = pluggy.HookimplMarker("sitframe")
 _PUBLIC: dict[str, str] = {
     # component protocols and the run lifecycle
     "Sensor": "components", "SituationInterpreter": "components", "Reward": "components",
-    "Behaviour": "components", "Arbiter": "components",
+    "Behaviour": "components", "Arbiter": "components", "EvaluationProtocol": "components",
     # records crossing the plugin boundary
     "Context": "records", "Proposal": "records", "Transition": "records",
     "StepRecord": "records", "RunInfo": "records", "TrialResult": "records",
@@ -52,6 +52,8 @@ _PUBLIC: dict[str, str] = {
     "describe_prototype": "clustering",
     "SituationFCS": "fuzzy", "FuzzyQLearner": "learning", "QLearningParams": "learning",
     "greedy_actions": "learning", "softmax_choice": "learning",
+    # metrics that know no behaviour (for evaluation protocols)
+    "path_length": "metrics", "heading_change_per_m": "metrics", "spl": "metrics",
     # logs
     "open_log": "logs", "LogWriter": "logs",
 }

@@ -47,6 +47,10 @@ from typing import Any
 from sitframe import __version__
 from sitframe.errors import PLUGIN_FAULT_EXIT, InputError, PluginError, PluginFault
 
+# start-up time: this module is imported whenever the command line builds its parser
+# (``sitframe --help`` and every command), so what only one command needs is imported
+# inside the function that needs it.
+
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line, exit 2 (argparse's own convention)

@@ -32,6 +32,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from sitframe.records import Context, LearnedPolicy, Proposal, Transition
+    from sitframe.robot import RobotParams
     from sitframe.world import World
 
 
@@ -192,4 +193,60 @@ class Arbiter(Protocol):
         A fused speed of ``None`` means the run's ``experiment.default_speed``.
         The scheduler clips the result to the robot's limits.
         """
+        ...
+
+
+@runtime_checkable
+class EvaluationProtocol(Protocol):
+    """How the evaluate stage runs and scores episodes of the frozen behaviours.
+
+    A run uses the protocol a component names in its class attribute
+    ``evaluation_protocol``. The protocol is created from the config table
+    :attr:`table` (its keys but ``worlds``); the evaluate stage runs one
+    *batch* of episodes in each world of that table's ``worlds``: a trial of
+    its own in a run that does not learn, else an evaluation of each learning
+    trial with that trial's learned policies. The core runs every episode
+    through the one simulation loop, without learning; a batch is logged as
+    one trial (episodes concatenated, ``first_iteration`` gives each one's
+    first row) with the per-episode figures under ``episodes/`` and the
+    aggregates as ``eval/<world>/<key>`` summary scalars.
+
+    Attributes
+    ----------
+    name
+        Unique registry name, e.g. ``"goal-episodes"``.
+    table
+        The config table holding the parameters, e.g. ``"goal"``.
+    iterations
+        The iteration limit of an episode (Gymnasium's *truncation*).
+
+    An optional ``check_world(world)`` raises :class:`sitframe.errors.InputError`
+    for a world the protocol cannot use, before anything runs. A parameter
+    ``episodes`` (episodes per batch) is what ``sitframe evaluate LOG
+    --goal-episodes N`` sets.
+    """
+
+    name: ClassVar[str]
+    table: ClassVar[str]
+    iterations: int
+
+    def episode_starts(self, world: World, rng: np.random.Generator,
+                       robot: RobotParams) -> tuple[np.ndarray, np.ndarray | None]:
+        """The batch's start poses (n, 3: x [m], y [m], theta [rad]) and goals (n, 3: x [m],
+        y [m], radius [m]; ``None``: no goals), drawn from ``rng`` (seeded per batch)."""
+        ...
+
+    def terminated(self, context: Context) -> bool:
+        """Whether the episode ends at ``context`` (e.g. the goal is reached), checked after
+        every iteration."""
+        ...
+
+    def score_episode(self, arrays: dict[str, np.ndarray], start: np.ndarray,
+                      goal: np.ndarray | None, robot: RobotParams) -> dict[str, Any]:
+        """Figures of one finished episode (scalars, the same keys for every episode) from its
+        per-iteration arrays (``pose`` (n+1, 3), ``collision``, ``command``, ...)."""
+        ...
+
+    def aggregate(self, figures: dict[str, np.ndarray]) -> dict[str, float]:
+        """The batch's scores from the per-episode figures (one array per key)."""
         ...

@@ -37,8 +37,9 @@ thesis's Table A.1):
     ``iterations``.
 ``[goal]``
     ``episodes``, ``timeout``, ``min_distance``, ``worlds``, ``pairs``
-    (``"random"`` or ``"world"``), ``radius``, ``margin`` (goal episodes; see
-    :mod:`sitframe.episodes`, which validates the last three).
+    (``"random"`` or ``"world"``), ``radius``, ``margin``: the parameters of
+    the ``goal-episodes`` evaluation protocol (``plugins/goal_episodes.py``)
+    that a goal run's evaluate stage uses.
 ``[plugins]``
     ``dirs``: folders of loose plugin modules, relative to the config file.
     Every ``*.py`` file in them is imported, i.e. **runs**, when the config
@@ -69,6 +70,7 @@ from typing import Any
 
 from sitframe import params as P
 from sitframe.errors import InputError, did_you_mean
+from sitframe.robot import RobotParams
 
 STAGES = ("collect", "cluster", "learn", "evaluate")
 
@@ -239,10 +241,7 @@ def _at(fn: Any, name: str, value: Any, file: str | None, prefix: str, **kw: Any
 
 
 def _validate_robot(value: dict[str, Any], file: str | None) -> dict[str, Any]:
-    from sitframe.params import accepted_params
-    from sitframe.robot import RobotParams
-
-    known, _ = accepted_params(RobotParams)
+    known, _ = P.accepted_params(RobotParams)
     for key in value:
         if key not in known:
             raise InputError(f"unknown key{did_you_mean(key, known)}; expected one of "

@@ -23,12 +23,23 @@ from typing import Any
 import h5py
 import numpy as np
 
-from sitframe.config import validate_config
+from sitframe.clustering import average_ranks, describe_prototype
+from sitframe.collect import trajectory_poses
+from sitframe.config import load_config, validate_config
 from sitframe.errors import InputError
 from sitframe.logs import Log, open_log
 from sitframe.pluginmanager import Registry, get_plugin_manager
 from sitframe.records import LearnedPolicy
-from sitframe.scheduler import STAGE_EVAL, Experiment, Resolved, TrialSpec, simulate, stage_seed
+from sitframe.scheduler import (
+    STAGE_BATCH,
+    STAGE_EVAL,
+    Experiment,
+    Resolved,
+    TrialSpec,
+    batch_scores,
+    simulate,
+    stage_seed,
+)
 
 
 def _resolve_path(path: str, base_dir: str) -> str:
@@ -174,8 +185,6 @@ def _check_collect(exp: Experiment, cfg: dict[str, Any], source: str | None) -> 
     """Data collection that cannot work, found before anything is written: a world without
     trajectories, far too many samples, a wander rate the robot cannot hold, or fewer
     samples than situations to fit."""
-    from sitframe.collect import trajectory_poses
-
     e, c = cfg["experiment"], cfg["collect"]
     if e["clusters_from"] or "collect" not in e["stages"]:
         return
@@ -271,8 +280,6 @@ BEST_TRIAL_RULE = "smallest rank sum of (fewest collisions, most coverage)"
 
 def _best_of(index: Any, eval_collisions: Any, coverage: Any, after_collisions: Any) -> int:
     """The rule of :func:`best_trial` on parallel sequences (NaN ranks worst)."""
-    from sitframe.clustering import average_ranks
-
     coll = np.nan_to_num(np.asarray(eval_collisions, float), nan=np.inf)
     cov = np.nan_to_num(np.asarray(coverage, float), nan=-np.inf)
     score = average_ranks(coll) + average_ranks(-cov)
@@ -303,9 +310,11 @@ def evaluate_log(
     wall-following reward adds ``wall_band_fraction`` and
     ``wall_distance_rmse_m``). ``arbiter`` replaces the log's arbiter.
 
-    With ``goal_episodes = N``: N random goal episodes
-    (:mod:`sitframe.episodes`) in ``world``. If the log is itself a goal run
-    its config is used; otherwise the behaviours, arbiter and ``[goal]`` table
+    With ``goal_episodes = N``: N episodes of the run's evaluation protocol
+    (one batch, :func:`sitframe.scheduler.run_batch`; its table's
+    ``episodes`` set to N), e.g. random goal episodes
+    (``plugins/goal_episodes.py``) in ``world``. If the log's config has a
+    protocol (a goal run) it is used; otherwise the behaviours, arbiter and ``[goal]`` table
     come from the ``fusion`` config (a preset name or a TOML path; default the
     ``goal-finding`` preset), whose behaviour with a ``policy_from`` is
     replaced by the log's learned behaviour (its table and its policy), with
@@ -315,9 +324,6 @@ def evaluate_log(
     ``collisions_per_episode``, ``collision_free_rate``, ``spl``,
     ``mean_time_s``, ``heading_change_per_m``, ``mean_path_length_m``.
     """
-    from sitframe.config import load_config
-    from sitframe.episodes import STAGE_GOAL, EpisodeConfig, batch_aggregate, is_goal_run
-
     log = open_log(log_path)
     log.check()
     cfg = validate_config(log.config, file=log_path)
@@ -338,9 +344,8 @@ def evaluate_log(
     source = log_path
     if goal_episodes:
         res0 = Resolved.build(cfg, registry, log_path)
-        if not is_goal_run(res0):
-            cfg, policies, source = _fusion_config(cfg, policies, fusion, log_path,
-                                                   load_config)
+        if res0.protocol_name() is None:
+            cfg, policies, source = _fusion_config(cfg, policies, fusion, log_path)
     if arbiter is not None:
         params = cfg["arbiter"] if cfg["arbiter"].get("component") == arbiter else {}
         cfg["arbiter"] = {**params, "component": arbiter}
@@ -348,14 +353,19 @@ def evaluate_log(
     res.world(world, key="--world")
     _check_state(res, state, log_path)
     if goal_episodes:
-        g = dict(cfg["goal"], episodes=goal_episodes)
-        ep = EpisodeConfig.from_config({"goal": g}, file=source)
-        spec = TrialSpec(index=trial, seed=stage_seed(seed, STAGE_GOAL, 0), world=world,
-                         iterations=ep.timeout, learn=False, interpreter_state=state,
-                         policies=policies, episodes=ep)
+        name = res.protocol_name()
+        if name is None:
+            raise InputError("no component names an evaluation_protocol to run episodes of; "
+                             "expected a behaviour such as 'goal'", file=source,
+                             key="behaviours")
+        table = res.protocol(name).table
+        cfg[table] = {**cfg[table], "episodes": goal_episodes}
+        spec = TrialSpec(index=trial, seed=stage_seed(seed, STAGE_BATCH, 0), world=world,
+                         iterations=int(res.protocol(name).iterations), learn=False,
+                         interpreter_state=state, policies=policies, protocol=name)
         result = simulate(res, spec)
         return {"log": log_path, "world": world, "trial": trial,
-                "arbiter": cfg["arbiter"]["component"], **batch_aggregate(result)}
+                "arbiter": cfg["arbiter"]["component"], **batch_scores(result)}
     spec = TrialSpec(index=trial, seed=stage_seed(seed, STAGE_EVAL, trial), world=world,
                      iterations=iterations, learn=False, interpreter_state=state,
                      policies=policies)
@@ -383,7 +393,7 @@ def _logged_policy(trial: Any, label: str, path: str) -> LearnedPolicy | None:
 
 
 def _fusion_config(log_cfg: dict[str, Any], policies: dict[str, LearnedPolicy],
-                   fusion: str, log_path: str, load_config: Any
+                   fusion: str, log_path: str
                    ) -> tuple[dict[str, Any], dict[str, LearnedPolicy], str]:
     """The fusion config with the log's learned behaviour in its ``policy_from`` slot."""
     fcfg, fsource, _base = load_config(fusion)
@@ -428,8 +438,6 @@ def rule_base_table(result: Any) -> Any:
     from collections import Counter
 
     from rich.table import Table
-
-    from sitframe.clustering import describe_prototype
 
     trials = result.trials
     world = result.info.config["experiment"]["world"]

@@ -9,7 +9,7 @@ sitframe's own ``pyproject.toml``), from loose ``.py`` files in a
 
 There are two kinds of hook:
 
-*Registration hooks* (``sitframe_sensors`` ... ``sitframe_arbiters``) are called
+*Registration hooks* (``sitframe_sensors`` ... ``sitframe_protocols``) are called
 once per run, when the run resolves its components. Each returns a list of
 *component factories*: classes (or callables) with a unique string attribute
 ``name``, called with the keyword parameters of the component's config table.
@@ -133,6 +133,28 @@ def sitframe_arbiters() -> list[Any]:
     """
 
 
+@hookspec
+def sitframe_protocols() -> list[Any]:
+    """Register evaluation-protocol factories.
+
+    Called once per run, when components are resolved. A protocol says how the
+    evaluate stage scores a run's behaviours in episodes: where each episode
+    starts (and its goal), when it ends early (Gymnasium's *terminated*; the
+    iteration limit is *truncation*) and how finished episodes are scored; see
+    :class:`sitframe.components.EvaluationProtocol`. A run uses the protocol
+    that one of its components names in a class attribute
+    ``evaluation_protocol`` (the built-in ``goal`` behaviour names
+    ``"goal-episodes"``); without one, each learning trial's frozen policy is
+    evaluated in the ``[evaluate] worlds``.
+
+    :return: A list of factories with unique ``name`` attributes and a class
+        attribute ``table``: the config table whose keys (except ``worlds``,
+        the worlds to run a batch of episodes in) are the parameters.
+
+    All implementations are called; their lists are merged.
+    """
+
+
 # --------------------------------------------------------------------------
 # Observer hooks
 # --------------------------------------------------------------------------
@@ -175,8 +197,9 @@ def sitframe_step(record: StepRecord) -> None:
     Called inside the simulation loop of the process that runs the trial (a
     worker process when trials run in parallel), after the behaviours learned
     from the iteration, once per iteration (each is 1.5 s of robot time),
-    only if at least one plugin implements it. Not called in frozen
-    evaluations.
+    only if at least one plugin implements it. Not called in the evaluations
+    of a learning trial (frozen runs or batches of an evaluation protocol's
+    episodes); called in the episodes of a batch that is a trial of its own.
 
     :param record: An immutable :class:`sitframe.records.StepRecord` holding
         references (not copies) to this iteration's arrays. Do not keep it
@@ -209,7 +232,7 @@ def sitframe_trial_data(trial: TrialResult) -> dict[str, Any] | None:
 
 @hookspec
 def sitframe_trial_end(run: RunInfo, trial: TrialResult) -> None:
-    """One learning trial (or evaluation/goal episode batch) finished.
+    """One learning trial (or a batch of an evaluation protocol's episodes) finished.
 
     Called in the main process, in trial order, with the complete per-iteration
     arrays of the trial, whether it was simulated here or in a worker.

@@ -75,6 +75,8 @@ from __future__ import annotations
 import errno
 import fcntl
 import glob
+import hashlib
+import importlib.util
 import json
 import os
 import re
@@ -770,3 +772,29 @@ def open_log(path: str | os.PathLike[str]) -> Log:
         raise InputError(f"unknown log schema version {version!r}; this sitframe reads version "
                          f"{SCHEMA_VERSION}", file=p, key="schema_version")
     return Log(p, attrs)
+
+
+def code_fingerprint(plugins: list[dict[str, Any]] | None = None) -> str:
+    """SHA-256 over the source of sitframe, its built-in plugins and loose plugin files.
+
+    Written to the log (root attribute ``code_hash``) so that ``--resume`` can
+    tell when the code changed since the run started (the resumed trials
+    might then differ from the logged ones). Third-party plugin packages are
+    covered by their distribution name and version in the ``plugins`` list.
+    """
+    h = hashlib.sha256()
+    files: list[Path] = []
+    for pkg in ("sitframe", "sitframe.plugins"):
+        spec = importlib.util.find_spec(pkg)
+        for folder in (spec.submodule_search_locations or []) if spec else []:
+            files += sorted(Path(folder).rglob("*.py"))
+    for info in plugins or []:
+        if info.get("file"):
+            files.append(Path(info["file"]))
+        h.update(f"{info.get('name')}={info.get('distribution')}={info.get('version')};".encode())
+    for f in files:
+        try:
+            h.update(f.read_bytes())
+        except OSError:
+            h.update(str(f).encode())
+    return h.hexdigest()

@@ -52,11 +52,19 @@ from typing import TYPE_CHECKING, Any
 from sitframe.config import config_hash, to_toml
 from sitframe.errors import InputError, PluginFault, TaskCancelled
 from sitframe.interrupts import deferred_interrupt
+from sitframe.scheduler import (
+    Experiment,
+    SerialExecutor,
+    TrialSpec,
+    attach_evaluation,
+    evaluation_specs,
+    simulate,
+    step_hook_of,
+)
 
 if TYPE_CHECKING:
     from sitframe.collect import Collected
     from sitframe.records import TrialResult
-    from sitframe.scheduler import Experiment, TrialSpec
 
 #: Seconds to wait for a Dask scheduler before giving up.
 DASK_CONNECT_TIMEOUT = 5.0
@@ -108,8 +116,6 @@ def _experiment(setup: Setup) -> Experiment:
     with _cache_lock:
         exp = _cache.get(setup.key)
         if exp is None:
-            from sitframe.scheduler import Experiment
-
             exp = Experiment(setup.cfg, source=setup.source, plugins_dirs=setup.plugins_dirs,
                              base_dir=setup.base_dir)
             if len(_cache) > 16:  # a long-lived Dask worker serving many sweeps
@@ -120,8 +126,6 @@ def _experiment(setup: Setup) -> Experiment:
 
 def run_trial(setup: Setup, spec: TrialSpec) -> TrialResult:
     """Worker entry point: run one trial and return its data."""
-    from sitframe.scheduler import simulate, step_hook_of
-
     exp = _experiment(setup)  # sitframe_step observers fire here, in the worker
     return simulate(exp.res, spec, step_hook=step_hook_of(exp.pm))
 
@@ -276,8 +280,8 @@ def _earlier(tag: Any, other: Any) -> bool:
 
 
 def _splittable(spec: TrialSpec) -> bool:
-    """Whether the trial's evaluations can run as separate tasks (not goal batches)."""
-    return bool(spec.evaluate) and getattr(spec, "episodes", None) is None
+    """Whether the trial's evaluations can run as separate tasks (a learning trial's can)."""
+    return bool(spec.evaluate) and spec.learn
 
 
 class TrialPipeline:
@@ -325,8 +329,6 @@ class TrialPipeline:
             self._learning += 1
 
     def __iter__(self) -> Iterator[tuple[str, Any, Any]]:
-        from sitframe.scheduler import attach_evaluation, evaluation_specs
-
         failure: tuple[Any, PluginFault] | None = None  # (tag, fault) of the earliest fault
         while True:
             self._fill()
@@ -611,8 +613,6 @@ def make_executor(workers: int | None = None, scheduler: str | None = None,
         Always return a :class:`PoolExecutor` (an :class:`InlineExecutor`
         instead of :class:`~sitframe.scheduler.SerialExecutor` for one worker).
     """
-    from sitframe.scheduler import SerialExecutor
-
     if scheduler is not None:
         if workers is not None:
             raise InputError("give either --workers (local processes) or --scheduler "

@@ -27,7 +27,8 @@ from typing import Any
 import pluggy
 
 from sitframe import hookspecs
-from sitframe.errors import InputError, PluginError
+from sitframe.errors import InputError, PluginError, did_you_mean
+from sitframe.params import check_params
 
 #: Entry-point group (and pluggy project name).
 GROUP = "sitframe"
@@ -41,6 +42,7 @@ KINDS: dict[str, str] = {
     "reward": "sitframe_rewards",
     "behaviour": "sitframe_behaviours",
     "arbiter": "sitframe_arbiters",
+    "protocol": "sitframe_protocols",
 }
 
 
@@ -316,8 +318,6 @@ class Registry:
         try:
             return self.entries[kind][name]
         except KeyError:
-            from sitframe.errors import did_you_mean
-
             choices = self.names(kind)
             raise InputError(
                 f"unknown {kind} '{name}'{did_you_mean(str(name), choices)}; "
@@ -342,8 +342,6 @@ class Registry:
         at ``file`` / ``key``; any other exception is a :class:`PluginError`
         naming the plugin.
         """
-        from sitframe.params import check_params
-
         entry = self.get(kind, name, file=file, key=key)
         check_params(entry.factory, params, file=file, key=key)
         try:

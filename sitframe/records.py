@@ -60,7 +60,8 @@ class Context:
     world
         The world the robot is in.
     goal
-        The current goal (goal episodes), else ``None``.
+        The current episode's goal (an evaluation protocol's, e.g. goal
+        episodes), else the world's ``[goal]``, else ``None``.
     """
 
     iteration: int
@@ -175,7 +176,8 @@ class TrialResult:
         Scalars for the summary table (``converged``, ``convergence_iteration``,
         ``collisions``, ``collisions_after_convergence``, ...).
     episodes
-        Per-episode arrays for goal runs (``success``, ``iterations``, ...), else empty.
+        Per-episode figures of a batch of an evaluation protocol's episodes (e.g.
+        ``success``, ``iterations``), and evaluations (``eval/<world>/...``).
     policies
         Behaviour label -> the :class:`LearnedPolicy` it ended the trial with
         (learned behaviours only); the arbiter's, if it learns, under the

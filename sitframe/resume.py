@@ -20,40 +20,14 @@ the new trials may not match the logged ones.
 
 from __future__ import annotations
 
-import hashlib
-import importlib.util
 import os
 from pathlib import Path
 from typing import Any
 
+from sitframe.config import validate_config
 from sitframe.errors import InputError
-from sitframe.logs import open_log
-
-
-def code_fingerprint(plugins: list[dict[str, Any]] | None = None) -> str:
-    """SHA-256 over the source of sitframe, its built-in plugins and loose plugin files.
-
-    Written to the log (root attribute ``code_hash``) so that ``--resume`` can
-    tell when the code changed since the run started (the resumed trials
-    might then differ from the logged ones). Third-party plugin packages are
-    covered by their distribution name and version in the ``plugins`` list.
-    """
-    h = hashlib.sha256()
-    files: list[Path] = []
-    for pkg in ("sitframe", "sitframe.plugins"):
-        spec = importlib.util.find_spec(pkg)
-        for folder in (spec.submodule_search_locations or []) if spec else []:
-            files += sorted(Path(folder).rglob("*.py"))
-    for info in plugins or []:
-        if info.get("file"):
-            files.append(Path(info["file"]))
-        h.update(f"{info.get('name')}={info.get('distribution')}={info.get('version')};".encode())
-    for f in files:
-        try:
-            h.update(f.read_bytes())
-        except OSError:
-            h.update(str(f).encode())
-    return h.hexdigest()
+from sitframe.experiment import _check_state, prepare_experiment
+from sitframe.logs import code_fingerprint, open_log
 
 
 def prepare_resume(
@@ -87,8 +61,6 @@ def prepare_resume(
         The log cannot be read, or this sitframe no longer resolves its config
         to the same config.
     """
-    from sitframe.config import validate_config
-    from sitframe.experiment import _check_state, prepare_experiment
 
     p = str(path)
     log = open_log(p)

@@ -59,7 +59,6 @@ from sitframe.contract import (
     memberships_mismatch,
     sensor_spec_mismatch,
 )
-from sitframe.episodes import check_goal_config, goal_batch_specs, is_goal_run, run_episode_batch
 from sitframe.errors import InputError, PluginError, PluginFault, TaskCancelled
 from sitframe.metrics import collisions_per_1000, coverage, path_length
 from sitframe.pluginmanager import Registry, get_plugin_manager
@@ -78,7 +77,9 @@ from sitframe.records import (
 from sitframe.robot import Command, RobotParams, step_robot
 from sitframe.world import Goal, World, load_world
 
-STAGE_COLLECT, STAGE_CLUSTER, STAGE_TRIALS, STAGE_EVAL = 0, 1, 2, 3
+#: Seed stages (:func:`stage_seed`); ``STAGE_BATCH``: the episode batches of a run that
+#: does not learn (one per world of its evaluation protocol).
+STAGE_COLLECT, STAGE_CLUSTER, STAGE_TRIALS, STAGE_EVAL, STAGE_BATCH = 0, 1, 2, 3, 4
 #: Summary keys of a frozen-policy evaluation (``evaluate --json`` and ``eval/<world>/...``).
 EVAL_KEYS = ("iterations", "collisions", "collisions_per_1000", "distance_m", "mean_speed_m_s",
              "coverage")
@@ -243,6 +244,43 @@ class Resolved:
             out[label] = (beh, reward)
         return out
 
+    def protocol_name(self) -> str | None:
+        """The evaluation protocol the run's components name (``evaluation_protocol``), or None.
+
+        A component asks for the protocol its behaviour is judged by with a
+        class attribute, e.g. ``evaluation_protocol = "goal-episodes"``; two
+        components naming different protocols are an input error.
+        """
+        comps = [b for b, _r in self.behaviours().values()] + [self.arbiter()]
+        names = sorted({n for c in comps if (n := getattr(c, "evaluation_protocol", None))})
+        if len(names) > 1:
+            raise InputError(f"the components ask for different evaluation protocols "
+                             f"({', '.join(names)}); expected one", file=self.file,
+                             key="behaviours")
+        return names[0] if names else None
+
+    def protocol(self, name: str) -> Any:
+        """A fresh evaluation protocol ``name``, created from its config table (but ``worlds``)."""
+        entry = self.registry.get("protocol", name, file=self.file, key="behaviours")
+        table = str(getattr(entry.factory, "table", "evaluate"))
+        params = {k: v for k, v in self.cfg.get(table, {}).items() if k != "worlds"}
+        return self._create("protocol", table, {**params, "component": name})
+
+    def protocol_worlds(self, name: str) -> list[str]:
+        """The worlds of protocol ``name``'s table, loaded and checked (``check_world``)."""
+        proto = self.protocol(name)
+        table = proto.table
+        names = list(self.cfg[table]["worlds"])
+        for j, wname in enumerate(names):
+            key = f"{table}.worlds[{j}]"
+            world = self.world(wname, key=key)
+            if hasattr(proto, "check_world"):
+                try:
+                    call(self.origins[table], "check_world", proto.check_world, world)
+                except InputError as exc:
+                    raise InputError(exc.message, file=self.file, key=key) from None
+        return names
+
     def world(self, name: str, key: str = "experiment.world") -> World:
         """The world ``name``: a shipped name, or a .toml path relative to :attr:`base_dir`
         (the config file's folder)."""
@@ -300,13 +338,14 @@ class TrialSpec:
     goal
         Goal (x [m], y [m], radius [m]) given to behaviours in the context;
         ``None`` = the world's ``[goal]`` if any.
-    stop_at_goal
-        End the trial as soon as the robot's centre is within the goal radius
-        (goal episodes); arrays are then shorter than ``iterations``.
-    episodes
-        A :class:`sitframe.episodes.EpisodeConfig`: the spec is a *batch* of
-        goal episodes in ``world`` (run by :func:`sitframe.episodes.run_episode_batch`),
-        returned as one trial.
+    protocol
+        The evaluation protocol (:class:`sitframe.components.EvaluationProtocol`)
+        by name: a spec that does not learn is then a *batch* of its episodes in
+        ``world`` (:func:`run_batch`), returned as one trial; a learning spec's
+        evaluations are such batches. ``None``: frozen-policy evaluations.
+    observed
+        Whether ``sitframe_step`` observers see the trial's iterations (not in
+        the evaluations of a learning trial).
     """
 
     index: int
@@ -320,8 +359,8 @@ class TrialSpec:
     eval_iterations: int = 1000
     start: tuple[float, float, float] | None = None
     goal: tuple[float, float, float] | None = None
-    stop_at_goal: bool = False
-    episodes: Any = None
+    protocol: str | None = None
+    observed: bool = True
 
 
 class _Step:
@@ -329,7 +368,7 @@ class _Step:
 
     __slots__ = ("origin", "method")
 
-    def __init__(self, origin: Origin | None, method: str) -> None:
+    def __init__(self, origin: Origin | str | None, method: str) -> None:
         self.origin, self.method = origin, method
 
 
@@ -377,13 +416,17 @@ def simulate(
     spec: TrialSpec,
     *,
     step_hook: Callable[[StepRecord], Any] | None = None,
+    protocol: Any = None,
 ) -> TrialResult:
-    """Run one trial (learning, frozen evaluation or goal episode) and return its arrays.
+    """Run one trial (learning, frozen evaluation or episode) and return its arrays.
 
-    ``step_hook`` fires for learning trials and goal episodes, never for the
-    frozen evaluations of a learning trial (``learn=False`` without
-    ``stop_at_goal``), whichever executor runs them: the serial one runs them
-    here, a pool as separate tasks, and the logs must not differ.
+    An evaluation ``protocol``'s ``terminated(context)``, called after every
+    iteration, ends the trial early; ``iterations`` is then only its limit. A
+    spec with a protocol that does not learn is a batch of episodes
+    (:func:`run_batch`). ``step_hook`` fires for learning trials and episode
+    batches of their own, never for the evaluations of a learning trial
+    (``observed=False``), whichever executor runs them: the serial one runs
+    them here, a pool as separate tasks, and the logs must not differ.
 
     Raises
     ------
@@ -392,16 +435,14 @@ def simulate(
         (:mod:`sitframe.contract`); names the plugin, component, method,
         trial and iteration.
     """
-    if spec.episodes is not None:
-        return run_episode_batch(res, spec, step_hook=step_hook)
-    if not spec.learn and not spec.stop_at_goal:
-        step_hook = None  # a frozen evaluation (sitframe_step: "not called" there)
+    if not spec.observed:
+        step_hook = None  # an evaluation of a learning trial (sitframe_step: "not called")
+    if spec.protocol is not None and not spec.learn:
+        return run_batch(res, spec, step_hook=step_hook)
     rng = np.random.default_rng(spec.seed)
     world = res.world(spec.world)
     goal = world.goal if spec.goal is None else Goal(np.asarray(spec.goal[:2], float),
                                                      float(spec.goal[2]))
-    goal_xy = None if goal is None else goal.position
-    goal_r2 = 0.0 if goal is None else goal.radius ** 2
     k = spec.index
     with _in_trial(k):  # each trial creates and binds its own components
         sensor = res.sensor()
@@ -459,6 +500,8 @@ def simulate(
                   for lb, (beh, _r) in behaviours.items()]
     at_learn = [(lb, beh, rew, _Step(ob, "learn"), _Step(orw, "__call__"))
                 for lb, beh, rew, ob, orw in learners]
+    at_end = None if protocol is None else _Step(
+        og.get(protocol.table) or f"protocol '{protocol.name}'", "terminated")
     step_at = at_read
     t = 0
     pose = np.array(world.start if spec.start is None else spec.start, dtype=float)
@@ -514,8 +557,7 @@ def simulate(
                 step_at = _Step(None, "sitframe_step")
                 step_hook(StepRecord(spec.index, tr, proposals, weights, rewards))
             ctx = ctx2
-            if spec.stop_at_goal and goal_xy is not None and \
-                    (pose[0] - goal_xy[0]) ** 2 + (pose[1] - goal_xy[1]) ** 2 <= goal_r2:
+            if at_end is not None and (step_at := at_end) and protocol.terminated(ctx):
                 n_done = t + 1
                 break
     except (KeyboardInterrupt, TaskCancelled, PluginFault, InputError):
@@ -554,6 +596,78 @@ def simulate(
     for ev_spec in evaluation_specs(spec, result.policies):
         attach_evaluation(result, ev_spec.world, simulate(res, ev_spec))
     return result
+
+
+def run_batch(res: Resolved, spec: TrialSpec, *,
+              step_hook: Callable[[StepRecord], Any] | None = None) -> TrialResult:
+    """Run a batch of ``spec.protocol``'s episodes in ``spec.world``; return it as one trial.
+
+    Start poses (and goals) come from the protocol, given a Generator seeded
+    by ``spec.seed``; episode ``e`` runs with its own seed spawned from it, so
+    a batch is reproducible and episode ``e`` does not depend on the others.
+    Each episode is :func:`simulate` from its start, with its goal, until the
+    protocol's ``terminated`` or its ``iterations``. The trial holds the
+    episodes' arrays concatenated (``pose`` has one extra row per episode;
+    ``episodes["first_iteration"]`` gives each one's first row), the
+    per-episode figures (one array per key, and one ``NNNN`` group per
+    episode) and the summary (:func:`trial_summary` over all episodes) with
+    the protocol's aggregates as ``eval/<world>/<key>``.
+    """
+    k = spec.index
+    with _in_trial(k):
+        proto = res.protocol(str(spec.protocol))
+    o = res.origins[proto.table]
+    world = res.world(spec.world, key=f"{proto.table}.worlds")
+    ss = np.random.SeedSequence(spec.seed % 2**64)
+    rng = np.random.default_rng(ss.spawn(1)[0])
+    starts, goals = call(o, "episode_starts", proto.episode_starts, world, rng, res.robot,
+                         trial=k)
+    starts = np.asarray(starts, dtype=float)
+    n = len(starts)
+    if starts.shape != (n, 3) or n < 1 or (goals is not None and np.shape(goals) != (n, 3)):
+        raise PluginFault(f"returned starts of shape {starts.shape} and goals of shape "
+                          f"{None if goals is None else np.shape(goals)}; expected (n, 3) "
+                          "each (goals may be None), n >= 1", where=str(o),
+                          method="episode_starts", trial=k)
+    seeds = np.random.SeedSequence(spec.seed % 2**64, spawn_key=(1,)).generate_state(n, np.uint64)
+    parts: list[TrialResult] = []
+    figures: list[dict[str, Any]] = []
+    for e in range(n):
+        goal = None if goals is None else tuple(float(v) for v in goals[e])
+        ep = dataclasses.replace(spec, seed=int(seeds[e]), iterations=int(proto.iterations),
+                                 evaluate=(), start=tuple(float(v) for v in starts[e]),
+                                 goal=goal, protocol=None)
+        r = simulate(res, ep, step_hook=step_hook, protocol=proto)
+        parts.append(r)
+        figures.append(_checked(o, "score_episode", check_data, lambda r=r, e=e: (
+            proto.score_episode(r.arrays, starts[e], None if goals is None else goals[e],
+                                res.robot)), k, "per-episode figures"))
+    per_ep = {key: np.asarray([f[key] for f in figures]) for key in figures[0]}
+    scores = _checked(o, "aggregate", check_data, lambda: proto.aggregate(per_ep), k,
+                      "the batch's scores")
+    arrays = {key: np.concatenate([p.arrays[key] for p in parts]) for key in parts[0].arrays}
+    first = np.cumsum([0] + [int(p.arrays["collision"].size) for p in parts[:-1]])
+    episodes: dict[str, Any] = {**per_ep, "start": starts}
+    if goals is not None:
+        episodes["goal"] = goals
+    episodes["first_iteration"] = first.astype(np.int64)
+    for e, f in enumerate(figures):
+        episodes[f"{e:04d}"] = row = {**f, "start": starts[e]}
+        if goals is not None:
+            row["goal"] = goals[e]
+    summary = trial_summary(world, arrays, {}, res.robot)  # (nothing converges here)
+    summary["distance_m"] = float(np.asarray(  # (not across the jumps between episodes)
+        [path_length(p.arrays["pose"][:, :2]) for p in parts]).sum())
+    for key, v in scores.items():
+        summary[summary_key("eval", world.name, key)] = v
+    return TrialResult(k, spec.seed, world.name, arrays, parts[0].behaviours, summary,
+                       episodes, policies=parts[0].policies)
+
+
+def batch_scores(result: TrialResult) -> dict[str, Any]:
+    """The protocol's aggregates of a batch returned by :func:`run_batch`."""
+    prefix = summary_key("eval", result.world, "")
+    return {k[len(prefix):]: v for k, v in result.summary.items() if k.startswith(prefix)}
 
 
 #: Name of the per-iteration sensor readings in a trial's arrays and the log
@@ -665,9 +779,12 @@ def _collect_plugin_data(result: TrialResult, components: list[tuple[str, Any]],
 
 
 def evaluation_specs(spec: TrialSpec, policies: dict[str, LearnedPolicy]) -> list[TrialSpec]:
-    """The frozen-policy evaluations of a finished trial (one spec per ``spec.evaluate`` world).
+    """The evaluations of a finished trial (one spec per ``spec.evaluate`` world).
 
     ``policies`` are the trial's learned policies (``TrialResult.policies``).
+    With a ``spec.protocol`` each evaluation is a batch of its episodes
+    (:func:`run_batch`) with these policies, else one frozen-policy run of
+    ``eval_iterations`` from the world's start.
     Parallel executors run these as separate tasks; :func:`attach_evaluation`
     adds their results to the trial in this order.
     """
@@ -675,8 +792,8 @@ def evaluation_specs(spec: TrialSpec, policies: dict[str, LearnedPolicy]) -> lis
         return []
     return [dataclasses.replace(
         spec, seed=stage_seed(spec.seed % (2**63), STAGE_EVAL, k), world=wname,
-        iterations=spec.eval_iterations, learn=False, policies=dict(policies), evaluate=())
-        for k, wname in enumerate(spec.evaluate)]
+        iterations=spec.eval_iterations, learn=False, policies=dict(policies), evaluate=(),
+        observed=False) for k, wname in enumerate(spec.evaluate)]
 
 
 #: Per-iteration arrays of a frozen-policy evaluation kept in the log (enough to
@@ -685,12 +802,19 @@ EVAL_ARRAYS = ("pose", "collision", "contact", "command", "nearest", READING, "m
 
 
 def attach_evaluation(result: TrialResult, wname: str, ev: TrialResult) -> None:
-    """Add evaluation ``ev`` in world ``wname`` (``eval/<wname>/...``) to its trial's result."""
+    """Add evaluation ``ev`` in world ``wname`` (``eval/<wname>/...``) to its trial's result.
+
+    A batch of episodes (:func:`run_batch`) also brings its per-episode
+    figures (``episodes/eval/<wname>/...``) and its protocol's aggregates.
+    """
     for key in EVAL_ARRAYS:
         if key in ev.arrays:
             result.episodes[f"eval/{wname}/{key}"] = ev.arrays[key]
-    for key in EVAL_KEYS:
-        result.summary[summary_key("eval", wname, key)] = ev.summary[key]
+    for key, v in ev.episodes.items():
+        result.episodes[f"eval/{wname}/{key}"] = v
+    scores = {key: ev.summary[key] for key in EVAL_KEYS} | batch_scores(ev)
+    for key, v in scores.items():
+        result.summary[summary_key("eval", wname, key)] = v
     for plugin, data in ev.plugin_data.items():
         box = result.plugin_data.setdefault(plugin, {})
         box.update({f"eval/{wname}/{k}": v for k, v in data.items()})
@@ -807,9 +931,12 @@ class Experiment:
             names += cfg["collect"]["worlds"]
         if "evaluate" in e["stages"]:
             names += cfg["evaluate"]["worlds"]
-        self.goal_run = is_goal_run(self.res)
-        if self.goal_run and "evaluate" in e["stages"]:
-            names += check_goal_config(cfg, self.res, source)
+        #: The run's evaluation protocol (:meth:`Resolved.protocol_name`); None = frozen.
+        self.protocol = self.res.protocol_name()
+        self.eval_worlds = list(cfg["evaluate"]["worlds"])
+        if self.protocol is not None and "evaluate" in e["stages"]:
+            self.eval_worlds = self.res.protocol_worlds(self.protocol)
+            names += self.eval_worlds
         for name in dict.fromkeys(names):
             key = "experiment.world" if name == e["world"] else "worlds"
             worlds[name] = self.res.world(name, key).text
@@ -875,13 +1002,12 @@ class Experiment:
     def trial_spec(self, k: int, interpreter_state: dict[str, Any],
                    policies: dict[str, dict[str, np.ndarray]] | None = None) -> TrialSpec:
         e = self.cfg["experiment"]
-        evaluate = (tuple(self.cfg["evaluate"]["worlds"])
-                    if "evaluate" in e["stages"] and not self.goal_run else ())
+        evaluate = tuple(self.eval_worlds) if "evaluate" in e["stages"] else ()
         return TrialSpec(
             index=k, seed=stage_seed(self.info.seed, STAGE_TRIALS, k), world=e["world"],
             iterations=int(e["iterations"]), learn=True, interpreter_state=interpreter_state,
             policies=policies or {}, evaluate=evaluate,
-            eval_iterations=int(self.cfg["evaluate"]["iterations"]))
+            eval_iterations=int(self.cfg["evaluate"]["iterations"]), protocol=self.protocol)
 
     # -- phases (``run`` composes them; a sweep interleaves them across runs) --
     def begin(self) -> None:
@@ -889,7 +1015,7 @@ class Experiment:
         self.info.extra.setdefault("step_hooks", bool(
             getattr(self.executor, "fires_step_hooks", True)))
         if self.out and "code_hash" not in self.info.extra:
-            from sitframe.resume import code_fingerprint  # hashes source files: only for logs
+            from sitframe.logs import code_fingerprint  # h5py: imported only when a run logs
 
             self.info.extra["code_hash"] = code_fingerprint(self.info.plugins)
         self._notify("sitframe_run_start", run=self.info)
@@ -939,16 +1065,23 @@ class Experiment:
     def trial_specs(self, interpreter_state: dict[str, Any],
                     policies: dict[str, dict[str, np.ndarray]] | None = None,
                     trials: list[int] | None = None) -> list[TrialSpec]:
-        """Specs of the learning trials to run (all, or the indices ``trials``)."""
+        """Specs of the trials to run: the learning trials (all, or the indices ``trials``),
+        or, in a run with an evaluation protocol that does not learn, one batch of its
+        episodes per world (trial ``j``: world ``j``, seed of stage :data:`STAGE_BATCH`).
+
+        A learning trial evaluates its own learned policies (:func:`evaluation_specs`).
+        """
         stages = self.cfg["experiment"]["stages"]
-        specs = []
         if "learn" in stages:
             idx = range(self.info.n_trials) if trials is None else trials
-            specs = [self.trial_spec(k, interpreter_state, policies) for k in idx]
-        if self.goal_run and "evaluate" in stages:  # goal episodes: one batch per goal world
-            first = self.info.n_trials if "learn" in stages else 0
-            specs += goal_batch_specs(self, interpreter_state, policies, first)
-        return specs
+            return [self.trial_spec(k, interpreter_state, policies) for k in idx]
+        if self.protocol is None or "evaluate" not in stages:
+            return []
+        return [TrialSpec(index=j, seed=stage_seed(self.info.seed, STAGE_BATCH, j), world=name,
+                          iterations=int(self.res.protocol(self.protocol).iterations),
+                          learn=False, interpreter_state=interpreter_state,
+                          policies=policies or {}, protocol=self.protocol)
+                for j, name in enumerate(self.eval_worlds)]
 
     def trial_done(self, result: TrialResult) -> None:
         """Hand a finished trial to observers (call in trial order)."""

@@ -72,6 +72,10 @@ import numpy as np
 
 from sitframe.errors import InputError, did_you_mean
 
+# start-up time: this module is imported whenever the command line builds its parser
+# (``sitframe --help`` and every command), so what only one command needs is imported
+# inside the function that needs it.
+
 HELP = "run an experiment over a grid of config values; one log per point + a summary table"
 
 _SWEEP_KEYS = ("name", "description", "base", "trials", "seed", "out")

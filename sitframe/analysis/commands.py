@@ -12,6 +12,10 @@ from __future__ import annotations
 import argparse
 import sys
 
+# start-up time: this module is imported whenever the command line builds its parser
+# (``sitframe --help`` and every command), so what only one command needs is imported
+# inside the function that needs it.
+
 HELP = "write the figures and tables of a log (PNG, Markdown, CSV) with an index.md"
 
 

@@ -15,6 +15,10 @@ from __future__ import annotations
 
 import argparse
 
+# start-up time: this module is imported whenever the command line builds its parser
+# (``sitframe --help`` and every command), so what only one command needs is imported
+# inside the function that needs it.
+
 HELP = "animate a logged trial (robot, sonar rays, situation, command) as GIF or MP4"
 
 

@@ -29,6 +29,7 @@ import numpy as np
 
 from sitframe.analysis import results as R
 from sitframe.errors import InputError
+from sitframe.world import parse_world
 
 __all__ = ["DEFAULT_FRAMES", "replay"]
 
@@ -90,9 +91,8 @@ def replay(
     from matplotlib.figure import Figure
     from matplotlib.patches import Circle
 
-    from sitframe.analysis.clustering_plots import OKABE_ITO as C
-    from sitframe.analysis.world_plot import plot_world
-    from sitframe.world import parse_world
+    from sitframe.analysis.clustering_plots import OKABE_ITO as C  # matplotlib: start-up time
+    from sitframe.analysis.world_plot import plot_world  # matplotlib: start-up time
 
     out = Path(out)
     suffix = out.suffix.lower()

@@ -37,6 +37,7 @@ import numpy as np
 from sitframe.analysis import results as R
 from sitframe.errors import InputError
 from sitframe.logs import Log, TrialLog
+from sitframe.world import parse_world
 
 __all__ = ["AnalysisReport", "analyse", "log_problems"]
 
@@ -168,8 +169,6 @@ class _Writer:
 
 
 def _worlds(lg: Log) -> dict[str, Any]:
-    from sitframe.world import parse_world
-
     out = {}
     for name, text in lg.worlds.items():
         try:
@@ -215,8 +214,8 @@ def analyse(
     import matplotlib
 
     matplotlib.use("Agg", force=False)
-    from sitframe.analysis import clustering_plots as CP
-    from sitframe.analysis import learning_plots as LP
+    from sitframe.analysis import clustering_plots as CP  # matplotlib: start-up time
+    from sitframe.analysis import learning_plots as LP  # matplotlib: start-up time
 
     t0 = time.perf_counter()
     lg = R.as_log(log)

@@ -1,7 +1,9 @@
-"""Goal episodes: pairs, ending at the goal or the timeout, batches, goal runs, evaluate."""
+"""Goal episodes (the goal-episodes protocol): pairs, ending at the goal or the timeout,
+batches, goal runs, evaluate."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -11,28 +13,23 @@ import pytest
 
 from sitframe.cli import main
 from sitframe.config import load_config, preset_text, validate_config
-from sitframe.episodes import (
-    AGGREGATE_KEYS,
-    EpisodeConfig,
-    batch_aggregate,
-    goal_pairs,
-    world_pairs,
-)
 from sitframe.errors import InputError
 from sitframe.experiment import evaluate_log, prepare_experiment
 from sitframe.logs import open_log
 from sitframe.pluginmanager import Registry, get_plugin_manager
-from sitframe.scheduler import Resolved, TrialSpec, simulate
+from sitframe.plugins.goal_episodes import AGGREGATE_KEYS, GoalEpisodes, goal_pairs, world_pairs
+from sitframe.scheduler import Resolved, TrialSpec, batch_scores, simulate
 from sitframe.world import load_world, parse_world
 
 STATE = {"centers": np.array([[0.5] * 8, [3.0] * 8]), "m": 1.2}
 
 
-def goal_only(**arbiter) -> Resolved:
+def goal_only(goal: dict | None = None, **arbiter) -> Resolved:
     cfg = validate_config({
         "interpreter": {"component": "fcm", "c": 2},
         "behaviours": {"goal": {"component": "goal"}},
         "arbiter": {"component": "single", **arbiter},
+        "goal": goal or {},
     })
     return Resolved.build(cfg, Registry.collect(get_plugin_manager()))
 
@@ -45,7 +42,7 @@ def spec(**kw) -> TrialSpec:
 
 def test_episode_ends_at_goal():
     res = goal_only()
-    r = simulate(res, spec(start=(1.0, 1.0, 0.0), goal=(3.0, 1.0, 0.3), stop_at_goal=True))
+    r = simulate(res, spec(start=(1.0, 1.0, 0.0), goal=(3.0, 1.0, 0.3)), protocol=GoalEpisodes())
     n = r.arrays["collision"].size
     assert n < 20
     assert math.hypot(r.arrays["pose"][-1, 0] - 3.0, r.arrays["pose"][-1, 1] - 1.0) <= 0.3
@@ -55,8 +52,8 @@ def test_episode_ends_at_goal():
 def test_episode_ends_at_timeout_not_at_collision():
     res = goal_only()
     # the goal is behind the wall x = 6.5 (y < 3.5): the robot pushes into the wall
-    r = simulate(res, spec(start=(5.5, 1.0, 0.0), goal=(8.0, 1.0, 0.3), stop_at_goal=True,
-                           iterations=25))
+    r = simulate(res, spec(start=(5.5, 1.0, 0.0), goal=(8.0, 1.0, 0.3), iterations=25),
+                 protocol=GoalEpisodes())
     assert r.arrays["collision"].size == 25
     assert r.arrays["collision"].sum() > 0
 
@@ -84,13 +81,13 @@ def test_world_pairs_need_a_goal():
 
 
 def test_batch_is_deterministic_and_scored():
-    res = goal_only()
-    ep = EpisodeConfig(episodes=3, timeout=60)
-    a = simulate(res, spec(episodes=ep))
-    b = simulate(res, spec(episodes=ep))
-    agg = batch_aggregate(a)
+    res = goal_only({"episodes": 3, "timeout": 60})
+    assert res.protocol_name() == "goal-episodes"
+    a = simulate(res, spec(protocol="goal-episodes"))
+    b = simulate(res, spec(protocol="goal-episodes"))
+    agg = batch_scores(a)
     assert set(AGGREGATE_KEYS) <= set(agg)
-    assert json.dumps(agg) == json.dumps(batch_aggregate(b))  # NaN-safe equality
+    assert json.dumps(agg) == json.dumps(batch_scores(b))  # NaN-safe equality
     assert agg["episodes"] == 3
     e = a.episodes
     assert e["success"].shape == (3,) and e["start"].shape == (3, 3)
@@ -102,7 +99,7 @@ def test_batch_is_deterministic_and_scored():
 
 def test_episode_config_validation():
     with pytest.raises(InputError, match="pairs"):
-        EpisodeConfig(pairs="fixed")
+        GoalEpisodes(pairs="fixed")
     with pytest.raises(InputError, match="goal.timeout"):
         validate_config({"behaviours": {"g": {"component": "goal"}}, "goal": {"timeout": 0}})
 
@@ -201,3 +198,44 @@ def test_unknown_arbiter_in_config_lists_available(tmp_path, oa_log, capsys):
     assert main(["run", path, "--out", str(tmp_path / "x.h5")]) == 2
     err = capsys.readouterr().err.strip()
     assert "unknown arbiter 'cbd'" in err and "available: cdb, priority, single" in err
+
+
+def test_learning_goal_run_evaluates_each_trials_learned_policy():
+    """A goal run that learns scores each trial's *learned* rule base in its goal episodes.
+
+    (Before, the episodes ran as extra trials after the learning trials with the
+    untrained behaviour: the rule base all zeros.)
+    """
+    from sitframe.parallel import InlineExecutor
+    from sitframe.scheduler import Experiment, evaluation_specs
+
+    cfg = validate_config({
+        "experiment": {"trials": 2, "iterations": 80, "world": "goal",
+                       "stages": ["learn", "evaluate"]},
+        "interpreter": {"component": "fcm", "c": 2},
+        "behaviours": {"avoid": {"component": "fuzzy-q", "reward": "obstacle-avoidance",
+                                 "headings": [90, 0, -90]},
+                       "goal": {"component": "goal"}},
+        "arbiter": {"component": "cdb", "sets": {"close": [0.0, 0.0, 0.3, 0.8],
+                                                 "far": [0.3, 0.8, 3.0, 3.0]},
+                    "rules": {"close": "avoid", "far": "goal"}},
+        "goal": {"episodes": 2, "timeout": 20, "worlds": ["goal"]},
+    })
+    exp = Experiment(cfg)
+    result = exp.run(interpreter_state=STATE)
+    assert [t.index for t in result.trials] == [0, 1]  # no extra batch with an untrained policy
+    # a pool runs the batches as separate tasks (TrialPipeline) and attaches them the same way
+    pooled = Experiment(cfg, executor=InlineExecutor()).run(interpreter_state=STATE)
+    for t, p in zip(result.trials, pooled.trials, strict=True):
+        assert json.dumps(t.summary, default=str) == json.dumps(p.summary, default=str)
+        np.testing.assert_array_equal(t.episodes["eval/goal/pose"], p.episodes["eval/goal/pose"])
+    rules = [t.policies["avoid"].outputs["heading"].rules for t in result.trials]
+    assert any(r.any() for r in rules)  # learned: not the all-zeros rule base
+    for t in result.trials:
+        assert t.summary["eval/goal/episodes"] == 2 and "eval/goal/success" in t.episodes
+        (ev,) = evaluation_specs(exp.trial_spec(t.index, STATE), t.policies)
+        assert ev.protocol == "goal-episodes" and ev.policies["avoid"] is t.policies["avoid"]
+        again = simulate(exp.res, ev)
+        np.testing.assert_array_equal(t.episodes["eval/goal/pose"], again.arrays["pose"])
+        untrained = simulate(exp.res, dataclasses.replace(ev, policies={}))
+        assert not np.array_equal(untrained.arrays["pose"], again.arrays["pose"])

@@ -1,0 +1,216 @@
+"""The ``goal-episodes`` evaluation protocol: drive from a start to a goal, and score it.
+
+An *episode* starts the robot at a start pose with a goal disc in the
+context (:attr:`sitframe.records.Context.goal`) and runs the configured
+behaviours and arbiter, without learning, until
+
+* the robot's centre is within the goal radius (**terminated**: success), or
+* ``timeout`` iterations (default 300 = 7.5 min of robot time) have passed
+  (**truncated**).
+
+A collision never ends an episode: the robot recovers (as the simulator's
+collision recovery does) and carries on; collisions are counted.
+
+Parameters: the run config's ``[goal]`` table (:attr:`GoalEpisodes.table`);
+its ``worlds`` list names the worlds the evaluate stage runs a batch in.
+A run uses this protocol when one of its components declares
+``evaluation_protocol = "goal-episodes"`` (the ``goal`` behaviour does).
+
+Start/goal pairs (``[goal] pairs``):
+
+``"random"`` (default)
+    ``episodes`` seeded random pairs per world: start and goal are free
+    positions for the robot disc with ``margin`` to spare (start heading
+    uniform), at least ``min_distance`` (3 m) apart as the crow flies.
+``"world"``
+    The world file's start pose and ``[goal]``, ``episodes`` times (the runs
+    differ only by sensor noise, if any).
+
+Per episode: ``success``, ``iterations``, ``collisions``, ``path_length_m``
+(robot centre), ``straight_m`` (straight-line distance from the start to the
+*edge* of the goal disc, the shortest possible successful path ignoring
+obstacles, used by SPL), ``time_s`` (iterations x control period, 1.5 s),
+``heading_change_per_m`` (total |heading change| per metre, path smoothness).
+
+Aggregates over a batch (:meth:`GoalEpisodes.aggregate`): ``episodes``,
+``success_rate``, ``collisions_per_episode``, ``collision_free_rate``
+(fraction of episodes without a collision), ``spl``
+(:func:`sitframe.metrics.spl`), ``mean_time_s`` (mean time of the
+*successful* episodes; NaN if none), ``heading_change_per_m`` (pooled: total
+heading change over total path length of all episodes),
+``mean_path_length_m``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, ClassVar
+
+import numpy as np
+
+from sitframe import (
+    Context,
+    InputError,
+    RobotParams,
+    World,
+    heading_change_per_m,
+    hookimpl,
+    path_length,
+    spl,
+)
+from sitframe import params as P
+
+PAIR_MODES = ("random", "world")
+#: Aggregate keys of a batch (``evaluate --goal-episodes --json``, ``eval/<world>/...``).
+AGGREGATE_KEYS = ("episodes", "success_rate", "collisions_per_episode", "collision_free_rate",
+                  "spl", "mean_time_s", "heading_change_per_m", "mean_path_length_m")
+
+
+def goal_pairs(
+    world: World,
+    n: int,
+    rng: np.random.Generator,
+    *,
+    min_distance: float = 3.0,
+    goal_radius: float = 0.3,
+    robot_radius: float = 0.15,
+    margin: float = 0.1,
+    max_tries: int = 1000,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Draw ``n`` random start/goal pairs in ``world``.
+
+    Returns
+    -------
+    (starts, goals)
+        ``starts`` (n, 3): x [m], y [m], theta [rad]; ``goals`` (n, 3): x [m],
+        y [m], radius [m]. Both positions are free for a disc of
+        ``robot_radius + margin``; they are at least ``min_distance`` apart.
+
+    Raises
+    ------
+    InputError
+        ``goal.min_distance``: no pair that far apart found in ``max_tries``.
+    """
+    starts = np.empty((n, 3))
+    goals = np.empty((n, 3))
+    for e in range(n):
+        for _ in range(max_tries):
+            s = world.random_free_pose(rng, robot_radius, margin=margin)
+            g = world.random_free_pose(rng, robot_radius, margin=margin)
+            if math.hypot(g[0] - s[0], g[1] - s[1]) >= min_distance:
+                break
+        else:
+            raise InputError(f"found no start and goal {min_distance:g} m apart in world "
+                             f"'{world.name}' in {max_tries} tries; expected a smaller "
+                             "min_distance or a larger world", key="goal.min_distance")
+        starts[e] = s
+        goals[e] = (g[0], g[1], goal_radius)
+    return starts, goals
+
+
+def world_pairs(world: World, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The world file's start and ``[goal]``, ``n`` times (InputError if it has no goal)."""
+    if world.goal is None:
+        raise InputError(f"world '{world.name}' has no [goal]; expected a [goal] table with "
+                         "position = [x, y] or goal.pairs = \"random\"", file=world.source,
+                         key="goal")
+    g = (*world.goal.position, world.goal.radius)
+    return np.tile(world.start, (n, 1)), np.tile(np.asarray(g, float), (n, 1))
+
+
+class GoalEpisodes:
+    """Goal episodes (module docstring): the ``[goal]`` table's parameters.
+
+    Parameters
+    ----------
+    episodes
+        Episodes per world.
+    timeout
+        Iterations before an episode is given up (truncated).
+    min_distance
+        Minimum straight-line start-goal distance [m] of random pairs.
+    pairs
+        ``"random"`` or ``"world"`` (module docstring).
+    radius
+        Goal radius [m] of random goals.
+    margin
+        Clearance [m] beyond the robot's radius required at random starts and goals.
+    """
+
+    name = "goal-episodes"
+    table: ClassVar[str] = "goal"
+
+    def __init__(self, *, episodes: int = 50, timeout: int = 300, min_distance: float = 3.0,
+                 pairs: str = "random", radius: float = 0.3, margin: float = 0.1) -> None:
+        self.episodes = int(P.number("episodes", episodes, lo=1, integer=True))
+        self.iterations = int(P.number("timeout", timeout, lo=1, integer=True))
+        self.min_distance = P.number("min_distance", min_distance, lo=0.0)
+        self.pairs = P.choice("pairs", pairs, PAIR_MODES)
+        self.radius = P.number("radius", radius, lo=0.0, lo_open=True)
+        self.margin = P.number("margin", margin, lo=0.0)
+
+    def check_world(self, world: World) -> None:
+        """Refuse, before anything runs, a world ``pairs = "world"`` cannot use."""
+        if self.pairs == "world" and world.goal is None:
+            raise InputError(f"world '{world.name}' has no [goal] but goal.pairs = \"world\"; "
+                             "expected a world with a [goal] table or goal.pairs = \"random\"")
+
+    def episode_starts(self, world: World, rng: np.random.Generator,
+                       robot: RobotParams) -> tuple[np.ndarray, np.ndarray]:
+        """The ``episodes`` start poses (n, 3) and goals (n, 3: x, y, radius) in ``world``."""
+        if self.pairs == "world":
+            return world_pairs(world, self.episodes)
+        return goal_pairs(world, self.episodes, rng, min_distance=self.min_distance,
+                          goal_radius=self.radius, robot_radius=robot.radius,
+                          margin=self.margin)
+
+    def terminated(self, context: Context) -> bool:
+        """Whether the robot's centre is within the goal disc."""
+        goal = context.goal
+        if goal is None:
+            return False
+        pose, xy = context.pose, goal.position
+        return bool((pose[0] - xy[0]) ** 2 + (pose[1] - xy[1]) ** 2 <= goal.radius ** 2)
+
+    def score_episode(self, arrays: dict[str, np.ndarray], start: np.ndarray,
+                      goal: np.ndarray | None, robot: RobotParams) -> dict[str, Any]:
+        """Per-episode figures of one finished episode (module docstring)."""
+        assert goal is not None  # episode_starts always gives goals
+        pose = arrays["pose"]
+        it = int(arrays["collision"].size)
+        reached = math.hypot(pose[-1, 0] - goal[0], pose[-1, 1] - goal[1]) <= goal[2]
+        straight = max(math.hypot(goal[0] - start[0], goal[1] - start[1]) - goal[2], 0.0)
+        return {
+            "success": bool(reached),
+            "iterations": it,
+            "collisions": int(arrays["collision"].sum()),
+            "path_length_m": path_length(pose[:, :2]),
+            "straight_m": straight,
+            "time_s": it * float(robot.control_period_s),
+            "heading_change_per_m": heading_change_per_m(pose[:, 2], pose[:, :2]),
+        }
+
+    def aggregate(self, ep: dict[str, np.ndarray]) -> dict[str, float]:
+        """Batch figures from per-episode arrays (keys of :meth:`score_episode`)."""
+        success = np.asarray(ep["success"], bool)
+        n = int(success.size)
+        coll = np.asarray(ep["collisions"], float)
+        path = np.asarray(ep["path_length_m"], float)
+        time_s = np.asarray(ep["time_s"], float)
+        total_turn = np.nansum(np.asarray(ep["heading_change_per_m"], float) * path)
+        nan = float("nan")
+        return {
+            "episodes": n,
+            "success_rate": float(success.mean()) if n else nan,
+            "collisions_per_episode": float(coll.mean()) if n else nan,
+            "collision_free_rate": float((coll == 0).mean()) if n else nan,
+            "spl": spl(success, ep["straight_m"], path),
+            "mean_time_s": float(time_s[success].mean()) if success.any() else nan,
+            "heading_change_per_m": float(total_turn / path.sum()) if path.sum() > 0 else nan,
+            "mean_path_length_m": float(path.mean()) if n else nan,
+        }
+
+
+@hookimpl
+def sitframe_protocols() -> list[Any]:
+    return [GoalEpisodes]

@@ -1,0 +1,88 @@
+"""The core's module imports: no cycles, function-local imports of sitframe modules only
+where they buy start-up time (said in a comment)."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import sitframe
+
+ROOT = Path(sitframe.__file__).parent
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for p in ROOT.rglob("*.py"):
+        parts = ("sitframe", *p.relative_to(ROOT).with_suffix("").parts)
+        out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = p
+    return out
+
+
+def _imports(path: Path, mods: dict[str, Path]) -> list[tuple[str, bool, int]]:
+    """(module, function-local?, line) of each sitframe import outside ``TYPE_CHECKING``."""
+    out: list[tuple[str, bool, int]] = []
+
+    def target(name: str) -> str | None:
+        while name and name not in mods:
+            name = name.rpartition(".")[0]
+        return name if name and name != "sitframe" else None
+
+    def walk(node: ast.AST, local: bool) -> None:
+        for ch in ast.iter_child_nodes(node):
+            if isinstance(ch, ast.If) and "TYPE_CHECKING" in ast.unparse(ch.test):
+                continue
+            if isinstance(ch, ast.Import | ast.ImportFrom):
+                if isinstance(ch, ast.ImportFrom) and ch.module == "sitframe":
+                    names = [f"sitframe.{a.name}" for a in ch.names]
+                elif isinstance(ch, ast.ImportFrom):
+                    names = [ch.module or ""]
+                else:
+                    names = [a.name for a in ch.names]
+                out.extend((t, local, ch.lineno) for n in names if (t := target(n)))
+            walk(ch, local or isinstance(ch, ast.FunctionDef | ast.AsyncFunctionDef))
+
+    walk(ast.parse(path.read_text()), False)
+    return out
+
+
+def test_no_import_cycles_in_the_core():
+    """Counting function-local imports too: a cycle hidden in a function is still a cycle."""
+    mods = _modules()
+    graph = {m: {t for t, _l, _n in _imports(p, mods)} - {m} for m, p in mods.items()}
+    state: dict[str, int] = {}  # 1 = on the path, 2 = done
+    path: list[str] = []
+
+    def visit(m: str) -> None:
+        state[m] = 1
+        path.append(m)
+        for d in sorted(graph[m]):
+            assert state.get(d) != 1, "import cycle: " + " -> ".join(
+                [*path[path.index(d):], d])
+            if d not in state:
+                visit(d)
+        path.pop()
+        state[m] = 2
+
+    for m in sorted(graph):
+        if m not in state:
+            visit(m)
+
+
+def test_no_episode_module_in_the_core():
+    assert not (ROOT / "episodes.py").exists()
+
+
+def test_function_local_imports_say_they_buy_start_up_time():
+    """A function-local import of a sitframe module has a comment on its line, or its module
+    says (``# start-up time:``) why it defers imports."""
+    mods = _modules()
+    bare = []
+    for p in mods.values():
+        text = p.read_text()
+        lines = text.splitlines()
+        if "# start-up time:" in text:
+            continue
+        bare += [f"{p.name}:{n}" for _t, local, n in _imports(p, mods)
+                 if local and "#" not in lines[n - 1]]
+    assert not bare, bare

@@ -1,0 +1,95 @@
+"""Evaluation protocols are plugins: a third-party protocol runs through the core's loop."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+from sitframe import Proposal, hookimpl
+from sitframe.config import validate_config
+from sitframe.errors import InputError, PluginFault
+from sitframe.pluginmanager import get_plugin_manager
+from sitframe.scheduler import Experiment
+
+STATE = {"centers": np.array([[0.5] * 8, [3.0] * 8]), "m": 1.2}
+
+
+class Laps:
+    """Three episodes from the world's start, no goal, each ended after ``stop`` iterations."""
+
+    name = "laps"
+    table = "evaluate"
+
+    def __init__(self, *, iterations: int = 1000) -> None:
+        self.iterations = iterations
+        self.stop = 5
+
+    def episode_starts(self, world: Any, rng: Any, robot: Any) -> tuple[np.ndarray, None]:
+        return np.tile(world.start, (3, 1)), None
+
+    def terminated(self, context: Any) -> bool:
+        return context.iteration >= self.stop  # (the context after the iteration)
+
+    def score_episode(self, arrays: dict[str, np.ndarray], start: Any, goal: Any,
+                      robot: Any) -> dict[str, Any]:
+        return {"steps": int(arrays["collision"].size)}
+
+    def aggregate(self, figures: dict[str, np.ndarray]) -> dict[str, float]:
+        return {"mean_steps": float(figures["steps"].mean())}
+
+
+class Lapper:
+    name = "lapper"
+    evaluation_protocol = "laps"
+
+    def reset(self, rng: Any, n_situations: int, iterations: int) -> None:
+        pass
+
+    def propose(self, context: Any) -> Proposal:
+        return Proposal(0.0, None)
+
+
+class Plugin:
+    @hookimpl
+    def sitframe_protocols(self) -> list[Any]:
+        return [Laps]
+
+    @hookimpl
+    def sitframe_behaviours(self) -> list[Any]:
+        return [Lapper]
+
+
+def experiment(**evaluate: Any) -> Experiment:
+    pm = get_plugin_manager()
+    pm.register(Plugin(), name="laps-plugin")
+    cfg = validate_config({
+        "experiment": {"stages": ["evaluate"]},
+        "interpreter": {"component": "fcm", "c": 2},
+        "behaviours": {"lap": {"component": "lapper"}},
+        "arbiter": {"component": "single"},
+        "evaluate": {"worlds": ["training"], "iterations": 20, **evaluate},
+    })
+    return Experiment(cfg, pm=pm)
+
+
+def test_a_plugin_protocol_runs_its_episodes_through_the_core():
+    exp = experiment()
+    assert exp.protocol == "laps"
+    (trial,) = exp.run(interpreter_state=STATE).trials
+    assert trial.summary["eval/training/mean_steps"] == 5.0
+    assert trial.episodes["steps"].tolist() == [5, 5, 5]
+    assert trial.episodes["first_iteration"].tolist() == [0, 5, 10]
+    assert "goal" not in trial.episodes and trial.arrays["pose"].shape == (18, 3)
+
+
+def test_a_protocol_breaking_the_contract_is_a_plugin_fault(monkeypatch):
+    monkeypatch.setattr(Laps, "episode_starts", lambda self, world, rng, robot: (np.zeros(3), None))
+    with pytest.raises(PluginFault, match="episode_starts.*expected \\(n, 3\\)"):
+        experiment().run(interpreter_state=STATE)
+
+
+def test_an_unknown_protocol_lists_the_available_ones():
+    with pytest.raises(InputError, match="unknown protocol 'nope'.*available: goal-episodes, laps"):
+        experiment().res.protocol("nope")
