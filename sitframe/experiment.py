@@ -1,6 +1,6 @@
 """High-level entry points: prepare a run from a config, evaluate a log, print rule bases.
 
-These glue :mod:`sitframe.config`, :mod:`sitframe.scheduler` and
+These glue :mod:`sitframe.config`, :mod:`sitframe.scheduler` (with :mod:`sitframe.loop`) and
 :mod:`sitframe.logs` together for the CLI and for notebooks::
 
     from sitframe.config import load_config
@@ -28,18 +28,11 @@ from sitframe.collect import trajectory_poses
 from sitframe.config import load_config, validate_config
 from sitframe.errors import InputError
 from sitframe.logs import Log, open_log
+from sitframe.loop import STAGE_BATCH, STAGE_EVAL, TrialSpec, batch_scores, simulate, stage_seed
 from sitframe.pluginmanager import Registry, get_plugin_manager
 from sitframe.records import LearnedPolicy
-from sitframe.scheduler import (
-    STAGE_BATCH,
-    STAGE_EVAL,
-    Experiment,
-    Resolved,
-    TrialSpec,
-    batch_scores,
-    simulate,
-    stage_seed,
-)
+from sitframe.resolve import Resolved
+from sitframe.scheduler import Experiment
 
 
 def _resolve_path(path: str, base_dir: str) -> str:
@@ -311,7 +304,7 @@ def evaluate_log(
     ``wall_distance_rmse_m``). ``arbiter`` replaces the log's arbiter.
 
     With ``goal_episodes = N``: N episodes of the run's evaluation protocol
-    (one batch, :func:`sitframe.scheduler.run_batch`; its table's
+    (one batch, :func:`sitframe.loop.run_batch`; its table's
     ``episodes`` set to N), e.g. random goal episodes
     (``plugins/goal_episodes.py``) in ``world``. If the log's config has a
     protocol (a goal run) it is used; otherwise the behaviours, arbiter and ``[goal]`` table

@@ -9,7 +9,7 @@ returns the trial's arrays; the calling process hands them to the observers,
 so exactly one process writes the HDF5 log, in trial order.
 
 Results are bit-identical to a serial run: a trial depends only on its
-:class:`~sitframe.scheduler.TrialSpec` (its seed is spawned from the run seed
+:class:`~sitframe.loop.TrialSpec` (its seed is spawned from the run seed
 and its index) and on the config, never on which worker runs it or when.
 (Across *machines* this holds as long as they run the same versions of
 sitframe, numpy and the plugins.)
@@ -52,15 +52,8 @@ from typing import TYPE_CHECKING, Any
 from sitframe.config import config_hash, to_toml
 from sitframe.errors import InputError, PluginFault, TaskCancelled
 from sitframe.interrupts import deferred_interrupt
-from sitframe.scheduler import (
-    Experiment,
-    SerialExecutor,
-    TrialSpec,
-    attach_evaluation,
-    evaluation_specs,
-    simulate,
-    step_hook_of,
-)
+from sitframe.loop import TrialSpec, attach_evaluation, evaluation_specs, simulate, step_hook_of
+from sitframe.scheduler import Experiment, SerialExecutor
 
 if TYPE_CHECKING:
     from sitframe.collect import Collected
@@ -288,14 +281,14 @@ class TrialPipeline:
     """Feeds trials to a :class:`PoolExecutor` and yields them as they complete.
 
     Each trial is split into its learning part and its frozen-policy
-    evaluations (:func:`~sitframe.scheduler.evaluation_specs`), which run as
+    evaluations (:func:`~sitframe.loop.evaluation_specs`), which run as
     separate tasks once the learning part has finished: the work then comes
     in pieces small enough to keep every worker busy until the end, instead of
     one worker finishing the last whole trial alone. At most ``window``
     learning tasks are in flight; evaluations are submitted ahead of further
     learning tasks, so trials complete roughly in index order (and reach the
     log early). The evaluations are attached in world order, exactly as
-    :func:`~sitframe.scheduler.simulate` attaches them, so the assembled
+    :func:`~sitframe.loop.simulate` attaches them, so the assembled
     result is identical to a serial one.
 
     Iterating yields ``("trial", tag, TrialResult)`` when a trial is complete
@@ -433,7 +426,7 @@ def start_method() -> str:
 def _mp_context(method: str) -> mp.context.BaseContext:
     ctx = mp.get_context(method)
     if method == "forkserver":
-        ctx.set_forkserver_preload(["sitframe.parallel", "sitframe.scheduler"])
+        ctx.set_forkserver_preload(["sitframe.parallel", "sitframe.scheduler", "sitframe.loop"])
     return ctx
 
 

@@ -5,7 +5,7 @@ or failed run holds everything needed to finish it: the resolved config,
 the run seed, the fitted situations (``/cluster/state``) and every trial that
 finished. Resuming rebuilds the experiment from that config, runs only the
 missing trial indices with the same per-trial seeds (spawned from the run
-seed and the index, see :func:`sitframe.scheduler.stage_seed`), appends them
+seed and the index, see :func:`sitframe.loop.stage_seed`), appends them
 and marks the log ``complete``. Every dataset is then bit-for-bit what an
 uninterrupted run with the same seed writes.
 

@@ -498,7 +498,7 @@ def _registry() -> Any:
 
 def classify_components(doc: dict[str, Any]) -> str:
     """``parse_config`` then resolve every component (what ``sitframe run`` does first)."""
-    from sitframe.scheduler import Resolved
+    from sitframe.resolve import Resolved
 
     with warnings.catch_warnings():
         warnings.simplefilter("error")

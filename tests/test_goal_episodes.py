@@ -16,9 +16,10 @@ from sitframe.config import load_config, preset_text, validate_config
 from sitframe.errors import InputError
 from sitframe.experiment import evaluate_log, prepare_experiment
 from sitframe.logs import open_log
+from sitframe.loop import TrialSpec, batch_scores, simulate
 from sitframe.pluginmanager import Registry, get_plugin_manager
 from sitframe.plugins.goal_episodes import AGGREGATE_KEYS, GoalEpisodes, goal_pairs, world_pairs
-from sitframe.scheduler import Resolved, TrialSpec, batch_scores, simulate
+from sitframe.resolve import Resolved
 from sitframe.world import load_world, parse_world
 
 STATE = {"centers": np.array([[0.5] * 8, [3.0] * 8]), "m": 1.2}
@@ -206,8 +207,9 @@ def test_learning_goal_run_evaluates_each_trials_learned_policy():
     (Before, the episodes ran as extra trials after the learning trials with the
     untrained behaviour: the rule base all zeros.)
     """
+    from sitframe.loop import evaluation_specs
     from sitframe.parallel import InlineExecutor
-    from sitframe.scheduler import Experiment, evaluation_specs
+    from sitframe.scheduler import Experiment
 
     cfg = validate_config({
         "experiment": {"trials": 2, "iterations": 80, "world": "goal",

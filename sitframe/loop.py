@@ -1,0 +1,622 @@
+"""One trial: the control loop, its arrays and its scoring.
+
+One control iteration (1.5 s of robot time)::
+
+    reading   = sensor.read(world, pose, rng)
+    u         = interpreter.memberships(reading)
+    proposals = {label: b.propose(context) for b in behaviours}
+    proposal  = arbiter.combine(context, proposals)
+    outcome   = step_robot(world, pose, command, robot, rng)
+    r         = reward(transition)        # per learning behaviour
+    b.learn(transition, r)
+    hook.sitframe_step(record)            # only if some plugin implements it
+
+Every value crossing from plugin code is checked (:mod:`sitframe.contract`).
+A :class:`TrialSpec` is picklable, so worker processes run the same loop.
+
+Seeds: the run seed ``S`` gives each stage and each trial its own
+:class:`numpy.random.SeedSequence` (``spawn_key`` = stage, trial), so trial
+``k`` is the same whatever the number of trials or workers, and all
+randomness of a trial flows from one :class:`numpy.random.Generator`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pluggy
+
+from sitframe.contract import (
+    MEMBERSHIP_SUM_TOL,
+    BoundaryError,
+    Origin,
+    blame,
+    call,
+    check_combined,
+    check_data,
+    check_memberships,
+    check_policy,
+    check_proposal,
+    check_reading,
+    check_reward,
+    fault,
+    memberships_mismatch,
+    sensor_spec_mismatch,
+)
+from sitframe.errors import InputError, PluginFault, TaskCancelled
+from sitframe.metrics import collisions_per_1000, coverage, path_length
+from sitframe.records import (
+    Context,
+    LearnedPolicy,
+    StepRecord,
+    Transition,
+    TrialInfo,
+    TrialResult,
+)
+from sitframe.resolve import Resolved
+from sitframe.robot import Command, RobotParams, step_robot
+from sitframe.world import Goal, World
+
+#: Seed stages (:func:`stage_seed`); ``STAGE_BATCH``: the episode batches of a run that
+#: does not learn (one per world of its evaluation protocol).
+STAGE_COLLECT, STAGE_CLUSTER, STAGE_TRIALS, STAGE_EVAL, STAGE_BATCH = 0, 1, 2, 3, 4
+#: Summary keys of a frozen-policy evaluation (``evaluate --json`` and ``eval/<world>/...``).
+EVAL_KEYS = ("iterations", "collisions", "collisions_per_1000", "distance_m", "mean_speed_m_s",
+             "coverage")
+
+
+def stage_seed(seed: int, stage: int, index: int = 0) -> int:
+    """A 64-bit seed for ``(stage, index)`` derived from the run seed."""
+    ss = np.random.SeedSequence(entropy=seed, spawn_key=(stage, index))
+    return int(ss.generate_state(1, np.uint64)[0])
+
+
+@dataclass(frozen=True)
+class TrialSpec:
+    """Everything one trial needs; picklable so workers can run it.
+
+    Attributes
+    ----------
+    index
+        Trial number.
+    seed
+        64-bit seed of the trial's Generator.
+    world
+        World name.
+    iterations
+        Number of control iterations.
+    learn
+        Whether behaviours with a reward learn (False = evaluation).
+    interpreter_state
+        Fitted interpreter state (from the cluster stage or a log).
+    policies
+        Behaviour label -> policy dict to load before the trial.
+    evaluate
+        World names to evaluate the trial's final policy in afterwards.
+    eval_iterations
+        Iterations per evaluation.
+    start
+        Start pose (x [m], y [m], theta [rad]); ``None`` = the world's start.
+    goal
+        Goal (x [m], y [m], radius [m]) given to behaviours in the context;
+        ``None`` = the world's ``[goal]`` if any.
+    protocol
+        The evaluation protocol (:class:`sitframe.components.EvaluationProtocol`)
+        by name: a spec that does not learn is then a *batch* of its episodes in
+        ``world`` (:func:`run_batch`), returned as one trial; a learning spec's
+        evaluations are such batches. ``None``: frozen-policy evaluations.
+    observed
+        Whether ``sitframe_step`` observers see the trial's iterations (not in
+        the evaluations of a learning trial).
+    """
+
+    index: int
+    seed: int
+    world: str
+    iterations: int
+    learn: bool
+    interpreter_state: dict[str, Any]
+    policies: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
+    evaluate: tuple[str, ...] = ()
+    eval_iterations: int = 1000
+    start: tuple[float, float, float] | None = None
+    goal: tuple[float, float, float] | None = None
+    protocol: str | None = None
+    observed: bool = True
+
+
+class _Step:
+    """Where the loop is, for fault messages: the component's origin and the method."""
+
+    __slots__ = ("origin", "method")
+
+    def __init__(self, origin: Origin | str | None, method: str) -> None:
+        self.origin, self.method = origin, method
+
+
+@contextmanager
+def _in_trial(trial: int) -> Iterator[None]:
+    """Name ``trial`` in a fault raised while the trial creates and binds its components."""
+    try:
+        yield
+    except PluginFault as exc:
+        if exc.trial is not None:
+            raise
+        raise PluginFault(exc.message, where=exc.where, method=exc.method,
+                          trial=trial) from exc
+
+
+def step_hook_of(pm: pluggy.PluginManager) -> Callable[[StepRecord], Any] | None:
+    """A function firing ``sitframe_step`` observers, or ``None`` when no plugin implements it.
+
+    An observer that raises is a :class:`PluginFault` naming its plugin (the
+    one whose ``sitframe_step`` is on the traceback), the trial and the iteration.
+    """
+    hook = pm.hook
+    impls = hook.sitframe_step.get_hookimpls()
+    if not impls:
+        return None
+    info = getattr(pm, "sitframe_info", {})
+
+    def step_hook(rec: StepRecord) -> None:
+        try:
+            hook.sitframe_step(record=rec)
+        except (KeyboardInterrupt, TaskCancelled, PluginFault):
+            raise
+        except Exception as exc:  # noqa: BLE001 - an observer's fault is reported, not raw
+            name = blame(exc, impls)
+            where = (f"plugin {info[name].describe() if name in info else name}"
+                     if name else "an observer")
+            raise fault(exc, where, "sitframe_step", rec.trial,
+                        rec.transition.before.iteration) from exc
+
+    return step_hook
+
+
+def simulate(
+    res: Resolved,
+    spec: TrialSpec,
+    *,
+    step_hook: Callable[[StepRecord], Any] | None = None,
+    protocol: Any = None,
+) -> TrialResult:
+    """Run one trial (learning, frozen evaluation or episode) and return its arrays.
+
+    An evaluation ``protocol``'s ``terminated(context)``, called after every
+    iteration, ends the trial early; ``iterations`` is then only its limit. A
+    spec with a protocol that does not learn is a batch of episodes
+    (:func:`run_batch`). ``step_hook`` fires for learning trials and episode
+    batches of their own, never for the evaluations of a learning trial
+    (``observed=False``), whichever executor runs them: the serial one runs
+    them here, a pool as separate tasks, and the logs must not differ.
+
+    Raises
+    ------
+    PluginFault
+        Plugin code raised, or returned a value that breaks the contract
+        (:mod:`sitframe.contract`); names the plugin, component, method,
+        trial and iteration.
+    """
+    if not spec.observed:
+        step_hook = None  # an evaluation of a learning trial (sitframe_step: "not called")
+    if spec.protocol is not None and not spec.learn:
+        return run_batch(res, spec, step_hook=step_hook)
+    rng = np.random.default_rng(spec.seed)
+    world = res.world(spec.world)
+    goal = world.goal if spec.goal is None else Goal(np.asarray(spec.goal[:2], float),
+                                                     float(spec.goal[2]))
+    k = spec.index
+    with _in_trial(k):  # each trial creates and binds its own components
+        sensor = res.sensor()
+        interp = res.interpreter()
+    og = res.origins  # the component origins, for messages
+    call(og["interpreter"], "load_state", interp.load_state, spec.interpreter_state, trial=k)
+    c = call(og["interpreter"], "n_situations", lambda: int(interp.n_situations), trial=k)
+    with _in_trial(k):
+        behaviours = res.behaviours()
+        arbiter = res.arbiter()
+        arb_reward = res.arbiter_reward() if spec.learn else None
+    L = spec.iterations
+    for label, (beh, _r) in behaviours.items():
+        o = og[f"behaviours.{label}"]
+        if label in spec.policies:
+            call(o, "load_policy", beh.load_policy, spec.policies[label], trial=k)
+        call(o, "reset", beh.reset, rng, c, L, trial=k)
+    if "arbiter" in spec.policies and hasattr(arbiter, "load_policy"):
+        call(og["arbiter"], "load_policy", arbiter.load_policy, spec.policies["arbiter"], trial=k)
+    if hasattr(arbiter, "reset"):
+        call(og["arbiter"], "reset", arbiter.reset, rng, c, L, trial=k)
+    learners = [(label, beh, rew, og[f"behaviours.{label}"], og[f"behaviours.{label}.reward"])
+                for label, (beh, rew) in behaviours.items() if rew is not None and spec.learn]
+    if arb_reward is not None:
+        learners.append(("arbiter", arbiter, arb_reward, og["arbiter"], og["arbiter.reward"]))
+    labels = list(behaviours)
+    components = [("sensor", sensor), ("interpreter", interp),
+                  *[(f"behaviours.{lb}", b) for lb, (b, _r) in behaviours.items()],
+                  *[(f"behaviours.{lb}.reward", r) for lb, (_b, r) in behaviours.items()
+                    if r is not None and spec.learn],  # (a frozen run uses no reward)
+                  ("arbiter", arbiter), ("arbiter.reward", arb_reward)]
+    components = [(key, comp) for key, comp in components if comp is not None]
+    tinfo = TrialInfo(k, "learn" if spec.learn else "evaluate", world, L, rng)
+    for key, comp in components:
+        if hasattr(comp, "trial_start"):
+            call(og[key], "trial_start", comp.trial_start, tinfo, trial=k)
+    default_speed = float(res.cfg["experiment"]["default_speed"])
+    robot = res.robot
+
+    d = res.run.sensor.dim
+    pose_a = np.empty((L + 1, 3))
+    sonar_a = np.empty((L, d))
+    u_a = np.empty((L, c))
+    cmd_a = np.empty((L, 2))
+    coll_a = np.zeros(L, dtype=bool)
+    contact_a = np.full((L, 2), np.nan)
+    near_a = np.empty(L)
+    weights_a = np.empty((L, len(labels)))
+    prop_a = {lb: np.empty((L, 2)) for lb in labels}
+    rew_a = {lb: np.empty(L) for lb, *_ in learners}
+
+    at_read, at_u = _Step(og["sensor"], "read"), _Step(og["interpreter"], "memberships")
+    at_combine, at_core = _Step(og["arbiter"], "combine"), _Step(None, "step")
+    at_propose = [(lb, beh, _Step(og[f"behaviours.{lb}"], "propose"))
+                  for lb, (beh, _r) in behaviours.items()]
+    at_learn = [(lb, beh, rew, _Step(ob, "learn"), _Step(orw, "__call__"))
+                for lb, beh, rew, ob, orw in learners]
+    at_end = None if protocol is None else _Step(
+        og.get(protocol.table) or f"protocol '{protocol.name}'", "terminated")
+    step_at = at_read
+    t = 0
+    pose = np.array(world.start if spec.start is None else spec.start, dtype=float)
+    n_done = L
+    try:
+        reading = sensor.read(world, pose, rng)
+        check_reading(reading, d)
+        near = _nearest(reading)
+        step_at = at_u
+        u = interp.memberships(reading)
+        check_memberships(u, c)
+        ctx = Context(0, pose, reading, u, near, world, goal)
+        for t in range(L):
+            proposals = {}
+            for lb, beh, step_at in at_propose:  # noqa: B007 - step_at names the caller on a fault
+                proposals[lb] = check_proposal(beh.propose(ctx))
+            step_at = at_combine
+            prop, weights = check_combined(arbiter.combine(ctx, proposals), len(labels))
+            step_at = at_core
+            speed = prop.speed_m_s if prop.speed_m_s is not None else default_speed
+            cmd = Command(prop.heading_deg, speed)
+            out = step_robot(world, pose, cmd, robot, rng)
+            pose = out.pose
+            step_at = at_read
+            reading2 = sensor.read(world, pose, rng)
+            check_reading(reading2, d)
+            near = _nearest(reading2)
+            step_at = at_u
+            u2 = interp.memberships(reading2)
+            check_memberships(u2, c)
+            ctx2 = Context(t + 1, pose, reading2, u2, near, world, goal)
+            tr = Transition(ctx, cmd, out, ctx2)
+            rewards = {}
+            for lb, beh, rew, at_l, step_at in at_learn:
+                r = check_reward(rew(tr))
+                rewards[lb] = r
+                rew_a[lb][t] = r
+                step_at = at_l
+                beh.learn(tr, r)
+            pose_a[t] = ctx.pose
+            sonar_a[t] = ctx.reading
+            u_a[t] = ctx.memberships
+            cmd_a[t] = (cmd.heading_change_deg, cmd.speed_m_s)
+            if out.collided:
+                coll_a[t] = True
+                contact_a[t] = out.contact_xy
+            near_a[t] = ctx.nearest
+            weights_a[t] = weights
+            for lb in labels:
+                p = proposals[lb]
+                prop_a[lb][t] = (p.heading_deg, np.nan if p.speed_m_s is None else p.speed_m_s)
+            if step_hook is not None:
+                step_at = _Step(None, "sitframe_step")
+                step_hook(StepRecord(spec.index, tr, proposals, weights, rewards))
+            ctx = ctx2
+            if at_end is not None and (step_at := at_end) and protocol.terminated(ctx):
+                n_done = t + 1
+                break
+    except (KeyboardInterrupt, TaskCancelled, PluginFault, InputError):
+        raise  # (a plugin's InputError names the input it found wrong)
+    except Exception as exc:
+        if step_at.origin is None and step_at.method == "step":
+            raise  # the core's own arithmetic: a bug here, not the plugin's
+        raise _loop_fault(exc, step_at, k, t, res, locals()) from exc
+    pose_a[n_done] = pose
+    n = n_done
+    _check_trial_values(sonar_a[:n], u_a[:n], weights_a[:n], og, k)
+    arrays: dict[str, np.ndarray] = {
+        "pose": pose_a[: n + 1], READING: sonar_a[:n], "memberships": u_a[:n],
+        "command": cmd_a[:n], "collision": coll_a[:n], "contact": contact_a[:n],
+        "nearest": near_a[:n], "weights": weights_a[:n],
+    }
+    for lb in labels:
+        arrays[f"proposals/{lb}"] = prop_a[lb][:n]
+    for lb in rew_a:
+        arrays[f"reward/{lb}"] = rew_a[lb][:n]
+    bdata, policies = {}, {}
+    learned = [(lb, b, og[f"behaviours.{lb}"]) for lb, (b, _r) in behaviours.items()]
+    if hasattr(arbiter, "policy"):
+        learned.append(("arbiter", arbiter, og["arbiter"]))
+    for lb, b, o in learned:
+        if hasattr(b, "trial_data"):
+            bdata[lb] = _checked(o, "trial_data", check_data, b.trial_data, k, "trial data")
+        if hasattr(b, "policy"):
+            pol = _checked(o, "policy", lambda p: check_policy(p, c), b.policy, k)
+            if pol is not None:
+                policies[lb] = pol
+    summary = trial_summary(world, arrays, bdata, robot)
+    result = TrialResult(spec.index, spec.seed, world.name, arrays, bdata, summary,
+                         policies=policies)
+    _collect_plugin_data(result, components, tinfo, og, res)
+    for ev_spec in evaluation_specs(spec, result.policies):
+        attach_evaluation(result, ev_spec.world, simulate(res, ev_spec))
+    return result
+
+
+def run_batch(res: Resolved, spec: TrialSpec, *,
+              step_hook: Callable[[StepRecord], Any] | None = None) -> TrialResult:
+    """Run a batch of ``spec.protocol``'s episodes in ``spec.world``; return it as one trial.
+
+    Start poses (and goals) come from the protocol, given a Generator seeded
+    by ``spec.seed``; episode ``e`` runs with its own seed spawned from it, so
+    a batch is reproducible and episode ``e`` does not depend on the others.
+    Each episode is :func:`simulate` from its start, with its goal, until the
+    protocol's ``terminated`` or its ``iterations``. The trial holds the
+    episodes' arrays concatenated (``pose`` has one extra row per episode;
+    ``episodes["first_iteration"]`` gives each one's first row), the
+    per-episode figures (one array per key, and one ``NNNN`` group per
+    episode) and the summary (:func:`trial_summary` over all episodes) with
+    the protocol's aggregates as ``eval/<world>/<key>``.
+    """
+    k = spec.index
+    with _in_trial(k):
+        proto = res.protocol(str(spec.protocol))
+    o = res.origins[proto.table]
+    world = res.world(spec.world, key=f"{proto.table}.worlds")
+    ss = np.random.SeedSequence(spec.seed % 2**64)
+    rng = np.random.default_rng(ss.spawn(1)[0])
+    starts, goals = call(o, "episode_starts", proto.episode_starts, world, rng, res.robot,
+                         trial=k)
+    starts = np.asarray(starts, dtype=float)
+    n = len(starts)
+    if starts.shape != (n, 3) or n < 1 or (goals is not None and np.shape(goals) != (n, 3)):
+        raise PluginFault(f"returned starts of shape {starts.shape} and goals of shape "
+                          f"{None if goals is None else np.shape(goals)}; expected (n, 3) "
+                          "each (goals may be None), n >= 1", where=str(o),
+                          method="episode_starts", trial=k)
+    seeds = np.random.SeedSequence(spec.seed % 2**64, spawn_key=(1,)).generate_state(n, np.uint64)
+    parts: list[TrialResult] = []
+    figures: list[dict[str, Any]] = []
+    for e in range(n):
+        goal = None if goals is None else tuple(float(v) for v in goals[e])
+        ep = dataclasses.replace(spec, seed=int(seeds[e]), iterations=int(proto.iterations),
+                                 evaluate=(), start=tuple(float(v) for v in starts[e]),
+                                 goal=goal, protocol=None)
+        r = simulate(res, ep, step_hook=step_hook, protocol=proto)
+        parts.append(r)
+        figures.append(_checked(o, "score_episode", check_data, lambda r=r, e=e: (
+            proto.score_episode(r.arrays, starts[e], None if goals is None else goals[e],
+                                res.robot)), k, "per-episode figures"))
+    per_ep = {key: np.asarray([f[key] for f in figures]) for key in figures[0]}
+    scores = _checked(o, "aggregate", check_data, lambda: proto.aggregate(per_ep), k,
+                      "the batch's scores")
+    arrays = {key: np.concatenate([p.arrays[key] for p in parts]) for key in parts[0].arrays}
+    first = np.cumsum([0] + [int(p.arrays["collision"].size) for p in parts[:-1]])
+    episodes: dict[str, Any] = {**per_ep, "start": starts}
+    if goals is not None:
+        episodes["goal"] = goals
+    episodes["first_iteration"] = first.astype(np.int64)
+    for e, f in enumerate(figures):
+        episodes[f"{e:04d}"] = row = {**f, "start": starts[e]}
+        if goals is not None:
+            row["goal"] = goals[e]
+    summary = trial_summary(world, arrays, {}, res.robot)  # (nothing converges here)
+    summary["distance_m"] = float(np.asarray(  # (not across the jumps between episodes)
+        [path_length(p.arrays["pose"][:, :2]) for p in parts]).sum())
+    for key, v in scores.items():
+        summary[summary_key("eval", world.name, key)] = v
+    return TrialResult(k, spec.seed, world.name, arrays, parts[0].behaviours, summary,
+                       episodes, policies=parts[0].policies)
+
+
+def batch_scores(result: TrialResult) -> dict[str, Any]:
+    """The protocol's aggregates of a batch returned by :func:`run_batch`."""
+    prefix = summary_key("eval", result.world, "")
+    return {k[len(prefix):]: v for k, v in result.summary.items() if k.startswith(prefix)}
+
+
+#: Name of the per-iteration sensor readings in a trial's arrays and the log
+#: (sensor-neutral; logs before contract v2 call it ``sonar``, read back as both).
+READING = "reading"
+
+
+def _nearest(reading: np.ndarray) -> float:
+    """The smallest range of a reading; NaN here is the sensor's fault, found at once."""
+    v = float(reading.min())
+    if v != v:  # NaN
+        raise BoundaryError(sensor_spec_mismatch(reading, reading.size) or "returned NaN")
+    return v
+
+
+def _loop_fault(exc: Exception, step_at: _Step, trial: int, t: int, res: Resolved,
+                scope: dict[str, Any]) -> PluginFault:
+    """The fault for ``exc`` raised at ``step_at``; blame a bad upstream value where there is one.
+
+    The loop checks readings and memberships cheaply (type and shape); when a
+    later component fails, the full checks run on this iteration's inputs
+    first, so a NaN reading is blamed on the sensor, not on the behaviour
+    that choked on it.
+    """
+    if step_at.origin is not None and step_at.method != "read":
+        c = res.run.n_situations
+        for name in ("reading2", "reading"):
+            r = scope.get(name)
+            if isinstance(r, np.ndarray) and (why := sensor_spec_mismatch(r, res.run.sensor.dim)):
+                return PluginFault(why, where=str(res.origins["sensor"]), method="read",
+                                   trial=trial, iteration=t)
+        for name in ("u2", "u"):
+            u = scope.get(name)
+            if isinstance(u, np.ndarray) and c is not None and (why := memberships_mismatch(u, c)):
+                return PluginFault(why, where=str(res.origins["interpreter"]),
+                                   method="memberships", trial=trial, iteration=t)
+    if isinstance(exc, BoundaryError):
+        return PluginFault(str(exc), where=str(step_at.origin or "an observer"),
+                           method=step_at.method, trial=trial, iteration=t)
+    return fault(exc, step_at.origin or "an observer (sitframe_step)", step_at.method, trial, t)
+
+
+def _check_trial_values(readings: np.ndarray, u: np.ndarray, weights: np.ndarray,
+                        origins: dict[str, Origin], trial: int) -> None:
+    """Vectorised checks of every reading, membership vector and weight of a finished trial."""
+    bad = ~np.isfinite(readings).all(axis=1)
+    if bad.any():
+        t = int(np.argmax(bad))
+        raise PluginFault(sensor_spec_mismatch(readings[t], readings.shape[1]) or "non-finite",
+                          where=str(origins["sensor"]), method="read", trial=trial, iteration=t)
+    bad = ~np.isfinite(u).all(axis=1) | (u < 0).any(axis=1) | \
+        (np.abs(u.sum(axis=1) - 1.0) > MEMBERSHIP_SUM_TOL)
+    if bad.any():
+        t = int(np.argmax(bad))
+        raise PluginFault(memberships_mismatch(u[t], u.shape[1]) or "invalid",
+                          where=str(origins["interpreter"]), method="memberships", trial=trial,
+                          iteration=t)
+    bad = ~np.isfinite(weights).all(axis=1)
+    if bad.any():
+        t = int(np.argmax(bad))
+        raise PluginFault(f"returned non-finite weights {weights[t].tolist()}",
+                          where=str(origins["arbiter"]), method="combine", trial=trial,
+                          iteration=t)
+
+
+def _checked(origin: Origin, method: str, check: Callable[[Any], Any], fn: Callable[[], Any],
+             trial: int, *what: str) -> Any:
+    value = call(origin, method, fn, trial=trial)
+    try:
+        return check(value, *what)
+    except BoundaryError as exc:
+        raise PluginFault(str(exc), where=str(origin), method=method, trial=trial) from None
+
+
+def _collect_plugin_data(result: TrialResult, components: list[tuple[str, Any]],
+                         tinfo: TrialInfo, origins: dict[str, Origin], res: Resolved) -> None:
+    """Components' ``trial_end`` and observers' ``sitframe_trial_data`` into ``plugin_data``."""
+    k = result.index
+
+    def add(plugin: str, where: str, data: dict[str, Any]) -> None:
+        box = result.plugin_data.setdefault(plugin, {})
+        for key, v in data.items():
+            if key in box:
+                raise PluginFault(f"hands '{key}' for the log, which another component of the "
+                                  f"same plugin already handed", where=where,
+                                  method="trial_end", trial=k)
+            box[key] = v
+
+    for key, comp in components:
+        if hasattr(comp, "trial_end"):
+            o = origins[key]
+            data = _checked(o, "trial_end", check_data, lambda c=comp: c.trial_end(tinfo), k,
+                            "per-trial data")
+            if data:
+                add(o.plugin_name, str(o), data)
+    for impl in res.registry.pm.hook.sitframe_trial_data.get_hookimpls():
+        where = f"plugin {res.registry.describe_plugin(impl.plugin_name)}"
+        try:
+            data = check_data(impl.function(trial=result), "sitframe_trial_data")
+        except BoundaryError as exc:
+            raise PluginFault(str(exc), where=where, method="sitframe_trial_data",
+                              trial=k) from None
+        except (KeyboardInterrupt, TaskCancelled, PluginFault):
+            raise
+        except Exception as exc:  # noqa: BLE001 - an observer's fault is reported, not raw
+            raise fault(exc, where, "sitframe_trial_data", k) from exc
+        if data:
+            add(impl.plugin_name, where, data)
+
+
+def evaluation_specs(spec: TrialSpec, policies: dict[str, LearnedPolicy]) -> list[TrialSpec]:
+    """The evaluations of a finished trial (one spec per ``spec.evaluate`` world).
+
+    ``policies`` are the trial's learned policies (``TrialResult.policies``).
+    With a ``spec.protocol`` each evaluation is a batch of its episodes
+    (:func:`run_batch`) with these policies, else one frozen-policy run of
+    ``eval_iterations`` from the world's start.
+    Parallel executors run these as separate tasks; :func:`attach_evaluation`
+    adds their results to the trial in this order.
+    """
+    if not spec.evaluate:
+        return []
+    return [dataclasses.replace(
+        spec, seed=stage_seed(spec.seed % (2**63), STAGE_EVAL, k), world=wname,
+        iterations=spec.eval_iterations, learn=False, policies=dict(policies), evaluate=(),
+        observed=False) for k, wname in enumerate(spec.evaluate)]
+
+
+#: Per-iteration arrays of a frozen-policy evaluation kept in the log (enough to
+#: replay it and to see where and in which situation it collided).
+EVAL_ARRAYS = ("pose", "collision", "contact", "command", "nearest", READING, "memberships")
+
+
+def attach_evaluation(result: TrialResult, wname: str, ev: TrialResult) -> None:
+    """Add evaluation ``ev`` in world ``wname`` (``eval/<wname>/...``) to its trial's result.
+
+    A batch of episodes (:func:`run_batch`) also brings its per-episode
+    figures (``episodes/eval/<wname>/...``) and its protocol's aggregates.
+    """
+    for key in EVAL_ARRAYS:
+        if key in ev.arrays:
+            result.episodes[f"eval/{wname}/{key}"] = ev.arrays[key]
+    for key, v in ev.episodes.items():
+        result.episodes[f"eval/{wname}/{key}"] = v
+    scores = {key: ev.summary[key] for key in EVAL_KEYS} | batch_scores(ev)
+    for key, v in scores.items():
+        result.summary[summary_key("eval", wname, key)] = v
+    for plugin, data in ev.plugin_data.items():
+        box = result.plugin_data.setdefault(plugin, {})
+        box.update({f"eval/{wname}/{k}": v for k, v in data.items()})
+
+
+def summary_key(*parts: str) -> str:
+    """The one spelling of a summary key: ``eval/<world>/<metric>`` (``.`` in the log's table)."""
+    return "/".join(parts)
+
+
+def trial_summary(world: World, arrays: dict[str, np.ndarray], bdata: dict[str, dict[str, Any]],
+                  robot: RobotParams) -> dict[str, Any]:
+    """Scalars of a trial: convergence, collision rates, distance, coverage."""
+    coll = arrays["collision"]
+    L = coll.size
+    if L == 0:
+        raise ValueError("a trial needs at least one iteration")
+    conv = [d.get("convergence_iteration", -1) for d in bdata.values() if "converged" in d]
+    converged = bool(conv) and all(c >= 0 for c in conv)
+    conv_it = max(conv) if converged else -1
+    xy = arrays["pose"][:, :2]
+    out = {
+        "iterations": L,
+        "converged": converged,
+        "convergence_iteration": int(conv_it),
+        "collisions": int(coll.sum()),
+        "collisions_per_1000": collisions_per_1000(coll),
+        "collisions_before_convergence": int(coll[: conv_it if converged else L].sum()),
+        "collisions_per_1000_after_convergence":
+            collisions_per_1000(coll, conv_it) if converged and conv_it < L else float("nan"),
+        "distance_m": path_length(xy),
+        "mean_speed_m_s": float(arrays["command"][:, 1].mean()),
+        "coverage": coverage(world, xy, radius=robot.radius),
+    }
+    for key, val in arrays.items():
+        if key.startswith("reward/"):
+            out[f"mean_{key.replace('/', '_')}"] = float(val.mean())
+    return out
