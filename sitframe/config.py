@@ -115,7 +115,9 @@ MAX_ITERATIONS = 10_000_000
 MAX_RATE_HZ = 1000.0
 MIN_RATE_HZ = 0.01
 _COMPONENT_SECTIONS = ("sensor", "interpreter", "arbiter")
-_BEHAVIOUR_META = ("component", "reward", "reward_params", "policy_from")
+#: Keys of a ``[behaviours.LABEL]`` (or ``[arbiter]``) table that the core reads and that
+#: are not the component's parameters (the one definition; resolve and sweep use it).
+META_KEYS = ("component", "reward", "reward_params", "policy_from")
 
 
 def list_presets() -> list[str]:

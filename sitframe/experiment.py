@@ -25,7 +25,7 @@ import numpy as np
 
 from sitframe.clustering import average_ranks, describe_prototype
 from sitframe.collect import trajectory_poses
-from sitframe.config import load_config, validate_config
+from sitframe.config import META_KEYS, load_config, validate_config
 from sitframe.errors import InputError
 from sitframe.logs import Log, open_log
 from sitframe.loop import STAGE_BATCH, STAGE_EVAL, TrialSpec, batch_scores, simulate, stage_seed
@@ -398,7 +398,7 @@ def _fusion_config(log_cfg: dict[str, Any], policies: dict[str, LearnedPolicy],
     want = fcfg["behaviours"][slot]["policy_from"].get("behaviour", slot)
     src = want if want in policies else next(iter(policies))
     table = {k: v for k, v in log_cfg["behaviours"][src].items()
-             if k not in ("reward", "reward_params", "policy_from")}
+             if k == "component" or k not in META_KEYS}
     behaviours = {}
     for lb, t in fcfg["behaviours"].items():
         behaviours[lb] = table if lb == slot else {k: v for k, v in t.items()

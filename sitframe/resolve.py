@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from sitframe.config import META_KEYS
 from sitframe.contract import (
     Origin,
     call,
@@ -30,9 +31,6 @@ from sitframe.records import (
 )
 from sitframe.robot import RobotParams
 from sitframe.world import World, load_world
-
-#: Keys of a ``[behaviours.LABEL]`` (or ``[arbiter]``) table that are not component parameters.
-META_KEYS = ("component", "reward", "reward_params", "policy_from")
 
 
 @dataclass

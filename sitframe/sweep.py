@@ -70,6 +70,7 @@ from typing import Any
 
 import numpy as np
 
+from sitframe.config import META_KEYS
 from sitframe.errors import InputError, did_you_mean
 
 # start-up time: this module is imported whenever the command line builds its parser
@@ -81,7 +82,6 @@ HELP = "run an experiment over a grid of config values; one log per point + a su
 _SWEEP_KEYS = ("name", "description", "base", "trials", "seed", "out")
 #: Most grid points a sweep may have (each point's experiment is prepared up front).
 MAX_POINTS = 10_000
-_BEHAVIOUR_META = ("component", "reward", "reward_params", "policy_from")
 
 
 @dataclass
@@ -276,7 +276,7 @@ def check_key(key: str, cfg: dict[str, Any], registry: Any, *, file: str | None 
         label = parts[1]
         table = cfg["behaviours"][label]
         names, var_kw = params_of("behaviour", table["component"])
-        valid = set(_BEHAVIOUR_META) | names
+        valid = set(META_KEYS) | names
         if parts[2] == "reward_params":
             rnames, rvar = params_of("reward", table.get("reward", ""))
             if len(parts) != 4 or (parts[3] not in rnames and not rvar):
