@@ -52,26 +52,15 @@ noise ``noise_std`` [m] and a ``dropout`` probability (a dropped beam reads
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import ClassVar
 
 import numpy as np
 
 from sitframe import RunContext, World, cast_rays, hookimpl
+from sitframe import params as P
 
 __all__ = ["SonarRing", "sitframe_sensors"]
-
-
-def _param(name: str, value: object, *, lo: float, hi: float = math.inf,
-           lo_open: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float | np.number):
-        raise ValueError(f"{name}: expected a number, got {value!r}")
-    v = float(value)
-    if not math.isfinite(v) or v < lo or v > hi or (lo_open and v == lo):
-        lo_b = "(" if lo_open else "["
-        raise ValueError(f"{name}: expected a number in {lo_b}{lo:g}, {hi:g}], got {value!r}")
-    return v
 
 
 #: More rays than this per sonar cone only costs time (a 25 deg cone is sampled
@@ -123,18 +112,18 @@ class SonarRing:
             raise ValueError(f"angles_deg: expected at least one finite angle, got {angles_deg!r}")
         self.angles_deg = angles
         self.angles_deg.setflags(write=False)
-        self.max_range = _param("max_range", max_range, lo=0.0, lo_open=True)
+        self.max_range = P.number("max_range", max_range, lo=0.0, lo_open=True)
         self.robot_radius = 0.15 if robot_radius is None else \
-            _param("robot_radius", robot_radius, lo=0.0)
+            P.number("robot_radius", robot_radius, lo=0.0)
         self._radius_given = robot_radius is not None
-        self.beam_width_deg = _param("beam_width_deg", beam_width_deg, lo=0.0, hi=180.0)
+        self.beam_width_deg = P.number("beam_width_deg", beam_width_deg, lo=0.0, hi=180.0)
         if isinstance(rays_per_beam, bool) or not isinstance(rays_per_beam, int | np.integer) \
                 or not 1 <= rays_per_beam <= MAX_RAYS_PER_BEAM:
             raise ValueError(f"rays_per_beam: expected an integer in [1, {MAX_RAYS_PER_BEAM}], "
                              f"got {rays_per_beam!r}")
         self.rays_per_beam = int(rays_per_beam)
-        self.noise_std = _param("noise_std", noise_std, lo=0.0)
-        self.dropout = _param("dropout", dropout, lo=0.0, hi=1.0)
+        self.noise_std = P.number("noise_std", noise_std, lo=0.0)
+        self.dropout = P.number("dropout", dropout, lo=0.0, hi=1.0)
         # Ray bearings relative to the heading, beam by beam: (d * rays,)
         if self.rays_per_beam > 1:
             spread = np.linspace(-0.5, 0.5, self.rays_per_beam) * self.beam_width_deg

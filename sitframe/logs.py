@@ -87,12 +87,14 @@ import tomllib
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import h5py
 import numpy as np
 
+from sitframe.clustering import SONAR_ANGLES_DEG
 from sitframe.errors import InputError
 from sitframe.interrupts import deferred_interrupt
 from sitframe.records import LearnedPolicy, PolicyOutput, RunInfo, SensorSpec, TrialResult
@@ -507,7 +509,7 @@ class TrialLog:
                                  ) from None
         return LearnedPolicy(outs) if outs else None
 
-    @property
+    @cached_property
     def policies(self) -> dict[str, LearnedPolicy]:
         """Label -> :class:`LearnedPolicy` of every behaviour that learned one."""
         out = {}
@@ -593,7 +595,7 @@ class Log:
         if not d:
             table = self.config.get("sensor", {})
             d = {"name": table.get("component", "pioneer-sonar"),
-                 "angles_deg": table.get("angles_deg", [90, 50, 30, 10, -10, -30, -50, -90]),
+                 "angles_deg": table.get("angles_deg", SONAR_ANGLES_DEG),
                  "max_range": table.get("max_range", 3.0)}
         try:
             return SensorSpec(str(d["name"]), np.asarray(d["angles_deg"], dtype=np.float64),

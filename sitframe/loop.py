@@ -263,6 +263,7 @@ def simulate(
 
     at_read, at_u = _Step(og["sensor"], "read"), _Step(og["interpreter"], "memberships")
     at_combine, at_core = _Step(og["arbiter"], "combine"), _Step(None, "step")
+    at_step = _Step(None, "sitframe_step")
     at_propose = [(lb, beh, _Step(og[f"behaviours.{lb}"], "propose"))
                   for lb, (beh, _r) in behaviours.items()]
     at_learn = [(lb, beh, rew, _Step(ob, "learn"), _Step(orw, "__call__"))
@@ -321,7 +322,7 @@ def simulate(
                 p = proposals[lb]
                 prop_a[lb][t] = (p.heading_deg, np.nan if p.speed_m_s is None else p.speed_m_s)
             if step_hook is not None:
-                step_at = _Step(None, "sitframe_step")
+                step_at = at_step
                 step_hook(StepRecord(spec.index, tr, proposals, weights, rewards))
             ctx = ctx2
             if at_end is not None and (step_at := at_end) and protocol.terminated(ctx):

@@ -33,6 +33,18 @@ from sitframe.robot import RobotParams
 from sitframe.world import World, load_world
 
 
+def config_worlds(cfg: dict[str, Any]) -> list[str]:
+    """The worlds a config's stages name, once each: the learning world, then the
+    collection rooms (if it collects) and the evaluation rooms (if it evaluates)."""
+    e = cfg["experiment"]
+    names = [e["world"]]
+    if "collect" in e["stages"]:
+        names += cfg["collect"]["worlds"]
+    if "evaluate" in e["stages"]:
+        names += cfg["evaluate"]["worlds"]
+    return list(dict.fromkeys(names))
+
+
 @dataclass
 class Resolved:
     """A config resolved against a registry: creates fresh, checked, bound components on demand.
@@ -91,14 +103,8 @@ class Resolved:
             raise PluginFault(f"n_situations is {c!r}, expected a positive integer",
                               where=str(res.origins["interpreter"]), method="n_situations")
         e = cfg["experiment"]
-        names = [e["world"], *worlds]
-        if "collect" in e["stages"] and not e.get("clusters_from"):
-            names += cfg["collect"]["worlds"]
-        if "evaluate" in e["stages"]:
-            names += cfg["evaluate"]["worlds"]
-        loaded = {}
-        for n in dict.fromkeys(names):
-            loaded[n] = res.world(n, "experiment.world" if n == e["world"] else "worlds")
+        loaded = {n: res.world(n, "experiment.world" if n == e["world"] else "worlds")
+                  for n in dict.fromkeys([*config_worlds(cfg), *worlds])}
         res.run = RunContext(robot, spec, tuple(cfg["behaviours"]), None if c is None else int(c),
                              loaded, int(e["seed"]), int(e["iterations"]),
                              float(e["default_speed"]))
@@ -161,10 +167,13 @@ class Resolved:
 
     def arbiter_reward(self) -> Any | None:
         """The reward the arbiter learns from (``[arbiter] reward = ...``), or ``None``."""
-        table = self.cfg["arbiter"]
+        return self._reward("arbiter", self.cfg["arbiter"])
+
+    def _reward(self, key: str, table: dict[str, Any]) -> Any | None:
+        """The reward a behaviour's or the arbiter's table names (``reward``, ``reward_params``)."""
         if "reward" not in table:
             return None
-        return self._create("reward", "arbiter.reward", {
+        return self._create("reward", f"{key}.reward", {
             "component": table["reward"], **dict(table.get("reward_params", {}))})
 
     def behaviours(self) -> dict[str, tuple[Any, Any | None]]:
@@ -174,12 +183,8 @@ class Resolved:
             key = f"behaviours.{label}"
             needs = (("learn",) if "reward" in table else ()) + \
                 (("load_policy",) if "policy_from" in table else ())
-            beh = self._create("behaviour", key, table, needs=needs)
-            reward = None
-            if "reward" in table:
-                reward = self._create("reward", f"{key}.reward", {
-                    "component": table["reward"], **dict(table.get("reward_params", {}))})
-            out[label] = (beh, reward)
+            out[label] = (self._create("behaviour", key, table, needs=needs),
+                          self._reward(key, table))
         return out
 
     def protocol_name(self) -> str | None:

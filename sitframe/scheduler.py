@@ -47,7 +47,7 @@ from sitframe.records import (
     RunInfo,
     TrialResult,
 )
-from sitframe.resolve import Resolved
+from sitframe.resolve import Resolved, config_worlds
 
 
 class SerialExecutor:
@@ -120,21 +120,15 @@ class Experiment:
         self.out = out
         text = to_toml(cfg)
         e = cfg["experiment"]
-        worlds = {}
-        names = [e["world"]]
-        if "collect" in e["stages"]:
-            names += cfg["collect"]["worlds"]
-        if "evaluate" in e["stages"]:
-            names += cfg["evaluate"]["worlds"]
+        names = config_worlds(cfg)
         #: The run's evaluation protocol (:meth:`Resolved.protocol_name`); None = frozen.
         self.protocol = self.res.protocol_name()
         self.eval_worlds = list(cfg["evaluate"]["worlds"])
         if self.protocol is not None and "evaluate" in e["stages"]:
             self.eval_worlds = self.res.protocol_worlds(self.protocol)
             names += self.eval_worlds
-        for name in dict.fromkeys(names):
-            key = "experiment.world" if name == e["world"] else "worlds"
-            worlds[name] = self.res.world(name, key).text
+        worlds = {n: self.res.world(n, "experiment.world" if n == e["world"] else "worlds").text
+                  for n in dict.fromkeys(names)}
         plugins = [dataclasses.asdict(info) for info, _c in self.registry.plugins_table()]
         self.info = RunInfo(
             name=e["name"], config=cfg, config_text=text, config_hash=config_hash(text),

@@ -67,3 +67,18 @@ def run_json(capsys, *argv: str):
     captured = capsys.readouterr()
     assert code == 0, captured.err
     return json.loads(captured.out)
+
+
+#: A 6 m x 4 m world file with one obstacle, for tests that need a world of their own.
+ROOM = """
+name = "room"
+
+[robot]
+start = [1.0, 1.0, 90.0]
+
+[[walls]]
+points = [[0, 0], [6, 0], [6, 4], [0, 4], [0, 0]]
+
+[[obstacles]]
+points = [[4, 2.5], [5, 2.5], [5, 3.2], [4, 3.2]]
+"""

@@ -28,24 +28,13 @@ from pathlib import Path
 
 import h5py
 import pytest
-from helpers import small_config
+from helpers import ROOM, small_config
 
 from sitframe.cli import main
 
 SMALL = small_config(trials=1, iterations=100, eval_iterations=50)
 
-WORLD = """
-name = "room"
-
-[robot]
-start = [1.0, 1.0, 90.0]
-
-[[walls]]
-points = [[0, 0], [6, 0], [6, 4], [0, 4], [0, 0]]
-
-[[obstacles]]
-points = [[4, 2.5], [5, 2.5], [5, 3.2], [4, 3.2]]
-
+WORLD = ROOM + """
 [goal]
 position = [5, 1]
 radius = 0.3

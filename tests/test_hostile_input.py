@@ -24,7 +24,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from helpers import small_config
+from helpers import ROOM, small_config
 
 from sitframe.cli import main
 from sitframe.logs import open_log
@@ -35,18 +35,6 @@ SMALL = small_config(trials=2, iterations=100, eval_iterations=50)
 _CLI = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
         "from sitframe.cli import console_main; sys.exit(console_main(sys.argv[1:]))")
 
-ROOM = """
-name = "room"
-
-[robot]
-start = [1.0, 1.0, 90.0]
-
-[[walls]]
-points = [[0, 0], [6, 0], [6, 4], [0, 4], [0, 0]]
-
-[[obstacles]]
-points = [[4, 2.5], [5, 2.5], [5, 3.2], [4, 3.2]]
-"""
 
 
 def refused(capsys, argv: list[str], *needles: str) -> str:
