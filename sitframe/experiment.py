@@ -326,7 +326,9 @@ def evaluate_log(
     if not policies:
         raise InputError(f"trial {trial} has no learned policy to evaluate", file=log_path,
                          key="trials")
-    if log.has("cluster/state") or not cfg["experiment"]["clusters_from"]:
+    if tl.situations:  # situations that evolved in the trial: its own final ones
+        state = tl.situations_part("state")
+    elif log.has("cluster/state") or not cfg["experiment"]["clusters_from"]:
         state = log.interpreter_state()
     else:  # a run that reused situations from another log (e.g. a goal run)
         state = open_log(cfg["experiment"]["clusters_from"]).interpreter_state()

@@ -353,7 +353,8 @@ class TrialPipeline:
                 if kind == "learn":
                     self._learning -= 1
                     setup, spec = info
-                    evs = evaluation_specs(spec, value.policies) if _splittable(spec) else []
+                    evs = (evaluation_specs(spec, value.policies, value.situations.get("state"))
+                           if _splittable(spec) else [])
                     if not evs:
                         yield "trial", tag, value
                         continue
