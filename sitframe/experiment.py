@@ -458,8 +458,11 @@ def rule_base_table(result: Any) -> Any:
     if not outs:
         return table
     centers = result.interpreter_state.get("centers")
-    for i in range(outs[0][2].rules.size):
-        desc = describe_prototype(centers[i], result.sensor_angles_deg) \
+    rows: Any = range(outs[0][2].rules.size)
+    if own := getattr(best, "situations", {}).get("state"):  # evolving: the best trial's ids
+        rows, centers = [int(i) for i in own["ids"]], own["centers"]
+    for n, i in enumerate(rows):
+        desc = describe_prototype(centers[n], result.sensor_angles_deg) \
             if centers is not None and len(result.sensor_angles_deg) == np.shape(centers)[1] \
             else ""
         row = [f"S{i}", desc]

@@ -279,11 +279,12 @@ class FuzzyQLearner:
         bool
             Whether the rule base was changed (so a controller must reload it).
         """
-        if self.converged_at is not None:
-            return False
         prm = self.params
         q = self.q
         active = np.flatnonzero(u_before >= prm.activation) if prm.activation > 0 else self._rows
+        if self.converged_at is not None:
+            self._monitor(active, u_before, reward, u_after, collided)
+            return False
         if active.size:
             v_next = 0.0 if (collided and prm.terminal_on_collision) else \
                 float(u_after @ q.max(axis=1))
@@ -306,6 +307,23 @@ class FuzzyQLearner:
             self._change(iteration)
             return True
         return False
+
+    def _monitor(self, active: np.ndarray, u_before: np.ndarray, reward: float,
+                 u_after: np.ndarray, collided: bool) -> None:
+        """After convergence: the TD errors the frozen rules would get (``td_abs``), no update.
+
+        Learning has stopped, but an evolving interpreter still needs to know
+        where the frozen rule base fits the task badly (it may split there).
+        """
+        self.td_abs[:] = 0.0
+        if active.size == 0:
+            return
+        prm = self.params
+        v_next = 0.0 if (collided and prm.terminal_on_collision) else \
+            float(u_after @ self.q.max(axis=1))
+        cur = self.q[active, self.rule_base[active]]
+        w = u_before[active] if prm.update == "thesis" else 1.0
+        self.td_abs[active] = np.abs(w * reward + prm.gamma * w * v_next - cur)
 
     def _change(self, iteration: int) -> None:
         self.since_change = 0
