@@ -75,7 +75,7 @@ Config (``[interpreter]``)::
     transform = "log"     # feature space (as fcm) and its offset
     offset = 0.1
     capacity = 48         # ids available in a trial
-    create_distance = 1.6 # feature-space distance of "poorly covered"
+    create_distance = 1.8 # feature-space distance of "poorly covered"
     create_after = 3      # consecutive poorly covered readings
     prior_weight = 100.0  # evidence of a seeded prototype (readings)
     adapt = true
@@ -111,7 +111,7 @@ class EvolvingInterpreter(FCMInterpreter):
     name = "evolving"
     evolving = True
 
-    def __init__(self, *, capacity: int = 48, create_distance: float = 1.6,
+    def __init__(self, *, capacity: int = 48, create_distance: float = 1.8,
                  create_after: int = 3, prior_weight: float = 100.0, adapt: bool = True,
                  merge_distance: float = 0.4, split_ratio: float = 4.0,
                  split_min_updates: int = 100, split_min_distance: float = 0.4,
