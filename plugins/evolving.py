@@ -96,10 +96,10 @@ from typing import Any
 
 import numpy as np
 
-from sitframe import MembershipFunction, hookimpl
+from sitframe import MembershipFunction, SituationEvent, hookimpl
 from sitframe import params as P
-from sitframe.plugins.fcm_interpreter import FCMInterpreter
-from sitframe.situations import SituationEvent
+
+from .fcm_interpreter import FCMInterpreter
 
 #: Most ids a trial may use (the loop logs (L, capacity) memberships).
 MAX_CAPACITY = 256

@@ -54,12 +54,12 @@ from sitframe import (
     PolicyOutput,
     Proposal,
     QLearningParams,
+    SituationEvent,
     SituationFCS,
     Transition,
     hookimpl,
 )
 from sitframe import params as P
-from sitframe.situations import SituationEvent
 
 OUTPUTS = ("heading", "speed")
 UNITS = {"heading": "deg", "speed": "m/s"}

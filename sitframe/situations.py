@@ -43,6 +43,8 @@ from typing import Any
 
 import numpy as np
 
+from sitframe.contract import call
+
 #: Event kinds, and their codes in the log (``events/kind``).
 KINDS = ("create", "split", "merge", "prune")
 
@@ -124,7 +126,6 @@ class SituationTracker:
         """
         if not (learning and getattr(interpreter, "evolving", False)):
             return None
-        from sitframe.contract import call
 
         def via(key: str, method: str, fn: Any) -> Any:
             return lambda *a: call(origins[key], method, fn, *a, trial=trial)

@@ -431,8 +431,8 @@ def _situation_figures(W: _Writer, lg: Log, trials: dict[int, TrialLog], chosen:
                        worlds: dict[str, Any], radius: float) -> None:
     """Evolving situations: their number against iterations, where they were made, and the
     final prototypes of the chosen trials."""
-    from sitframe.analysis import clustering_plots as CP
-    from sitframe.analysis import situation_plots as SP
+    from sitframe.analysis import clustering_plots as CP  # matplotlib: start-up time
+    from sitframe.analysis import situation_plots as SP  # matplotlib: start-up time
 
     sec = "Evolving situations"
     start = len(np.asarray(lg.interpreter_state().get("ids", [])))
