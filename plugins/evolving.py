@@ -167,11 +167,12 @@ class EvolvingInterpreter(FCMInterpreter):
         if self.F.shape[1] != x.size and not self.ids.size:  # (not bound: learn d here)
             self._set_prototypes(np.zeros((0, x.size)), self.ids, np.zeros(0), self.next_id)
         self.t += 1
-        if not self.frozen:
-            self._cover(x)
-        ids = self.ids
-        diff = self.F[ids] - x
+        diff = self.Fa - x  # (the alive prototypes, kept contiguous: this is the hot loop)
         d2 = np.einsum("ij,ij->i", diff, diff)
+        if not self.frozen and self._cover(x, d2):
+            diff = self.Fa - x
+            d2 = np.einsum("ij,ij->i", diff, diff)
+        ids = self.ids
         u = self._u.from_d2(d2)
         out = np.zeros(self.capacity)
         out[ids] = u
@@ -180,8 +181,8 @@ class EvolvingInterpreter(FCMInterpreter):
             self.last_win[ids[int(u.argmax())]] = self.t
             if self.adapt:
                 um = u ** self.m
-                self.N[ids] += um
-                self.F[ids] -= (um / self.N[ids])[:, None] * diff
+                self.Na += um
+                self.Fa -= (um / self.Na)[:, None] * diff
             if self.t % self.check_every == 0:
                 self._checks()
         return out
@@ -212,6 +213,7 @@ class EvolvingInterpreter(FCMInterpreter):
         return {"refused": int(self.refused)}
 
     def state(self) -> dict[str, Any]:
+        self._sync()
         ids = self.ids
         return {"ids": ids.astype(np.int64), "centers": self.ranges(self.F[ids]),
                 "feature_centers": self.F[ids].copy(), "evidence": self.N[ids].copy(),
@@ -279,6 +281,7 @@ class EvolvingInterpreter(FCMInterpreter):
         self.alive = np.zeros(K, dtype=bool)
         self.alive[ids] = True
         self.ids = np.flatnonzero(self.alive)
+        self._compact()
         self.next_id = int(next_id)
         self.last_win = np.zeros(K, dtype=np.int64)
         self.err_sum = np.zeros(K)
@@ -295,30 +298,41 @@ class EvolvingInterpreter(FCMInterpreter):
         self.feature_centers = self.F[self.ids]
         self.centers = self.ranges(self.feature_centers) if self.ids.size else None
 
-    def _cover(self, x: np.ndarray) -> None:
-        """Count poorly covered readings; create a situation after ``create_after`` in a row."""
-        if self.ids.size:
-            diff = self.F[self.ids] - x
-            if np.einsum("ij,ij->i", diff, diff).min() <= self.create_d2:
+    def _compact(self) -> None:
+        """Copy the alive prototypes and evidence into contiguous arrays (after a change)."""
+        self.Fa = self.F[self.ids]
+        self.Na = self.N[self.ids]
+
+    def _sync(self) -> None:
+        """Write the contiguous prototypes and evidence back (before a change or ``state``)."""
+        self.F[self.ids] = self.Fa
+        self.N[self.ids] = self.Na
+
+    def _cover(self, x: np.ndarray, d2: np.ndarray) -> bool:
+        """Count poorly covered readings (``d2``: squared distances to the alive prototypes);
+        create a situation after ``create_after`` in a row. Returns whether one was made."""
+        if d2.size:
+            if d2.min() <= self.create_d2:
                 self.streak = 0
                 self.streak_sum[:] = 0.0
-                return
+                return False
             self.streak += 1
             self.streak_sum += x
             if self.streak < self.create_after:
-                return
+                return False
             at, weight = self.streak_sum / self.streak, float(self.streak)
         else:  # nothing yet: the first reading is the first situation
             at, weight = np.array(x, dtype=float), 1.0
         self.streak = 0
         self.streak_sum[:] = 0.0
-        self._new("create", at, weight)
+        return self._new("create", at, weight) is not None
 
     def _new(self, kind: str, at: np.ndarray, weight: float) -> int | None:
         """Add a prototype at ``at`` (features) with ``weight`` evidence; queue its event."""
         if self.next_id >= self.capacity:
             self.refused += 1
             return None
+        self._sync()
         parents, w = self._parents(at)
         i = self.next_id
         self.next_id += 1
@@ -326,6 +340,7 @@ class EvolvingInterpreter(FCMInterpreter):
         self.N[i] = weight
         self.alive[i] = True
         self.ids = np.flatnonzero(self.alive)
+        self._compact()
         self.last_win[i] = self.t
         self.pending.append(SituationEvent(kind, i, parents, w, self.ranges(at)))
         return i
@@ -343,9 +358,11 @@ class EvolvingInterpreter(FCMInterpreter):
 
     def _checks(self) -> None:
         """Merge, prune and split: at most one of each per check."""
+        self._sync()
         self._merge()
         self._prune()
         self._split()
+        self._compact()
         self.err_sum *= self.error_decay
         self.err_n *= self.error_decay
         self.err_x *= self.error_decay
@@ -405,6 +422,7 @@ class EvolvingInterpreter(FCMInterpreter):
         self.alive[i] = False
         self.ids = np.flatnonzero(self.alive)
         self.N[i] = 0.0
+        self._compact()
         self.err_sum[i] = self.err_n[i] = 0.0
         self.err_x[i] = 0.0
 
