@@ -36,7 +36,8 @@ memberships, Eq. 4.10) does not drift with c: it is smallest where the data
 falls into the crispest groups. The rule: run the c sweep over ``auto_cs``
 (``auto_trials`` restarts each, one trial chosen per c as usual), keep the c
 whose chosen trial has no empty cluster (``min_card > 0``), and take the one
-with the smallest R_f (ties: the smaller c); then cluster with that c and
+with the smallest R_f (ties, e.g. several perfectly crisp partitions: the
+largest ``min_ht`` (MinHT), then the smaller c); then cluster with that c and
 ``trials`` restarts as for a fixed c. The sweep is logged (``auto_cs``,
 ``auto_rf``, ``auto_c``). Until ``fit`` has run, ``n_situations`` is ``None``.
 """
@@ -162,7 +163,10 @@ class FCMInterpreter:
         sw = sweep_c(self.features(X), cs, n_trials=self.auto_trials, m=self.m, tol=self.tol,
                      max_iter=self.max_iter, seed=rng)
         rf = np.where(sw.measures["min_card"] > 0, sw.measures["rf"], np.inf)
-        best = int(np.argmin(rf)) if np.isfinite(rf).any() else int(np.argmin(sw.measures["rf"]))
+        if not np.isfinite(rf).any():
+            rf = np.asarray(sw.measures["rf"], float)
+        tied = np.isclose(rf, rf.min())  # (e.g. several perfectly crisp partitions, R_f = 0)
+        best = int(np.argmax(np.where(tied, sw.measures["min_ht"], -np.inf)))
         return {"auto_c": int(sw.cs[best]), "auto_cs": np.asarray(sw.cs),
                 "auto_rf": np.asarray(sw.measures["rf"], float)}
 

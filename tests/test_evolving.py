@@ -162,3 +162,18 @@ def test_online_run_logs_history_and_evaluates_own_situations(tmp_path, capsys) 
                   "--iterations", "100", "--json")
     assert ev["iterations"] == 100
     assert ev["collisions"] == tl.summary["eval/novel-1/collisions"]
+
+
+def test_auto_c_picks_the_crispest_partition_and_loads_any_c() -> None:
+    rng = np.random.default_rng(1)
+    centres = np.array([[0.3, 0.3], [2.5, 0.4], [1.2, 2.6]])
+    X = np.concatenate([c + 0.05 * rng.standard_normal((60, 2)) for c in centres])
+    fcm = FCMInterpreter(c="auto", auto_cs=[2, 3, 4, 5], auto_trials=3, trials=3)
+    assert fcm.n_situations is None
+    out = fcm.fit(X, np.random.default_rng(0))
+    assert out["auto_c"] == 3 == fcm.n_situations and out["auto_rf"].shape == (4,)
+    again = FCMInterpreter(c="auto")
+    again.load_state(fcm.state())
+    assert again.n_situations == 3
+    with pytest.raises(ValueError, match="auto"):
+        FCMInterpreter(c="many")
