@@ -37,7 +37,7 @@ falls into the crispest groups. The rule: run the c sweep over ``auto_cs``
 (``auto_trials`` restarts each, one trial chosen per c as usual), keep the c
 whose chosen trial has no empty cluster (``min_card > 0``), and take the one
 with the smallest R_f (ties, e.g. several perfectly crisp partitions: the
-largest ``min_ht`` (MinHT), then the smaller c); then cluster with that c and
+largest minimum hard tendency ``min_ht``, then the smaller c); then cluster with that c and
 ``trials`` restarts as for a fixed c. The sweep is logged (``auto_cs``,
 ``auto_rf``, ``auto_c``). Until ``fit`` has run, ``n_situations`` is ``None``.
 """

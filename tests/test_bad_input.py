@@ -192,7 +192,7 @@ CASES = [
          "available: cdb", c__toml=SMALL + "\n[arbiter]\ncomponent = 'cbd'\n"),
     case("component-unknown-sensor", RUN, "c.toml: sensor:", "available: laser, pioneer-sonar",
          c__toml=SMALL + "\n[sensor]\ncomponent = 'sonar'\n"),
-    case("component-unknown-interpreter", RUN, "c.toml: interpreter:", "available: fcm",
+    case("component-unknown-interpreter", RUN, "c.toml: interpreter:", "available: evolving, fcm",
          c__toml=_cfg('component = "fcm"', 'component = "kmeans"')),
     case("world-unknown-in-config", RUN, "c.toml: experiment.world:",
          "unknown world 'trainng'", "did you mean 'training'", "novel-1",
