@@ -438,8 +438,8 @@ def run_sweep(sweep: Sweep, executor: Any, *, progress: bool = False) -> dict[st
                 state = pt.run_kwargs.get("interpreter_state")
                 if exp.needs_clusters(state):
                     pipe.add_call(i, run_clusters, setups[i])
-                else:
-                    add_trials(i, state)
+                else:  # (no state: an evolving interpreter starting from no situations)
+                    add_trials(i, state if state is not None else exp.prepare())
             for kind, tag, value in pipe:
                 if kind == "call":
                     collected, fit, state = value

@@ -147,11 +147,14 @@ create_distance = 1.2
 """
 
 
-def test_online_run_logs_history_and_evaluates_own_situations(tmp_path, capsys) -> None:
-    cfg = small_config(trials=1, iterations=200).replace(
+def _online_config(iterations: int = 200) -> str:
+    cfg = small_config(trials=1, iterations=iterations).replace(
         '[interpreter]\ncomponent = "fcm"\nc = 6\ntrials = 4', ONLINE.strip())
-    cfg = cfg.replace("[experiment]", '[experiment]\nstages = ["learn", "evaluate"]')
-    _cfg, out = run_config(tmp_path, cfg, "online.h5")
+    return cfg.replace("[experiment]", '[experiment]\nstages = ["learn", "evaluate"]')
+
+
+def test_online_run_logs_history_and_evaluates_own_situations(tmp_path, capsys) -> None:
+    _cfg, out = run_config(tmp_path, _online_config(), "online.h5")
     assert '"situations"' in capsys.readouterr().out
     tl = open_log(str(out)).trial(0)
     state, events = tl.situations_part("state"), tl.situations_part("events")
@@ -177,3 +180,15 @@ def test_auto_c_picks_the_crispest_partition_and_loads_any_c() -> None:
     assert again.n_situations == 3
     with pytest.raises(ValueError, match="auto"):
         FCMInterpreter(c="many")
+
+
+def test_a_sweep_starts_online_runs_from_no_situations(tmp_path) -> None:
+    from sitframe.cli import main
+
+    (tmp_path / "base.toml").write_text(_online_config(iterations=100))
+    (tmp_path / "s.toml").write_text('[sweep]\nbase = "base.toml"\n[grid]\n'
+                                     '"interpreter.create_distance" = [1.0]\n')
+    assert main(["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "o"),
+                 "--workers", "1"]) == 0
+    (log,) = (tmp_path / "o").glob("*.h5")
+    assert open_log(str(log)).trial(0).situations["count"] >= 1
