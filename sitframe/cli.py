@@ -329,7 +329,7 @@ def _run_resume(args: argparse.Namespace) -> int:
 
 def _prepare_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
     from sitframe.config import load_config
-    from sitframe.experiment import prepare_experiment
+    from sitframe.prepare import prepare_experiment
 
     _positive("trials", args.trials)
     _positive("iterations", args.iterations)
@@ -416,7 +416,7 @@ def print_run(result: Any) -> None:
                   f"{s['coverage']:.2f}")
     console.print(t)
     if result.trials:
-        from sitframe.experiment import rule_base_table
+        from sitframe.evaluation import rule_base_table
 
         console.print(rule_base_table(result))
     if result.info.out:
@@ -430,7 +430,7 @@ def print_run(result: Any) -> None:
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from sitframe.config import MAX_ITERATIONS, MAX_TRIALS
-    from sitframe.experiment import evaluate_log
+    from sitframe.evaluation import evaluate_log
 
     _positive("iterations", args.iterations, MAX_ITERATIONS)
     _positive("goal-episodes", args.goal_episodes, MAX_TRIALS)

@@ -28,7 +28,7 @@ thesis's Table A.1):
     behaviour = "LABEL"}`` to start from a learned policy (``trial = "best"``
     picks the trial whose frozen rule base ranked best on collisions and
     coverage when evaluated in the log's own learning world; see
-    :func:`sitframe.experiment.best_trial`), then the
+    :func:`sitframe.prepare.best_trial`), then the
     behaviour's own parameters.
 ``[arbiter]``
     ``component`` (default ``"single"``) and its parameters.

@@ -1,6 +1,6 @@
 """Run trials in parallel: a local process pool or a Dask distributed cluster.
 
-Both executors follow the protocol of :class:`sitframe.scheduler.SerialExecutor`:
+Both executors follow the protocol of :class:`sitframe.experiment.SerialExecutor`:
 ``map(experiment, specs)`` yields one :class:`~sitframe.records.TrialResult`
 per spec **in spec order**, each as soon as it and every earlier trial are
 done. Workers only compute: each rebuilds the components from the config and
@@ -51,9 +51,9 @@ from typing import TYPE_CHECKING, Any
 
 from sitframe.config import config_hash, to_toml
 from sitframe.errors import InputError, PluginFault, TaskCancelled
+from sitframe.experiment import Experiment, SerialExecutor
 from sitframe.interrupts import deferred_interrupt
 from sitframe.loop import TrialSpec, attach_evaluation, evaluation_specs, simulate, step_hook_of
-from sitframe.scheduler import Experiment, SerialExecutor
 
 if TYPE_CHECKING:
     from sitframe.collect import Collected
@@ -426,7 +426,7 @@ def start_method() -> str:
 def _mp_context(method: str) -> mp.context.BaseContext:
     ctx = mp.get_context(method)
     if method == "forkserver":
-        ctx.set_forkserver_preload(["sitframe.parallel", "sitframe.scheduler", "sitframe.loop"])
+        ctx.set_forkserver_preload(["sitframe.parallel", "sitframe.experiment", "sitframe.loop"])
     return ctx
 
 
@@ -437,7 +437,7 @@ class ProcessExecutor(PoolExecutor):
     ----------
     workers
         Number of worker processes (at least 1; 1 still uses a subprocess,
-        the CLI uses :class:`~sitframe.scheduler.SerialExecutor` for 1).
+        the CLI uses :class:`~sitframe.experiment.SerialExecutor` for 1).
     """
 
     def __init__(self, workers: int) -> None:
@@ -604,7 +604,7 @@ def make_executor(workers: int | None = None, scheduler: str | None = None,
         How many trials will run (no more workers than that are started).
     pool
         Always return a :class:`PoolExecutor` (an :class:`InlineExecutor`
-        instead of :class:`~sitframe.scheduler.SerialExecutor` for one worker).
+        instead of :class:`~sitframe.experiment.SerialExecutor` for one worker).
     """
     if scheduler is not None:
         if workers is not None:

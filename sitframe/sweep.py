@@ -355,7 +355,7 @@ def point_names(grid: dict[str, list[Any]], *, file: str | None = None
 
 def _prepare_points(sweep: Sweep, plugins_dirs: tuple[str, ...]) -> list[Point]:
     from sitframe.config import validate_config
-    from sitframe.experiment import prepare_experiment
+    from sitframe.prepare import prepare_experiment
 
     points = []
     for name, values in point_names(sweep.grid, file=sweep.file):

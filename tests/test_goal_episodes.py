@@ -14,7 +14,8 @@ import pytest
 from sitframe.cli import main
 from sitframe.config import load_config, preset_text, validate_config
 from sitframe.errors import InputError
-from sitframe.experiment import evaluate_log, prepare_experiment
+from sitframe.evaluation import evaluate_log
+from sitframe.prepare import prepare_experiment
 from sitframe.logs import open_log
 from sitframe.loop import TrialSpec, batch_scores, simulate
 from sitframe.pluginmanager import Registry, get_plugin_manager
@@ -207,9 +208,9 @@ def test_learning_goal_run_evaluates_each_trials_learned_policy():
     (Before, the episodes ran as extra trials after the learning trials with the
     untrained behaviour: the rule base all zeros.)
     """
+    from sitframe.experiment import Experiment
     from sitframe.loop import evaluation_specs
     from sitframe.parallel import InlineExecutor
-    from sitframe.scheduler import Experiment
 
     cfg = validate_config({
         "experiment": {"trials": 2, "iterations": 80, "world": "goal",

@@ -10,6 +10,7 @@ import pytest
 from helpers import run_config, run_json, small_config
 
 from sitframe.cli import main
+from sitframe.experiment import SerialExecutor
 from sitframe.logs import open_log
 from sitframe.parallel import (
     InlineExecutor,
@@ -18,7 +19,6 @@ from sitframe.parallel import (
     compare_logs,
     make_executor,
 )
-from sitframe.scheduler import SerialExecutor
 
 SMALL = small_config(trials=5, seed=11, eval_worlds=("novel-1", "training"))
 

@@ -190,22 +190,22 @@ def test_same_seed_in_two_separate_processes_is_bit_identical(tmp_path):
 
 
 def test_best_of_weighs_collisions_and_coverage():
-    from sitframe.experiment import _best_of
+    from sitframe.prepare import best_of
 
     idx = [0, 1, 2, 3]
     # trial 1 never collides but hardly moves (a looper); trial 2 is nearly as
     # safe and covers the room: the rank sums are 6, 5, 3, 6
-    assert _best_of(idx, [3.0, 0.0, 1.0, 2.0], [0.30, 0.05, 0.40, 0.10], [0, 0, 0, 0]) == 2
+    assert best_of(idx, [3.0, 0.0, 1.0, 2.0], [0.30, 0.05, 0.40, 0.10], [0, 0, 0, 0]) == 2
     # equal rank sums: fewer collisions after convergence, then the lower index
-    assert _best_of([0, 1], [1.0, 2.0], [0.1, 0.2], [5.0, 1.0]) == 1
-    assert _best_of([0, 1], [1.0, 2.0], [0.1, 0.2], [1.0, 1.0]) == 0
+    assert best_of([0, 1], [1.0, 2.0], [0.1, 0.2], [5.0, 1.0]) == 1
+    assert best_of([0, 1], [1.0, 2.0], [0.1, 0.2], [1.0, 1.0]) == 0
     # a trial without an evaluation (NaN) ranks last
-    assert _best_of([0, 1], [np.nan, 9.0], [np.nan, 0.1], [0, 0]) == 1
+    assert best_of([0, 1], [np.nan, 9.0], [np.nan, 0.1], [0, 0]) == 1
 
 
 def test_best_trial_uses_only_the_learning_world(tmp_path, capsys):
     from sitframe.errors import InputError
-    from sitframe.experiment import best_trial
+    from sitframe.prepare import best_trial
 
     cfg = tmp_path / "best.toml"
     cfg.write_text(small_config(trials=3, iterations=200, eval_worlds=("training", "novel-1")))
