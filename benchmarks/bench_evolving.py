@@ -25,7 +25,7 @@ def main() -> None:
     args = ap.parse_args()
 
     from sitframe.config import load_config, validate_config
-    from sitframe.experiment import prepare_experiment
+    from sitframe.prepare import prepare_experiment
 
     cfg, source, _ = load_config("obstacle-avoidance-evolving")
     cfg["experiment"].update(trials=1, iterations=args.iterations,
