@@ -37,7 +37,8 @@ thesis's Table A.1):
     ``iterations``.
 ``[goal]``
     ``episodes``, ``timeout``, ``min_distance``, ``worlds``, ``pairs``
-    (``"random"`` or ``"world"``), ``radius``, ``margin``: the parameters of
+    (``"random"`` or ``"world"``), ``radius``, ``margin``, ``train``
+    (``"world"`` or ``"episodes"``: how a learning trial runs): the parameters of
     the ``goal-episodes`` evaluation protocol (``plugins/goal_episodes.py``)
     that a goal run's evaluate stage uses.
 ``[plugins]``
@@ -101,7 +102,7 @@ DEFAULTS: dict[str, dict[str, Any]] = {
     "arbiter": {"component": "single"},
     "evaluate": {"worlds": ["training", "novel-1", "novel-2"], "iterations": 1000},
     "goal": {"episodes": 50, "timeout": 300, "min_distance": 3.0, "worlds": ["goal"],
-             "pairs": "random", "radius": 0.3, "margin": 0.1},
+             "pairs": "random", "radius": 0.3, "margin": 0.1, "train": "world"},
     "plugins": {"dirs": []},
 }
 
@@ -340,6 +341,7 @@ def _check_core(cfg: dict[str, Any], file: str | None) -> None:
     _at(P.choice, "pairs", g["pairs"], file, "goal", choices=("random", "world"))
     _at(P.number, "radius", g["radius"], file, "goal", lo=0.0, lo_open=True)
     _at(P.number, "margin", g["margin"], file, "goal", lo=0.0)
+    _at(P.choice, "train", g["train"], file, "goal", choices=("world", "episodes"))
     _check_names(g["worlds"], file, "goal.worlds")
     _check_names(cfg["plugins"]["dirs"], file, "plugins.dirs", allow_empty=True)
 
