@@ -171,7 +171,7 @@ def default_actions(labels: Sequence[str]) -> list[dict[str, float]]:
 
 
 class FuzzyQArbiter:
-    """Learned arbitration: fuzzy Q-learning of a behaviour weighting per situation and goal context.
+    """Learned arbitration: fuzzy Q-learning of a behaviour weighting per situation x context.
 
     Parameters
     ----------
@@ -198,6 +198,7 @@ class FuzzyQArbiter:
         sectors: int = 4,
         stall_iterations: int = 20,
         stall_margin: float = 0.1,
+        proximity: Sequence[float] = (),
         alpha: float = 0.3,
         gamma: float = 0.9,
         b: int = 5,
@@ -219,6 +220,11 @@ class FuzzyQArbiter:
         self.stall_iterations = int(P.number("stall_iterations", stall_iterations, lo=0,
                                              integer=True))
         self.stall_margin = P.number("stall_margin", stall_margin, lo=0.0)
+        prox = P.number_list("proximity", list(proximity), lo=0.0) if len(proximity) else []
+        if prox and (len(prox) != 2 or prox[0] >= prox[1]):
+            raise InputError(f"expected [near, far] with near < far [m], or [] (no proximity "
+                             f"context), got {prox}", key="proximity")
+        self.proximity = tuple(prox)
         self.qparams = QLearningParams(
             alpha=alpha, gamma=gamma, b=b, p=p, temperature=temperature,
             temperature_mode=temperature_mode, temperature_decay=temperature_decay,
@@ -229,6 +235,8 @@ class FuzzyQArbiter:
         names = list(SECTOR_NAMES[self.sectors])
         if self.stall_iterations:
             names += [f"{n}_stalled" for n in names]
+        if self.proximity:
+            names = [f"{n}_{p}" for n in names for p in ("close", "far")]
         self.contexts = names
         self.W = np.zeros((0, 0))
         self._labels: tuple[str, ...] = ()
@@ -281,9 +289,9 @@ class FuzzyQArbiter:
         n = n_situations * len(self.contexts)
         if self.fixed is not None:
             if self.fixed.size != n:
-                raise ValueError(f"the loaded arbitration has {self.fixed.size // len(self.contexts)}"
-                                 f" rules per context but the interpreter has {n_situations} "
-                                 "situations")
+                per = self.fixed.size // len(self.contexts)
+                raise ValueError(f"the loaded arbitration has {per} rules per context but the "
+                                 f"interpreter has {n_situations} situations")
             self.learner, self.rules = None, self.fixed.copy()
         else:
             self.learner = FuzzyQLearner(n, self.W.shape[0], self.qparams, rng, iterations)
@@ -308,10 +316,22 @@ class FuzzyQArbiter:
         return k + (self.sectors if stalled else 0)
 
     def _state(self, ctx: Context, stalled: bool) -> np.ndarray:
-        """(c * n_contexts,) rule strengths: the memberships in the current context's block."""
+        """(c * n_contexts,) rule strengths: the memberships in the current context's block(s).
+
+        With a proximity context the blocks ``close`` and ``far`` of the goal
+        context share the memberships by how near the nearest range is
+        (``close`` 1 below ``proximity[0]``, 0 beyond ``proximity[1]``, linear
+        between; ``far`` = 1 - ``close``).
+        """
         u = np.zeros(self.c * len(self.contexts))
         j = self._context(ctx, stalled)
-        u[j * self.c:(j + 1) * self.c] = ctx.memberships
+        if not self.proximity:
+            u[j * self.c:(j + 1) * self.c] = ctx.memberships
+            return u
+        a, b = self.proximity
+        close = min(1.0, max(0.0, (b - ctx.nearest) / (b - a)))
+        u[2 * j * self.c:(2 * j + 1) * self.c] = close * ctx.memberships
+        u[(2 * j + 1) * self.c:(2 * j + 2) * self.c] = (1.0 - close) * ctx.memberships
         return u
 
     def _stalled(self) -> bool:
