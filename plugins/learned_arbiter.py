@@ -299,7 +299,7 @@ class FuzzyQArbiter:
 
     def load_policy(self, policy: LearnedPolicy) -> None:
         """Freeze the arbitration to a logged one (same contexts and number of actions)."""
-        if list(policy.outputs) != self.contexts:
+        if set(policy.outputs) != set(self.contexts):
             raise ValueError(f"the policy's goal contexts {list(policy.outputs)} differ from this "
                              f"arbiter's {self.contexts}; configure the same sectors and "
                              "stall_iterations as the run that learned it")
@@ -307,8 +307,8 @@ class FuzzyQArbiter:
         if a != {self.W.shape[0]} and self.W.size:
             raise ValueError(f"the policy chooses among {a.pop()} weightings, this arbiter has "
                              f"{self.W.shape[0]}; configure the same actions")
-        self.fixed = np.concatenate([np.asarray(o.rules, dtype=np.intp)
-                                     for o in policy.outputs.values()])
+        self.fixed = np.concatenate([np.asarray(policy.outputs[name].rules, dtype=np.intp)
+                                     for name in self.contexts])  # (a log sorts the outputs)
 
     # -- loop --------------------------------------------------------------
     def _context(self, ctx: Context, stalled: bool) -> int:
