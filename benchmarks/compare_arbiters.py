@@ -31,12 +31,54 @@ WORLDS = ("goal", "novel-1", "novel-2", "multi-room", "u-trap")
 KEYS = ("success_rate", "collision_free_rate", "spl", "mean_time_s", "heading_change_per_m")
 
 
+_LOADED: dict[tuple[str, int, str | None], Any] = {}
+
+
+def _load(log: str, trial: int, arbiter: str | None) -> Any:
+    """The resolved config, policies and situations of a log's trial, read once per process
+    (``evaluate_log`` re-reads and checksums the whole log on every call)."""
+    key = (log, trial, arbiter)
+    if key not in _LOADED:
+        from sitframe.config import validate_config
+        from sitframe.experiment import _logged_policy
+        from sitframe.logs import open_log
+        from sitframe.pluginmanager import Registry, get_plugin_manager
+
+        lg = open_log(log)
+        cfg = validate_config(lg.config, file=log)
+        tl = lg.trial(trial)
+        policies = {lb: p for lb in tl.behaviours
+                    if (p := _logged_policy(tl, lb, log)) is not None}
+        state = open_log(cfg["experiment"]["clusters_from"]).interpreter_state() \
+            if cfg["experiment"]["clusters_from"] else lg.interpreter_state()
+        if arbiter is not None:
+            params = cfg["arbiter"] if cfg["arbiter"].get("component") == arbiter else {}
+            cfg["arbiter"] = {**params, "component": arbiter}
+        _LOADED[key] = (cfg, policies, state, Registry.collect(get_plugin_manager()))
+    return _LOADED[key]
+
+
+def _batch(log: str, trial: int, arbiter: str | None, world: str, seed: int,
+           episodes: int) -> Any:
+    """One batch of goal episodes, exactly as ``sitframe evaluate LOG --world W --trial K
+    --goal-episodes N --seed S [--arbiter A]`` runs it."""
+    from sitframe.loop import STAGE_BATCH, TrialSpec, simulate, stage_seed
+    from sitframe.resolve import Resolved
+
+    cfg, policies, state, registry = _load(log, trial, arbiter)
+    cfg = {**cfg, "goal": {**cfg["goal"], "episodes": episodes}}
+    res = Resolved.build(cfg, registry, log)
+    spec = TrialSpec(index=trial, seed=stage_seed(seed, STAGE_BATCH, 0), world=world,
+                     iterations=int(cfg["goal"]["timeout"]), learn=False,
+                     interpreter_state=state, policies=policies, protocol="goal-episodes")
+    return simulate(res, spec)
+
+
 def _evaluate(task: tuple[str, str, int, str | None, str, int, int]) -> dict[str, Any]:
-    from sitframe.experiment import evaluate_log
+    from sitframe.loop import batch_scores
 
     name, log, trial, arbiter, world, seed, episodes = task
-    out = evaluate_log(log, world=world, trial=trial, seed=seed, goal_episodes=episodes,
-                       arbiter=arbiter)
+    out = batch_scores(_batch(log, trial, arbiter, world, seed, episodes))
     return {"arbiter": name, "world": world, "seed": seed, **{k: out[k] for k in KEYS}}
 
 
@@ -90,7 +132,7 @@ def draw_paths(runs: list[tuple[str, str, int, str | None]], world: str, seed: i
     med = np.median(spl, axis=1, keepdims=True)
     score = np.where(ok, np.abs(spl - med).sum(axis=0), np.inf)
     e = int(np.argmin(score))
-    fig, axes = plt.subplots(1, len(runs), figsize=(5.2 * len(runs), 3.6), squeeze=False)
+    fig, axes = plt.subplots(1, len(runs), figsize=(5.2 * len(runs), 3.9), squeeze=False)
     from sitframe.world import load_world
     w = load_world(world)
     for ax, (name, p) in zip(axes[0], paths.items(), strict=True):
@@ -116,29 +158,9 @@ def draw_paths(runs: list[tuple[str, str, int, str | None]], world: str, seed: i
 def _episode_paths(log: str, trial: int, arbiter: str | None, world: str, seed: int,
                    episodes: int) -> dict[str, Any]:
     """Per-episode paths of one arbiter's batch (as ``evaluate_log`` runs it)."""
-    from sitframe.config import validate_config
-    from sitframe.experiment import _logged_policy
-    from sitframe.logs import open_log
-    from sitframe.loop import STAGE_BATCH, TrialSpec, simulate, stage_seed
     from sitframe.metrics import spl as spl_of
-    from sitframe.pluginmanager import Registry, get_plugin_manager
-    from sitframe.resolve import Resolved
 
-    lg = open_log(log)
-    cfg = validate_config(lg.config, file=log)
-    tl = lg.trial(trial)
-    policies = {lb: p for lb in tl.behaviours if (p := _logged_policy(tl, lb, log)) is not None}
-    state = open_log(cfg["experiment"]["clusters_from"]).interpreter_state() \
-        if cfg["experiment"]["clusters_from"] else lg.interpreter_state()
-    if arbiter is not None:
-        params = cfg["arbiter"] if cfg["arbiter"].get("component") == arbiter else {}
-        cfg["arbiter"] = {**params, "component": arbiter}
-    cfg["goal"] = {**cfg["goal"], "episodes": episodes}
-    res = Resolved.build(cfg, Registry.collect(get_plugin_manager()), log)
-    spec = TrialSpec(index=trial, seed=stage_seed(seed, STAGE_BATCH, 0), world=world,
-                     iterations=int(cfg["goal"]["timeout"]), learn=False,
-                     interpreter_state=state, policies=policies, protocol="goal-episodes")
-    r = simulate(res, spec)
+    r = _batch(log, trial, arbiter, world, seed, episodes)
     first = list(r.episodes["first_iteration"]) + [r.arrays["collision"].size]
     pose, coll = r.arrays["pose"], r.arrays["collision"]
     poses, hits = [], []
