@@ -10,12 +10,12 @@ import pytest
 
 from sitframe.config import validate_config
 from sitframe.errors import InputError
+from sitframe.experiment import Experiment
 from sitframe.loop import TrialSpec, simulate
 from sitframe.pluginmanager import Registry, get_plugin_manager
 from sitframe.plugins.learned_arbiter import FuzzyQArbiter, GoalProgressReward, goal_sector
 from sitframe.records import Context, LearnedPolicy, Proposal, Transition
 from sitframe.resolve import Resolved
-from sitframe.scheduler import Experiment
 from sitframe.world import Goal, load_world
 
 STATE = {"centers": np.array([[0.5] * 8, [3.0] * 8]), "m": 1.2}
@@ -97,8 +97,11 @@ def test_bad_arbiter_config_names_the_key():
     assert "actions[0].folow" in str(info.value)
     with pytest.raises(InputError, match="sectors"):
         Resolved.build(goal_run(sectors=3), reg)
-    with pytest.raises(InputError, match="goal.train"):
-        validate_config({"goal": {"train": "episode"}})
+    cfg = goal_run()
+    cfg["goal"]["train"] = "episode"
+    with pytest.raises(InputError, match="'world', 'episodes'") as info:
+        Resolved.build(cfg, reg).protocol("goal-episodes")
+    assert "goal.train" in str(info.value)
 
 
 @pytest.fixture(scope="module")
