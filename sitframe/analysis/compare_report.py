@@ -53,6 +53,8 @@ def plot_metrics(cmp: Comparison, seed: int = 0) -> Any:
                     [[m.estimate[j] - lo], [hi - m.estimate[j]]]
                 ax.errorbar([j + 0.3], [m.estimate[j]], yerr=err, fmt="D", color=c, ms=5,
                             capsize=3, lw=1.5)
+        if m.statistic == "share":
+            ax.set_ylim(-0.05, 1.05)
         star = "  *" if m.different else ""
         ax.set_title(_wrap(m.label) + star, fontsize=9)
         ax.set_xticks(range(k), [_wrap(n, 18) for n in cmp.names],
