@@ -1,4 +1,4 @@
-"""Compare runs: ``sitframe compare LOG LOG [...] [-o DIR] [--json]`` or ``sitframe compare SWEEP_DIR``.
+"""Compare runs: ``sitframe compare LOG LOG [...] [-o DIR] [--json]``, or a sweep folder.
 
 Each metric (convergence, evaluation collisions and coverage per world, goal
 metrics where present) per run: median over trials with a 95 % bootstrap

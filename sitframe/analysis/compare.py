@@ -118,7 +118,8 @@ class Comparison:
             rows.append(cells)
         notes = [f"Estimate = median over trials (share for the convergence rate) with a "
                  f"{LEVEL:.0%} bootstrap interval ({RESAMPLES} resamples, percentile method); "
-                 f"n = trials with a value. p: {self.test}{', two-sided' if two else ' across all runs'}; Holm-adjusted over the "
+                 f"n = trials with a value. p: {self.test}, "
+                 f"{'two-sided' if two else 'across all runs'}; Holm-adjusted over the "
                  f"{sum(np.isfinite(m.p) for m in self.metrics)} tested metrics."]
         return Table("Comparison of " + ", ".join(self.names), cols, rows, notes=notes)
 
