@@ -121,7 +121,8 @@ class Comparison:
                  f"n = trials with a value. p: {self.test}, "
                  f"{'two-sided' if two else 'across all runs'}; Holm-adjusted over the "
                  f"{sum(np.isfinite(m.p) for m in self.metrics)} tested metrics."]
-        return Table("Comparison of " + ", ".join(self.names), cols, rows, notes=notes)
+        return Table(f"Per run: median (share for convergence) [{LEVEL:.0%} CI] (trials); "
+                     f"{self.test} across runs", cols, rows, notes=notes)
 
     def to_json(self) -> dict[str, Any]:
         """Plain data (NaN as None) for ``--json``."""
@@ -345,6 +346,9 @@ def compare_sweep(folder: str | os.PathLike[str], *, seed: int = 0) -> Compariso
         groups.setdefault(tuple(p[k] for k in axes), []).append(s)
     names = [", ".join(f"{k.rsplit('.', 1)[-1]}={v}" for k, v in zip(axes, g, strict=True))
              or "all" for g in groups]
-    cmp = _compare(names, [str(folder)] * len(names), list(groups.values()), seed)
+    sources = [f"{len(t)} point(s) of {folder}" + (f", pooled over {SEED_KEY}"
+                                                    if len(t) > 1 else "")
+               for t in groups.values()]
+    cmp = _compare(names, sources, list(groups.values()), seed)
     cmp.axes = {n: dict(zip(axes, g, strict=True)) for n, g in zip(names, groups, strict=True)}
     return cmp

@@ -75,9 +75,12 @@
   function layout() {
     const w = D.worlds[ep.world];
     const [x0, y0, x1, y1] = w ? w.bounds : [-5, -5, 5, 5];
-    const pad = 0.3, cssW = el.canvas.clientWidth || 600;
-    const cssH = Math.round((cssW * (y1 - y0 + 2 * pad)) / (x1 - x0 + 2 * pad));
+    const pad = 0.3, aspect = (y1 - y0 + 2 * pad) / (x1 - x0 + 2 * pad);
+    const maxH = Math.max(280, window.innerHeight * 0.8); // a tall world fits the window
+    const cssW = Math.round(Math.min(el.canvas.parentElement.clientWidth || 600, maxH / aspect));
+    const cssH = Math.round(cssW * aspect);
     const dpr = window.devicePixelRatio || 1;
+    el.canvas.style.width = cssW + "px";
     el.canvas.style.height = cssH + "px";
     el.canvas.width = Math.round(cssW * dpr);
     el.canvas.height = Math.round(cssH * dpr);
@@ -171,13 +174,13 @@
     if (ep.kind === "learning" && ep.convergence !== null)
       phase = i >= ep.convergence ? `frozen (converged at ${ep.convergence})` : `learning (converges at ${ep.convergence})`;
     const hd = at(A.heading, i), sp = at(A.speed, i);
-    const rw = A.reward ? `${at(A.reward, i) >= 0 ? "+" : ""}${at(A.reward, i).toFixed(2)} (${ep.reward_label})` : "not logged for evaluations";
+    const rw = A.reward ? `${at(A.reward, i) >= 0 ? "+" : ""}${at(A.reward, i).toFixed(2)} (${ep.reward_label})` : "– (not logged)";
     el.iter.textContent = `${i} / ${ep.n - 1}`;
     el.info.innerHTML =
       `iteration  ${i}   t = ${(i * 1.5).toFixed(1)} s\n` +
       `phase      ${phase}\n` +
       `situation  ${D.labels[dom] || "S" + dom} (u = ${at(A.memberships, i, dom).toFixed(2)})\n` +
-      `command    heading ${hd >= 0 ? "+" : ""}${hd.toFixed(1)}°, speed ${sp.toFixed(2)} m/s\n` +
+      `command    turn ${hd >= 0 ? "+" : ""}${hd.toFixed(1)}°, ${sp.toFixed(2)} m/s\n` +
       `reward     ${rw}\n` +
       `collisions ${shown} so far of ${A.collIdx.length}` + (hit ? `   <span class="coll">COLLISION</span>` : "");
   }
