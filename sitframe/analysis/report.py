@@ -300,7 +300,8 @@ def analyse(
                     lambda: R.convergence_table(lg))
 
             W.table(sec, "rule_bases", "Learned action per situation in every trial, and the most "
-                    "frequent one (Tables A.2/A.3)", lambda: R.rule_bases_across_trials(lg))
+                    "frequent one (Tables A.2/A.3)",
+                    lambda: R.rule_bases_across_trials(lg, read=get))
 
             def curves() -> Any:
                 rewards, conv = {}, {}
