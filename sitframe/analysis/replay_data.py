@@ -132,7 +132,8 @@ def replay_payload(log: Log, trials: dict[int, TrialLog]) -> dict[str, Any]:
         ``worlds`` (name -> walls, obstacles, bounds, goal), ``sensor``
         (``angles_deg``, ``max_range``), ``radius`` [m], ``labels`` (one per
         situation), ``episodes`` (list of descriptors: ``trial``, ``kind``
-        ``"learning"``/``"evaluation"``, ``world``, ``n``, ``convergence``,
+        ``"learning"``/``"evaluation"`` (``"run"`` for a trial of a run
+        without the learn stage), ``world``, ``n``, ``convergence``,
         ``actions`` and ``unit`` of the learned output, and one
         ``{type, offset, shape, scale}`` per array) and ``blob`` (base64 of
         the gzip-compressed arrays).
@@ -140,21 +141,27 @@ def replay_payload(log: Log, trials: dict[int, TrialLog]) -> dict[str, Any]:
     from sitframe.analysis.report import _worlds
 
     spec = log.sensor
+    try:  # a run without the learn stage (e.g. goal episodes with a frozen rule base)
+        learns = "learn" in log.config.get("experiment", {}).get("stages", ["learn"])
+    except InputError:
+        learns = True
     P = _Packer()
     episodes: list[dict[str, Any]] = []
     for k in sorted(trials):
         tr = trials[k]
         rb = _rules(tr)
         conv = R.convergence_iteration(tr)
-        learn = dict(tr.arrays)
+        # the rule per situation: per iteration while learning, the frozen policy otherwise
+        frozen = None if rb is None else \
+            np.asarray(tr.policies[rb[0]].outputs[rb[1]].rules)[None, :]
+        own = rb[3] if rb is not None and rb[3] is not None else (None if learns else frozen)
         runs: list[tuple[str, str, dict[str, np.ndarray], np.ndarray | None]] = [
-            ("learning", tr.world, learn, None if rb is None or rb[3] is None else rb[3])]
+            ("learning" if learns else "run", tr.world, dict(tr.arrays), own)]
         for w, arrays in R.evaluation_episodes(tr).items():
             arrays = dict(arrays)
             if "reading" not in arrays and "sonar" in arrays:
                 arrays["reading"] = arrays["sonar"]
-            frozen = None if rb is None else np.asarray(tr.policies[rb[0]].outputs[rb[1]].rules)
-            runs.append(("evaluation", w, arrays, None if frozen is None else frozen[None, :]))
+            runs.append(("evaluation", w, arrays, frozen))
         for kind, world, arrays, rules in runs:
             if rules is not None and rules.ndim != 2:
                 rules = None

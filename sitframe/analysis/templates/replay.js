@@ -41,7 +41,7 @@
     const k = Number(el.trial.value);
     const eps = D.episodes.map((e, j) => [e, j]).filter(([e]) => e.trial === k);
     el.episode.innerHTML = eps.map(([e, j]) => `<option value="${j}">${
-      e.kind === "learning" ? `learning in ${e.world}` : `evaluation in ${e.world}`}</option>`).join("");
+      `${e.kind} in ${e.world}`}</option>`).join("");
   }
 
   function select(j) {
@@ -118,8 +118,10 @@
     ctx.strokeStyle = "rgba(0,114,178,.75)"; ctx.lineWidth = Math.max(1, px * 0.8);
     ctx.beginPath();
     for (let r = lo; r <= i; r++) {
-      const x = X(at(A.xy, r, 0)), y = Y(at(A.xy, r, 1));
-      r === lo ? ctx.moveTo(x, y) : ctx.lineTo(x, y);
+      const wx = at(A.xy, r, 0), wy = at(A.xy, r, 1);
+      // a jump longer than any step (0.45 m at 0.3 m/s) is a reset between episodes: no line
+      const jump = r > lo && Math.hypot(wx - at(A.xy, r - 1, 0), wy - at(A.xy, r - 1, 1)) > 0.6;
+      r === lo || jump ? ctx.moveTo(X(wx), Y(wy)) : ctx.lineTo(X(wx), Y(wy));
     }
     ctx.stroke();
     // collisions so far (crosses at the contact point)
@@ -170,7 +172,7 @@
       rows[s].querySelector(".fill").style.width = (100 * at(A.memberships, i, s)).toFixed(1) + "%";
       rows[s].querySelector(".act").textContent = rr >= 0 ? fmtAct(ep.actions[A.rules.v[rr * c + s]]) : "";
     }
-    let phase = ep.kind === "evaluation" ? "frozen rule base (evaluation)" : "learning";
+    let phase = ep.kind === "learning" ? "learning" : `frozen rule base (${ep.kind})`;
     if (ep.kind === "learning" && ep.convergence !== null)
       phase = i >= ep.convergence ? `frozen (converged at ${ep.convergence})` : `learning (converges at ${ep.convergence})`;
     const hd = at(A.heading, i), sp = at(A.speed, i);
