@@ -52,6 +52,29 @@ def test_statistics_two_and_three_runs():
     assert "Difference" not in " ".join(three.table().columns)
 
 
+def test_settings_pooling_seeds_use_the_run_as_unit():
+    """Trials of one run share its situations: with several seeds per setting the test
+    compares the runs' medians and the interval resamples whole runs."""
+    rng = np.random.default_rng(2)
+
+    def seeds(shift):  # 5 runs of 11 trials, each run offset by its own seed effect
+        return [_summary(rng.normal(1000 + shift + rng.normal(0, 300), 50, 11).round(),
+                         np.zeros(11)) for _ in range(5)]
+
+    a, b = seeds(0), seeds(100)
+    cmp = _compare(["a", "b"], ["a", "b"], [a, b], seed=0)
+    it = next(m for m in cmp.metrics if m.key == "convergence_iteration")
+    assert cmp.unit == "run" and it.runs == [5, 5] and "5 runs" in cmp.table().rows[1][1]
+    med = [np.array([np.median(s["convergence_iteration"]) for s in x]) for x in (a, b)]
+    from scipy.stats import mannwhitneyu
+
+    assert it.p == pytest.approx(mannwhitneyu(*med, alternative="two-sided").pvalue)
+    flat = _compare(["a", "b"], ["a", "b"], [[np.concatenate(a)], [np.concatenate(b)]], 0)
+    it_flat = next(m for m in flat.metrics if m.key == "convergence_iteration")
+    assert flat.unit == "trial" and it_flat.p < it.p  # trials as the unit overstate certainty
+    assert it.high[0] - it.low[0] > it_flat.high[0] - it_flat.low[0]
+
+
 def test_holm_adjustment():
     p = np.array([0.01, np.nan, 0.04, 0.03, 0.5])
     adj = _holm(p)

@@ -19,10 +19,19 @@ evaluation world the collisions per 1000 iterations and the coverage of the
 frozen rule base; for goal-episode evaluations the success rate, the share of
 collision-free episodes, SPL, mean time to goal and heading change per metre.
 
+Two logs are two runs: the test asks whether *these runs'* trials differ.
+Trials of one run share its situations (the clustering of its seed), so two
+runs of one setting with different seeds differ more often than chance
+(``benchmarks/compare_seeds.py``: 9 % of 270 same-setting seed pairs had a
+Holm-significant metric); to compare *settings*, run each with several seeds.
+
 A sweep folder (``sitframe sweep`` output) is compared per setting: points
 that differ only in ``experiment.seed`` are pooled, each metric is drawn
 against every grid axis (one line per combination of the other axes) with
-its intervals, and the Kruskal-Wallis test runs across all settings.
+its intervals, and the test runs across all settings. When settings pool
+two or more seeds, the unit is the run: the intervals resample whole runs
+(a cluster bootstrap over seeds, trials pooled within) and the rank test
+compares the runs' medians, so the seed-to-seed spread is counted.
 """
 
 from __future__ import annotations
@@ -82,6 +91,7 @@ class MetricResult:
     p: float = math.nan
     p_holm: float = math.nan
     diff: tuple[float, float, float] | None = None
+    runs: list[int] = field(default_factory=list)  # per compared run: seeds pooled in it
 
     @property
     def different(self) -> bool:
@@ -98,6 +108,7 @@ class Comparison:
     test: str
     metrics: list[MetricResult]
     axes: dict[str, list[Any]] = field(default_factory=dict)  # sweeps: setting -> axis values
+    unit: str = "trial"  # what the test and intervals resample: "trial", or "run" (seed)
 
     def table(self) -> Table:
         """One row per metric: each run's estimate [95 % CI] (n), p, Holm p, verdict."""
@@ -110,15 +121,19 @@ class Comparison:
         for m in self.metrics:
             d = 0 if m.key.endswith("iteration") else 2
             cells: list[Any] = [m.label]
-            for v, e, lo, hi in zip(m.values, m.estimate, m.low, m.high, strict=True):
-                cells.append(_interval(e, lo, hi, d) + f" (n={v.size})")
+            for j, (v, e, lo, hi) in enumerate(zip(m.values, m.estimate, m.low, m.high,
+                                                   strict=True)):
+                seeds = f", {m.runs[j]} runs" if self.unit == "run" else ""
+                cells.append(_interval(e, lo, hi, d) + f" (n={v.size}{seeds})")
             if two:
                 cells.append(_interval(*m.diff, d) if m.diff else "–")
             cells += [_p(m.p), _p(m.p_holm), "yes" if m.different else "no"]
             rows.append(cells)
+        unit = ("whole runs (seeds) resampled; the test compares the runs' medians"
+                if self.unit == "run" else "trials resampled; the test compares trials")
         notes = [f"Estimate = median over trials (share for the convergence rate) with a "
-                 f"{LEVEL:.0%} bootstrap interval ({RESAMPLES} resamples, percentile method); "
-                 f"n = trials with a value. p: {self.test}, "
+                 f"{LEVEL:.0%} bootstrap interval ({RESAMPLES} resamples, percentile method, "
+                 f"{unit}); n = trials with a value. p: {self.test}, "
                  f"{'two-sided' if two else 'across all runs'}; Holm-adjusted over the "
                  f"{sum(np.isfinite(m.p) for m in self.metrics)} tested metrics."]
         return Table(f"Per run: median (share for convergence) [{LEVEL:.0%} CI] (trials); "
@@ -130,7 +145,7 @@ class Comparison:
             return float(x) if math.isfinite(x) else None
 
         return {"runs": self.names, "sources": self.sources, "test": self.test,
-                "confidence_level": LEVEL, "metrics": [
+                "unit": self.unit, "confidence_level": LEVEL, "metrics": [
                     {"key": m.key, "label": m.label, "statistic": m.statistic,
                      "n": [int(v.size) for v in m.values], "estimate": [f(x) for x in m.estimate],
                      "low": [f(x) for x in m.low], "high": [f(x) for x in m.high],
@@ -242,30 +257,85 @@ def _holm(p: np.ndarray) -> np.ndarray:
     return out
 
 
+def _cluster_ci(clusters: list[np.ndarray], statistic: str,
+                rng: np.random.Generator) -> tuple[float, float, float]:
+    """Estimate over the pooled trials; interval from resampling whole runs (seeds)."""
+    fn = np.mean if statistic == "share" else np.median
+    pooled = np.concatenate(clusters)
+    if len(clusters) < 2 or np.all(pooled == pooled[0]):
+        return _ci(pooled, statistic, rng)
+
+    def stat(idx: np.ndarray) -> float:
+        return float(fn(np.concatenate([clusters[int(i)] for i in idx])))
+
+    res = stats.bootstrap((np.arange(len(clusters)),), stat, n_resamples=RESAMPLES,
+                          confidence_level=LEVEL, method="percentile", random_state=rng,
+                          vectorized=False)
+    return float(fn(pooled)), float(res.confidence_interval.low), \
+        float(res.confidence_interval.high)
+
+
+def _cluster_diff(a: list[np.ndarray], b: list[np.ndarray], statistic: str,
+                  rng: np.random.Generator) -> tuple[float, float, float] | None:
+    fn = np.mean if statistic == "share" else np.median
+    pa, pb = np.concatenate(a), np.concatenate(b)
+    est = float(fn(pb) - fn(pa))
+    if np.all(np.r_[pa, pb] == pa[0]):
+        return est, est, est
+
+    def stat(ia: np.ndarray, ib: np.ndarray) -> float:
+        return float(fn(np.concatenate([b[int(i)] for i in ib]))
+                     - fn(np.concatenate([a[int(i)] for i in ia])))
+
+    res = stats.bootstrap((np.arange(len(a)), np.arange(len(b))), stat, n_resamples=RESAMPLES,
+                          confidence_level=LEVEL, method="percentile", random_state=rng,
+                          vectorized=False)
+    return est, float(res.confidence_interval.low), float(res.confidence_interval.high)
+
+
+def _metric(key: str, label: str, statistic: str, runs: list[list[np.ndarray]],
+            clustered: bool, rng: np.random.Generator) -> MetricResult:
+    """One metric; ``runs[j]`` holds run j's trial values per seed (NaN already dropped)."""
+    runs = [[c for c in r if c.size] for r in runs]
+    vals = [np.concatenate(r) if r else np.empty(0) for r in runs]
+    res = MetricResult(key, label, statistic, vals, runs=[len(r) for r in runs])
+    fn = np.mean if statistic == "share" else np.median
+    for r, v in zip(runs, vals, strict=True):
+        e, lo, hi = (_cluster_ci(r, statistic, rng) if clustered and r
+                     else _ci(v, statistic, rng))
+        res.estimate.append(e)
+        res.low.append(lo)
+        res.high.append(hi)
+    # the unit of the test: one trial, or one run (its median) when runs pool several seeds
+    res.p = _rank_test([np.array([fn(c) for c in r]) for r in runs] if clustered else vals)
+    if len(vals) == 2 and all(v.size >= 2 for v in vals):
+        res.diff = (_cluster_diff(runs[0], runs[1], statistic, rng) if clustered
+                    else _diff(vals[0], vals[1], statistic, rng))
+    return res
+
+
 def _compare(names: list[str], sources: list[str], tables: list[list[np.ndarray]],
              seed: int) -> Comparison:
-    """Metrics of runs given as lists of summary tables (pooled per run)."""
+    """Metrics of runs, each given as a list of summary tables (one per seed).
+
+    When every run pools two or more seeds, the seed's run is the unit: the
+    intervals resample whole runs (a cluster bootstrap) and the rank test
+    compares the runs' medians, since trials of one run share its situations
+    and are not independent samples of the setting.
+    """
     rng = np.random.default_rng(seed)
-    per_run = [trial_metrics(np.concatenate(t)) if t else {} for t in tables]
-    keys = list(dict.fromkeys(k for m in per_run for k in m))
+    clustered = all(len(t) >= 2 for t in tables)
+    per = [[trial_metrics(s) for s in t] for t in tables]
+    keys = list(dict.fromkeys(k for run in per for m in run for k in m))
     metrics = []
     for k in keys:
-        label, statistic = next((m[k][0], m[k][1]) for m in per_run if k in m)
-        vals = [m[k][2][np.isfinite(m[k][2])] if k in m else np.empty(0) for m in per_run]
-        r = MetricResult(k, label, statistic, vals)
-        for v in vals:
-            e, lo, hi = _ci(v, statistic, rng)
-            r.estimate.append(e)
-            r.low.append(lo)
-            r.high.append(hi)
-        r.p = _rank_test(vals)
-        if len(vals) == 2:
-            r.diff = _diff(vals[0], vals[1], statistic, rng)
-        metrics.append(r)
+        label, statistic = next((m[k][0], m[k][1]) for run in per for m in run if k in m)
+        runs = [[m[k][2][np.isfinite(m[k][2])] for m in run if k in m] for run in per]
+        metrics.append(_metric(k, label, statistic, runs, clustered, rng))
     for m, ph in zip(metrics, _holm(np.array([m.p for m in metrics])), strict=True):
         m.p_holm = float(ph)
     test = "Mann-Whitney U" if len(names) == 2 else "Kruskal-Wallis"
-    return Comparison(names, sources, test, metrics)
+    return Comparison(names, sources, test, metrics, unit="run" if clustered else "trial")
 
 
 def _run_names(paths: list[str]) -> list[str]:
