@@ -1,4 +1,4 @@
-"""Write every figure and table a log supports into a folder, with an ``index.md``.
+"""Write every figure and table a log supports into a folder, with index.html and index.md.
 
 This is what ``sitframe analyse LOG [-o DIR]`` runs; from Python::
 
@@ -83,6 +83,11 @@ class AnalysisReport:
     def index(self) -> str:
         """Path of ``index.md``."""
         return os.path.join(self.out_dir, "index.md")
+
+    @property
+    def html(self) -> str:
+        """Path of ``index.html`` (the page with every figure, table and the replay)."""
+        return os.path.join(self.out_dir, "index.html")
 
 
 def log_problems(log: R.LogLike) -> list[str]:
