@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from sitframe.analysis.compare import _compare, _holm, compare_logs, compare_sweep
+from sitframe.analysis.compare import _compare, _holm, compare_logs
 from sitframe.analysis.replay_data import replay_payload
 from sitframe.cli import main
 from sitframe.logs import open_log
@@ -122,13 +122,12 @@ def test_compare_sweep_folder(two_runs, tmp_path, capsys):
         for name, p, seed, log in rows:
             (folder / f"{name}.h5").write_bytes(log.read_bytes())
             w.writerow([name, p, seed, 2, "complete", f"elsewhere/{name}.h5"])
-    cmp = compare_sweep(folder)
-    assert cmp.names == ["p=5", "p=9"]  # pooled over the seed axis
-    assert [v.size for v in cmp.metrics[0].values] == [4, 2]
-    assert main(["compare", str(folder)]) == 0
+    assert main(["compare", str(folder), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["runs"] == ["p=5", "p=9"]  # pooled over the seed axis
+    assert data["metrics"][0]["n"] == [4, 2] and data["unit"] == "trial"  # p=9 has one seed
     assert (folder / "report" / "axis_p.png").exists()
     assert (folder / "report" / "index.html").exists()
-    capsys.readouterr()
 
 
 def test_same_log_twice_is_not_different(two_runs):
