@@ -704,15 +704,15 @@ class Log:
 
     def summary_frame(self) -> Any:
         """The summary table as a pandas DataFrame (needs pandas; see
-        :func:`sitframe.analysis.frames.summary_frame`)."""
-        from sitframe.analysis.frames import summary_frame
+        :func:`sitframe.frames.summary_frame`)."""
+        from sitframe.frames import summary_frame  # pandas is optional: loaded on use
 
         return summary_frame(self)
 
     def iterations_frame(self, trials: list[int] | None = None) -> Any:
         """Per-iteration arrays of the learning trials as one pandas DataFrame (needs pandas;
-        see :func:`sitframe.analysis.frames.iterations_frame`)."""
-        from sitframe.analysis.frames import iterations_frame
+        see :func:`sitframe.frames.iterations_frame`)."""
+        from sitframe.frames import iterations_frame  # pandas is optional: loaded on use
 
         return iterations_frame(self, trials)
 

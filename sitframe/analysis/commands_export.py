@@ -1,6 +1,6 @@
 """Write a log's tables for other tools: ``sitframe export LOG [--format csv|parquet] [--out DIR]``.
 
-Tidy tables (:mod:`sitframe.analysis.frames`): ``summary`` (one row per
+Tidy tables (:mod:`sitframe.frames`): ``summary`` (one row per
 trial), ``iterations`` (one row per iteration of every learning trial, with a
 ``trial`` column) and ``evaluations`` (one row per iteration of every
 frozen-policy evaluation, with ``trial`` and ``world``). Needs pandas
@@ -30,7 +30,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Write the tables and print their paths."""
-    from sitframe.analysis.frames import export
+    from sitframe.analysis.export import export
 
     for path in export(args.log, args.out, args.format):
         print(path)

@@ -27,6 +27,7 @@ import numpy as np
 from sitframe.analysis import results as R
 from sitframe.errors import InputError
 from sitframe.logs import Log, TrialLog
+from sitframe.world import parse_world
 
 __all__ = ["replay_payload"]
 
@@ -138,8 +139,6 @@ def replay_payload(log: Log, trials: dict[int, TrialLog]) -> dict[str, Any]:
         ``{type, offset, shape, scale}`` per array) and ``blob`` (base64 of
         the gzip-compressed arrays).
     """
-    from sitframe.analysis.report import _worlds
-
     spec = log.sensor
     try:  # a run without the learn stage (e.g. goal episodes with a frozen rule base)
         learns = "learn" in log.config.get("experiment", {}).get("stages", ["learn"])
@@ -174,7 +173,11 @@ def replay_payload(log: Log, trials: dict[int, TrialLog]) -> dict[str, Any]:
                 ep.update(behaviour=rb[0], output=rb[1], actions=rb[2].tolist(), unit=rb[4])
             episodes.append(ep)
     worlds = {}
-    for name, w in _worlds(log).items():
+    for name, text in log.worlds.items():
+        try:
+            w = parse_world(text, file=f"{log.path}:worlds/{name}")
+        except InputError:  # a world the log holds damaged: drawn empty, not fatal
+            continue
         worlds[name] = {"walls": [np.round(a, 3).tolist() for a in w.walls],
                         "obstacles": [np.round(a, 3).tolist() for a in w.obstacles],
                         "bounds": [float(b) for b in w.bounds],

@@ -1,4 +1,4 @@
-"""A log's tables as pandas DataFrames, and ``sitframe export`` (CSV or Parquet).
+"""A log's tables as pandas DataFrames (:meth:`sitframe.logs.Log.summary_frame`, ...).
 
 Tidy tables: one row per observation, one column per variable.
 
@@ -14,25 +14,26 @@ Tidy tables: one row per observation, one column per variable.
 * :func:`evaluations_frame` — the same for the frozen-policy evaluations,
   with a ``world`` column.
 
-pandas is an optional dependency (``pip install 'sitframe[pandas]'``;
-Parquet also needs pyarrow, ``'sitframe[parquet]'``).
+pandas is an optional dependency (``pip install 'sitframe[pandas]'``); a
+clear :class:`ImportError` says so when it is missing. ``sitframe export``
+(:mod:`sitframe.analysis.export`) writes these tables as CSV or Parquet.
+
+This module imports nothing from sitframe (the reader imports it), so it
+takes the :class:`~sitframe.logs.Log` it is given rather than a path.
 """
 
 from __future__ import annotations
 
 import json
-import os
 from collections.abc import Iterable
-from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sitframe.analysis.results import _summary, as_log, evaluation_episodes
-from sitframe.errors import InputError
-from sitframe.logs import Log, TrialLog
+if TYPE_CHECKING:
+    from sitframe.logs import Log, TrialLog
 
-__all__ = ["evaluations_frame", "export", "iterations_frame", "summary_frame"]
+__all__ = ["evaluations_frame", "iterations_frame", "summary_frame"]
 
 _NAMED = {"pose": ("x", "y", "theta"), "command": ("heading", "speed"),
           "contact": ("contact_x", "contact_y")}
@@ -48,10 +49,12 @@ def _pandas() -> Any:
     return pd
 
 
-def summary_frame(log: Log | str | os.PathLike[str]) -> Any:
+def summary_frame(log: Log) -> Any:
     """One row per finished trial: ``trial`` and every summary scalar (NaN = not logged)."""
     pd = _pandas()
-    s = _summary(as_log(log))
+    s = log.summary()
+    if s.size:  # rows of trials whose group is in the log
+        s = s[np.isin(s["trial"], log.trial_indices())]
     frame = pd.DataFrame({n: s[n] for n in s.dtype.names or ()})
     if "converged" in frame:
         frame["converged"] = frame["converged"] > 0.5
@@ -108,74 +111,28 @@ def _trials(log: Log, trials: Iterable[int] | None) -> list[TrialLog]:
     return [log.trial(k) for k in (log.trial_indices() if trials is None else trials)]
 
 
-def iterations_frame(log: Log | str | os.PathLike[str],
-                     trials: Iterable[int] | None = None) -> Any:
+def iterations_frame(log: Log, trials: Iterable[int] | None = None) -> Any:
     """One row per iteration of the learning trials (default all), with a ``trial`` column."""
     pd = _pandas()
-    lg = as_log(log)
+    lg = log
     parts = [_frame(tr.arrays, {"trial": tr.index, "world": tr.world},
                     _weight_labels(lg, tr.index)) for tr in _trials(lg, trials)]
     return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
 
 
-def evaluations_frame(log: Log | str | os.PathLike[str],
-                      trials: Iterable[int] | None = None) -> Any:
+def _evaluations(tr: TrialLog) -> dict[str, dict[str, np.ndarray]]:
+    """World -> arrays of each frozen-policy evaluation (``episodes/eval/<world>/<name>``)."""
+    out: dict[str, dict[str, np.ndarray]] = {}
+    for key, val in tr.episodes.items():
+        parts = key.split("/")
+        if len(parts) == 3 and parts[0] == "eval":
+            out.setdefault(parts[1], {})[parts[2]] = np.asarray(val)
+    return out
+
+
+def evaluations_frame(log: Log, trials: Iterable[int] | None = None) -> Any:
     """One row per iteration of every frozen-policy evaluation (``trial``, ``world``, ...)."""
     pd = _pandas()
-    lg = as_log(log)
     parts = [_frame(arrays, {"trial": tr.index, "world": w}, None)
-             for tr in _trials(lg, trials) for w, arrays in evaluation_episodes(tr).items()]
+             for tr in _trials(log, trials) for w, arrays in _evaluations(tr).items()]
     return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
-
-
-def export(log: Log | str | os.PathLike[str], out_dir: str | os.PathLike[str] | None = None,
-           fmt: str = "csv") -> list[str]:
-    """Write ``summary``, ``iterations`` and ``evaluations`` tables as CSV or Parquet.
-
-    Parameters
-    ----------
-    log
-        The log or its path.
-    out_dir
-        Output folder (default ``<log stem>-export`` beside the log); created.
-    fmt
-        ``"csv"`` or ``"parquet"`` (needs pyarrow).
-
-    Returns
-    -------
-    list of str
-        The written files (a table with no rows is not written).
-    """
-    if fmt not in ("csv", "parquet"):
-        raise InputError(f"expected csv or parquet, got {fmt!r}", key="--format")
-    try:
-        _pandas()
-        if fmt == "parquet":
-            import pyarrow  # noqa: F401
-    except ImportError as exc:
-        what = str(exc) if fmt == "csv" or "pandas" in str(exc) else (
-            "parquet needs pyarrow, which is not installed; pip install 'sitframe[parquet]' "
-            "or use --format csv")
-        raise InputError(what, key="--format") from None
-    lg = as_log(log)
-    lg.check()
-    out = Path(out_dir) if out_dir is not None else Path(lg.path).with_name(
-        Path(lg.path).stem + "-export")
-    tables = {"summary": summary_frame(lg), "iterations": iterations_frame(lg),
-              "evaluations": evaluations_frame(lg)}
-    written = []
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        for name, frame in tables.items():
-            if frame.empty:
-                continue
-            path = out / f"{name}.{fmt}"
-            if fmt == "csv":
-                frame.to_csv(path, index=False)
-            else:
-                frame.to_parquet(path, index=False)
-            written.append(str(path))
-    except OSError as exc:
-        raise InputError(f"cannot write the export: {exc.strerror or exc}", file=str(out),
-                         key="--out") from None
-    return written
