@@ -46,6 +46,7 @@ from pathlib import Path
 from typing import Any
 
 from sitframe import __version__
+from sitframe import params as P
 from sitframe.errors import PLUGIN_FAULT_EXIT, InputError, PluginError, PluginFault, note
 
 # start-up time: this module is imported whenever the command line builds its parser
@@ -219,10 +220,8 @@ def _dispatch(args: argparse.Namespace) -> int:
 
 
 def _positive(name: str, value: int | None, hi: int | None = None) -> None:
-    if value is not None and value < 1:
-        raise InputError(f"must be at least 1, got {value}", key=f"--{name}")
-    if value is not None and hi is not None and value > hi:
-        raise InputError(f"must be at most {hi}, got {value}", key=f"--{name}")
+    if value is not None:
+        P.number(f"--{name}", value, lo=1, hi=hi, integer=True)
 
 
 # ---------------------------------------------------------------------------
