@@ -119,12 +119,14 @@ def build_parser() -> argparse.ArgumentParser:
 #: ``add_arguments(parser)`` and ``main(args) -> int`` (exit status).
 EXTRA_COMMANDS: dict[str, str] = {"analyse": "sitframe.analysis.commands",
                                   "replay": "sitframe.analysis.commands_replay",
+                                  "compare": "sitframe.analysis.commands_compare",
+                                  "export": "sitframe.analysis.commands_export",
                                   "sweep": "sitframe.sweep"}
 
 
 #: Commands that read a log given on the command line: an exception while they use its
 #: contents means the log is damaged (valid HDF5, wrong layout), reported in one line.
-_LOG_READERS = ("evaluate", "analyse", "replay")
+_LOG_READERS = ("evaluate", "analyse", "replay", "export")
 
 
 def main(argv: list[str] | None = None) -> int:
