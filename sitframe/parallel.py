@@ -519,10 +519,12 @@ class DaskExecutor(PoolExecutor):
     address
         The scheduler's address, e.g. ``tcp://10.0.0.5:8786``.
     timeout
-        Seconds to wait for the connection before raising :class:`InputError`.
+        Seconds to wait for the connection before raising :class:`InputError`
+        (default :data:`DASK_CONNECT_TIMEOUT`, read when called).
     """
 
-    def __init__(self, address: str, timeout: float = DASK_CONNECT_TIMEOUT) -> None:
+    def __init__(self, address: str, timeout: float | None = None) -> None:
+        timeout = DASK_CONNECT_TIMEOUT if timeout is None else timeout
         try:
             from distributed import Client
         except ImportError:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 
 import matplotlib
+import pytest
 from hypothesis import settings
 
 matplotlib.use("Agg")
@@ -20,3 +21,13 @@ matplotlib.use("Agg")
 settings.register_profile("ci", derandomize=True, print_blob=True)
 if os.environ.get("CI"):
     settings.load_profile("ci")
+
+
+@pytest.fixture(scope="session")
+def interrupted_reference(tmp_path_factory):
+    """``(config, log)`` of the uninterrupted serial run an interrupted and resumed run must
+    reproduce bit for bit (shared by test_resume and test_hostile_input)."""
+    from helpers import INTERRUPTED, run_config
+
+    return run_config(tmp_path_factory.mktemp("interrupted"), INTERRUPTED, "reference.h5",
+                      "--workers", "1")

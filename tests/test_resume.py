@@ -11,15 +11,14 @@ import time
 
 import numpy as np
 import pytest
-from helpers import run_config, run_json, small_config
+from helpers import INTERRUPTED_ITERATIONS, INTERRUPTED_TRIALS, run_json
 
 from sitframe.cli import main
 from sitframe.errors import InputError
 from sitframe.logs import open_log
 from sitframe.parallel import compare_logs
 
-N_TRIALS, ITERATIONS = 8, 300
-CONFIG = small_config(name="resume", trials=N_TRIALS, iterations=ITERATIONS, seed=5)
+N_TRIALS, ITERATIONS = INTERRUPTED_TRIALS, INTERRUPTED_ITERATIONS
 
 #: Runs the CLI with Python's own SIGINT handler even if the test runner was
 #: started with SIGINT ignored (as background jobs of a non-interactive shell are).
@@ -27,10 +26,9 @@ _CLI = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_han
         "from sitframe.cli import console_main; sys.exit(console_main(sys.argv[1:]))")
 
 
-@pytest.fixture(scope="module")
-def reference(tmp_path_factory):
-    return run_config(tmp_path_factory.mktemp("resume"), CONFIG, "reference.h5",
-                      "--workers", "1")
+@pytest.fixture
+def reference(interrupted_reference):
+    return interrupted_reference
 
 
 def _start(cfg, out, *extra):
