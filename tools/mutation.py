@@ -19,6 +19,7 @@ none = every module of ``[tool.mutmut] only_mutate``.
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import subprocess
 import sys
@@ -53,8 +54,11 @@ def main(argv: list[str] | None = None) -> int:
     build(args.workdir, args.fresh)
     mutmut = [sys.executable, "-m", "mutmut"] if shutil.which("mutmut") is None else ["mutmut"]
     names = [f"{m}.*" for m in args.modules]
-    code = subprocess.call([*mutmut, "run", *names], cwd=args.workdir)
-    subprocess.call([*mutmut, "results"], cwd=args.workdir)
+    # derandomized property-based tests (as in CI): a mutant's verdict must not depend on
+    # which examples a run happens to draw
+    env = {**os.environ, "CI": "1"}
+    code = subprocess.call([*mutmut, "run", *names], cwd=args.workdir, env=env)
+    subprocess.call([*mutmut, "results"], cwd=args.workdir, env=env)
     return code
 
 
