@@ -253,26 +253,27 @@ def test_14_extreme_worlds_are_refused_naming_the_limit(tmp_path, capsys, walls,
     assert time.perf_counter() - t0 < 5
 
 
-def test_14_free_cells_of_many_obstacles_is_fast_and_unchanged():
+def test_14_free_cells_of_many_obstacles_are_those_of_the_direct_test():
+    """The per-obstacle computation of free cells (time proportional to the room plus the
+    obstacles; its speed is measured by benchmarks, not asserted here) gives the cells of
+    the direct test, in a room of many obstacles and in shipped rooms."""
     from sitframe.world import load_world, parse_world
 
     rows = ['name = "many"', "[robot]", "start = [0.5, 0.5, 0]", "[[walls]]",
-            "points = [[0, 0], [60, 0], [60, 60], [0, 60], [0, 0]]"]
-    for i in range(58):
-        for j in range(58):
-            x, y = 1.5 + i, 1.5 + j
+            "points = [[0, 0], [16, 0], [16, 16], [0, 16], [0, 0]]"]
+    for i in range(14):
+        for j in range(14):
+            x, y = 1.5 + i, 1.4 + j + 0.05 * i
             square = [[x, y], [x + 0.2, y], [x + 0.2, y + 0.2], [x, y + 0.2]]
             rows += ["[[obstacles]]", f"points = {square}"]
-    world = parse_world("\n".join(rows))
-    t0 = time.perf_counter()
-    cells = world.free_cells()
-    assert time.perf_counter() - t0 < 10 and len(world.obstacles) == 3364
-    for w in (load_world("training"), load_world("novel-2")):  # same cells as the direct test
+    many = parse_world("\n".join(rows))
+    assert len(many.obstacles) == 196
+    for w in (many, load_world("training"), load_world("novel-2")):
         x0, y0, x1, y1 = w.bounds
         gx, gy = np.meshgrid(np.arange(x0 + 0.25, x1, 0.5), np.arange(y0 + 0.25, y1, 0.5))
         c = np.stack([gx.ravel(), gy.ravel()], axis=1)
         assert w.free_cells().tobytes() == c[w.is_free(c)].tobytes()
-    assert cells.shape[1] == 2
+    assert 0 < len(many.free_cells()) < 32 * 32
 
 
 def test_15_world_path_that_is_a_folder_names_the_config_and_key(tmp_path, capsys):

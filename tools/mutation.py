@@ -10,10 +10,12 @@ copies the package into a scratch folder laid out as it is installed (``sitframe
 
 Usage::
 
-    nice -n 10 python tools/mutation.py [MODULE ...] [--workdir DIR] [--fresh]
+    nice -n 10 python tools/mutation.py [MODULE ...] [--tests FILE ...] [--workdir DIR]
+                                        [--fresh]
 
 MODULE is a dotted name as installed (``sitframe.fcm``, ``sitframe.plugins.rewards``);
-none = every module of ``[tool.mutmut] only_mutate``.
+none = every module of ``[tool.mutmut] only_mutate``. ``--tests`` replaces the test
+files of ``pytest_add_cli_args_test_selection`` (a fast subset for the modules asked for).
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def build(workdir: Path, fresh: bool) -> None:
+def build(workdir: Path, fresh: bool, tests: list[str], modules: list[str]) -> None:
     """Copy the sources into ``workdir`` with the installed package layout."""
     if fresh and workdir.exists():
         shutil.rmtree(workdir)
@@ -41,7 +43,19 @@ def build(workdir: Path, fresh: bool) -> None:
         if dst.exists():
             shutil.rmtree(dst)
         shutil.copytree(src, dst, ignore=ignore)
-    shutil.copy2(ROOT / "pyproject.toml", workdir / "pyproject.toml")
+    text = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
+    if tests:
+        start = text.index("pytest_add_cli_args_test_selection = [")
+        end = text.index("]", start) + 1
+        text = text[:start] + f"pytest_add_cli_args_test_selection = {tests!r}" + text[end:]
+    if modules:  # generate mutants of the modules asked for only
+        start = text.index("only_mutate = [")
+        end = text.index("]", start) + 1
+        files = [m.replace(".", "/") + ".py" for m in modules]
+        text = text[:start] + f"only_mutate = {files!r}" + text[end:]
+    target = workdir / "pyproject.toml"
+    if not target.exists() or target.read_text(encoding="utf-8") != text:
+        target.write_text(text.replace("'", '"'), encoding="utf-8")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -49,9 +63,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("modules", nargs="*", help="dotted module names (default: all configured)")
     ap.add_argument("--workdir", type=Path,
                     default=Path(tempfile.gettempdir()) / "sitframe-mutation")
+    ap.add_argument("--tests", nargs="+", default=[], metavar="FILE",
+                    help="test files to run against the mutants (default: the configured ones)")
     ap.add_argument("--fresh", action="store_true", help="discard earlier results")
     args = ap.parse_args(argv)
-    build(args.workdir, args.fresh)
+    build(args.workdir, args.fresh, args.tests, args.modules)
     mutmut = [sys.executable, "-m", "mutmut"] if shutil.which("mutmut") is None else ["mutmut"]
     names = [f"{m}.*" for m in args.modules]
     # derandomized property-based tests (as in CI): a mutant's verdict must not depend on
