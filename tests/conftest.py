@@ -24,6 +24,19 @@ if os.environ.get("CI"):
 
 
 @pytest.fixture(scope="session")
+def two_runs(tmp_path_factory):
+    """Two tiny runs of one config (2 trials x 300 iterations, 4 situations, evaluation in
+    novel-1), seeds 5 and 6: for the report, compare and export tests."""
+    from helpers import run_config, small_config
+
+    folder = tmp_path_factory.mktemp("two-runs")
+    cfg = small_config(name="tiny", seed=5, trials=2, iterations=300, c=4, fcm_trials=2)
+    a = run_config(folder, cfg, "a.h5")[1]
+    b = run_config(folder, cfg, "b.h5", "--seed", "6")[1]
+    return a, b
+
+
+@pytest.fixture(scope="session")
 def interrupted_reference(tmp_path_factory):
     """``(config, log)`` of the uninterrupted serial run an interrupted and resumed run must
     reproduce bit for bit (shared by test_resume and test_hostile_input)."""

@@ -84,7 +84,8 @@ def test_evaluate_json_contract(small_run, capsys):
     [
         (["run", "obstacle-avoid"], r"unknown experiment 'obstacle-avoid' .*available presets"),
         (["run", "nope.toml"], r"nope.toml: config file not found"),
-        (["run", "obstacle-avoidance", "--trials", "0"], r"--trials: must be at least 1"),
+        (["run", "obstacle-avoidance", "--trials", "0"],
+         r"--trials: expected an integer in \[1, inf\], got 0"),
         (["run", "obstacle-avoidance", "--world", "narnia"], r"experiment.world: unknown world"),
         (["evaluate", "missing.h5", "--world", "training"], r"missing.h5: log file not found"),
         (["world", "show", "narnia"], r"unknown world 'narnia'"),
@@ -113,11 +114,16 @@ def test_not_hdf5_and_wrong_schema(tmp_path, capsys):
     assert "unknown log schema version 99" in capsys.readouterr().err
 
 
-def test_speed_needs_a_heading_log(tmp_path, capsys, monkeypatch):
+def test_a_missing_log_without_prerequisite_is_one_line(tmp_path, capsys, monkeypatch):
+    """A config that reads a log it names no prerequisite for: one line, nothing run.
+    (The shipped presets name theirs: tests/test_prerequisites.py.)"""
     monkeypatch.chdir(tmp_path)
-    assert main(["run", "speed"]) == 2
+    (tmp_path / "c.toml").write_text(SMALL.replace('seed = 3', 'seed = 3\nclusters_from = '
+                                                   '"logs/obstacle-avoidance.h5"'))
+    assert main(["run", "c.toml"]) == 2
     err = capsys.readouterr().err
-    assert "logs/obstacle-avoidance.h5: log file not found" in err
+    assert err.count("\n") == 1 and "logs/obstacle-avoidance.h5: log file not found" in err
+    assert not (tmp_path / "logs").exists() or not any((tmp_path / "logs").iterdir())
 
 
 def test_reused_situations_are_recorded_and_sensor_must_match(small_run, tmp_path, capsys):
