@@ -59,3 +59,12 @@ def test_path_metrics():
     assert spl(np.array([1, 0, 1]), np.array([2.0, 2.0, 2.0]), np.array([4.0, 2.0, 1.0])) == \
         pytest.approx((0.5 + 0 + 1.0) / 3)
     assert np.isnan(spl(np.zeros(0), np.zeros(0), np.zeros(0)))
+
+
+def test_path_metrics_on_logged_poses():
+    """Logged poses are (x, y, theta): the heading is not a distance; turning on the spot has
+    no smoothness per metre; collision flags are flags, whatever their integer type."""
+    poses = np.array([[0.0, 0.0, 0.0], [3.0, 4.0, 3.0]])
+    assert path_length(poses) == 5.0
+    assert np.isnan(heading_change_per_m(np.array([0.0, 1.0]), np.zeros((2, 2))))
+    assert collisions_per_1000(np.array([0, 2, 0, 0], dtype=np.int8)) == 250.0
