@@ -234,3 +234,34 @@ def test_priority_switching():
     assert only.combine(near(1.0), PROPS)[1].tolist() == [1.0, 0.0]
     with pytest.raises(InputError, match="at most one condition"):
         PriorityArbiter(rules=[{"behaviour": "a", "nearest_blow": 1.0}])
+
+
+def test_priority_defaults_threshold_half_a_metre_and_activation_half():
+    d = PriorityArbiter()
+    assert d.combine(near(0.49), PROPS)[1].tolist() == [1.0, 0.0]
+    assert d.combine(near(0.51), PROPS)[1].tolist() == [0.0, 1.0]
+    labels = list(PROPS)
+    assert d.winner(3.0, labels, [0.5, None]) == 0  # an activation of 0.5 is enough
+    assert d.winner(0.1, labels, [0.49, None]) == 1  # below it, even when close
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "key"),
+    [
+        ({"threshold": -0.1}, "threshold"),
+        ({"activation": 1.5}, "activation"),
+        ({"activation": -0.1}, "activation"),
+        ({"rules": []}, "rules"),
+        ({"rules": "avoid"}, "rules"),
+        ({"rules": [{"nearest_below": 1.0}]}, "rules[0]"),
+        ({"rules": [{"behaviour": "a", "nearest_below": 1.0, "nearest_above": 2.0}]},
+         "rules[0]"),
+        ({"rules": [{"behaviour": "a", "farthest": 1.0}]}, "rules[0]"),
+        ({"rules": [{"behaviour": "a", "activation_above": 1.5}]}, "rules[0].activation_above"),
+        ({"rules": [{"behaviour": "a", "nearest_below": -1.0}]}, "rules[0].nearest_below"),
+    ],
+)
+def test_priority_bad_parameters_name_their_key(kwargs, key):
+    with pytest.raises(InputError) as info:
+        PriorityArbiter(**kwargs)
+    assert info.value.key == key
