@@ -120,10 +120,10 @@ def run_fuzzy(seed: int, out: Path, a: argparse.Namespace) -> dict[str, Any]:
     data = trial.behaviours["avoid"]
     snap_it = np.asarray(data["heading/snapshot_iteration"])
     snap = np.asarray(data["heading/snapshot_greedy"])
-    singles = np.asarray(data["singletons/heading"], dtype=float)
+    singles = trial.learned_policy("avoid").outputs["heading"].actions
     collided = np.asarray(trial.arrays["collision"], dtype=bool)
     L = collided.size
-    interp = Task.from_config(PRESET).res.interpreter()
+    interp = Task.from_config(PRESET).res.interpreter()  # the preset's fcm, fitted state below
     interp.load_state(log.interpreter_state())
     rows = []
     for t in FUZZY_CHECKPOINTS:
