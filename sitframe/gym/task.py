@@ -103,6 +103,8 @@ class Task:
     normalize: bool
     start_margin: float
     terminate_on_collision: bool
+    _bounds: tuple[np.ndarray, np.ndarray] | None = None
+    _commands: list[Command] | None = None
 
     @classmethod
     def from_config(cls, config: str | dict[str, Any] = "obstacle-avoidance", *,
@@ -192,6 +194,11 @@ class Task:
 
     def observation_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper bounds, (d,) or (d + 2,) with goal distance and bearing."""
+        if self._bounds is None:
+            self._bounds = self._observation_bounds()
+        return self._bounds
+
+    def _observation_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         d = self.sensor_dim
         top = 1.0 if self.normalize else self.max_range
         lo, hi = [0.0] * d, [top] * d
@@ -202,13 +209,18 @@ class Task:
 
     def observe(self, reading: np.ndarray, pose: np.ndarray, goal: Goal | None) -> np.ndarray:
         """The observation of ``reading`` at ``pose`` (float32, in :meth:`observation_bounds`)."""
-        obs = reading / self.max_range if self.normalize else reading
-        if goal is not None:
-            dist, bearing = goal_features(pose, goal)
-            dist = min(dist, self.diagonal)
-            extra = (dist / self.diagonal, bearing / math.pi) if self.normalize else \
-                (dist, bearing)
-            obs = np.concatenate([obs, extra])
+        return self.observe_many(reading[None, :], pose[None, :], [goal])[0]
+
+    def observe_many(self, readings: np.ndarray, poses: np.ndarray,
+                     goals: list[Goal | None]) -> np.ndarray:
+        """Observations (N, d[+2]) of N robots' readings (N, d) at poses (N, 3)."""
+        obs = readings / self.max_range if self.normalize else readings
+        if self.protocol is not None:
+            extra = np.array([goal_features(p, g) for p, g in zip(poses, goals, strict=True)])
+            extra[:, 0] = np.minimum(extra[:, 0], self.diagonal)
+            if self.normalize:
+                extra /= (self.diagonal, math.pi)
+            obs = np.concatenate([obs, extra], axis=1)
         lo, hi = self.observation_bounds()
         return np.clip(obs.astype(np.float32), lo, hi)
 
@@ -224,8 +236,11 @@ class Task:
         i = int(action)
         if not 0 <= i < self.n_actions:
             raise ValueError(f"action {action!r} out of range: expected 0..{self.n_actions - 1}")
-        return Command(float(self.headings[i // self.speeds.size]),
-                       float(self.speeds[i % self.speeds.size]))
+        if self._commands is None:
+            v = self.speeds.size
+            self._commands = [Command(float(self.headings[a // v]), float(self.speeds[a % v]))
+                              for a in range(self.n_actions)]
+        return self._commands[i]
 
     # -- episodes -------------------------------------------------------------
     def draw_start(self, rng: np.random.Generator) -> tuple[np.ndarray, Goal | None]:
@@ -240,10 +255,12 @@ class Task:
     def trial_info(self, rng: np.random.Generator) -> TrialInfo:
         return TrialInfo(0, "learn", self.world, self.max_steps, rng)
 
-    def context(self, t: int, pose: np.ndarray, reading: np.ndarray,
-                goal: Goal | None) -> Context:
-        """The loop's context for the reward (no memberships: the env has no interpreter)."""
-        return Context(t, pose, reading, _NO_U, float(reading.min()), self.world, goal)
+    def context(self, t: int, pose: np.ndarray, reading: np.ndarray, goal: Goal | None,
+                nearest: float | None = None) -> Context:
+        """The loop's context for the reward (no memberships: the env has no interpreter);
+        ``nearest`` is the reading's smallest range (computed if not given)."""
+        return Context(t, pose, reading, _NO_U,
+                       float(reading.min()) if nearest is None else nearest, self.world, goal)
 
     def terminated(self, ctx: Context, collided: bool) -> bool:
         """Goal reached (goal tasks), or a collision with ``terminate_on_collision``."""
