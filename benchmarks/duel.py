@@ -10,8 +10,10 @@ for every method and checkpoint), ``--eval-iterations`` iterations each:
 - collisions per 1000 iterations (pooled over starts and rooms),
 - coverage (fraction of free 0.5 m cells visited, mean over starts and rooms),
 
-against environment steps and against training wall time (evaluation time
-excluded). Collisions while learning are the second score.
+against environment steps and against training time (CPU seconds of the
+learning process, evaluation excluded: the wall time on an idle core; the
+machine the duel ran on was shared, so its wall clock measured the others).
+Collisions while learning are the second score.
 
 Methods
 -------
@@ -42,6 +44,7 @@ from __future__ import annotations
 import argparse
 import copy
 import json
+import resource
 import subprocess
 import sys
 import time
@@ -62,13 +65,13 @@ CONFIGS: dict[str, tuple[str, dict[str, Any], int, tuple[int, ...]]] = {
     # nothing in 50k steps; lr 1e-3 and gamma 0.9 (the fuzzy learner's gamma) did.
     "dqn": ("dqn", {"learning_rate": 1e-3, "gamma": 0.9, "learning_starts": 1000,
                     "target_update_interval": 1000, "exploration_fraction": 0.2,
-                    "exploration_final_eps": 0.05}, 30_000, (5_000, 10_000, 20_000, 30_000)),
-    "dqn-default": ("dqn", {}, 30_000, (10_000, 30_000)),
+                    "exploration_final_eps": 0.05}, 20_000, (2_500, 5_000, 10_000, 20_000)),
+    "dqn-default": ("dqn", {}, 20_000, (10_000, 20_000)),
     # 8 envs x 256 steps = SB3's default 2048-step rollout, one batched forward pass per
     # 8 steps; gamma 0.9 as DQN's
-    "ppo": ("ppo", {"n_envs": 8, "n_steps": 256, "gamma": 0.9}, 100_000,
-            (20_000, 50_000, 100_000)),
-    "ppo-default": ("ppo", {}, 100_000, (50_000, 100_000)),
+    "ppo": ("ppo", {"n_envs": 8, "n_steps": 256, "gamma": 0.9}, 50_000,
+            (10_000, 25_000, 50_000)),
+    "ppo-default": ("ppo", {}, 50_000, (25_000, 50_000)),
 }
 FUZZY_CHECKPOINTS = (500, 1000, 2000, 5000)  # learning iterations
 
@@ -109,11 +112,15 @@ def run_fuzzy(seed: int, out: Path, a: argparse.Namespace) -> dict[str, Any]:
     from sitframe.logs import open_log
 
     log_path = out / f"fuzzy-q-{seed}.h5"
-    t0 = time.perf_counter()
-    subprocess.run([str(Path(sys.executable).parent / "sitframe"), "run", PRESET, "--trials", "1",
-                    "--seed", str(seed), "--out", str(log_path)], check=True,
-                   stdout=subprocess.DEVNULL)
-    wall = time.perf_counter() - t0
+    cpu_path = log_path.with_suffix(".cpu")
+    if not cpu_path.exists():  # (a rerun reuses a finished learning run)
+        c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        subprocess.run([str(Path(sys.executable).parent / "sitframe"), "run", PRESET,
+                        "--trials", "1", "--seed", str(seed), "--out", str(log_path)],
+                       check=True, stdout=subprocess.DEVNULL)
+        c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu_path.write_text(json.dumps(c1.ru_utime + c1.ru_stime - c0.ru_utime - c0.ru_stime))
+    cpu = float(json.loads(cpu_path.read_text()))
     log = open_log(log_path)
     n_collect = int(log.stage("collect")["samples"].shape[0])
     trial = log.trial(0)
@@ -135,8 +142,9 @@ def run_fuzzy(seed: int, out: Path, a: argparse.Namespace) -> dict[str, Any]:
 
         score = evaluate(policy, starts=a.starts, iterations=a.eval_iterations, seed=a.eval_seed)
         rows.append({"steps": n_collect + t, "learning_collisions": int(collided[:t].sum()),
-                     # the run's wall time up to t (collect + cluster + learning, pro rata)
-                     "wall_s": wall * (n_collect + t) / (n_collect + L), **score})
+                     # the run's CPU time up to t (collect + cluster + learning, pro rata;
+                     # its own evaluation stage of 3 x 1000 iterations is counted too)
+                     "cpu_s": cpu * (n_collect + t) / (n_collect + L), **score})
     return {"config": "fuzzy-q", "method": "fuzzy-q", "seed": seed, "collected": n_collect,
             "rows": rows}
 
@@ -166,16 +174,16 @@ def run_sb3(name: str, seed: int, a: argparse.Namespace,
 
     class Checkpoints(BaseCallback):
         def _on_training_start(self) -> None:
-            self.collisions, self.t0, self.paused = 0, time.perf_counter(), 0.0
+            self.collisions, self.t0, self.paused = 0, time.process_time(), 0.0
 
         def _on_step(self) -> bool:
             self.collisions += sum(bool(i.get("collided")) for i in self.locals["infos"])
             if len(snaps) < len(checkpoints) and self.num_timesteps >= checkpoints[len(snaps)]:
-                p0 = time.perf_counter()
+                p0 = time.process_time()
                 snaps.append({"steps": self.num_timesteps, "learning_collisions": self.collisions,
-                              "wall_s": p0 - self.t0 - self.paused,
+                              "cpu_s": p0 - self.t0 - self.paused,
                               "state": copy.deepcopy(self.model.policy.state_dict())})
-                self.paused += time.perf_counter() - p0
+                self.paused += time.process_time() - p0
             return True
 
     model.learn(total_timesteps=total, callback=Checkpoints())
@@ -269,12 +277,12 @@ def table(runs: dict[str, list[dict[str, Any]]], target_c: float, target_v: floa
              f"coverage {target_v:.3f}\n",
              "| method | seeds | budget (steps) | final coll./1000 median [IQR] | final coverage "
              "median [IQR] | steps to reach target (per seed) | collisions while learning "
-             "(final) | train wall s (median) |", "|" + "---|" * 8]
+             "(final) | training CPU s (median) |", "|" + "---|" * 8]
     for name, rs in runs.items():
         steps, c = curves(rs, "collisions_per_1000")
         _s, v = curves(rs, "coverage")
         _s, lc = curves(rs, "learning_collisions")
-        _s, w = curves(rs, "wall_s")
+        _s, w = curves(rs, "cpu_s")
         reach = []
         for k in range(len(rs)):
             ok = np.flatnonzero((c[k] <= target_c) & (v[k] >= target_v))

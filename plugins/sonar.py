@@ -58,8 +58,8 @@ from typing import ClassVar
 import numpy as np
 
 from sitframe import RunContext, World, cast_rays, hookimpl, point_segment_distance
-from sitframe.geometry import SegmentSet, _raycast
 from sitframe import params as P
+from sitframe.geometry import SegmentSet, _raycast
 
 __all__ = ["SonarRing", "sitframe_sensors"]
 
