@@ -65,13 +65,13 @@ CONFIGS: dict[str, tuple[str, dict[str, Any], int, tuple[int, ...]]] = {
     # nothing in 50k steps; lr 1e-3 and gamma 0.9 (the fuzzy learner's gamma) did.
     "dqn": ("dqn", {"learning_rate": 1e-3, "gamma": 0.9, "learning_starts": 1000,
                     "target_update_interval": 1000, "exploration_fraction": 0.2,
-                    "exploration_final_eps": 0.05}, 20_000, (2_500, 5_000, 10_000, 20_000)),
-    "dqn-default": ("dqn", {}, 20_000, (10_000, 20_000)),
+                    "exploration_final_eps": 0.05}, 15_000, (2_500, 5_000, 10_000, 15_000)),
+    "dqn-default": ("dqn", {}, 15_000, (5_000, 15_000)),
     # 8 envs x 256 steps = SB3's default 2048-step rollout, one batched forward pass per
     # 8 steps; gamma 0.9 as DQN's
-    "ppo": ("ppo", {"n_envs": 8, "n_steps": 256, "gamma": 0.9}, 50_000,
-            (10_000, 25_000, 50_000)),
-    "ppo-default": ("ppo", {}, 50_000, (25_000, 50_000)),
+    "ppo": ("ppo", {"n_envs": 8, "n_steps": 256, "gamma": 0.9}, 40_000,
+            (10_000, 20_000, 40_000)),
+    "ppo-default": ("ppo", {}, 40_000, (20_000, 40_000)),
 }
 FUZZY_CHECKPOINTS = (500, 1000, 2000, 5000)  # learning iterations
 
@@ -321,8 +321,7 @@ def main() -> None:
         if c != "fuzzy-q" and c not in CONFIGS:
             raise SystemExit(f"--configs: unknown '{c}'; expected fuzzy-q or one of "
                              f"{', '.join(CONFIGS)}")
-    jobs = [(c, s, a) for s in range(a.seeds) for c in a.configs]
-    jobs.sort(key=lambda j: j[0] == "ppo")  # the long PPO jobs last
+    jobs = [(c, s, a) for s in range(a.seeds) for c in a.configs]  # seed by seed
     with Pool(a.workers, maxtasksperchild=1) as pool:
         for msg in pool.imap_unordered(job, jobs):
             print(msg, flush=True)

@@ -34,6 +34,7 @@ import numpy as np
 from sitframe.gym.task import Task
 from sitframe.records import Transition
 from sitframe.robot import step_robot
+from sitframe.world import Goal
 
 __all__ = ["SitframeEnv", "render_frame"]
 
@@ -129,8 +130,6 @@ class SitframeEnv(gym.Env):
 
 def _chosen_start(task: Task, options: dict[str, Any], pose: np.ndarray,
                   goal: Any) -> tuple[np.ndarray, Any]:
-    from sitframe.world import Goal
-
     if "pose" in options:
         p = np.asarray(options["pose"], dtype=float).reshape(-1)
         if p.shape != (3,) or not task.world.is_free(p[None, :2], task.res.robot.radius)[0]:
@@ -151,7 +150,7 @@ def render_frame(world: Any, pose: np.ndarray, reading: np.ndarray | None, senso
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.patches import Circle
 
-    from sitframe.analysis.world_plot import plot_world
+    from sitframe.analysis.world_plot import plot_world  # matplotlib: only when rendering
 
     fig = plot_world(world, show_trajectories=False, show_start=False, show_goal=False,
                      robot_radius=radius)
