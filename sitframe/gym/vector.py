@@ -3,12 +3,18 @@
 Robot ``i`` behaves exactly as a :class:`sitframe.gym.env.SitframeEnv`
 seeded ``seed + i`` (as :class:`gymnasium.vector.SyncVectorEnv` seeds its
 copies): same start poses, goals, readings and rewards for the same actions
-(tested). What is shared is the numpy work:
+(tested, bit for bit, collisions included). What is shared is the numpy work
+of :func:`sitframe.robot.step_robot`, re-arranged for N robots with the same
+element-wise arithmetic (its private helpers are reused):
 
-- the "can this robot reach any wall during the period?" test of the
-  simulator (:func:`sitframe.robot.step_robot`'s first step) is one (N, S)
-  numpy call; robots in open space move by the closed form at once, only
-  those near a wall go through ``step_robot``'s substep collision checks;
+- the "can this robot reach any wall during the period?" test is one (N, S)
+  call; robots in open space move by the closed form;
+- the substep collision checks of the others are one (M, K, substeps) call,
+  each robot against only the segments it can reach;
+- the contact refinement and the back-off of the robots that touched a wall
+  are batched too; the rare cases it leaves out (a start inside a wall, a
+  dead-ahead contact whose turn side is drawn from the generator) run
+  ``step_robot`` itself;
 - sensors with a ``read_many(world, poses, rngs)`` method (the Pioneer sonar
   ring has one) read all N robots in one ray-casting call; others are read
   one by one.
@@ -87,6 +93,7 @@ class SitframeVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, num_envs)
         self._done = np.zeros(num_envs, dtype=bool)
         self._action_plans: np.ndarray | None = None
+        self._ctx: list[Any] = [None] * num_envs  # each robot's last context
         self._many = getattr(self.envs[0].sensor, "read_many", None)
         segs = self.task.world.segment_set
         self._seg = (segs.ax, segs.ay, segs.ex, segs.ey, segs.inv_len2) if segs.n else None
@@ -100,7 +107,7 @@ class SitframeVectorEnv(VectorEnv):
         obs = [env.reset(seed=s, options=options)[0] for env, s in zip(self.envs, seeds,
                                                                       strict=True)]
         self._done[:] = False
-        self._ctx: list[Any] = [None] * self.num_envs  # each robot's last context
+        self._ctx = [None] * self.num_envs
         return np.stack(obs), self._infos(np.zeros(self.num_envs, dtype=bool))
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
@@ -158,8 +165,9 @@ class SitframeVectorEnv(VectorEnv):
         One (N, S) test finds the robots that can reach a wall during the period
         (``step_robot``'s first step); robots in open space move by its closed
         form; the others' substeps are checked against their reachable segments
-        in one (M, K, substeps) call, and only robots that touch a wall go through
-        ``step_robot`` itself (contact refinement and recovery).
+        in one (M, K, substeps) call, and the contacts of those that touch a wall
+        are refined and recovered from in one more (:func:`_contacts`). A robot
+        that call does not cover goes through ``step_robot`` itself.
         """
         envs, rp = self.envs, self.task.res.robot
         T = rp.control_period_s
