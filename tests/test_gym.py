@@ -78,14 +78,17 @@ def test_goal_reached_terminates() -> None:
     assert obs[-1] == pytest.approx(0.0, abs=1e-3)  # bearing: dead ahead
 
 
-def test_vector_env_equals_single_envs(oa_task: sg.Task) -> None:
+@pytest.mark.parametrize(("config", "continuous"), [("obstacle-avoidance", False),
+                                                    ("goal-finding", True)])
+def test_vector_env_equals_single_envs(config: str, continuous: bool) -> None:
     n, seed = 3, 11
-    venv = sg.SitframeVectorEnv("obstacle-avoidance", num_envs=n, max_steps=15)
-    singles = [sg.SitframeEnv(task=oa_task) for _ in range(n)]
+    venv = sg.SitframeVectorEnv(config, num_envs=n, max_steps=15, continuous=continuous)
+    singles = [sg.SitframeEnv(task=venv.task, continuous=continuous) for _ in range(n)]
     vobs, _ = venv.reset(seed=seed)
     sobs = [e.reset(seed=seed + i)[0] for i, e in enumerate(singles)]
     np.testing.assert_array_equal(vobs, np.stack(sobs))
-    acts = np.random.default_rng(0).integers(0, 7, (40, n))  # past one autoreset each
+    rng = np.random.default_rng(0)  # 40 steps: past one autoreset each
+    acts = rng.uniform(-1, 1, (40, n, 1)) if continuous else rng.integers(0, 7, (40, n))
     done = [False] * n
     for a in acts:
         vobs, vr, vte, vtr, vinfo = venv.step(a)
@@ -98,7 +101,7 @@ def test_vector_env_equals_single_envs(oa_task: sg.Task) -> None:
             assert (vr[i], vte[i], vtr[i]) == (r, te, tr)
             np.testing.assert_array_equal(vinfo["pose"][i], e.pose)
             done[i] = te or tr
-    assert venv.observation_space.shape == (n, 8)
+    assert venv.observation_space.shape == (n, 10 if config == "goal-finding" else 8)
 
 
 def test_sonar_read_many_equals_read() -> None:
