@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from sitframe.config import load_config
+from sitframe.config import Component, load_config
 from sitframe.errors import InputError
 from sitframe.pluginmanager import Registry, get_plugin_manager
 from sitframe.records import Context, TrialInfo
@@ -170,8 +170,8 @@ class Task:
 
     def make_reward(self) -> Any:
         """A fresh reward plugin, created and bound as a run creates it."""
-        return self.res._create("reward", "env.reward",  # noqa: SLF001 - the run's own factory
-                                {"component": self.reward_name, **self.reward_params})
+        return self.res._create("reward", "env.reward",  # the run's own factory
+                                Component(self.reward_name, dict(self.reward_params)))
 
     # -- spaces -------------------------------------------------------------
     @property
