@@ -57,9 +57,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from sitframe import RunContext, World, cast_rays, hookimpl, point_segment_distance
+from sitframe import RunContext, World, cast_rays, cast_rays_many, hookimpl
 from sitframe import params as P
-from sitframe.geometry import SegmentSet, _raycast
 
 __all__ = ["SonarRing", "sitframe_sensors"]
 
@@ -191,7 +190,7 @@ class SonarRing:
         n = poses.shape[0]
         reach = self.max_range + self.robot_radius
         ang = self._ray_rel[None, :] + poses[:, 2:3]  # (N, rays), as read() adds them
-        dist = _cast_many(world.segment_set, poses[:, :2], ang, reach)
+        dist = cast_rays_many(world.segment_set, poses[:, :2], ang, reach)
         dist = dist.reshape(n, self._n, -1).min(axis=2)
         readings = np.where(dist >= reach, self.max_range, dist - self.robot_radius)
         for i in range(n) if self.noise_std > 0.0 or self.dropout > 0.0 else ():
@@ -205,39 +204,6 @@ class SonarRing:
     def __repr__(self) -> str:
         return (f"SonarRing({self._n} beams, max_range={self.max_range:g} m, "
                 f"rays_per_beam={self.rays_per_beam})")
-
-
-class _Culled:
-    """Per-robot segment arrays shaped (N, K, 1) for :func:`sitframe.geometry._raycast`."""
-
-    __slots__ = ("ax", "ay", "ex", "ey")
-
-    def __init__(self, segs: SegmentSet, idx: np.ndarray) -> None:
-        self.ax, self.ay = segs.ax[idx][..., None], segs.ay[idx][..., None]
-        self.ex, self.ey = segs.ex[idx][..., None], segs.ey[idx][..., None]
-
-
-def _cast_many(segs: SegmentSet, xy: np.ndarray, angles: np.ndarray,
-               reach: float) -> np.ndarray:
-    """Ray lengths (N, R) from N origins ``xy`` along ``angles`` (N, R) [rad], up to ``reach``.
-
-    Each robot's rays meet only the segments within ``reach`` of it (the others
-    cannot be hit nearer), padded with repeats of its first one, so the (N, K, R)
-    arrays are a fraction of (N, S, R). Element by element the arithmetic is
-    :func:`sitframe.cast_rays`' own (its kernel, broadcast): the lengths are
-    bit-identical to one ``cast_rays`` call per robot.
-    """
-    n = xy.shape[0]
-    if segs.n == 0:
-        return np.full(angles.shape, float(reach))
-    d = point_segment_distance(xy, segs)  # (N, S)
-    near = d <= reach * (1.0 + 1e-9) + 1e-12
-    k = max(int(near.sum(axis=1).max()), 1)
-    order = np.argsort(~near, axis=1, kind="stable")[:, :k]  # near segments first
-    idx = np.where(np.arange(k) < near.sum(axis=1)[:, None], order, order[:, :1])
-    return _raycast(xy[:, 0].reshape(n, 1, 1), xy[:, 1].reshape(n, 1, 1),
-                    np.cos(angles)[:, None, :], np.sin(angles)[:, None, :], _Culled(segs, idx),
-                    float(reach))
 
 
 @hookimpl

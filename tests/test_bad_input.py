@@ -186,7 +186,7 @@ CASES = [
          "unknown behaviour 'fuzzy-qq'", "did you mean 'fuzzy-q'", "available: crisp-q, fuzzy-q",
          c__toml=_cfg('component = "fuzzy-q"', 'component = "fuzzy-qq"')),
     case("component-unknown-reward", RUN, "c.toml: behaviours.avoid.reward:",
-         "unknown reward 'obstacle'", "available: obstacle-avoidance",
+         "unknown reward 'obstacle'", "available: goal-progress, obstacle-avoidance",
          c__toml=_cfg('reward = "obstacle-avoidance"', 'reward = "obstacle"')),
     case("component-unknown-arbiter", RUN, "c.toml: arbiter:", "did you mean 'cdb'",
          "available: cdb", c__toml=SMALL + "\n[arbiter]\ncomponent = 'cbd'\n"),
