@@ -73,43 +73,6 @@ class GoalBehaviour:
         return {}
 
 
-class GoalProgressReward:
-    """Reward for reaching a goal: progress towards it, a bonus on arrival, a collision penalty.
-
-    ``collision`` (-30) on a collision; else ``reached`` (100) when the robot's
-    centre ends inside the goal disc; else ``per_m`` (100) times the metres the
-    straight-line distance to the goal shrank (negative when it grew). Used by
-    the Gymnasium goal task (:mod:`sitframe.gym`) when the config learns nothing.
-    """
-
-    name = "goal-progress"
-
-    def __init__(self, *, collision: float = -30.0, reached: float = 100.0,
-                 per_m: float = 100.0) -> None:
-        self.collision = P.number("collision", collision)
-        self.reached = P.number("reached", reached)
-        self.per_m = P.number("per_m", per_m)
-
-    def __call__(self, tr: Transition) -> float:
-        goal = tr.after.goal
-        if goal is None:
-            raise InputError("the 'goal-progress' reward needs a goal in the context",
-                             key="reward")
-        if tr.outcome.collided:
-            return self.collision
-        gx, gy = goal.position
-        before = math.hypot(gx - tr.before.pose[0], gy - tr.before.pose[1])
-        after = math.hypot(gx - tr.after.pose[0], gy - tr.after.pose[1])
-        if after <= goal.radius:
-            return self.reached
-        return self.per_m * (before - after)
-
-
 @hookimpl
 def sitframe_behaviours() -> list[Any]:
     return [GoalBehaviour]
-
-
-@hookimpl
-def sitframe_rewards() -> list[Any]:
-    return [GoalProgressReward]

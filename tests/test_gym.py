@@ -74,7 +74,7 @@ def test_goal_reached_terminates() -> None:
     goal = (p[0] + 0.3 * np.cos(p[2]), p[1] + 0.3 * np.sin(p[2]), 0.3)
     env.reset(seed=0, options={"goal": goal})
     obs, r, term, trunc, _info = env.step(3)  # straight ahead: 0.225 m, inside the goal disc
-    assert term and not trunc and r == 100.0
+    assert term and not trunc and r == env.reward_fn.goal  # the arrival bonus
     assert obs[-1] == pytest.approx(0.0, abs=1e-3)  # bearing: dead ahead
 
 

@@ -16,7 +16,7 @@ Choices the issue leaves open (also in the README, "Gymnasium"):
   ``experiment.default_speed``.
 - **Reward**: the task behaviour's reward plugin. A goal config whose
   behaviours learn nothing (the ``goal-finding`` preset) gets
-  ``goal-progress`` (``plugins/goal.py``). ``reward=`` overrides both.
+  ``goal-progress`` (``plugins/learned_arbiter.py``). ``reward=`` overrides both.
 - **Episodes**: a start pose drawn uniformly among free poses with
   ``start_margin`` (0.1 m) of clearance beyond the robot's radius; goal tasks
   draw start and goal from the protocol (``[goal]`` table: min_distance,
