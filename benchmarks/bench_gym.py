@@ -1,0 +1,104 @@
+"""Benchmark: steps per second of the Gymnasium envs against the plain simulator.
+
+Three loops, alternated ``--repeats`` times in one run (medians reported):
+
+plain
+    the simulator alone, as in ``bench_sim.py``: the obstacle-avoidance
+    preset's sonar (8 cones of 5 rays) read + ``step_robot`` with a random
+    heading of the preset's 7 each iteration;
+single
+    ``SitframeEnv`` (``sitframe/ObstacleAvoidance-v0``) under random actions,
+    reset when an episode ends;
+vector
+    ``SitframeVectorEnv`` with ``--num-envs`` robots (robot-steps per second).
+
+Times are CPU seconds of this process (``time.process_time``): on a machine
+shared with other jobs, wall time mostly measures the others.
+
+Prints the rates and the ratios single / plain (target >= 0.5) and vector /
+single (target >= 3 at N = 16), and whether ``check_env`` passes for every
+registered id.
+
+Run::
+
+    python benchmarks/bench_gym.py [--steps 3000] [--num-envs 16] [--repeats 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.utils.env_checker import check_env
+
+import sitframe.gym as sg
+from sitframe.robot import Command, step_robot
+
+
+def plain(env: sg.SitframeEnv, steps: int, seed: int) -> float:
+    """Seconds for ``steps`` simulator iterations (sensor read + step) with random headings."""
+    rng = np.random.default_rng(seed)
+    world, sensor, rp = env.world, env.sensor, env.task.res.robot
+    heads = env.task.headings[rng.integers(0, env.task.headings.size, steps)]
+    pose = world.random_free_pose(rng, rp.radius, margin=0.1)
+    t0 = time.process_time()
+    for i in range(steps):
+        sensor.read(world, pose, rng)
+        pose = step_robot(world, pose, Command(float(heads[i]), 0.15), rp, rng).pose
+    return time.process_time() - t0
+
+
+def single(env: sg.SitframeEnv, steps: int, seed: int) -> float:
+    acts = np.random.default_rng(seed).integers(0, env.action_space.n, steps)
+    env.reset(seed=seed)
+    t0 = time.process_time()
+    for i in range(steps):
+        _o, _r, term, trunc, _i = env.step(acts[i])
+        if term or trunc:
+            env.reset()
+    return time.process_time() - t0
+
+
+def vector(venv: sg.SitframeVectorEnv, steps: int, seed: int) -> float:
+    n = venv.num_envs
+    acts = np.random.default_rng(seed).integers(0, venv.single_action_space.n, (steps // n, n))
+    venv.reset(seed=seed)
+    t0 = time.process_time()
+    for a in acts:
+        venv.step(a)
+    return time.process_time() - t0
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--steps", type=int, default=3000, help="(robot-)steps per timed loop")
+    ap.add_argument("--num-envs", type=int, default=16)
+    ap.add_argument("--repeats", type=int, default=5)
+    a = ap.parse_args()
+    for env_id in sg.ENV_IDS:
+        check_env(gym.make(env_id).unwrapped, skip_render_check=True)
+        print(f"check_env {env_id}: passed")
+    env = sg.make_env("obstacle-avoidance")
+    venv = sg.make_vector_env("obstacle-avoidance", a.num_envs)
+    steps = a.steps - a.steps % a.num_envs
+    for fn, obj in ((plain, env), (single, env), (vector, venv)):  # warm-up
+        fn(obj, 200 - 200 % a.num_envs, 99)
+    t: dict[str, list[float]] = {"plain": [], "single": [], "vector": []}
+    for k in range(a.repeats):
+        t["plain"].append(steps / plain(env, steps, k))
+        t["single"].append(steps / single(env, steps, k))
+        t["vector"].append(steps / vector(venv, steps, k))
+    m = {key: statistics.median(v) for key, v in t.items()}
+    print(f"steps={steps} repeats={a.repeats} (medians)")
+    print(f"plain simulator:   {m['plain']:10,.0f} iterations/s")
+    print(f"single env:        {m['single']:10,.0f} steps/s   single/plain = "
+          f"{m['single'] / m['plain']:.2f}  (target >= 0.5; >= 10,000 steps/s)")
+    print(f"vector env N={a.num_envs:<3}: {m['vector']:10,.0f} robot-steps/s   vector/single = "
+          f"{m['vector'] / m['single']:.2f}  (target >= 3)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,174 @@
+"""One robot as a Gymnasium environment (:class:`SitframeEnv`).
+
+Observation
+    ``Box(float32)`` of shape (d,) — the sensor's reading, d = its beams (8 for the
+    Pioneer sonar), ranges from the robot's rim in [0, max_range] metres, or in
+    [0, 1] divided by ``max_range`` when ``normalize=True`` (default). A goal
+    task appends the goal's distance (metres, in [0, world diagonal]; divided
+    by the diagonal when normalised) and bearing (radians in [-pi, pi], positive
+    = left; divided by pi when normalised): shape (d + 2,).
+Action
+    ``Discrete(H * V)``: action ``a`` is heading ``headings[a // V]`` [deg] at
+    speed ``speeds[a % V]`` [m/s] (V = 1 at the config's default speed when it
+    learns no speed); or, with ``continuous=True``, ``Box([-1, 1]^k)``: heading
+    change ``a[0] * 90`` deg and, if the config learns speeds, speed ``a[1]``
+    mapped onto [min_speed, max_speed].
+Step
+    One control iteration (1.5 s of robot time) through the simulator and
+    sensor code paths of a sitframe trial (:func:`sitframe.robot.step_robot`,
+    the sensor plugin's ``read``), rewarded by the config's reward plugin.
+Episode
+    See :mod:`sitframe.gym.task` (start poses, goals, time limit, termination).
+    All randomness (start poses, goals, sensor noise, the simulator's
+    tie-breaks) flows from the env's seeded generator ``np_random``:
+    ``reset(seed=s)`` gives the same episode for the same actions.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from sitframe.gym.task import Task
+from sitframe.records import Transition
+from sitframe.robot import step_robot
+from sitframe.world import Goal
+
+__all__ = ["SitframeEnv", "render_frame"]
+
+
+class SitframeEnv(gym.Env):
+    """A sitframe config as a Gymnasium environment (module docstring for the spaces).
+
+    Parameters
+    ----------
+    config
+        Preset name, TOML config path, or a validated config dict.
+    continuous
+        Continuous ``Box`` actions instead of ``Discrete``.
+    render_mode
+        ``None`` or ``"rgb_array"`` (an (H, W, 3) uint8 frame of the world, the
+        robot, its sensor beams and the goal).
+    **task
+        Passed to :meth:`sitframe.gym.task.Task.from_config`: ``world``,
+        ``reward``, ``reward_params``, ``max_steps``, ``normalize``,
+        ``start_margin``, ``terminate_on_collision``, ``plugins_dirs``.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
+
+    def __init__(self, config: str | dict[str, Any] = "obstacle-avoidance", *,
+                 continuous: bool = False, render_mode: str | None = None,
+                 task: Task | None = None, **task_kw: Any) -> None:
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode: expected None or 'rgb_array', got {render_mode!r}")
+        self.task = task if task is not None else Task.from_config(config, **task_kw)
+        self.continuous = bool(continuous)
+        self.render_mode = render_mode
+        lo, hi = self.task.observation_bounds()
+        self.observation_space = gym.spaces.Box(lo, hi, dtype=np.float32)
+        if self.continuous:
+            k = 2 if self.task.learns_speed else 1
+            self.action_space = gym.spaces.Box(-1.0, 1.0, (k,), dtype=np.float32)
+        else:
+            self.action_space = gym.spaces.Discrete(self.task.n_actions)
+        self.sensor = self.task.make_sensor()
+        self.reward_fn = self.task.make_reward()
+        self.world = self.task.world
+        self.pose = self.world.start.copy()
+        self.goal = None
+        self.t = 0
+        self._reading: np.ndarray | None = None
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
+              ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start an episode at a random free pose (and goal) drawn from ``np_random``.
+
+        ``options`` may give ``{"pose": (x, y, theta)}`` (and ``"goal": (x, y, radius)``)
+        to start from a chosen pose instead.
+        """
+        super().reset(seed=seed)
+        rng = self.np_random
+        self.pose, self.goal = self.task.draw_start(rng)
+        if options:
+            self.pose, self.goal = _chosen_start(self.task, options, self.pose, self.goal)
+        self.t = 0
+        if hasattr(self.reward_fn, "trial_start"):
+            self.reward_fn.trial_start(self.task.trial_info(rng))
+        self._reading = self.sensor.read(self.world, self.pose, rng)
+        return self.task.observe(self._reading, self.pose, self.goal), self._info(None)
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if self._reading is None:
+            raise RuntimeError("call reset() before step()")
+        task, rng = self.task, self.np_random
+        cmd = task.command(action, self.continuous)
+        before = task.context(self.t, self.pose, self._reading, self.goal)
+        out = step_robot(self.world, self.pose, cmd, task.res.robot, rng)
+        self.pose = out.pose
+        self._reading = self.sensor.read(self.world, self.pose, rng)
+        self.t += 1
+        after = task.context(self.t, self.pose, self._reading, self.goal)
+        reward = float(self.reward_fn(Transition(before, cmd, out, after)))
+        terminated = task.terminated(after, out.collided)
+        truncated = not terminated and self.t >= task.max_steps
+        obs = task.observe(self._reading, self.pose, self.goal)
+        return obs, reward, terminated, truncated, self._info(out)
+
+    def _info(self, out: Any) -> dict[str, Any]:
+        return {"pose": self.pose.copy(), "collided": bool(out is not None and out.collided),
+                "distance_m": 0.0 if out is None else float(out.distance_m)}
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode != "rgb_array":
+            return None
+        return render_frame(self.world, self.pose, self._reading, self.sensor, self.goal,
+                            self.task.res.robot.radius)
+
+
+def _chosen_start(task: Task, options: dict[str, Any], pose: np.ndarray,
+                  goal: Any) -> tuple[np.ndarray, Any]:
+    if "pose" in options:
+        p = np.asarray(options["pose"], dtype=float).reshape(-1)
+        if p.shape != (3,) or not task.world.is_free(p[None, :2], task.res.robot.radius)[0]:
+            raise ValueError(f"options['pose']: expected a free (x, y, theta) pose in world "
+                             f"'{task.world.name}', got {options['pose']!r}")
+        pose = p
+    if "goal" in options:
+        g = np.asarray(options["goal"], dtype=float).reshape(-1)
+        if g.shape != (3,) or task.protocol is None:
+            raise ValueError("options['goal']: expected (x, y, radius) in a goal task")
+        goal = Goal(g[:2], float(g[2]))
+    return pose, goal
+
+
+def render_frame(world: Any, pose: np.ndarray, reading: np.ndarray | None, sensor: Any,
+                 goal: Any, radius: float, dpi: int = 60) -> np.ndarray:
+    """An (H, W, 3) uint8 picture of ``world``: the robot at ``pose``, its beams, the goal."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.patches import Circle
+
+    from sitframe.analysis.world_plot import plot_world  # matplotlib: only when rendering
+
+    fig = plot_world(world, show_trajectories=False, show_start=False, show_goal=False,
+                     robot_radius=radius)
+    ax = fig.axes[0]
+    x, y, th = (float(v) for v in pose)
+    ax.add_patch(Circle((x, y), radius, facecolor="tab:blue", edgecolor="k", zorder=5))
+    ax.plot([x, x + radius * np.cos(th)], [y, y + radius * np.sin(th)], "k-", zorder=6)
+    if reading is not None and hasattr(sensor, "angles_deg"):
+        ang = th + np.radians(np.asarray(sensor.angles_deg, float))
+        rr = radius + np.asarray(reading, float)
+        for a, r in zip(ang, rr, strict=False):
+            ax.plot([x, x + r * np.cos(a)], [y, y + r * np.sin(a)], "-", color="tab:orange",
+                    lw=0.8, zorder=4)
+    if goal is not None:
+        ax.add_patch(Circle(tuple(goal.position), goal.radius, facecolor="none",
+                            edgecolor="tab:green", lw=1.5, zorder=5))
+        ax.plot(*goal.position, "*", color="tab:green", ms=12, zorder=6)
+    canvas = FigureCanvasAgg(fig)
+    fig.set_dpi(dpi)
+    canvas.draw()
+    return np.asarray(canvas.buffer_rgba())[..., :3].copy()

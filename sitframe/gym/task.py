@@ -1,0 +1,282 @@
+"""A sitframe config seen as a reinforcement-learning task (shared by the single and vector envs).
+
+:class:`Task` resolves a config (preset name or TOML path) with the same
+code a run uses (:class:`sitframe.resolve.Resolved`): its robot, its sensor
+plugin, the reward plugin of its learning behaviour, its worlds, and — for a
+goal task (a config whose components ask for the ``goal-episodes``
+protocol) — that protocol's start/goal pairs and its ``terminated`` test.
+Nothing here imports Gymnasium; the envs build their spaces from it.
+
+Choices the issue leaves open (also in the README, "Gymnasium"):
+
+- **Actions** are the headings (and speeds, if configured) of the config's
+  *task behaviour*: the first behaviour with a ``reward``, else the first with
+  ``headings``. Discrete action ``a`` is heading ``a // n_speeds`` and speed
+  ``a % n_speeds``; without ``speeds`` every action drives at
+  ``experiment.default_speed``.
+- **Reward**: the task behaviour's reward plugin. A goal config whose
+  behaviours learn nothing (the ``goal-finding`` preset) gets
+  ``goal-progress`` (``plugins/learned_arbiter.py``). ``reward=`` overrides both.
+- **Episodes**: a start pose drawn uniformly among free poses with
+  ``start_margin`` (0.1 m) of clearance beyond the robot's radius; goal tasks
+  draw start and goal from the protocol (``[goal]`` table: min_distance,
+  margin, radius). The time limit is the goal protocol's ``timeout``, else
+  ``evaluate.iterations`` (1000): it *truncates*. A goal task *terminates*
+  when the goal is reached; a collision terminates only with
+  ``terminate_on_collision=True`` (the robot recovers and carries on, as in
+  sitframe's own trials).
+- **Contexts** handed to the reward carry no memberships (an empty array):
+  the env has no situation interpreter, its observation is the raw reading.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from sitframe.config import Component, load_config
+from sitframe.errors import InputError
+from sitframe.pluginmanager import Registry, get_plugin_manager
+from sitframe.records import Context, TrialInfo
+from sitframe.resolve import Resolved
+from sitframe.robot import Command
+from sitframe.world import Goal, World
+
+__all__ = ["GOAL_REWARD", "Task", "goal_features"]
+
+#: The reward a goal task gets when its config learns nothing.
+GOAL_REWARD = "goal-progress"
+_NO_U = np.empty(0)
+_NO_U.setflags(write=False)
+
+
+def goal_features(pose: np.ndarray, goal: Goal) -> tuple[float, float]:
+    """Distance [m] from the robot's centre to the goal's centre and its bearing [rad] in
+    (-pi, pi] relative to the heading (positive = left)."""
+    dx, dy = goal.position[0] - pose[0], goal.position[1] - pose[1]
+    return math.hypot(dx, dy), math.remainder(math.atan2(dy, dx) - pose[2], 2.0 * math.pi)
+
+
+@dataclass
+class Task:
+    """A config resolved into what an RL environment needs.
+
+    Attributes
+    ----------
+    res
+        The resolved config (its components are created fresh per env).
+    world
+        The world episodes run in.
+    headings, speeds
+        (H,) heading changes [deg] and (V,) speeds [m/s] of the discrete actions
+        (``speeds`` holds only ``default_speed`` when the config learns no speed).
+    learns_speed
+        Whether the config's task behaviour has ``speeds`` (a continuous action
+        then has a speed dimension).
+    reward_name, reward_params
+        The reward plugin and its parameters.
+    protocol
+        The goal-episodes protocol (episodes = 1) for goal tasks, else None.
+    max_steps
+        Time limit of an episode (truncation).
+    normalize
+        Observations scaled to [0, 1] (ranges) and [-1, 1] (bearing).
+    start_margin
+        Clearance beyond the robot's radius of random start poses [m].
+    terminate_on_collision
+        Whether a collision ends the episode.
+    """
+
+    res: Resolved
+    world: World
+    headings: np.ndarray
+    speeds: np.ndarray
+    learns_speed: bool
+    reward_name: str
+    reward_params: dict[str, Any]
+    protocol: Any
+    max_steps: int
+    normalize: bool
+    start_margin: float
+    terminate_on_collision: bool
+    _bounds: tuple[np.ndarray, np.ndarray] | None = None
+    _commands: list[Command] | None = None
+
+    @classmethod
+    def from_config(cls, config: str | dict[str, Any] = "obstacle-avoidance", *,
+                    world: str | None = None, reward: str | None = None,
+                    reward_params: dict[str, Any] | None = None, max_steps: int | None = None,
+                    normalize: bool = True, start_margin: float = 0.1,
+                    terminate_on_collision: bool = False,
+                    plugins_dirs: tuple[str, ...] = ()) -> Task:
+        """Resolve ``config`` (preset name, TOML path or a validated config dict).
+
+        Raises
+        ------
+        sitframe.errors.InputError
+            A bad config, world or plugin parameter (names file and key).
+        ValueError
+            The config has no behaviour with headings, or a bad argument.
+        """
+        if isinstance(config, dict):
+            cfg, source, base = copy.deepcopy(config), None, "."
+        else:
+            cfg, source, base = load_config(str(config))
+        label = _task_behaviour(cfg, source)
+        table = cfg["behaviours"][label]
+        registry = Registry.collect(get_plugin_manager(plugins_dirs=plugins_dirs))
+        res0 = Resolved.build(cfg, registry, source, base_dir=base)
+        goal_task = res0.protocol_name() == "goal-episodes"
+        rname = reward or table.get("reward") or (GOAL_REWARD if goal_task else None)
+        if rname is None:
+            raise ValueError(f"config {source or '<dict>'}: behaviour '{label}' has no reward; "
+                             "expected a reward in its table or reward=... for the env")
+        rparams = dict(reward_params if reward_params is not None else
+                       (table.get("reward_params", {}) if rname == table.get("reward") else {}))
+        wname = world or cfg["experiment"]["world"]
+        res = Resolved.build(cfg, registry, source, worlds=(wname,), base_dir=base)
+        proto = None
+        if goal_task:
+            proto = res.protocol("goal-episodes")
+            proto.episodes = 1
+            if hasattr(proto, "check_world"):
+                proto.check_world(res.world(wname, key="world"))
+        if max_steps is None:
+            max_steps = proto.iterations if proto is not None else \
+                int(cfg.get("evaluate", {}).get("iterations", 1000))
+        if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
+            raise ValueError(f"max_steps: expected a positive integer, got {max_steps!r}")
+        if not (isinstance(start_margin, int | float) and start_margin >= 0):
+            raise ValueError(f"start_margin: expected a number >= 0 [m], got {start_margin!r}")
+        speeds = np.asarray(table.get("speeds", ()), dtype=np.float64)
+        learns_speed = speeds.size > 0
+        if not learns_speed:
+            speeds = np.array([float(cfg["experiment"]["default_speed"])])
+        task = cls(res, res.world(wname, key="world"),
+                   np.asarray(table["headings"], dtype=np.float64), speeds, learns_speed,
+                   rname, rparams, proto, int(max_steps), bool(normalize), float(start_margin),
+                   bool(terminate_on_collision))
+        task.make_reward()  # a bad reward name or parameter fails here, not at the first step
+        return task
+
+    # -- components -------------------------------------------------------
+    def make_sensor(self) -> Any:
+        """A fresh sensor, created and bound as a run creates it."""
+        return self.res.sensor()
+
+    def make_reward(self) -> Any:
+        """A fresh reward plugin, created and bound as a run creates it."""
+        return self.res._create("reward", "env.reward",  # the run's own factory
+                                Component(self.reward_name, dict(self.reward_params)))
+
+    # -- spaces -------------------------------------------------------------
+    @property
+    def sensor_dim(self) -> int:
+        return int(self.res.run.sensor.dim)
+
+    @property
+    def max_range(self) -> float:
+        return float(self.res.run.sensor.max_range)
+
+    @property
+    def n_actions(self) -> int:
+        return self.headings.size * self.speeds.size
+
+    @property
+    def diagonal(self) -> float:
+        """Diagonal of the world's bounding box [m]: the largest goal distance."""
+        x0, y0, x1, y1 = self.world.bounds
+        return math.hypot(x1 - x0, y1 - y0)
+
+    def observation_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper bounds, (d,) or (d + 2,) with goal distance and bearing."""
+        if self._bounds is None:
+            self._bounds = self._observation_bounds()
+        return self._bounds
+
+    def _observation_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        d = self.sensor_dim
+        top = 1.0 if self.normalize else self.max_range
+        lo, hi = [0.0] * d, [top] * d
+        if self.protocol is not None:
+            lo += [0.0, -1.0 if self.normalize else -math.pi]
+            hi += [1.0 if self.normalize else self.diagonal, 1.0 if self.normalize else math.pi]
+        return np.asarray(lo, np.float32), np.asarray(hi, np.float32)
+
+    def observe(self, reading: np.ndarray, pose: np.ndarray, goal: Goal | None) -> np.ndarray:
+        """The observation of ``reading`` at ``pose`` (float32, in :meth:`observation_bounds`)."""
+        return self.observe_many(reading[None, :], pose[None, :], [goal])[0]
+
+    def observe_many(self, readings: np.ndarray, poses: np.ndarray,
+                     goals: list[Goal | None]) -> np.ndarray:
+        """Observations (N, d[+2]) of N robots' readings (N, d) at poses (N, 3)."""
+        obs = readings / self.max_range if self.normalize else readings
+        if self.protocol is not None:
+            extra = np.array([goal_features(p, g) for p, g in zip(poses, goals, strict=True)])
+            extra[:, 0] = np.minimum(extra[:, 0], self.diagonal)
+            if self.normalize:
+                extra /= (self.diagonal, math.pi)
+            obs = np.concatenate([obs, extra], axis=1)
+        lo, hi = self.observation_bounds()
+        return np.clip(obs.astype(np.float32), lo, hi)
+
+    def command(self, action: Any, continuous: bool) -> Command:
+        """The command of a discrete action index or a continuous action in [-1, 1]^k."""
+        if continuous:
+            a = np.clip(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
+            rp = self.res.robot
+            heading = float(a[0]) * rp.max_heading_change_deg
+            speed = (rp.min_speed + 0.5 * (float(a[1]) + 1.0) * (rp.max_speed - rp.min_speed)
+                     if self.learns_speed else float(self.speeds[0]))
+            return Command(heading, speed)
+        i = int(action)
+        if not 0 <= i < self.n_actions:
+            raise ValueError(f"action {action!r} out of range: expected 0..{self.n_actions - 1}")
+        if self._commands is None:
+            v = self.speeds.size
+            self._commands = [Command(float(self.headings[a // v]), float(self.speeds[a % v]))
+                              for a in range(self.n_actions)]
+        return self._commands[i]
+
+    # -- episodes -------------------------------------------------------------
+    def draw_start(self, rng: np.random.Generator) -> tuple[np.ndarray, Goal | None]:
+        """A random free start pose (3,) and, for goal tasks, a goal, drawn from ``rng``."""
+        if self.protocol is None:
+            return self.world.random_free_pose(rng, self.res.robot.radius,
+                                               margin=self.start_margin), None
+        starts, goals = self.protocol.episode_starts(self.world, rng, self.res.robot)
+        g = None if goals is None else Goal(np.asarray(goals[0][:2], float), float(goals[0][2]))
+        return np.asarray(starts[0], dtype=float), g
+
+    def trial_info(self, rng: np.random.Generator) -> TrialInfo:
+        return TrialInfo(0, "learn", self.world, self.max_steps, rng)
+
+    def context(self, t: int, pose: np.ndarray, reading: np.ndarray, goal: Goal | None,
+                nearest: float | None = None) -> Context:
+        """The loop's context for the reward (no memberships: the env has no interpreter);
+        ``nearest`` is the reading's smallest range (computed if not given)."""
+        return Context(t, pose, reading, _NO_U,
+                       float(reading.min()) if nearest is None else nearest, self.world, goal)
+
+    def terminated(self, ctx: Context, collided: bool) -> bool:
+        """Goal reached (goal tasks), or a collision with ``terminate_on_collision``."""
+        if collided and self.terminate_on_collision:
+            return True
+        return self.protocol is not None and bool(self.protocol.terminated(ctx))
+
+
+def _task_behaviour(cfg: dict[str, Any], source: str | None) -> str:
+    """The label of the behaviour the env's actions are: the first with a reward, else the
+    first with headings."""
+    beh = cfg["behaviours"]
+    for pick in (lambda t: "reward" in t and "headings" in t, lambda t: "headings" in t):
+        for label, table in beh.items():
+            if pick(table):
+                return label
+    raise InputError("no behaviour has 'headings'; the env's discrete actions are a behaviour's "
+                     "headings (expected e.g. headings = [90, 60, 30, 0, -30, -60, -90])",
+                     file=source, key="behaviours")
