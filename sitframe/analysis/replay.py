@@ -151,7 +151,7 @@ def replay(
     radius = R.robot_radius(lg)
     labels = R.situation_labels(lg)
     if len(labels) != u.shape[1]:
-        labels = [f"S{i}" for i in range(u.shape[1])]
+        labels = [f"S{i + 1}" for i in range(u.shape[1])]
     conv = 0 if evaluation is not None else R.convergence_iteration(tr)
     frozen = "frozen (evaluation)" if evaluation is not None else "frozen (converged)"
 
