@@ -13,8 +13,9 @@ same log ranges the situations were clustered on (``offset`` from the
 ``[interpreter]`` table) -- its nearest range, its label and the mean learned
 speed over all trials (each trial's greedy speed: the converged rule base, or
 the greedy one of its final Q). Spearman's rank correlation of the learned
-speed with the openness, with the mean range [m] and with the nearest range
-closes the table.
+speed with the openness, with the mean range [m], the nearest range and the
+range ahead (the nearest of the beams within 22.5 deg of the heading, the
+ahead sector of the situation labels) closes the table.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import numpy as np
 from scipy.stats import spearmanr
 
 from sitframe.analysis import situation_labels
+from sitframe.clustering import SECTORS_DEG
 from sitframe.logs import open_log
 
 
@@ -60,8 +62,10 @@ def main() -> None:
     for i in np.argsort(openness):
         print(f"| {labels[i]} | {openness[i]:.2f} | {centers[i].mean():.2f} m | "
               f"{centers[i].min():.2f} m | {mean_speed[i]:.3f} m/s |")
+    angles = (np.asarray(src.sensor.angles_deg) + 180.0) % 360.0 - 180.0
+    ahead = centers[:, np.abs(angles) <= SECTORS_DEG[0]].min(axis=1)
     for name, x in (("openness", openness), ("mean range", centers.mean(axis=1)),
-                    ("nearest range", centers.min(axis=1))):
+                    ("nearest range", centers.min(axis=1)), ("range ahead", ahead)):
         print(f"Spearman(learned speed, {name}) = {spearmanr(mean_speed, x).statistic:.2f}")
 
 
