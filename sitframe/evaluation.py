@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from sitframe.clustering import describe_prototype
-from sitframe.config import META_KEYS, load_config, validate_config
+from sitframe.config import META_KEYS, Config, load_config, validate_config
 from sitframe.errors import InputError
 from sitframe.logs import open_log
 from sitframe.loop import STAGE_BATCH, STAGE_EVAL, TrialSpec, batch_scores, simulate, stage_seed
@@ -67,10 +67,11 @@ def evaluate_log(
     if not policies:
         raise InputError(f"trial {trial} has no learned policy to evaluate", file=log_path,
                          key="trials")
-    if log.has("cluster/state") or not cfg["experiment"]["clusters_from"]:
+    clusters_from = Config.of(cfg).experiment.clusters_from
+    if log.has("cluster/state") or not clusters_from:
         state = log.interpreter_state()
     else:  # a run that reused situations from another log (e.g. a goal run)
-        state = open_log(cfg["experiment"]["clusters_from"]).interpreter_state()
+        state = open_log(clusters_from).interpreter_state()
     pm = get_plugin_manager(plugins_dirs=plugins_dirs)
     registry = Registry.collect(pm)
     if arbiter is not None:
@@ -94,12 +95,13 @@ def evaluate_log(
                              key="behaviours")
         table = res.protocol(name).table
         cfg[table] = {**cfg[table], "episodes": goal_episodes}
+        res = Resolved.build(cfg, registry, source)  # (with the episodes asked for)
         spec = TrialSpec(index=trial, seed=stage_seed(seed, STAGE_BATCH, 0), world=world,
                          iterations=int(res.protocol(name).iterations), learn=False,
                          interpreter_state=state, policies=policies, protocol=name)
         result = simulate(res, spec)
         return {"log": log_path, "world": world, "trial": trial,
-                "arbiter": cfg["arbiter"]["component"], **batch_scores(result)}
+                "arbiter": res.config.arbiter.name, **batch_scores(result)}
     spec = TrialSpec(index=trial, seed=stage_seed(seed, STAGE_EVAL, trial), world=world,
                      iterations=iterations, learn=False, interpreter_state=state,
                      policies=policies)
@@ -166,7 +168,7 @@ def rule_base_table(result: Any) -> Any:
     from rich.table import Table
 
     trials = result.trials
-    world = result.info.config["experiment"]["world"]
+    world = Config.of(result.info.config).experiment.world
     key = f"eval/{world}/collisions_per_1000"
     ranked = [t for t in trials if key in t.summary]
     best = trials[0]

@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import os
 import platform
+import threading
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -42,31 +43,13 @@ from sitframe.loop import (
     stage_seed,
     step_hook_of,
 )
+from sitframe.parallel import InOrder, SerialExecutor, TrialPipeline
 from sitframe.pluginmanager import Registry, get_plugin_manager
 from sitframe.records import (
     RunInfo,
     TrialResult,
 )
-from sitframe.resolve import Resolved, config_worlds
-
-
-class SerialExecutor:
-    """Runs trials one after another in this process (fires ``sitframe_step``).
-
-    The executor protocol is ``map(experiment, specs)`` yielding one
-    :class:`TrialResult` per spec, in the order of ``specs``, as soon as each
-    is available (so observers can log trial ``k`` before ``k + 1`` ends).
-    Parallel executors (:mod:`sitframe.parallel`) follow the same protocol
-    but run in other processes, where ``sitframe_step`` observers do not fire.
-    """
-
-    #: ``sitframe_step`` observers see every iteration with this executor.
-    fires_step_hooks = True
-
-    def map(self, experiment: Experiment, specs: list[TrialSpec]) -> Iterator[TrialResult]:
-        step_hook = step_hook_of(experiment.pm)
-        for spec in specs:
-            yield simulate(experiment.res, spec, step_hook=step_hook)
+from sitframe.resolve import Resolved
 
 
 @dataclass
@@ -97,9 +80,8 @@ class Experiment:
     plugins_dirs
         Folders of loose plugin modules (also loaded by worker processes).
     executor
-        Runs the trials: anything with ``map(experiment, specs)`` yielding
-        :class:`TrialResult` in the order of ``specs``. Default
-        :class:`SerialExecutor` (in this process, with ``sitframe_step``).
+        Runs the trials (:mod:`sitframe.parallel`); default
+        :class:`~sitframe.parallel.SerialExecutor` (in this process, with ``sitframe_step``).
     base_dir
         Folder that world paths in the config are relative to (the config
         file's folder).
@@ -117,42 +99,44 @@ class Experiment:
         self.pm = pm or get_plugin_manager(plugins_dirs=plugins_dirs)
         self.registry = Registry.collect(self.pm)
         self.res = Resolved.build(cfg, self.registry, source, base_dir=base_dir)
+        #: The typed config (what the run reads); :attr:`cfg` is its serial form.
+        self.config = self.res.config
         self.out = out
         text = to_toml(cfg)
-        e = cfg["experiment"]
-        names = config_worlds(cfg)
+        e = self.config.experiment
+        names = self.config.worlds()
         #: The run's evaluation protocol (:meth:`Resolved.protocol_name`); None = frozen.
         self.protocol = self.res.protocol_name()
-        self.eval_worlds = list(cfg["evaluate"]["worlds"])
-        if self.protocol is not None and "evaluate" in e["stages"]:
+        self.eval_worlds = list(self.config.evaluate.worlds)
+        if self.protocol is not None and "evaluate" in e.stages:
             self.eval_worlds = self.res.protocol_worlds(self.protocol)
             names += self.eval_worlds
-        worlds = {n: self.res.world(n, "experiment.world" if n == e["world"] else "worlds").text
+        worlds = {n: self.res.world(n, "experiment.world" if n == e.world else "worlds").text
                   for n in dict.fromkeys(names)}
         plugins = [dataclasses.asdict(info) for info, _c in self.registry.plugins_table()]
         self.info = RunInfo(
-            name=e["name"], config=cfg, config_text=text, config_hash=config_hash(text),
-            seed=int(e["seed"]), out=out, n_trials=int(e["trials"]),
-            iterations=int(e["iterations"]), plugins=plugins, worlds=worlds,
+            name=e.name, config=cfg, config_text=text, config_hash=config_hash(text),
+            seed=e.seed, out=out, n_trials=e.trials, iterations=e.iterations, plugins=plugins,
+            worlds=worlds,
             extra={"versions": versions(), "source": source or "",
                    "sensor": self.res.run.sensor.as_dict()},
         )
 
     # -- stages ------------------------------------------------------------
     def collect(self) -> Collected:
-        c = self.cfg["collect"]
+        c = self.config.collect
         rng = np.random.default_rng(stage_seed(self.info.seed, STAGE_COLLECT))
-        worlds = [self.res.world(n, "collect.worlds") for n in c["worlds"]]
+        worlds = [self.res.world(n, "collect.worlds") for n in c.worlds]
         sensor = self.res.sensor()
         o = self.res.origins["sensor"]
         parts = []
-        if c["mode"] in ("trajectory", "both"):
+        if c.mode in ("trajectory", "both"):
             parts.append(call(o, "read", collect_trajectories, worlds, sensor, rng,
-                              speed=c["speed"], rate_hz=c["rate_hz"], params=self.res.robot))
-        if c["mode"] in ("wander", "both"):
+                              speed=c.speed, rate_hz=c.rate_hz, params=self.res.robot))
+        if c.mode in ("wander", "both"):
             parts.append(call(o, "read", collect_wander, worlds, sensor, rng,
-                              n_samples=c["wander_samples"], speed=c["speed"],
-                              rate_hz=c["rate_hz"], params=self.res.robot))
+                              n_samples=c.wander_samples, speed=c.speed,
+                              rate_hz=c.rate_hz, params=self.res.robot))
         collected = concat_collected(parts)
         why = sensor_spec_mismatch(collected.samples[0], self.res.run.sensor.dim) \
             if len(collected.samples) else None
@@ -190,19 +174,18 @@ class Experiment:
 
     def trial_spec(self, k: int, interpreter_state: dict[str, Any],
                    policies: dict[str, dict[str, np.ndarray]] | None = None) -> TrialSpec:
-        e = self.cfg["experiment"]
-        evaluate = tuple(self.eval_worlds) if "evaluate" in e["stages"] else ()
+        e = self.config.experiment
+        evaluate = tuple(self.eval_worlds) if "evaluate" in e.stages else ()
         return TrialSpec(
-            index=k, seed=stage_seed(self.info.seed, STAGE_TRIALS, k), world=e["world"],
-            iterations=int(e["iterations"]), learn=True, interpreter_state=interpreter_state,
+            index=k, seed=stage_seed(self.info.seed, STAGE_TRIALS, k), world=e.world,
+            iterations=e.iterations, learn=True, interpreter_state=interpreter_state,
             policies=policies or {}, evaluate=evaluate,
-            eval_iterations=int(self.cfg["evaluate"]["iterations"]), protocol=self.protocol)
+            eval_iterations=self.config.evaluate.iterations, protocol=self.protocol)
 
     # -- phases (``run`` composes them; a sweep interleaves them across runs) --
     def begin(self) -> None:
         """Announce the run to observers (the logger creates, or on resume reopens, the log)."""
-        self.info.extra.setdefault("step_hooks", bool(
-            getattr(self.executor, "fires_step_hooks", True)))
+        self.info.extra.setdefault("step_hooks", bool(self.executor.in_process))
         if self.out and "code_hash" not in self.info.extra:
             from sitframe.logs import code_fingerprint  # h5py: imported only when a run logs
 
@@ -214,7 +197,7 @@ class Experiment:
         """Whether :meth:`prepare` would collect/cluster (raises if the stages cannot)."""
         if interpreter_state is not None:
             return False
-        if collected is None and "collect" not in self.cfg["experiment"]["stages"]:
+        if collected is None and "collect" not in self.config.experiment.stages:
             raise InputError("the run needs clusters: include 'collect' and 'cluster' "
                              "in experiment.stages or reuse clusters from a log",
                              file=self.source, key="experiment.stages")
@@ -241,7 +224,7 @@ class Experiment:
         """
         if not self.needs_clusters(interpreter_state, collected):
             if not self.info.extra.get("resume"):
-                source = self.cfg["experiment"]["clusters_from"] or "given by the caller"
+                source = self.config.experiment.clusters_from or "given by the caller"
                 self.record_clusters({"reused_from": source}, interpreter_state)
             return interpreter_state  # type: ignore[return-value]
         if collected is None:
@@ -260,7 +243,7 @@ class Experiment:
 
         A learning trial evaluates its own learned policies (:func:`evaluation_specs`).
         """
-        stages = self.cfg["experiment"]["stages"]
+        stages = self.config.experiment.stages
         if "learn" in stages:
             idx = range(self.info.n_trials) if trials is None else trials
             return [self.trial_spec(k, interpreter_state, policies) for k in idx]
@@ -323,46 +306,213 @@ class Experiment:
         ``interpreter_state`` (e.g. read from an earlier log) skips collect
         and cluster. ``trials`` restricts which learning-trial indices run;
         ``skip`` drops any spec (learning trial or episode batch) whose index
-        is in it (resume: the ones already in the log).
-
-        Trials go to ``self.executor``; their results reach the observers
-        (the HDF5 logger) in this process, in trial order, as soon as each
-        trial and all before it have finished. Ctrl-C (KeyboardInterrupt)
-        stops the executor (pending trials are cancelled), leaves the trials
-        already handed to observers in the log, marks the run ``aborted`` and
-        re-raises.
+        is in it (resume: the ones already in the log). See :func:`drive`.
         """
-        t0 = time.perf_counter()
-        status = "failed"
-        results: list[TrialResult] = []
-        stream = None
-        try:
-            self.begin()
-            start = getattr(self.executor, "start", None)
-            if start is not None and "learn" in self.cfg["experiment"]["stages"]:
-                start(self)  # e.g. warm up worker processes while we collect and cluster
-            interpreter_state = self.prepare(interpreter_state, collected)
-            specs = [s for s in self.trial_specs(interpreter_state, policies, trials)
-                     if s.index not in skip]
-            if specs:
-                stream = self.executor.map(self, specs)
-                for result in stream:
-                    results.append(result)
-                    self.trial_done(result)
-            status = "complete"
-        except KeyboardInterrupt:
-            status = "aborted"
-            raise
-        except PluginFault as exc:
-            self.info.extra["failure"] = str(exc)
-            raise
-        finally:
-            close = getattr(stream, "close", None)
-            if close is not None:
-                close()  # cancels a parallel executor's pending trials
-            self.finish(status)
-        return RunResult(self.info, results, time.perf_counter() - t0, status,
-                         interpreter_state or {}, self.res.run.sensor.angles_deg)
+        return drive([(self, RunPlan(interpreter_state, collected, policies, trials,
+                                     frozenset(skip)))], self.executor)[0]
+
+
+@dataclass(frozen=True)
+class RunPlan:
+    """What one run of :func:`drive` starts from (all optional).
+
+    Attributes
+    ----------
+    interpreter_state
+        Situations fitted elsewhere (skips collect and cluster).
+    collected
+        Collected samples to cluster (skips collect).
+    policies
+        Frozen learned policies per behaviour label (``policy_from``).
+    trials
+        Learning-trial indices to run (default all).
+    skip
+        Indices of specs not to run (resume: those already in the log).
+    """
+
+    interpreter_state: dict[str, Any] | None = None
+    collected: Collected | None = None
+    policies: dict[str, Any] | None = None
+    trials: list[int] | None = None
+    skip: frozenset[int] = frozenset()
+
+    @classmethod
+    def of(cls, kwargs: dict[str, Any]) -> RunPlan:
+        """From ``prepare_experiment``'s run keyword arguments."""
+        return cls(**{k: (frozenset(v) if k == "skip" else v) for k, v in kwargs.items()})
+
+
+class _Runs:
+    """The runs of one :func:`drive` call: their specs, release order, results and status."""
+
+    def __init__(self, runs: list[tuple[Experiment, RunPlan]], pipe: TrialPipeline,
+                 handles: list[Any]) -> None:
+        self.runs, self.pipe, self.handles = runs, pipe, handles
+        self.status = ["pending"] * len(runs)
+        self.states: list[dict[str, Any]] = [{} for _ in runs]
+        self.release: list[InOrder] = [InOrder(()) for _ in runs]
+        self.results: list[list[TrialResult]] = [[] for _ in runs]
+
+    def add_trials(self, i: int, state: dict[str, Any]) -> None:
+        exp, plan = self.runs[i]
+        self.states[i] = state
+        specs = [s for s in exp.trial_specs(state, plan.policies, plan.trials)
+                 if s.index not in plan.skip]
+        self.release[i] = InOrder(s.index for s in specs)
+        self.pipe.add_trials(((i, s.index), self.handles[i], s) for s in specs)
+        if not specs:
+            self.finish(i, "complete")
+
+    def trial(self, i: int, k: int, result: TrialResult) -> None:
+        for r in self.release[i].add(k, result):
+            self.results[i].append(r)
+            self.runs[i][0].trial_done(r)
+        if self.release[i].complete:
+            self.finish(i, "complete")
+
+    def finish(self, i: int, status: str) -> None:
+        self.status[i] = status
+        self.runs[i][0].finish(status)
+
+    def stop(self, exc: BaseException) -> None:
+        """Mark every run still running ``aborted`` (Ctrl-C) or ``failed``."""
+        status = "aborted" if isinstance(exc, KeyboardInterrupt) else "failed"
+        for i, st in enumerate(self.status):
+            if st != "running":
+                continue
+            if isinstance(exc, PluginFault):
+                self.runs[i][0].info.extra["failure"] = str(exc)
+            self.finish(i, status)
+
+
+def drive(runs: list[tuple[Experiment, RunPlan]], executor: Any) -> list[RunResult]:
+    """The run lifecycle, shared by ``run``, ``run --resume`` and ``sweep``.
+
+    Each run is announced to its observers (:meth:`Experiment.begin`), gets
+    its situations (given, or collected and clustered), and its trials go to
+    ``executor`` through one :class:`~sitframe.parallel.TrialPipeline`; each
+    run's finished trials reach its observers (the HDF5 logger) in this
+    process, in trial order, as soon as each trial and all before it have
+    finished (:class:`~sitframe.parallel.InOrder`), and the run ends
+    ``complete``. With several runs on a pool (a sweep), every run's collect
+    and cluster stages are tasks too, so all runs' work shares the workers.
+
+    Ctrl-C (KeyboardInterrupt) or a failure cancels the pending tasks, leaves
+    the trials already handed to observers in the logs, marks every run
+    still running ``aborted`` (Ctrl-C) or ``failed`` and re-raises.
+    """
+    t0 = time.perf_counter()
+    for exp, _plan in runs:
+        exp.executor = executor
+    handles = [exp if executor.in_process else Setup.of(exp) for exp, _plan in runs]
+    pipe = TrialPipeline(executor, run_trial)
+    book = _Runs(runs, pipe, handles)
+    try:
+        with pipe:
+            for i, (exp, plan) in enumerate(runs):
+                book.status[i] = "running"  # (observers hear the end even if begin fails)
+                exp.begin()
+                if exp.needs_clusters(plan.interpreter_state, plan.collected) and \
+                        len(runs) > 1 and not executor.in_process:
+                    pipe.add_call(i, run_clusters, handles[i])
+                    continue
+                if len(runs) == 1 and "learn" in exp.config.experiment.stages:
+                    if isinstance(handles[i], Setup):  # forked workers inherit what is built
+                        _cache.setdefault(handles[i].key, exp)
+                    executor.warm(warm_up, handles[i])  # workers start while we cluster
+                book.add_trials(i, exp.prepare(plan.interpreter_state, plan.collected))
+            for kind, tag, value in pipe:
+                if kind == "call":
+                    collected, fit, state = value
+                    runs[tag][0].record_collected(collected)
+                    runs[tag][0].record_clusters(fit, state)
+                    book.add_trials(tag, state)
+                else:
+                    book.trial(*tag, value)
+    except BaseException as exc:
+        book.stop(exc)
+        raise
+    wall = time.perf_counter() - t0
+    return [RunResult(exp.info, book.results[i], wall, book.status[i], book.states[i],
+                      exp.res.run.sensor.angles_deg) for i, (exp, _plan) in enumerate(runs)]
+
+
+# ---------------------------------------------------------------------------
+# What a worker receives and runs
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Setup:
+    """What a worker needs to rebuild an experiment's components (picklable).
+
+    Attributes
+    ----------
+    key
+        Cache key: hash of the resolved config and the plugin folders.
+    cfg
+        The validated config.
+    source
+        Where the config came from (for messages).
+    plugins_dirs
+        Folders of loose plugin modules to load.
+    base_dir
+        Absolute folder the config's world paths are relative to.
+    """
+
+    key: str
+    cfg: dict[str, Any]
+    source: str | None
+    plugins_dirs: tuple[str, ...]
+    base_dir: str = "."
+
+    @classmethod
+    def of(cls, experiment: Experiment) -> Setup:
+        dirs = tuple(os.path.abspath(d) for d in experiment.plugins_dirs)
+        base = os.path.abspath(experiment.base_dir)
+        key = config_hash(to_toml(experiment.cfg) + "\0" + "\0".join((*dirs, base)))
+        return cls(key, experiment.cfg, experiment.source, dirs, base)
+
+
+_cache: dict[str, Experiment] = {}
+_cache_lock = threading.Lock()
+
+
+def _experiment(handle: Experiment | Setup) -> Experiment:
+    """The experiment of a task: the caller's own (in-process executors) or, in a worker,
+    one rebuilt from its :class:`Setup` (built once per worker; thread-safe)."""
+    if isinstance(handle, Experiment):
+        return handle
+    with _cache_lock:
+        exp = _cache.get(handle.key)
+        if exp is None:
+            exp = Experiment(handle.cfg, source=handle.source, plugins_dirs=handle.plugins_dirs,
+                             base_dir=handle.base_dir)
+            if len(_cache) > 16:  # a long-lived Dask worker serving many sweeps
+                _cache.clear()
+            _cache[handle.key] = exp
+        return exp
+
+
+def run_trial(handle: Experiment | Setup, spec: TrialSpec) -> TrialResult:
+    """Task: run one trial and return its data (``sitframe_step`` fires where it runs)."""
+    exp = _experiment(handle)
+    return simulate(exp.res, spec, step_hook=step_hook_of(exp.pm))
+
+
+def run_clusters(handle: Experiment | Setup
+                 ) -> tuple[Collected, dict[str, Any], dict[str, Any]]:
+    """Task: the collect and cluster stages (``collected, fit, state``)."""
+    exp = _experiment(handle)
+    collected = exp.collect()
+    fit, state = exp.cluster(collected.samples)
+    return collected, fit, state
+
+
+def warm_up(handle: Experiment | Setup) -> int:
+    """Task: build the components now; returns the worker's pid."""
+    _experiment(handle)
+    return os.getpid()
 
 
 def versions() -> dict[str, str]:
@@ -377,4 +527,5 @@ def versions() -> dict[str, str]:
     }
 
 
-__all__ = ["Experiment", "RunResult", "SerialExecutor", "versions"]
+__all__ = ["Experiment", "RunPlan", "RunResult", "Setup", "drive", "run_clusters",
+           "run_trial", "versions"]

@@ -19,6 +19,7 @@ import dataclasses
 import hashlib
 import math
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -27,10 +28,10 @@ import numpy as np
 
 from sitframe.clustering import average_ranks
 from sitframe.collect import trajectory_poses
-from sitframe.config import validate_config
+from sitframe.config import config_hash, load_config, to_toml, validate_config
 from sitframe.errors import InputError
 from sitframe.experiment import Experiment
-from sitframe.logs import Log, open_log
+from sitframe.logs import Log, lock_log, open_log, unlock_log
 from sitframe.records import LearnedPolicy
 from sitframe.resolve import Resolved
 
@@ -76,8 +77,9 @@ def prepare_experiment(
     dirs += plugins_dirs
     exp = Experiment(cfg, source=source, out=out, plugins_dirs=dirs, base_dir=base_dir)
     exp.info.extra["progress"] = progress
+    config = exp.config
     kwargs: dict[str, Any] = {}
-    _check_collect(exp, cfg, source)
+    _check_collect(exp, source)
     checked: dict[str, Log] = {}
     inputs: dict[str, str] = {}
 
@@ -91,7 +93,7 @@ def prepare_experiment(
             checked[path].check()
         return checked[path]
 
-    clusters_from = cfg["experiment"]["clusters_from"]
+    clusters_from = config.experiment.clusters_from
     if clusters_from:
         path = _resolve_path(clusters_from, base_dir)
         log = source_log(path, "experiment.clusters_from")
@@ -106,8 +108,8 @@ def prepare_experiment(
         kwargs["interpreter_state"] = state
         inputs["clusters_from"] = fingerprint(state)
     policies: dict[str, LearnedPolicy] = {}
-    for label, table in cfg["behaviours"].items():
-        pf = table.get("policy_from")
+    for label, table in config.behaviours.items():
+        pf = table.policy_from
         if not pf:
             continue
         path = _resolve_path(pf["log"], base_dir)
@@ -137,6 +139,87 @@ def prepare_experiment(
             inputs[w.source or ""] = f"world '{name}'"
         check_out(out, inputs)
     return exp, kwargs
+
+
+def make_prerequisites(cfg: dict[str, Any], base_dir: str = ".", *,
+                       executor_for: Callable[[int], Any] | None = None,
+                       plugins_dirs: tuple[str, ...] = (), progress: bool = False,
+                       say: Callable[[str], None] = print,
+                       _stack: tuple[str, ...] = ()) -> list[str]:
+    """Make the logs a config builds on, before the run is prepared.
+
+    A config's ``[prerequisites]`` table maps a log path it reads (in
+    ``clusters_from`` or a ``policy_from``) to the experiment that makes
+    that log (a preset name, or a .toml path relative to the config's folder)::
+
+        [prerequisites]
+        "logs/obstacle-avoidance-12.h5" = "obstacle-avoidance-12"
+
+    For each entry: a log that does not exist is made now, by running that
+    experiment unchanged (its own prerequisites first) with the log as its
+    output; a log that exists is reused if it is complete and was made by the
+    same config (same config hash); anything else is refused, so a run never
+    builds on a log other than the one its prerequisite names. Every choice is
+    said in one line through ``say``.
+
+    Parameters
+    ----------
+    executor_for
+        ``executor_for(n_trials)`` gives the executor a prerequisite run uses
+        (default: in this process).
+    plugins_dirs, progress
+        As for :func:`prepare_experiment`.
+
+    Returns
+    -------
+    list of str
+        The paths of the logs made now (in the order made).
+    """
+    made: list[str] = []
+    for log, experiment in cfg.get("prerequisites", {}).items():
+        key = f"prerequisites.{log}"
+        path = _resolve_path(log, base_dir)
+        name = _resolve_path(experiment, base_dir) if experiment.endswith(".toml") \
+            else experiment
+        if name in _stack:
+            raise InputError(f"prerequisites form a cycle: {' -> '.join((*_stack, name))}",
+                             key=key)
+        pcfg, psource, pbase = load_config(name)
+        if Path(path).exists():
+            _check_reusable(path, pcfg, experiment, key)
+            say(f"reusing {path}: a complete log of '{experiment}' (same config)")
+            continue
+        made += make_prerequisites(pcfg, pbase, executor_for=executor_for,
+                                   plugins_dirs=plugins_dirs, progress=progress, say=say,
+                                   _stack=(*_stack, name))
+        say(f"{path} not found: running '{experiment}' first to make it")
+        exp, kwargs = prepare_experiment(pcfg, source=psource, base_dir=pbase, out=path,
+                                         plugins_dirs=plugins_dirs, progress=progress)
+        if executor_for is not None:
+            exp.executor = executor_for(exp.info.n_trials)
+        lock_log(path)
+        failed = True
+        try:
+            exp.run(**kwargs)
+            failed = False
+        finally:
+            exp.executor.shutdown(cancel=failed)
+            unlock_log(path)
+        made.append(path)
+    return made
+
+
+def _check_reusable(path: str, cfg: dict[str, Any], experiment: str, key: str) -> None:
+    """An existing prerequisite log: complete, and made by the prerequisite's own config."""
+    log = open_log(path)
+    if not log.complete:
+        raise InputError(f"the prerequisite log is not complete (status {log.status}); finish "
+                         f"it with `sitframe run --resume {path}`, or remove it to remake it",
+                         file=path, key=key)
+    if str(log.attrs.get("config_hash", "")) != config_hash(to_toml(cfg)):
+        raise InputError(f"exists but was not made by '{experiment}' as it is now (another "
+                         "config); remove it to remake it, or name the config that made it",
+                         file=path, key=key)
 
 
 def check_out(out: str, inputs: dict[str, str]) -> None:
@@ -174,16 +257,16 @@ def fingerprint(arrays: dict[str, Any]) -> str:
 MAX_COLLECT_SAMPLES = 10_000_000
 
 
-def _check_collect(exp: Experiment, cfg: dict[str, Any], source: str | None) -> None:
+def _check_collect(exp: Experiment, source: str | None) -> None:
     """Data collection that cannot work, found before anything is written: a world without
     trajectories, far too many samples, a wander rate the robot cannot hold, or fewer
     samples than situations to fit."""
-    e, c = cfg["experiment"], cfg["collect"]
-    if e["clusters_from"] or "collect" not in e["stages"]:
+    e, c = exp.config.experiment, exp.config.collect
+    if e.clusters_from or "collect" not in e.stages:
         return
-    rate, speed = float(c["rate_hz"]), float(c["speed"])
+    rate, speed = c.rate_hz, c.speed
     n = 0
-    if c["mode"] in ("wander", "both"):  # wandering holds each command 1/rate_hz seconds
+    if c.mode in ("wander", "both"):  # wandering holds each command 1/rate_hz seconds
         try:
             dataclasses.replace(exp.res.robot, control_period_s=1.0 / rate)
         except InputError as exc:
@@ -192,12 +275,12 @@ def _check_collect(exp: Experiment, cfg: dict[str, Any], source: str | None) -> 
         except (ValueError, TypeError) as exc:
             raise InputError(f"wander mode holds each command 1/rate_hz s: {exc}",
                              file=source, key="collect.rate_hz") from None
-        n += int(c["wander_samples"]) * len(c["worlds"])
-    if c["mode"] in ("trajectory", "both"):
+        n += c.wander_samples * len(c.worlds)
+    if c.mode in ("trajectory", "both"):
         turn_step = math.radians(exp.res.robot.max_turn_rate_deg_s) / rate
         worlds = []
         estimate = 0.0  # upper bound: samples along the paths + turning on the spot
-        for i, name in enumerate(c["worlds"]):
+        for i, name in enumerate(c.worlds):
             world = exp.res.world(name, "collect.worlds")
             if not world.trajectories:
                 raise InputError(f"world '{name}' has no [[trajectories]] to collect along; "

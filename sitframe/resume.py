@@ -99,7 +99,7 @@ def prepare_resume(
     have = set(log.trial_indices())
     kwargs["skip"] = frozenset(have)
     missing = [k for k in range(exp.info.n_trials) if k not in have]
-    if "learn" not in cfg["experiment"]["stages"]:
+    if "learn" not in exp.config.experiment.stages:
         missing = []
     return exp, kwargs, missing
 

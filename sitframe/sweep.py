@@ -64,14 +64,16 @@ import re
 import sys
 import time
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from sitframe.config import META_KEYS
-from sitframe.errors import InputError, did_you_mean
+from sitframe.errors import InputError, did_you_mean, note
 
 # start-up time: this module is imported whenever the command line builds its parser
 # (``sitframe --help`` and every command), so what only one command needs is imported
@@ -117,16 +119,45 @@ class Sweep:
 # ---------------------------------------------------------------------------
 
 
-def load_sweep(path: str, *, out: str | None = None,
-               plugins_dirs: tuple[str, ...] = ()) -> Sweep:
+def load_sweep(path: str, *, out: str | None = None, plugins_dirs: tuple[str, ...] = (),
+               prerequisites: Callable[[dict[str, Any], str], Any] | None = None) -> Sweep:
     """Read and validate a sweep file; prepare every grid point's experiment.
 
-    Nothing is written. Raises :class:`InputError` (file, key, suggestion)
-    for anything wrong.
+    Nothing is written, unless ``prerequisites(base_cfg, base_dir)`` is given: it
+    is called before the points are prepared, to make the logs the base config
+    builds on (:func:`sitframe.prepare.make_prerequisites`). Raises
+    :class:`InputError` (file, key, suggestion) for anything wrong.
     """
-    from sitframe.config import load_config
-
     p = Path(path)
+    raw = _read_sweep_file(p, path)
+    head = _check_head(raw.get("sweep", {}), path, out)
+    name = head.get("name", p.stem)
+    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_.=-]+", name):
+        raise InputError(f"expected a name of letters, digits, '_', '-', '.', got {name!r}",
+                         file=path, key="sweep.name")
+    base_cfg, base_source, base_dir = _load_base(head["base"], p, path)
+    fixed: dict[str, Any] = dict(raw.get("set", {}))
+    for key, short in (("trials", "experiment.trials"), ("seed", "experiment.seed")):
+        if key in head:
+            fixed[short] = head[key]
+    grid = raw.get("grid", {})
+    _check_grid(grid, fixed, path)
+    plugins = _registry(base_cfg, base_dir, plugins_dirs)
+    for where, keys in (("set", fixed), ("grid", grid)):
+        for key in keys:
+            check_key(key, base_cfg, plugins, file=path, where=where)
+    out_dir = Path(out or head.get("out") or Path("logs") / "sweeps" / name)
+    desc = head.get("description", "")
+    sweep = Sweep(name, str(p), head["base"], base_cfg, base_source, base_dir, fixed,
+                  dict(grid), out_dir, desc if isinstance(desc, str) else "")
+    if prerequisites is not None:
+        prerequisites(base_cfg, base_dir)
+    sweep.points = _prepare_points(sweep, plugins_dirs)
+    return sweep
+
+
+def _read_sweep_file(p: Path, path: str) -> dict[str, Any]:
+    """The sweep file's TOML, with only the sections ``sweep``, ``set`` and ``grid``."""
     if not p.is_file():
         raise InputError("sweep file not found (expected a .toml sweep definition)", file=path)
     try:
@@ -141,7 +172,11 @@ def load_sweep(path: str, *, out: str | None = None,
                              "; expected sweep, set, grid", file=path, key=section)
         if not isinstance(raw[section], dict):
             raise InputError("expected a table", file=path, key=section)
-    head = raw.get("sweep", {})
+    return raw
+
+
+def _check_head(head: dict[str, Any], path: str, out: str | None) -> dict[str, Any]:
+    """The ``[sweep]`` table: known keys, a ``base``, an ``out`` inside the working folder."""
     for key in head:
         if key not in _SWEEP_KEYS:
             raise InputError(f"unknown key{did_you_mean(key, _SWEEP_KEYS)}; expected one of "
@@ -149,29 +184,40 @@ def load_sweep(path: str, *, out: str | None = None,
     if "base" not in head:
         raise InputError("missing 'base' (a preset name or the path of an experiment .toml)",
                          file=path, key="sweep.base")
-    base = head["base"]
-    if not isinstance(base, str) or not base:
-        raise InputError(f"expected a preset name or a path, got {base!r}", file=path,
+    if not isinstance(head["base"], str) or not head["base"]:
+        raise InputError(f"expected a preset name or a path, got {head['base']!r}", file=path,
                          key="sweep.base")
-    name = head.get("name", p.stem)
-    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_.=-]+", name):
-        raise InputError(f"expected a name of letters, digits, '_', '-', '.', got {name!r}",
-                         file=path, key="sweep.name")
+    if "out" in head:
+        if not isinstance(head["out"], str) or not head["out"]:
+            raise InputError(f"expected a folder path (string), got {head['out']!r}",
+                             file=path, key="sweep.out")
+        rel = Path(head["out"])
+        if out is None and (rel.is_absolute() or ".." in rel.parts):
+            raise InputError(f"expected a folder inside the working folder (relative, no '..'), "
+                             f"got {head['out']!r}; give --out DIR on the command line to write "
+                             "elsewhere", file=path, key="sweep.out")
+    return head
+
+
+def _load_base(base: str, p: Path, path: str) -> tuple[dict[str, Any], str, str]:
+    """The base experiment: a preset name, or a .toml path relative to the sweep file."""
+    from sitframe.config import load_config
+
     base_arg = base
     if base.endswith(".toml") or "/" in base:
         bp = Path(base)
         base_arg = str(bp if bp.is_absolute() else p.parent / bp)
     try:
-        base_cfg, base_source, base_dir = load_config(base_arg)
+        return load_config(base_arg)
     except InputError as exc:
         if exc.file in (None, base_arg) and exc.key is None:
             raise InputError(exc.message, file=path, key="sweep.base") from None
         raise
-    fixed: dict[str, Any] = dict(raw.get("set", {}))
-    for key, short in (("trials", "experiment.trials"), ("seed", "experiment.seed")):
-        if key in head:
-            fixed[short] = head[key]
-    grid = raw.get("grid", {})
+
+
+def _check_grid(grid: dict[str, Any], fixed: dict[str, Any], path: str) -> None:
+    """Every grid axis a non-empty list of distinct values, not also fixed; not too many
+    points; no run names set (a sweep names its points' runs)."""
     if not grid:
         raise InputError("the grid is empty (expected [grid] with at least one "
                          "\"dotted.key\" = [values])", file=path, key="grid")
@@ -189,30 +235,11 @@ def load_sweep(path: str, *, out: str | None = None,
     if n_points > MAX_POINTS:
         raise InputError(f"the grid has {n_points} points; expected at most {MAX_POINTS}",
                          file=path, key="grid")
-    if "out" in head and (not isinstance(head["out"], str) or not head["out"]):
-        raise InputError(f"expected a folder path (string), got {head['out']!r}", file=path,
-                         key="sweep.out")
     for where, keys in (("set", fixed), ("grid", grid)):
         if "experiment.name" in keys:
             raise InputError("a sweep names every point's run itself (<sweep name>/<point>); "
                              "expected [sweep] name instead", file=path,
                              key=f"{where}.experiment.name")
-    if "out" in head and out is None:
-        rel = Path(head["out"])
-        if rel.is_absolute() or ".." in rel.parts:
-            raise InputError(f"expected a folder inside the working folder (relative, no '..'), "
-                             f"got {head['out']!r}; give --out DIR on the command line to write "
-                             "elsewhere", file=path, key="sweep.out")
-    plugins = _registry(base_cfg, base_dir, plugins_dirs)
-    for where, keys in (("set", fixed), ("grid", grid)):
-        for key in keys:
-            check_key(key, base_cfg, plugins, file=path, where=where)
-    out_dir = Path(out or head.get("out") or Path("logs") / "sweeps" / name)
-    desc = head.get("description", "")
-    sweep = Sweep(name, str(p), base, base_cfg, base_source, base_dir, fixed, dict(grid),
-                  out_dir, desc if isinstance(desc, str) else "")
-    sweep.points = _prepare_points(sweep, plugins_dirs)
-    return sweep
 
 
 def _registry(cfg: dict[str, Any], base_dir: str, plugins_dirs: tuple[str, ...]) -> Any:
@@ -388,108 +415,33 @@ def _prepare_points(sweep: Sweep, plugins_dirs: tuple[str, ...]) -> list[Point]:
 
 
 def run_sweep(sweep: Sweep, executor: Any, *, progress: bool = False) -> dict[str, Any]:
-    """Run every point's stages and trials through ``executor`` (a pool executor).
+    """Run every point's stages and trials through ``executor`` (one run lifecycle,
+    :func:`sitframe.experiment.drive`, for all points at once).
 
     Each point's log is written in this process, in trial order, as trials
     finish; this process holds every point log's lock for the whole sweep.
     Ctrl-C (or SIGTERM) cancels pending work, marks unfinished points
-    ``aborted`` and re-raises.
+    ``aborted`` and re-raises. ``progress`` shows the progress plugin's bar
+    over all points' trials.
 
     Returns
     -------
     dict
         ``{"name", "out", "wall_seconds", "points": [summary row per point]}``.
     """
+    from sitframe.experiment import RunPlan, drive
     from sitframe.logs import lock_log
-    from sitframe.parallel import Setup, TrialPipeline, run_clusters
 
     t0 = time.perf_counter()
-    points = sweep.points
-    for pt in points:  # one writer per log: refuse before any point writes anything
+    for pt in sweep.points:  # one writer per log: refuse before any point writes anything
         lock_log(pt.log)
-    status = ["pending"] * len(points)
-    buffers: list[dict[int, Any]] = [{} for _ in points]
-    expected: list[list[int]] = [[] for _ in points]
-    done: list[int] = [0] * len(points)
-    setups = [Setup.of(pt.experiment) for pt in points]
-    total = sum(pt.experiment.info.n_trials for pt in points
-                if "learn" in pt.experiment.cfg["experiment"]["stages"])
-    bar = _Progress(total, sweep.name) if progress else None
-    pipe = TrialPipeline(executor)
-
-    def add_trials(i: int, state: dict[str, Any]) -> None:
-        pt = points[i]
-        specs = pt.experiment.trial_specs(state, pt.run_kwargs.get("policies"))
-        expected[i] = [s.index for s in specs]
-        pipe.add_trials(((i, s.index), setups[i], s) for s in specs)
-        if not specs:
-            finish(i, "complete")
-
-    def finish(i: int, st: str) -> None:
-        status[i] = st
-        points[i].experiment.finish(st)
-
-    try:
-        with pipe:
-            for i, pt in enumerate(points):
-                exp = pt.experiment
-                exp.begin()
-                status[i] = "running"
-                state = pt.run_kwargs.get("interpreter_state")
-                if exp.needs_clusters(state):
-                    pipe.add_call(i, run_clusters, setups[i])
-                else:
-                    add_trials(i, state)
-            for kind, tag, value in pipe:
-                if kind == "call":
-                    collected, fit, state = value
-                    exp = points[tag].experiment
-                    exp.record_collected(collected)
-                    exp.record_clusters(fit, state)
-                    add_trials(tag, state)
-                    continue
-                i, k = tag
-                buffers[i][k] = value
-                order = expected[i]
-                while done[i] < len(order) and order[done[i]] in buffers[i]:
-                    points[i].experiment.trial_done(buffers[i].pop(order[done[i]]))
-                    done[i] += 1
-                    if bar is not None:
-                        bar.advance()
-                if done[i] == len(order):
-                    finish(i, "complete")
-    except BaseException as exc:
-        st = "aborted" if isinstance(exc, KeyboardInterrupt) else "failed"
-        for i, s in enumerate(status):
-            if s == "running":
-                finish(i, st)
-        raise
-    finally:
-        if bar is not None:
-            bar.stop()
-    rows = [summarise_point(pt) for pt in points]
+    for pt in sweep.points:
+        pt.experiment.info.extra["progress"] = progress
+        pt.experiment.info.extra["progress_group"] = f"sweep {sweep.name}"
+    drive([(pt.experiment, RunPlan.of(pt.run_kwargs)) for pt in sweep.points], executor)
+    rows = [summarise_point(pt) for pt in sweep.points]
     return {"name": sweep.name, "out": str(sweep.out), "keys": list(sweep.grid),
             "wall_seconds": round(time.perf_counter() - t0, 3), "points": rows}
-
-
-class _Progress:
-    """A rich progress bar over all trials of the sweep (stderr)."""
-
-    def __init__(self, total: int, name: str) -> None:
-        from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
-
-        self.progress = Progress("[progress.description]{task.description}", BarColumn(),
-                                 MofNCompleteColumn(), TimeRemainingColumn(),
-                                 console=Console(stderr=True))
-        self.progress.start()
-        self.task = self.progress.add_task(f"sweep {name}: trials", total=total)
-
-    def advance(self) -> None:
-        self.progress.advance(self.task, 1)
-
-    def stop(self) -> None:
-        self.progress.stop()
 
 
 # ---------------------------------------------------------------------------
@@ -707,9 +659,15 @@ def main(args: argparse.Namespace) -> int:
 
     if args.workers is not None and args.workers < 1:
         raise InputError(f"must be at least 1, got {args.workers}", key="--workers")
-    sweep = load_sweep(args.sweep, out=args.out, plugins_dirs=tuple(args.plugins_dir))
+    from sitframe.prepare import make_prerequisites
+
+    dirs = tuple(args.plugins_dir)
+    executor_for = partial(make_executor, args.workers, args.scheduler)
+    sweep = load_sweep(args.sweep, out=args.out, plugins_dirs=dirs, prerequisites=lambda c, b:
+                       make_prerequisites(c, b, executor_for=executor_for, plugins_dirs=dirs,
+                                          say=note))
     total = sum(pt.experiment.info.n_trials for pt in sweep.points)
-    executor = make_executor(args.workers, args.scheduler, total, pool=True)
+    executor = make_executor(args.workers, args.scheduler, total)
     failed = True
     try:
         result = run_sweep(sweep, executor,

@@ -15,11 +15,11 @@ from sitframe.cli import main
 from sitframe.config import load_config, preset_text, validate_config
 from sitframe.errors import InputError
 from sitframe.evaluation import evaluate_log
-from sitframe.prepare import prepare_experiment
 from sitframe.logs import open_log
 from sitframe.loop import TrialSpec, batch_scores, simulate
 from sitframe.pluginmanager import Registry, get_plugin_manager
 from sitframe.plugins.goal_episodes import AGGREGATE_KEYS, GoalEpisodes, goal_pairs, world_pairs
+from sitframe.prepare import prepare_experiment
 from sitframe.resolve import Resolved
 from sitframe.world import load_world, parse_world
 
@@ -102,8 +102,11 @@ def test_batch_is_deterministic_and_scored():
 def test_episode_config_validation():
     with pytest.raises(InputError, match="pairs"):
         GoalEpisodes(pairs="fixed")
-    with pytest.raises(InputError, match="goal.timeout"):
-        validate_config({"behaviours": {"g": {"component": "goal"}}, "goal": {"timeout": 0}})
+    # the protocol checks its own table when any run resolves (a goal run or not)
+    cfg = validate_config({"behaviours": {"a": {"component": "fuzzy-q"}},
+                           "goal": {"timeout": 0}})
+    with pytest.raises(InputError, match=r"goal\.timeout.*expected an integer"):
+        Resolved.build(cfg, Registry.collect(get_plugin_manager()))
 
 
 @pytest.mark.parametrize("goal, where", [("[20, 4]", "outside the walls"),
@@ -155,7 +158,9 @@ def test_cli_evaluate_goal_json_and_errors(oa_log, capsys):
 
 
 def goal_config(tmp_path, oa_log, extra: str = "") -> str:
-    text = preset_text("goal-finding").replace("logs/obstacle-avoidance-12.h5", oa_log)
+    # (our own small log instead of the preset's prerequisite run)
+    text = preset_text("goal-finding").split("[prerequisites]")[0]
+    text = text.replace("logs/obstacle-avoidance-12.h5", oa_log)
     text = text.replace("episodes = 50", "episodes = 2").replace(
         'worlds = ["goal", "novel-1", "novel-2"]', 'worlds = ["goal"]')
     p = tmp_path / "gf.toml"
@@ -209,8 +214,7 @@ def test_learning_goal_run_evaluates_each_trials_learned_policy():
     untrained behaviour: the rule base all zeros.)
     """
     from sitframe.experiment import Experiment
-    from sitframe.loop import evaluation_specs
-    from sitframe.parallel import InlineExecutor
+    from sitframe.loop import evaluation_specs, simulate
 
     cfg = validate_config({
         "experiment": {"trials": 2, "iterations": 80, "world": "goal",
@@ -227,9 +231,10 @@ def test_learning_goal_run_evaluates_each_trials_learned_policy():
     exp = Experiment(cfg)
     result = exp.run(interpreter_state=STATE)
     assert [t.index for t in result.trials] == [0, 1]  # no extra batch with an untrained policy
-    # a pool runs the batches as separate tasks (TrialPipeline) and attaches them the same way
-    pooled = Experiment(cfg, executor=InlineExecutor()).run(interpreter_state=STATE)
-    for t, p in zip(result.trials, pooled.trials, strict=True):
+    # the run drives the batches as separate tasks (TrialPipeline) and attaches them exactly
+    # as one simulate() call with the evaluations inline does
+    inline = [simulate(exp.res, exp.trial_spec(k, STATE)) for k in (0, 1)]
+    for t, p in zip(result.trials, inline, strict=True):
         assert json.dumps(t.summary, default=str) == json.dumps(p.summary, default=str)
         np.testing.assert_array_equal(t.episodes["eval/goal/pose"], p.episodes["eval/goal/pose"])
     rules = [t.policies["avoid"].outputs["heading"].rules for t in result.trials]

@@ -139,11 +139,16 @@ def test_not_hdf5_and_wrong_schema(tmp_path, capsys):
     assert "unknown log schema version 99" in capsys.readouterr().err
 
 
-def test_speed_needs_a_heading_log(tmp_path, capsys, monkeypatch):
+def test_a_missing_log_without_prerequisite_is_one_line(tmp_path, capsys, monkeypatch):
+    """A config that reads a log it names no prerequisite for: one line, nothing run.
+    (The shipped presets name theirs: tests/test_prerequisites.py.)"""
     monkeypatch.chdir(tmp_path)
-    assert main(["run", "speed"]) == 2
+    (tmp_path / "c.toml").write_text(SMALL.replace('seed = 3', 'seed = 3\nclusters_from = '
+                                                   '"logs/obstacle-avoidance.h5"'))
+    assert main(["run", "c.toml"]) == 2
     err = capsys.readouterr().err
-    assert "logs/obstacle-avoidance.h5: log file not found" in err
+    assert err.count("\n") == 1 and "logs/obstacle-avoidance.h5: log file not found" in err
+    assert not (tmp_path / "logs").exists() or not any((tmp_path / "logs").iterdir())
 
 
 def test_reused_situations_are_recorded_and_sensor_must_match(small_run, tmp_path, capsys):
