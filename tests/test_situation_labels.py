@@ -12,10 +12,10 @@ from sitframe.plugins.laser import LaserScanner
 from sitframe.plugins.sonar import SonarRing
 
 SENSORS = {
-    "pioneer sonar, 25 deg cones (the presets)": SonarRing(beam_width_deg=25, rays_per_beam=5),
-    "pioneer sonar, single rays (the thesis)": SonarRing(),
-    "laser, 16 beams over 180 deg": LaserScanner(),
-    "laser, 16-beam ring": LaserScanner(fov_deg=360, beams=16),
+    "sonar-cones": SonarRing(beam_width_deg=25, rays_per_beam=5),  # the presets' sonar
+    "sonar-rays": SonarRing(),                                      # the thesis's
+    "laser-180": LaserScanner(),                                    # 16 beams over 180 deg
+    "laser-ring": LaserScanner(fov_deg=360, beams=16),
 }
 
 
@@ -25,7 +25,7 @@ def situation(label: str) -> str:
     return "obstacle ahead" if head == "front blocked" else head
 
 
-@pytest.mark.parametrize("sensor", list(SENSORS), ids=lambda s: s.split(",")[0] + s[-12:])
+@pytest.mark.parametrize("sensor", list(SENSORS))
 def test_labels_are_right_on_the_labelled_set(sensor: str) -> None:
     s = SENSORS[sensor]
     readings, labels, notes = labelled_readings(s)
