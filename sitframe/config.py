@@ -37,7 +37,8 @@ thesis's Table A.1):
     ``iterations``.
 ``[goal]``
     ``episodes``, ``timeout``, ``min_distance``, ``worlds``, ``pairs``
-    (``"random"`` or ``"world"``), ``radius``, ``margin``: the parameters of
+    (``"random"`` or ``"world"``), ``radius``, ``margin``, optionally ``train``
+    (``"world"`` or ``"episodes"``: how a learning trial runs): the parameters of
     the ``goal-episodes`` evaluation protocol (``plugins/goal_episodes.py``)
     that a goal run's evaluate stage uses.
 ``[prerequisites]``
@@ -116,6 +117,9 @@ DEFAULTS: dict[str, dict[str, Any]] = {
 #: Optional sections without defaults (absent from a config that does not use them, so the
 #: config's text, and so its hash, stays what it was before they existed).
 OPTIONAL_SECTIONS = ("prerequisites",)
+#: Optional keys without defaults, for the same reason (checked by the component that reads
+#: them: ``goal.train`` by the goal-episodes protocol).
+OPTIONAL_KEYS = {"goal": {"train"}}
 
 _CORE_KEYS = {s: set(v) for s, v in DEFAULTS.items() if s not in ("behaviours",)}
 
@@ -323,7 +327,7 @@ def validate_config(raw: dict[str, Any], *, file: str | None = None) -> dict[str
             cfg[section] = {log: _at(P.string, log, run, file, section)
                             for log, run in value.items()}
         else:
-            known = _CORE_KEYS[section]
+            known = _CORE_KEYS[section] | OPTIONAL_KEYS.get(section, set())
             for key in value:
                 if key not in known:
                     raise InputError(

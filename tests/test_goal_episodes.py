@@ -141,7 +141,8 @@ def test_evaluate_goal_episodes(oa_log):
     assert set(AGGREGATE_KEYS) <= set(r) and r["episodes"] == 2 and r["arbiter"] == "cdb"
     p = evaluate_log(oa_log, world="goal", goal_episodes=2, arbiter="priority")
     assert p["arbiter"] == "priority"
-    with pytest.raises(InputError, match="unknown arbiter 'nope'.*available: cdb, priority"):
+    with pytest.raises(InputError, match="unknown arbiter 'nope'.*available: cdb, "
+                       "fuzzy-q-arbiter, priority"):
         evaluate_log(oa_log, world="goal", goal_episodes=2, arbiter="nope")
 
 
@@ -154,7 +155,7 @@ def test_cli_evaluate_goal_json_and_errors(oa_log, capsys):
     assert main(["evaluate", oa_log, "--world", "goal", "--goal-episodes", "2",
                  "--arbiter", "nope"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "available: cdb, priority, single" in err[0]
+    assert len(err) == 1 and "available: cdb, fuzzy-q-arbiter, priority, single" in err[0]
 
 
 def goal_config(tmp_path, oa_log, extra: str = "") -> str:
@@ -204,7 +205,8 @@ def test_unknown_arbiter_in_config_lists_available(tmp_path, oa_log, capsys):
     Path(path).write_text(text)
     assert main(["run", path, "--out", str(tmp_path / "x.h5")]) == 2
     err = capsys.readouterr().err.strip()
-    assert "unknown arbiter 'cbd'" in err and "available: cdb, priority, single" in err
+    assert "unknown arbiter 'cbd'" in err
+    assert "available: cdb, fuzzy-q-arbiter, priority, single" in err
 
 
 def test_learning_goal_run_evaluates_each_trials_learned_policy():
