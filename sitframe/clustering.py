@@ -527,50 +527,59 @@ def _check_proto(center: object, angles_deg: object) -> tuple[np.ndarray, np.nda
     return v, a
 
 
+#: Sector edges of :func:`describe_prototype` [deg from the heading, either side]:
+#: ahead up to the first, the diagonals up to the second, the sides up to the third,
+#: behind beyond it.
+SECTORS_DEG = (22.5, 67.5, 112.5)
+#: A short reading in one half of the ahead sector is a close side wall's own when it
+#: is at least this many times that wall's range (see ``_ahead``).
+SIDE_WALL_REACH = 1.5
+
+
 def describe_prototype(
     center: np.ndarray,
     angles_deg: np.ndarray = SONAR_ANGLES_DEG,
     *,
     near: float = 0.5,
-    far: float = 0.8,
-    lane: float = 0.4,
+    far: float = 0.9,
 ) -> str:
     """Short description of a range prototype, for tables and plot titles.
 
-    Works for any beam layout (bearings are taken modulo 360 deg). Each range
-    ``r`` at bearing ``a`` (degrees, positive = left) is a hit at forward
-    distance ``r cos a`` and lateral offset ``r sin a`` (metres). Sectors:
+    Works for any beam layout: beams are grouped by bearing ``a`` (degrees,
+    positive = left, taken modulo 360) into sectors (:data:`SECTORS_DEG`),
+    and each sector's value is the smallest range of its beams (``inf`` for
+    a sector without beams):
 
-    - *ahead* = the smallest forward distance of the hits of the frontal beams
-      (``|a| <= 35``) that lie in the robot's lane (``|r sin a| <= lane``);
-      ``inf`` if none does (e.g. the +-30 deg sonars seeing corridor walls);
-    - *left* / *right* = the smallest range of the beams with
-      ``45 <= a <= 110`` / ``-110 <= a <= -45``; the *side* beams are those
-      with ``70 <= |a| <= 110``;
-    - *behind* = the smallest range of the beams with ``|a| > 110``.
+    - *ahead*: ``|a| <= 22.5``;
+    - *front-left* / *front-right* (diagonals): ``22.5 < |a| <= 60``;
+    - *left* / *right* (sides): ``60 < |a| <= 120``;
+    - *behind*: ``|a| > 120``.
 
-    A value is *blocked* below ``near`` and *close* below ``far``. When the
-    layout covers ahead, left and right (the Pioneer front ring, a 180 deg
-    laser, a 360 deg ring), rules, first match wins:
+    A sector is *close* below ``far`` (and ahead is *blocked* below ``near``).
+    Only the beams near the heading decide whether the way ahead is open: a
+    sonar cone at 30 deg reads the nearest of its rays, which in a corridor
+    is a side wall at 40 deg, so the diagonals never make a corridor a dead
+    end. When the layout has beams ahead, left and right (the Pioneer front
+    ring, a 180 deg laser, a 360 deg ring), first match wins:
 
-    - ahead, left and right all below ``far`` -> ``"dead end"``;
-    - ahead below ``far``:
-      both sides open -> ``"front blocked"`` (``"obstacle ahead"`` if it is
-      only close), followed by ``", left open"`` or ``", right open"`` for the
-      side whose mean range (over the beams with ``0 < a <= 110`` /
-      ``-110 <= a < 0``) is larger by at least 0.25 m;
-      left below ``far`` -> ``"left corner"`` if a left side beam is below
-      ``far``, else ``"obstacle front-left"``; the same on the right;
-    - ahead open: left and right below ``far`` -> ``"corridor"``; left below
-      ``far`` -> ``"wall on left"`` (``"obstacle front-left"`` if the side
-      beams are open); the same on the right; behind below ``far`` ->
-      ``"obstacle behind"``; otherwise ``"open space"``.
+    - ahead close: both sides close -> ``"dead end"``; the left side close ->
+      ``"left corner"``, the right -> ``"right corner"``; neither side but
+      one diagonal close -> ``"obstacle front-left"`` / ``"front-right"``;
+      otherwise ``"obstacle ahead"``, followed by ``", left open"`` or
+      ``", right open"`` when the mean range of that half (``0 < a <= 120``
+      / ``-120 <= a < 0``) is larger by at least 0.25 m;
+    - ahead open: both sides close -> ``"corridor"``; the left side close ->
+      ``"wall on left"``, the right -> ``"wall on right"``; a diagonal close ->
+      ``"obstacle front-left"`` / ``"front-right"`` (the nearer if both);
+      behind close -> ``"obstacle behind"``; otherwise ``"open space"``.
 
-    A layout that misses one of ahead, left and right gets the covered
-    sectors that are close, joined by ``", "`` (``"front blocked"`` /
-    ``"obstacle ahead"``, ``"obstacle left"``, ``"obstacle right"``,
-    ``"obstacle behind"``), or ``"nothing close in view"``: it never calls
-    open what it cannot see.
+    A layout that misses ahead, left or right gets the covered sectors that
+    are close, joined by ``", "`` (``"obstacle ahead"``, ``"obstacle
+    front-left"``, ``"obstacle left"``, ...), or ``"nothing close in view"``:
+    it never calls open what it cannot see.
+
+    Measured on the labelled readings of ``tests/data/situations.toml``
+    (120 poses in eight configurations, ``tests/test_situation_labels.py``).
 
     Parameters
     ----------
@@ -580,8 +589,6 @@ def describe_prototype(
         Beam bearings, degrees, positive = left (counter-clockwise).
     near, far : float, metres
         Thresholds, ``0 < near < far``.
-    lane : float, metres
-        Half-width of the lane ahead of the robot, > 0.
 
     Returns
     -------
@@ -591,47 +598,71 @@ def describe_prototype(
     if not (0 < near < far):
         raise ValueError(f"near and far must satisfy 0 < near < far (metres), got near={near}, "
                          f"far={far}")
-    if not lane > 0:
-        raise ValueError(f"lane must be > 0 (metres), got {lane}")
     a = (a + 180.0) % 360.0 - 180.0  # [-180, 180)
-    rad = np.deg2rad(a)
-    fwd, lat = v * np.cos(rad), v * np.sin(rad)
-    frontal = np.abs(a) <= 35
-    in_lane = frontal & (np.abs(lat) <= lane)
-    ahead = float(fwd[in_lane].min()) if in_lane.any() else math.inf
+    front, diag, side = SECTORS_DEG
+    mag = np.abs(a)
 
     def level(mask: np.ndarray) -> float:
         return float(v[mask].min()) if mask.any() else math.inf
 
-    is_left, is_right = (a >= 45) & (a <= 110), (a <= -45) & (a >= -110)
-    left, right, behind = level(is_left), level(is_right), level(np.abs(a) > 110)
-    left_side, right_side = level(is_left & (a >= 70)), level(is_right & (a <= -70))
-    if not (frontal.any() and is_left.any() and is_right.any()):
+    is_ahead, is_l, is_r = mag <= front, (a > diag) & (a <= side), (a < -diag) & (a >= -side)
+    fl, fr = level((a > front) & (a <= diag)), level((a < -front) & (a >= -diag))
+    left, right, behind = level(is_l), level(is_r), level(mag > side)
+    if not (is_ahead.any() and is_l.any() and is_r.any()):
+        ahead = level(is_ahead)
         close = [("front blocked" if ahead < near else "obstacle ahead", ahead),
+                 ("obstacle front-left", fl), ("obstacle front-right", fr),
                  ("obstacle left", left), ("obstacle right", right),
                  ("obstacle behind", behind)]
         return ", ".join(w for w, r in close if r < far) or "nothing close in view"
-    if ahead < far and left < far and right < far:
-        return "dead end"
+    ahead = _ahead(v, a, is_ahead, left if left < far else math.inf,
+                   right if right < far else math.inf)
     if ahead < far:
-        if left >= far and right >= far:
-            head = "front blocked" if ahead < near else "obstacle ahead"
-            lh, rh = (a > 0) & (a <= 110), (a < 0) & (a >= -110)
-            lm = float(v[lh].mean()) if lh.any() else 0.0
-            rm = float(v[rh].mean()) if rh.any() else 0.0
-            if abs(lm - rm) >= 0.25:
-                return f"{head}, {'left' if lm > rm else 'right'} open"
-            return head
-        if left < far:
-            return "left corner" if left_side < far else "obstacle front-left"
-        return "right corner" if right_side < far else "obstacle front-right"
+        if left < far and right < far:
+            return "dead end"
+        if left < far or right < far:
+            return "left corner" if left < far else "right corner"
+        head = "front blocked" if ahead < near else "obstacle ahead"
+        lm, rm = (float(v[m].mean()) if m.any() else 0.0
+                  for m in ((a > 0) & (a <= side), (a < 0) & (a >= -side)))
+        if abs(lm - rm) >= 0.25:
+            return f"{head}, {'left' if lm > rm else 'right'} open"
+        return head
     if left < far and right < far:
         return "corridor"
-    if left < far:
-        return "wall on left" if left_side < far else "obstacle front-left"
-    if right < far:
-        return "wall on right" if right_side < far else "obstacle front-right"
+    if left < far or right < far:
+        return "wall on left" if left < far else "wall on right"
+    if min(fl, fr) < far:
+        return "obstacle front-left" if fl <= fr else "obstacle front-right"
     return "obstacle behind" if behind < far else "open space"
+
+
+def _ahead(v: np.ndarray, a: np.ndarray, is_ahead: np.ndarray, left: float,
+           right: float) -> float:
+    """The range ahead [m] for :func:`describe_prototype`: what blocks the way, not a side wall.
+
+    ``left`` / ``right`` are the ranges of close side walls (``inf`` when
+    open). A beam straight ahead counts; so does the nearer of the two halves
+    of the ahead sector when both are short (something across the way). A
+    short reading in one half only counts when it is nearer than
+    :data:`SIDE_WALL_REACH` (1.5) times that side's wall: a wall at distance
+    ``d`` alongside is hit at about ``d / sin(b)`` by a ray at bearing ``b``,
+    and the ahead beams' rays reach ``b`` of about 40 deg (the edge of a 25
+    deg cone at 10 deg, on a robot turned up to 20 deg toward the wall), so
+    a reading of ``1.5 d`` or more there is the side wall itself. Measured
+    on the labelled set with poses perturbed by up to 12 deg and 0.2 m: 99 %
+    right with 1.5, 97 % with 2 and 90 % when such readings always count.
+    """
+    def level(mask: np.ndarray) -> float:
+        return float(v[mask].min()) if mask.any() else math.inf
+
+    half_l, half_r = level(is_ahead & (a > 0)), level(is_ahead & (a < 0))
+    cands = [level(is_ahead & (a == 0)), max(half_l, half_r)]
+    if half_l < SIDE_WALL_REACH * left:
+        cands.append(half_l)
+    if half_r < SIDE_WALL_REACH * right:
+        cands.append(half_r)
+    return min(cands)
 
 
 def canonical_order(

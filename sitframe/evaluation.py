@@ -200,7 +200,7 @@ def rule_base_table(result: Any) -> Any:
         desc = describe_prototype(centers[n], result.sensor_angles_deg) \
             if centers is not None and len(result.sensor_angles_deg) == np.shape(centers)[1] \
             else ""
-        row = [f"S{i}", desc]
+        row = [f"S{i + 1}", desc]
         for label, out, o in outs:
             votes = Counter(int(t.policies[label].outputs[out].rules[i]) for t in trials
                             if label in t.policies)

@@ -72,7 +72,7 @@ def test_collision_intervals():
 
 def test_situation_labels_and_config_readers(log):
     labels = A.situation_labels(log)
-    assert len(labels) == 6 and labels[0].startswith("S0: ")
+    assert len(labels) == 6 and labels[0].startswith("S1: ") and labels[-1].startswith("S6: ")
     assert A.sensor_angles(log).tolist() == [90, 50, 30, 10, -10, -30, -50, -90]
     assert A.robot_radius(log) == pytest.approx(0.15)
 
@@ -95,7 +95,7 @@ def test_lookup_and_rule_base_tables_one_row_per_situation(log, trial):
     q = trial.behaviours["avoid"]["heading/q"]
     np.testing.assert_allclose([r[2:9] for r in lt.rows], q)
     rb = A.rule_base_table(log, 0)
-    assert [r[0] for r in rb.rows] == list(range(6))
+    assert [r[0] for r in rb.rows] == list(range(1, 7))  # situations numbered from 1
     singles = trial.behaviours["avoid"]["actions/heading"]
     assert rb.column("Action [deg]") == [int(singles[i]) for i in trial.policy("avoid")["heading"]]
     assert sum(rb.column("Dominant [%]")) == pytest.approx(100.0)

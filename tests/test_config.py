@@ -73,4 +73,4 @@ def test_missing_config_file(tmp_path):
 def test_to_toml_is_valid_toml():
     cfg, _, _ = load_config("speed")
     text = to_toml(cfg)
-    assert tomllib.loads(text)["behaviours"]["avoid"]["policy_from"]["trial"] == 0
+    assert tomllib.loads(text)["behaviours"]["avoid"]["policy_from"]["trial"] == "best"

@@ -143,8 +143,8 @@ def test_pioneer_labels_do_not_depend_on_beam_order_or_turns() -> None:
     ([3.0, 0.7, 0.0], "corridor", "corridor"),              # along the corridor
     ([5.25, 0.7, 0.0], "dead end", "dead end"),             # facing its end
     ([3.0, 0.7, np.pi / 2], "obstacle ahead", "obstacle ahead"),  # facing a side wall
-    ([3.0, 0.4, 0.0], "wall on right", "right corner"),     # the laser's -30 beam: in the lane
-    ([3.0, 0.3, 0.0], "right corner", "right corner"),      # so near it is also ahead
+    ([3.0, 0.4, 0.0], "corridor", "corridor"),              # 0.25 / 0.85 m from the walls
+    ([3.0, 0.3, 0.0], "wall on right", "wall on right"),    # the left wall 0.95 m away: open
 ])
 def test_describe_any_layout(pose, ring, laser) -> None:
     p = np.array(pose)
@@ -209,7 +209,7 @@ def test_prototype_plot_draws_the_layout() -> None:
     V = np.array([ring.read(CORRIDOR, np.array(p), None) for p in ([3, 0.7, 0], [0.5, 0.7, 0])])
     fig = plot_prototypes(V, ring.angles_deg, max_range=ring.max_range)
     ax = fig.axes[1]
-    assert ax.get_title() == "S1: corridor"
+    assert ax.get_title() == "S2: corridor"
     assert (ax.get_thetamin(), ax.get_thetamax()) == (-180, 180)  # the whole ring is shown
     # the beams' end points sit at the layout's bearings, ranges unchanged
     dots = ax.lines[-2].get_xydata()

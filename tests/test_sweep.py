@@ -168,7 +168,7 @@ def test_sweep_file_errors(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("name", ["ablation", "oa12-optimism", "oa8-optimism", "sensors",
-                                  "sensors-beams"])
+                                  "sensors-beams", "obstacle-avoidance"])
 def test_shipped_sweeps_load(name):
     """The sweep files the README cites resolve every point (keys, values, presets)."""
     from pathlib import Path
@@ -177,7 +177,8 @@ def test_shipped_sweeps_load(name):
 
     path = Path(__file__).resolve().parents[1] / "sweeps" / f"{name}.toml"
     sweep = load_sweep(str(path))
-    assert len(sweep.points) == {"ablation": 6, "sensors": 20, "sensors-beams": 10}.get(name, 40)
+    assert len(sweep.points) == {"ablation": 6, "sensors": 20, "sensors-beams": 10,
+                                 "oa12-optimism": 40, "oa8-optimism": 40}.get(name, 10)
     if name == "sensors":  # a whole [sensor] table per value, replacing the base's
         sonar, laser = sweep.points[0], sweep.points[-1]
         assert sonar.name == "sensor=pioneer-sonar-beam_width_deg=25-rays_per_beam=5_seed=0"

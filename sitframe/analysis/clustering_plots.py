@@ -67,7 +67,7 @@ def plot_prototypes(
     max_range: float = 3.0,
     labels: list[str] | None = None,
     ncols: int | None = None,
-    first_index: int = 0,
+    first_index: int = 1,
 ) -> Figure:
     """Each cluster prototype as a polar plot of its ranges, one per beam (thesis Fig. 5.2).
 
@@ -90,8 +90,8 @@ def plot_prototypes(
         One description per prototype; default :func:`describe_prototype`.
     ncols : int, optional
         Columns of the grid (default ``min(c, 4)``).
-    first_index : int, default 0
-        Number of the first situation in the titles ``"S{i}: {label}"``.
+    first_index : int, default 1
+        Number of the first situation (as in the thesis) in the titles ``"S{i}: {label}"``.
 
     Returns
     -------

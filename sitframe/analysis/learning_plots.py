@@ -101,7 +101,7 @@ def plot_exploration(
         ``counts[s, a]`` = iterations in which situation ``s`` was dominant and
         executed action ``a`` (:func:`sitframe.analysis.results.exploration_counts`).
     situation_labels : sequence of str, optional
-        One label per situation (row); default ``S0 ... S(c-1)``.
+        One label per situation (row); default ``S1 ... Sc``.
     actions : sequence of float, optional
         Action values (columns), e.g. heading changes in degrees.
     title : str, optional
@@ -118,7 +118,7 @@ def plot_exploration(
         raise ValueError(f"counts must be (situations, actions), got shape {N.shape}")
     c, A = N.shape
     ylab = list(situation_labels) if situation_labels is not None else [
-        f"S{i}" for i in range(c)]
+        f"S{i + 1}" for i in range(c)]
     if len(ylab) != c:
         raise ValueError(f"need {c} situation labels, got {len(ylab)}")
     if actions is None:

@@ -152,7 +152,7 @@ def replay(
     radius = R.robot_radius(lg)
     labels = R.situation_labels(lg)
     if len(labels) != u.shape[1]:
-        labels = [f"S{i}" for i in range(u.shape[1])]
+        labels = [f"S{i + 1}" for i in range(u.shape[1])]
     alive = ""  # evolving situations: how many exist at each iteration
     if tr.situations:
         n0 = len(np.asarray(lg.interpreter_state().get("ids", [])))

@@ -16,8 +16,9 @@ Definitions used throughout
 * *Convergence iteration*: the iteration at which the learner froze its greedy
   rule base (thesis 4.6.4); ``None`` if it did not converge. Collisions
   "after convergence" are those of iterations ``>= convergence iteration``.
-* Situations are numbered from 0 (``S0 ... S(c-1)``) in labels and tables,
-  like the array rows and the rest of sitframe (the thesis numbers from 1).
+* Situations are numbered from 1 (``S1 ... Sc``) in labels, tables and
+  figures, as in the thesis; array rows (``memberships[:, i]``, ``q[i]``)
+  stay 0-based, so situation ``Sk`` is row ``k - 1``.
 """
 
 from __future__ import annotations
@@ -118,14 +119,14 @@ def situation_labels(log: LogLike, *, numbered: bool = True) -> list[str]:
 
     Uses :func:`sitframe.clustering.describe_prototype` on
     ``/cluster/state/centers`` with the log's sensor angles. Without prototypes
-    (another interpreter) the labels are just ``S0 ... S(c-1)``.
+    (another interpreter) the labels are just ``S1 ... Sc``.
 
     Parameters
     ----------
     log
         The log (or its path).
     numbered
-        Prefix each label with ``"S{i}: "`` (0-based, like the array rows).
+        Prefix each label with ``"S{k}: "``, numbered from 1 (row ``k - 1``).
 
     Returns
     -------
@@ -135,12 +136,12 @@ def situation_labels(log: LogLike, *, numbered: bool = True) -> list[str]:
     try:
         centers = np.asarray(lg.interpreter_state()["centers"], dtype=np.float64)
     except (InputError, KeyError):
-        return [f"S{i}" for i in range(_n_situations(lg))]
+        return [f"S{i + 1}" for i in range(_n_situations(lg))]
     angles = sensor_angles(lg)
     if centers.ndim != 2 or centers.shape[1] != angles.size:
-        return [f"S{i}" for i in range(centers.shape[0])]
+        return [f"S{i + 1}" for i in range(centers.shape[0])]
     words = [describe_prototype(v, angles) for v in centers]
-    return [f"S{i}: {w}" if numbered else w for i, w in enumerate(words)]
+    return [f"S{i}: {w}" if numbered else w for i, w in enumerate(words, start=1)]
 
 
 def _n_situations(log: Log) -> int:
@@ -544,7 +545,7 @@ def lookup_table(log: LogLike, trial: int | TrialLog, label: str | None = None,
     cols = (["Situation", "Description"]
             + [_deg(float(a)) if heading else f"{a:g}" for a in singles]
             + ["Greedy [deg]" if heading else f"Greedy ({output})"])
-    rows = [[i, labels[i], *map(float, q[i]), _num(singles[int(np.argmax(q[i]))])]
+    rows = [[i + 1, labels[i], *map(float, q[i]), _num(singles[int(np.argmax(q[i]))])]
             for i in range(q.shape[0])]
     conv = convergence_iteration(tr, label)
     when = (f"at convergence (iteration {conv})" if conv is not None
@@ -584,7 +585,7 @@ def rule_base_table(log: LogLike, trial: int | TrialLog, label: str | None = Non
     counts = np.bincount(u.argmax(axis=1), minlength=c) if u.size else np.zeros(c)
     share = 100.0 * counts / max(int(counts.sum()), 1)
     head = f"Action [{po.unit}]" if po.unit else f"Action ({output})"
-    rows = [[i, labels[i], _num(singles[pol[i]]),
+    rows = [[i + 1, labels[i], _num(singles[pol[i]]),
              float(q[i].max()) if q is not None else float("nan"), float(share[i])]
             for i in range(c)]
     conv = convergence_iteration(tr, label)
@@ -627,7 +628,7 @@ def rule_bases_across_trials(log: LogLike, label: str | None = None,
     for i in range(A.shape[0]):
         vals, cnt = np.unique(A[i], return_counts=True)
         best = vals[np.argmax(cnt)]
-        rows.append([i, labels[i], *map(float, A[i]), float(best),
+        rows.append([i + 1, labels[i], *map(float, A[i]), float(best),
                      100.0 * cnt.max() / A.shape[1]])
     cols = ["Situation", "Description"] + [f"T{k}" + ("" if c else "*")
                                            for k, c in zip(idx, conv, strict=True)]

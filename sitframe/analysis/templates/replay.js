@@ -64,7 +64,7 @@
     for (let s = 0; s < c; s++) {
       const row = document.createElement("div");
       row.className = "bar";
-      row.innerHTML = `<span class="lab" title="${D.labels[s] || "S" + s}">${D.labels[s] || "S" + s}` +
+      row.innerHTML = `<span class="lab" title="${D.labels[s] || "S" + (s + 1)}">${D.labels[s] || "S" + (s + 1)}` +
         `</span><span class="track"><span class="fill" style="display:block"></span></span>` +
         `<span class="act"></span>`;
       el.bars.appendChild(row);
@@ -181,7 +181,7 @@
     el.info.innerHTML =
       `iteration  ${i}   t = ${(i * 1.5).toFixed(1)} s\n` +
       `phase      ${phase}\n` +
-      `situation  ${D.labels[dom] || "S" + dom} (u = ${at(A.memberships, i, dom).toFixed(2)})\n` +
+      `situation  ${D.labels[dom] || "S" + (dom + 1)} (u = ${at(A.memberships, i, dom).toFixed(2)})\n` +
       `command    turn ${hd >= 0 ? "+" : ""}${hd.toFixed(1)}°, ${sp.toFixed(2)} m/s\n` +
       `reward     ${rw}\n` +
       `collisions ${shown} so far of ${A.collIdx.length}` + (hit ? `   <span class="coll">COLLISION</span>` : "");
