@@ -78,8 +78,9 @@ reader follows a trial's link only to ``<log>.trials/NNNN.h5`` beside the
 log, for trial NNNN, and only if it is a regular file. A write that fails
 (e.g. a full disk) removes its scratch files and leaves the published log
 as it was. Readers never block the writer (it never opens a published file
-for writing). The rename protects against process death, not against power
-loss (no fsync).
+for writing; a reader that opened the log just before packing published it
+may find a trial file gone, and reading again sees the packed log). The
+rename protects against process death, not against power loss (no fsync).
 
 One log has one writer: the writing process holds an exclusive
 :func:`fcntl.flock` on ``LOG.lock`` (beside the log) from its first
@@ -489,6 +490,9 @@ class LogWriter:
                 packed = _pack_trials(f, str(self.path))
         for p in packed:
             p.unlink(missing_ok=True)
+        for folder in {p.parent for p in packed} - {self.shards}:  # (a renamed log's)
+            with suppress(OSError):
+                folder.rmdir()
         if self.shards.is_dir():
             self._clear_shards(keep=self._linked())
 
