@@ -11,8 +11,10 @@ one log, after the run's collect and cluster stages, and times each
 ``LogWriter.trial`` call. The writer of this checkout and the writer of git
 revision ``--old`` (default ``ef46ff4``, the last one that copied the whole
 log per trial) write alternately, trial by trial, so a change in machine
-load hits both alike. First this checkout's writer writes N trials alone;
-then both writers write ``--old-trials`` trials (default 200: the old one
+load hits both alike. First this checkout's writer writes N trials to one
+log, alternating with a control log restarted every 100 trials (never over
+100 trials: its ratio is the load drift, and growing/control is the cost of
+growth alone); then both writers write ``--old-trials`` trials (default 200: the old one
 copies the whole log for every trial, so 1000 would take hours)
 alternately, each to its own log.
 Printed per writer: the median time to write one of the first 100 trials
@@ -124,13 +126,52 @@ def _write(writers: dict[str, Any], info: Any, stages: dict[str, Any], trial: An
     return times
 
 
+def _grow_and_control(info: Any, stages: dict[str, Any], trial: Any, n: int,
+                      tmp: Path) -> tuple[list[float], list[float]]:
+    """Write trials 0..n-1 to one log and, alternately, the same trials to a control log
+    started afresh every 100 trials (so it never holds more than 100): seconds per write
+    of each. The control tells load drift from growth."""
+    big = LogWriter(tmp / "big.h5")
+    big.start(info)
+    for name, data in stages.items():
+        big.stage(name, data)
+    grow: list[float] = []
+    control: list[float] = []
+    small = None
+    t_start = time.perf_counter()
+    for k in range(n):
+        if k % 100 == 0:
+            if small is not None:
+                small.set_status("complete")
+                small.release()
+            small = LogWriter(tmp / f"control{k}.h5")
+            small.start(info)
+            for name, data in stages.items():
+                small.stage(name, data)
+        t = dataclasses.replace(trial, index=k, seed=trial.seed + k)
+        for w, times in ((big, grow), (small, control)):
+            t0 = time.perf_counter()
+            w.trial(t, ["avoid"])
+            times.append(time.perf_counter() - t0)
+        if (k + 1) % 100 == 0:
+            print(f"  {k + 1} trials written ({time.perf_counter() - t_start:.0f} s)", flush=True)
+    t0 = time.perf_counter()
+    big.set_status("complete")
+    print(f"  end of the run (packs {n} trial files into the log): "
+          f"{time.perf_counter() - t0:.2f} s, log {os.path.getsize(big.path) / 1e6:.0f} MB")
+    big.release()
+    return grow, control
+
+
 def write_cost(n: int, old_rev: str | None, n_old: int, tmp: Path) -> int:
     info, stages, trial = one_trial(tmp)
-    print(f"1. this checkout's writer alone, {n} trials:")
-    new = LogWriter(tmp / "new.h5")
-    ratio = _ratio("this checkout", _write({"this checkout": new}, info, stages, trial, n)[
-        "this checkout"])
-    log = open_log(new.path)
+    print(f"1. this checkout's writer, one log growing to {n} trials, alternating with a "
+          "control log restarted every 100 trials:")
+    grow, control = _grow_and_control(info, stages, trial, n, tmp)
+    ratio = _ratio("growing log", grow)
+    drift = _ratio("control log (never over 100 trials)", control)
+    print(f"growth alone (growing-log ratio / control ratio): {ratio / drift:.2f}")
+    log = open_log(tmp / "big.h5")
     log.check()
     ok = log.trial_indices() == list(range(n)) and len(log.summary()) == n \
         and not shard_folder(log.path).exists()
