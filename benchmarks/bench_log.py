@@ -274,7 +274,8 @@ def kill_tally(n: int, tmp: Path, seed: int) -> int:
               f"resumed -> {'identical, one file' if ok else f'DIFFERS {diff[:3]}'}", flush=True)
     print(f"kill -9 tally over {n} runs (uninterrupted run {t_ref:.2f} s): {readable}/{n} logs "
           f"read whole ({mid} killed mid-run; {dirty} killed inside a write, leaving a scratch "
-          f"file or an unlinked trial file), {identical}/{n} resumed bit-identically to the uninterrupted run")
+          f"file or an unlinked trial file), {identical}/{n} resumed bit-identically to the "
+          "uninterrupted run")
     return 0 if readable == identical == n else 1
 
 
