@@ -246,7 +246,7 @@ def simulate(
     for key, comp in components:
         if hasattr(comp, "trial_start"):
             call(og[key], "trial_start", comp.trial_start, tinfo, trial=k)
-    default_speed = float(res.cfg["experiment"]["default_speed"])
+    default_speed = res.config.experiment.default_speed
     robot = res.robot
 
     d = res.run.sensor.dim
