@@ -78,7 +78,7 @@ def old_logs_module(rev: str, tmp: Path) -> ModuleType:
 def one_trial(tmp: Path) -> tuple[Any, dict[str, dict[str, Any]], Any]:
     """(run info, stage data, one finished trial) of a short obstacle-avoidance run."""
     from sitframe.config import load_config
-    from sitframe.experiment import prepare_experiment
+    from sitframe.prepare import prepare_experiment
 
     cfg, source, _ = load_config("obstacle-avoidance")
     cfg["experiment"].update(trials=1, iterations=300, stages=["collect", "cluster", "learn"])
