@@ -61,6 +61,7 @@ from sitframe import (
 from sitframe import params as P
 
 PAIR_MODES = ("random", "world")
+TRAIN_MODES = ("world", "episodes")
 #: Aggregate keys of a batch (``evaluate --goal-episodes --json``, ``eval/<world>/...``).
 AGGREGATE_KEYS = ("episodes", "success_rate", "collisions_per_episode", "collision_free_rate",
                   "spl", "mean_time_s", "heading_change_per_m", "mean_path_length_m")
@@ -135,19 +136,29 @@ class GoalEpisodes:
         Goal radius [m] of random goals.
     margin
         Clearance [m] beyond the robot's radius required at random starts and goals.
+    train
+        How a *learning* trial of a goal run is driven: ``"world"`` (default)
+        from the world's start with its ``[goal]`` for the trial's iterations;
+        ``"episodes"``, as a chain of these episodes (the same pairs, timeout
+        and end at the goal), the robot put at the next start with the next
+        goal when one ends, learning carried on across them
+        (:attr:`train_in_episodes`; what a learned arbitration needs: many
+        start/goal pairs).
     """
 
     name = "goal-episodes"
     table: ClassVar[str] = "goal"
 
     def __init__(self, *, episodes: int = 50, timeout: int = 300, min_distance: float = 3.0,
-                 pairs: str = "random", radius: float = 0.3, margin: float = 0.1) -> None:
-        self.episodes = int(P.number("episodes", episodes, lo=1, integer=True))
-        self.iterations = int(P.number("timeout", timeout, lo=1, integer=True))
+                 pairs: str = "random", radius: float = 0.3, margin: float = 0.1,
+                 train: str = "world") -> None:
+        self.episodes = int(P.number("episodes", episodes, lo=1, hi=100_000, integer=True))
+        self.iterations = int(P.number("timeout", timeout, lo=1, hi=10_000_000, integer=True))
         self.min_distance = P.number("min_distance", min_distance, lo=0.0)
         self.pairs = P.choice("pairs", pairs, PAIR_MODES)
         self.radius = P.number("radius", radius, lo=0.0, lo_open=True)
         self.margin = P.number("margin", margin, lo=0.0)
+        self.train_in_episodes = P.choice("train", train, TRAIN_MODES) == "episodes"
 
     def check_world(self, world: World) -> None:
         """Refuse, before anything runs, a world ``pairs = "world"`` cannot use."""

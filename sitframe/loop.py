@@ -274,6 +274,9 @@ def simulate(
     t = 0
     pose = np.array(world.start if spec.start is None else spec.start, dtype=float)
     n_done = L
+    chain = _training_episodes(res, spec, world)  # None unless the protocol trains in episodes
+    if chain is not None:
+        pose, goal = next(chain.pairs)
     try:
         reading = sensor.read(world, pose, rng)
         check_reading(reading, d)
@@ -328,6 +331,15 @@ def simulate(
             if at_end is not None and (step_at := at_end) and protocol.terminated(ctx):
                 n_done = t + 1
                 break
+            if chain is not None and t + 1 < L and chain.over(ctx, t + 1):
+                pose, goal = next(chain.pairs)  # the next training episode starts here
+                step_at = at_read
+                reading = sensor.read(world, pose, rng)
+                check_reading(reading, d)
+                step_at = at_u
+                u = interp.memberships(reading)
+                check_memberships(u, c)
+                ctx = Context(t + 1, pose, reading, u, _nearest(reading), world, goal)
     except (KeyboardInterrupt, TaskCancelled, PluginFault, InputError):
         raise  # (a plugin's InputError names the input it found wrong)
     except Exception as exc:
@@ -358,12 +370,71 @@ def simulate(
             if pol is not None:
                 policies[lb] = pol
     summary = trial_summary(world, arrays, bdata, robot)
-    result = TrialResult(spec.index, spec.seed, world.name, arrays, bdata, summary,
+    episodes = {} if chain is None else chain.record(arrays["pose"], summary)
+    result = TrialResult(spec.index, spec.seed, world.name, arrays, bdata, summary, episodes,
                          policies=policies)
     _collect_plugin_data(result, components, tinfo, og, res)
     for ev_spec in evaluation_specs(spec, result.policies):
         attach_evaluation(result, ev_spec.world, simulate(res, ev_spec))
     return result
+
+
+class _TrainingEpisodes:
+    """A learning trial as a chain of an evaluation protocol's episodes.
+
+    A protocol with a true ``train_in_episodes`` attribute (e.g. ``goal-episodes``
+    with ``[goal] train = "episodes"``) makes every learning trial of its run
+    a sequence of its episodes: the robot starts at the first start pose with
+    its goal, and when the protocol's ``terminated`` holds or the episode has
+    lasted the protocol's ``iterations``, it is put at the next start with the
+    next goal; learning carries on across episodes. The pairs come from
+    ``episode_starts`` with a Generator of their own (seeded by the trial's
+    seed), drawn again whenever a batch is used up.
+    """
+
+    def __init__(self, proto: Any, world: World, seed: int, robot: RobotParams) -> None:
+        self.proto, self.world, self.robot = proto, world, robot
+        self.rng = np.random.default_rng(np.random.SeedSequence(seed % 2**64, spawn_key=(2,)))
+        self.first: list[int] = [0]
+        self.goals: list[tuple[float, float, float]] = []
+        self.reached: list[bool] = []
+        self.pairs = self._pairs()
+
+    def _pairs(self) -> Iterator[tuple[np.ndarray, Goal | None]]:
+        while True:
+            starts, goals = self.proto.episode_starts(self.world, self.rng, self.robot)
+            for e, start in enumerate(np.asarray(starts, dtype=float)):
+                g = None if goals is None else np.asarray(goals[e], dtype=float)
+                self.goals.append((np.nan, np.nan, np.nan) if g is None else tuple(g))
+                yield start.copy(), None if g is None else Goal(g[:2], float(g[2]))
+
+    def over(self, ctx: Context, t: int) -> bool:
+        """Whether the episode ends at ``ctx`` (iteration ``t``): terminated or timed out."""
+        done = bool(self.proto.terminated(ctx))
+        if done or t - self.first[-1] >= int(self.proto.iterations):
+            self.reached.append(done)
+            self.first.append(t)
+            return True
+        return False
+
+    def record(self, pose: np.ndarray, summary: dict[str, Any]) -> dict[str, Any]:
+        """The episodes' first rows and goals (``learn/...``); the distance without the jumps."""
+        first = np.asarray(self.first, dtype=np.int64)
+        summary["distance_m"] = float(sum(path_length(seg[:, :2])
+                                          for seg in np.split(pose, first[1:])))
+        n = len(first)
+        return {"learn/first_iteration": first, "learn/goal": np.asarray(self.goals[:n]),
+                "learn/success": np.asarray(self.reached + [False] * (n - len(self.reached)))[:n]}
+
+
+def _training_episodes(res: Resolved, spec: TrialSpec, world: World) -> _TrainingEpisodes | None:
+    """The episode chain of a learning trial whose protocol trains in episodes, else None."""
+    if not spec.learn or spec.protocol is None:
+        return None
+    proto = res.protocol(str(spec.protocol))
+    if not getattr(proto, "train_in_episodes", False):
+        return None
+    return _TrainingEpisodes(proto, world, spec.seed, res.robot)
 
 
 def run_batch(res: Resolved, spec: TrialSpec, *,

@@ -102,8 +102,11 @@ def test_batch_is_deterministic_and_scored():
 def test_episode_config_validation():
     with pytest.raises(InputError, match="pairs"):
         GoalEpisodes(pairs="fixed")
-    with pytest.raises(InputError, match="goal.timeout"):
-        validate_config({"behaviours": {"g": {"component": "goal"}}, "goal": {"timeout": 0}})
+    # the protocol checks its own table when any run resolves (a goal run or not)
+    cfg = validate_config({"behaviours": {"a": {"component": "fuzzy-q"}},
+                           "goal": {"timeout": 0}})
+    with pytest.raises(InputError, match=r"goal\.timeout.*expected an integer"):
+        Resolved.build(cfg, Registry.collect(get_plugin_manager()))
 
 
 @pytest.mark.parametrize("goal, where", [("[20, 4]", "outside the walls"),
@@ -138,7 +141,8 @@ def test_evaluate_goal_episodes(oa_log):
     assert set(AGGREGATE_KEYS) <= set(r) and r["episodes"] == 2 and r["arbiter"] == "cdb"
     p = evaluate_log(oa_log, world="goal", goal_episodes=2, arbiter="priority")
     assert p["arbiter"] == "priority"
-    with pytest.raises(InputError, match="unknown arbiter 'nope'.*available: cdb, priority"):
+    with pytest.raises(InputError, match="unknown arbiter 'nope'.*available: cdb, "
+                       "fuzzy-q-arbiter, priority"):
         evaluate_log(oa_log, world="goal", goal_episodes=2, arbiter="nope")
 
 
@@ -151,11 +155,13 @@ def test_cli_evaluate_goal_json_and_errors(oa_log, capsys):
     assert main(["evaluate", oa_log, "--world", "goal", "--goal-episodes", "2",
                  "--arbiter", "nope"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "available: cdb, priority, single" in err[0]
+    assert len(err) == 1 and "available: cdb, fuzzy-q-arbiter, priority, single" in err[0]
 
 
 def goal_config(tmp_path, oa_log, extra: str = "") -> str:
-    text = preset_text("goal-finding").replace("logs/obstacle-avoidance-12.h5", oa_log)
+    # (our own small log instead of the preset's prerequisite run)
+    text = preset_text("goal-finding").split("[prerequisites]")[0]
+    text = text.replace("logs/obstacle-avoidance-12.h5", oa_log)
     text = text.replace("episodes = 50", "episodes = 2").replace(
         'worlds = ["goal", "novel-1", "novel-2"]', 'worlds = ["goal"]')
     p = tmp_path / "gf.toml"
@@ -199,7 +205,8 @@ def test_unknown_arbiter_in_config_lists_available(tmp_path, oa_log, capsys):
     Path(path).write_text(text)
     assert main(["run", path, "--out", str(tmp_path / "x.h5")]) == 2
     err = capsys.readouterr().err.strip()
-    assert "unknown arbiter 'cbd'" in err and "available: cdb, priority, single" in err
+    assert "unknown arbiter 'cbd'" in err
+    assert "available: cdb, fuzzy-q-arbiter, priority, single" in err
 
 
 def test_learning_goal_run_evaluates_each_trials_learned_policy():

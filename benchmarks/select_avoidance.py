@@ -1,0 +1,94 @@
+"""Which avoidance rule base to fuse with goal seeking: does a selection predict goal safety?
+
+For every trial (rule base) of an obstacle-avoidance log this runs the
+goal-finding fusion (CDB, ``sitframe evaluate LOG --trial K --goal-episodes N``)
+
+* in the log's *training* room, a short run (``--short`` random pairs, a seed of
+  its own): the proposed selection score, its collision-free rate;
+* in each test room (``--test`` pairs, seed 0): what the selection should
+  predict, the collision-free rate there.
+
+and prints the Spearman correlation with the test rooms' collision-free rate
+of (a) today's ``trial = "best"`` score (rank sum of training-room collisions
+and coverage, :func:`sitframe.prepare.best_trial`; lower is better, so a
+useful score correlates *negatively*) and (b) the short goal run's
+collision-free rate (a useful score correlates positively), and the rule base
+each picks.
+
+Usage::
+
+    nice -n 10 python benchmarks/select_avoidance.py logs/obstacle-avoidance-12.h5
+"""
+
+from __future__ import annotations
+
+import argparse
+from concurrent.futures import ProcessPoolExecutor
+from typing import Any
+
+import numpy as np
+from scipy.stats import rankdata, spearmanr
+
+TEST_WORLDS = ("goal", "novel-1", "novel-2")
+
+
+def _cf(task: tuple[str, int, str, int, int]) -> dict[str, Any]:
+    from sitframe.evaluation import evaluate_log
+
+    log, trial, world, seed, episodes = task
+    out = evaluate_log(log, world=world, trial=trial, seed=seed, goal_episodes=episodes)
+    return {"trial": trial, "world": world, "cf": out["collision_free_rate"],
+            "success": out["success_rate"]}
+
+
+def rank_sums(log: str) -> dict[int, float]:
+    """Trial -> the rank sum :func:`sitframe.prepare.best_trial` minimises."""
+    from sitframe.logs import open_log
+
+    lg = open_log(log)
+    t = lg.summary()
+    w = lg.config["experiment"]["world"]
+    score = rankdata(np.asarray(t[f"eval.{w}.collisions_per_1000"], float)) + \
+        rankdata(-np.asarray(t[f"eval.{w}.coverage"], float))
+    return dict(zip((int(i) for i in t["trial"]), score.tolist(), strict=True))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("log")
+    ap.add_argument("--short", type=int, default=20, help="pairs of the short training run")
+    ap.add_argument("--test", type=int, default=100, help="pairs per test room")
+    ap.add_argument("--workers", type=int, default=2)
+    args = ap.parse_args()
+    from sitframe.logs import open_log
+    from sitframe.prepare import best_trial
+
+    lg = open_log(args.log)
+    trials = lg.trial_indices()
+    train_world = lg.config["experiment"]["world"]
+    tasks = [(args.log, k, train_world, 1000, args.short) for k in trials]
+    tasks += [(args.log, k, w, 0, args.test) for w in TEST_WORLDS for k in trials]
+    with ProcessPoolExecutor(args.workers) as pool:
+        rows = list(pool.map(_cf, tasks))
+    short = {r["trial"]: r["cf"] for r in rows if r["world"] == train_world}
+    test = {w: {r["trial"]: r["cf"] for r in rows if r["world"] == w} for w in TEST_WORLDS}
+    rs = rank_sums(args.log)
+    print(f"| trial | rank sum (training) | short goal run CF ({train_world}) | "
+          + " | ".join(f"CF {w}" for w in TEST_WORLDS) + " |")
+    print("|---|---|---|" + "---|" * len(TEST_WORLDS))
+    for k in trials:
+        print(f"| {k} | {rs[k]:.1f} | {short[k]:.2f} | "
+              + " | ".join(f"{test[w][k]:.2f}" for w in TEST_WORLDS) + " |")
+    print()
+    best_rs, best_short = best_trial(lg), max(trials, key=lambda k: (short[k], -k))
+    for w in TEST_WORLDS:
+        y = [test[w][k] for k in trials]
+        a = spearmanr([rs[k] for k in trials], y).statistic
+        b = spearmanr([short[k] for k in trials], y).statistic
+        print(f"{w}: Spearman with test CF: rank sum {a:+.2f}, short goal run {b:+.2f}; "
+              f"CF of the pick: rank sum (trial {best_rs}) {test[w][best_rs]:.2f}, "
+              f"short run (trial {best_short}) {test[w][best_short]:.2f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,401 @@
+"""Learned arbitration (thesis 7, third future-work item): *how* to blend, by fuzzy Q-learning.
+
+``fuzzy-q-arbiter``
+    An arbiter whose rule base maps a *state* to a *behaviour weighting*
+    and is learned online by fuzzy Q-learning (:class:`sitframe.FuzzyQLearner`)
+    from a goal-reaching reward while the behaviours themselves stay frozen
+    (``policy_from`` their own logs): the hierarchy the thesis proposes,
+    first the low-level behaviours, then their arbitration.
+``goal-progress``
+    The goal-reaching reward it learns from.
+
+**State.** The run's fuzzy situations (memberships ``u``, (c,)) times a crisp
+*goal context*: the sector of the goal's bearing relative to the robot
+(``sectors`` equal sectors, the first centred straight ahead, then
+counter-clockwise: with 4, ``ahead``, ``left``, ``behind``, ``right``) and,
+with ``stall_iterations > 0``, whether the robot is *stalled*: it has not
+come closer to the goal than ever before in this episode (by ``stall_margin``)
+for ``stall_iterations`` iterations; it stays stalled until it does. The
+stall flag is the arbiter's only memory (a purely reactive arbiter cannot
+tell "walking into a U-trap" from "walking around it"; the flag is Bug2's
+leave condition). The fuzzy state has ``c x n_contexts`` rules: rule
+``(context, i)`` fires with strength ``u_i`` in the current context, 0 in
+the others.
+
+**Actions** (``actions``). A discrete set of weightings: tables ``{label =
+weight}`` over the behaviour labels, normalised to sum 1. Default: each
+behaviour alone and each pair at 1/2 each (for avoid, goal, follow: 6
+actions). The fused command is that of CDB, with weights ``w = sum_i u_i
+W[a_i]`` where ``a_i`` is the action of situation ``i``'s rule in the current
+context: ``heading = sum_k w_k heading_k``, speed the same average over the
+behaviours that propose one.
+
+**Learning.** :class:`sitframe.QLearningParams` (same keys and meaning as
+``fuzzy-q``; defaults here: ``update = "standard"``, ``terminal_on_collision
+= true``, relative temperature 0.25, ``b = 5``, ``p = 50``). Convergence is the
+learner's: the greedy rule base unchanged for ``p`` rule-base changes.
+
+**Policy.** Logged as one output per goal context (``ahead``, ``left``, ...,
+``ahead_stalled``, ...), each (c,) rules over the action indices with their
+Q (c, A); the weightings themselves are in the trial data
+(``action_weights``, (A, k)). ``load_policy`` freezes the arbitration.
+
+**Reward** (``goal-progress``), on each transition, with ``d`` the distance
+[m] from the robot's centre to the goal and ``d_best`` the smallest ``d`` so
+far in the episode:
+
+1. collision: ``collision`` (-50);
+2. the goal reached (``d <= radius``): ``goal`` (+50);
+3. otherwise ``progress * max(0, d_best - d) + time``: +``progress``
+   (100) per metre of *new* approach to the goal, and ``time`` (-1) each
+   iteration. Moving away costs only time, so a detour around a trap is
+   not punished beyond its length, and dithering earns nothing.
+
+A new episode (the goal moved) starts a new ``d_best``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from itertools import combinations
+from typing import Any
+
+import numpy as np
+
+from sitframe import (
+    Context,
+    FuzzyQLearner,
+    InputError,
+    LearnedPolicy,
+    PolicyOutput,
+    Proposal,
+    QLearningParams,
+    RunContext,
+    Transition,
+    hookimpl,
+)
+from sitframe import params as P
+
+#: Names of the goal-bearing sectors for 4 and 8 sectors (others: ``s0``, ``s1``, ...).
+SECTOR_NAMES = {1: ("any",), 2: ("ahead", "behind"), 4: ("ahead", "left", "behind", "right"),
+                8: ("ahead", "ahead_left", "left", "behind_left", "behind", "behind_right",
+                    "right", "ahead_right")}
+
+
+def _goal_distance(ctx: Context) -> float:
+    if ctx.goal is None:
+        raise InputError(f"learned arbitration needs a goal, but world '{ctx.world.name}' has "
+                         "no [goal] and the run gives none (use goal episodes)",
+                         file=ctx.world.source, key="goal")
+    g = ctx.goal.position
+    return math.hypot(g[0] - ctx.pose[0], g[1] - ctx.pose[1])
+
+
+def goal_sector(ctx: Context, sectors: int) -> int:
+    """Index of the goal bearing's sector: 0 centred straight ahead, counter-clockwise."""
+    assert ctx.goal is not None
+    g = ctx.goal.position
+    bearing = math.atan2(g[1] - ctx.pose[1], g[0] - ctx.pose[0]) - ctx.pose[2]
+    width = 2 * math.pi / sectors
+    return int(((bearing + width / 2) % (2 * math.pi)) // width) % sectors
+
+
+class _Progress:
+    """The episode's best distance to the goal and when it last improved."""
+
+    def __init__(self, margin: float) -> None:
+        self.margin = margin
+        self.goal: tuple[float, float] | None = None
+        self.best = math.inf
+        self.since = 0
+
+    def observe(self, ctx: Context) -> float:
+        """Update with ``ctx``; return the best distance *before* it."""
+        assert ctx.goal is not None
+        key = (float(ctx.goal.position[0]), float(ctx.goal.position[1]))
+        d = _goal_distance(ctx)
+        if key != self.goal or ctx.iteration == 0:
+            self.goal, self.best, self.since = key, d, 0
+            return d
+        best = self.best
+        if d < best - self.margin:
+            self.best, self.since = d, 0
+        else:
+            self.since += 1
+        return best
+
+
+class GoalProgressReward:
+    """Goal-reaching reward: new approach to the goal, a cost per iteration, collision, goal.
+
+    See the module docstring. Parameters in ``[arbiter] reward_params``.
+    """
+
+    name = "goal-progress"
+
+    def __init__(self, *, progress: float = 100.0, time: float = -1.0,
+                 collision: float = -50.0, goal: float = 50.0, near: float = 0.0,
+                 near_cost: float = 0.0) -> None:
+        self.progress = P.number("progress", progress, lo=0.0)
+        self.near = P.number("near", near, lo=0.0)
+        self.near_cost = P.number("near_cost", near_cost, lo=0.0)
+        self.time = P.number("time", time)
+        self.collision = P.number("collision", collision)
+        self.goal = P.number("goal", goal)
+        self._track = _Progress(0.0)
+
+    def trial_start(self, trial: Any) -> None:
+        self._track = _Progress(0.0)
+
+    def __call__(self, tr: Transition) -> float:
+        if self._track.goal is None or tr.before.iteration == 0:
+            self._track.observe(tr.before)
+        if tr.outcome.collided:
+            self._track.observe(tr.after)
+            return self.collision
+        best = self._track.observe(tr.after)
+        d = _goal_distance(tr.after)
+        assert tr.after.goal is not None
+        if d <= tr.after.goal.radius:
+            return self.goal
+        close = self.near_cost * max(0.0, self.near - tr.after.nearest)
+        return self.progress * max(0.0, best - d) + self.time - close
+
+
+def default_actions(labels: Sequence[str]) -> list[dict[str, float]]:
+    """Each behaviour alone, then each pair at 1/2 each."""
+    acts = [{lb: 1.0} for lb in labels]
+    acts += [{a: 0.5, b: 0.5} for a, b in combinations(labels, 2)]
+    return acts
+
+
+class FuzzyQArbiter:
+    """Learned arbitration: fuzzy Q-learning of a behaviour weighting per situation x context.
+
+    Parameters
+    ----------
+    actions
+        List of weightings ``{label = weight}`` (weights >= 0, not all 0);
+        default :func:`default_actions`.
+    sectors
+        Number of goal-bearing sectors (1, 2, 4 or 8).
+    stall_iterations
+        Iterations without a new closest approach to the goal after which the
+        robot counts as stalled (0: no stall context).
+    stall_margin
+        How much closer [m] than the best so far counts as a new approach.
+    alpha, gamma, b, p, temperature, ...
+        :class:`sitframe.QLearningParams`.
+    """
+
+    name = "fuzzy-q-arbiter"
+
+    def __init__(
+        self,
+        *,
+        actions: Sequence[Mapping[str, float]] | None = None,
+        sectors: int = 4,
+        stall_iterations: int = 20,
+        stall_margin: float = 0.1,
+        proximity: Sequence[float] = (),
+        alpha: float = 0.3,
+        gamma: float = 0.9,
+        b: int = 5,
+        p: int = 50,
+        temperature: float = 0.25,
+        temperature_mode: str = "relative",
+        temperature_decay: float = 1.0,
+        temperature_min: float = 0.0,
+        q_init_value: float = 0.0,
+        update: str = "standard",
+        activation: float = 0.3,
+        terminal_on_collision: bool = True,
+        min_updates: int = 0,
+    ) -> None:
+        self.sectors = int(P.number("sectors", sectors, lo=1, integer=True))
+        if self.sectors not in SECTOR_NAMES:
+            raise InputError(f"expected 1, 2, 4 or 8 goal-bearing sectors, got {self.sectors}",
+                             key="sectors")
+        self.stall_iterations = int(P.number("stall_iterations", stall_iterations, lo=0,
+                                             integer=True))
+        self.stall_margin = P.number("stall_margin", stall_margin, lo=0.0)
+        prox = P.number_list("proximity", list(proximity), lo=0.0) if len(proximity) else []
+        if prox and (len(prox) != 2 or prox[0] >= prox[1]):
+            raise InputError(f"expected [near, far] with near < far [m], or [] (no proximity "
+                             f"context), got {prox}", key="proximity")
+        self.proximity = tuple(prox)
+        self.qparams = QLearningParams(
+            alpha=alpha, gamma=gamma, b=b, p=p, temperature=temperature,
+            temperature_mode=temperature_mode, temperature_decay=temperature_decay,
+            temperature_min=temperature_min, q_init_value=q_init_value, update=update,
+            activation=activation, terminal_on_collision=terminal_on_collision,
+            min_updates=min_updates)
+        self._actions_cfg = None if actions is None else self._check_actions(actions)
+        names = list(SECTOR_NAMES[self.sectors])
+        if self.stall_iterations:
+            names += [f"{n}_stalled" for n in names]
+        if self.proximity:
+            names = [f"{n}_{p}" for n in names for p in ("close", "far")]
+        self.contexts = names
+        self.W = np.zeros((0, 0))
+        self._labels: tuple[str, ...] = ()
+        self.c = 0
+        self.learner: FuzzyQLearner | None = None
+        self.fixed: np.ndarray | None = None
+        self.rules = np.zeros(0, dtype=np.intp)
+        self._track = _Progress(self.stall_margin)
+        self._iterations = 0
+
+    @staticmethod
+    def _check_actions(actions: Any) -> list[dict[str, float]]:
+        if isinstance(actions, (str, Mapping)) or not isinstance(actions, Sequence) or \
+                not actions:
+            raise InputError("expected a non-empty list of weightings {label = weight}",
+                             key="actions")
+        out = []
+        for i, a in enumerate(actions):
+            if not isinstance(a, Mapping) or not a:
+                raise InputError("expected a table {label = weight}", key=f"actions[{i}]")
+            w = {str(k): P.number(f"actions[{i}].{k}", v, lo=0.0) for k, v in a.items()}
+            if sum(w.values()) <= 0:
+                raise InputError("expected at least one weight > 0", key=f"actions[{i}]")
+            out.append(w)
+        return out
+
+    # -- binding ---------------------------------------------------------
+    def _bind(self, labels: Sequence[str]) -> None:
+        acts = self._actions_cfg if self._actions_cfg is not None else default_actions(labels)
+        W = np.zeros((len(acts), len(labels)))
+        for i, a in enumerate(acts):
+            for lb, w in a.items():
+                if lb not in labels:
+                    raise InputError(f"the 'fuzzy-q-arbiter' arbiter names behaviour '{lb}', "
+                                     f"but the run's behaviours are: {', '.join(labels)}",
+                                     key=f"actions[{i}].{lb}")
+                W[i, list(labels).index(lb)] = w
+        self.W = W / W.sum(axis=1, keepdims=True)
+        self._labels = tuple(labels)
+
+    def bind(self, run: RunContext) -> None:
+        """Build the (A, k) weighting matrix over the run's behaviour labels."""
+        self._bind(list(run.labels))
+
+    # -- lifecycle ---------------------------------------------------------
+    def reset(self, rng: np.random.Generator, n_situations: int, iterations: int) -> None:
+        self.c = n_situations
+        self._iterations = iterations
+        self._track = _Progress(self.stall_margin)
+        n = n_situations * len(self.contexts)
+        if self.fixed is not None:
+            if self.fixed.size != n:
+                per = self.fixed.size // len(self.contexts)
+                raise ValueError(f"the loaded arbitration has {per} rules per context but the "
+                                 f"interpreter has {n_situations} situations")
+            self.learner, self.rules = None, self.fixed.copy()
+        else:
+            self.learner = FuzzyQLearner(n, self.W.shape[0], self.qparams, rng, iterations)
+            self.rules = self.learner.rule_base
+
+    def load_policy(self, policy: LearnedPolicy) -> None:
+        """Freeze the arbitration to a logged one (same contexts and number of actions)."""
+        if set(policy.outputs) != set(self.contexts):
+            raise ValueError(f"the policy's goal contexts {list(policy.outputs)} differ from this "
+                             f"arbiter's {self.contexts}; configure the same sectors and "
+                             "stall_iterations as the run that learned it")
+        a = {o.actions.size for o in policy.outputs.values()}
+        if a != {self.W.shape[0]} and self.W.size:
+            raise ValueError(f"the policy chooses among {a.pop()} weightings, this arbiter has "
+                             f"{self.W.shape[0]}; configure the same actions")
+        self.fixed = np.concatenate([np.asarray(policy.outputs[name].rules, dtype=np.intp)
+                                     for name in self.contexts])  # (a log sorts the outputs)
+
+    # -- loop --------------------------------------------------------------
+    def _context(self, ctx: Context, stalled: bool) -> int:
+        k = goal_sector(ctx, self.sectors)
+        return k + (self.sectors if stalled else 0)
+
+    def _state(self, ctx: Context, stalled: bool) -> np.ndarray:
+        """(c * n_contexts,) rule strengths: the memberships in the current context's block(s).
+
+        With a proximity context the blocks ``close`` and ``far`` of the goal
+        context share the memberships by how near the nearest range is
+        (``close`` 1 below ``proximity[0]``, 0 beyond ``proximity[1]``, linear
+        between; ``far`` = 1 - ``close``).
+        """
+        u = np.zeros(self.c * len(self.contexts))
+        j = self._context(ctx, stalled)
+        if not self.proximity:
+            u[j * self.c:(j + 1) * self.c] = ctx.memberships
+            return u
+        a, b = self.proximity
+        close = min(1.0, max(0.0, (b - ctx.nearest) / (b - a)))
+        u[2 * j * self.c:(2 * j + 1) * self.c] = close * ctx.memberships
+        u[(2 * j + 1) * self.c:(2 * j + 2) * self.c] = (1.0 - close) * ctx.memberships
+        return u
+
+    def _stalled(self) -> bool:
+        return bool(self.stall_iterations) and self._track.since >= self.stall_iterations
+
+    def combine(self, context: Context, proposals: dict[str, Proposal]) -> tuple[Proposal, Any]:
+        labels = list(proposals)
+        if tuple(labels) != self._labels:
+            self._bind(labels)
+        if self.learner is not None:
+            self.learner.record_rules(context.iteration)
+            self.rules = self.learner.rule_base
+        self._track.observe(context)
+        self._u = self._state(context, self._stalled())
+        w = self._u @ self.W[self.rules]
+        props = list(proposals.values())
+        heading = float(sum(wk * p.heading_deg for wk, p in zip(w, props, strict=True)))
+        sw = sum(wk for wk, p in zip(w, props, strict=True) if p.speed_m_s is not None)
+        speed = None
+        if sw > 0:
+            speed = float(sum(wk * p.speed_m_s for wk, p in zip(w, props, strict=True)
+                              if p.speed_m_s is not None) / sw)
+        return Proposal(heading, speed), w / w.sum()
+
+    def learn(self, transition: Transition, reward: float) -> None:
+        if self.learner is None:
+            return
+        after = transition.after
+        # the stall flag the next combine will see (unless a new episode starts there)
+        stalled = bool(self.stall_iterations) and self._track.since + 1 >= \
+            self.stall_iterations and _goal_distance(after) >= self._track.best - self.stall_margin
+        u1 = self._state(after, stalled)
+        self.learner.update(self._u, reward, u1, transition.outcome.collided,
+                            transition.before.iteration)
+        self.rules = self.learner.rule_base
+
+    # -- results -------------------------------------------------------------
+    def trial_data(self) -> dict[str, Any]:
+        data: dict[str, Any] = {"action_weights": self.W.copy()}
+        if self.learner is not None:
+            d = self.learner.data(self._iterations)
+            data.update({f"arbitration/{k}": v for k, v in d.items()})
+            data["converged"] = bool(d["converged"])
+            data["convergence_iteration"] = int(d["convergence_iteration"])
+        return data
+
+    def policy(self) -> LearnedPolicy:
+        """One output per goal context: (c,) weighting indices and their Q (c, A)."""
+        rules = self.learner.final_rule_base() if self.learner is not None else self.rules
+        q = None if self.learner is None else self.learner.q
+        a = self.W.shape[0]
+        outs = {}
+        for j, name in enumerate(self.contexts):
+            sl = slice(j * self.c, (j + 1) * self.c)
+            outs[name] = PolicyOutput(np.arange(a, dtype=float), np.asarray(rules[sl]).astype(
+                np.int16), "", None if q is None else q[sl].copy())
+        return LearnedPolicy(outs)
+
+
+@hookimpl
+def sitframe_arbiters() -> list[Any]:
+    return [FuzzyQArbiter]
+
+
+@hookimpl
+def sitframe_rewards() -> list[Any]:
+    return [GoalProgressReward]

@@ -1,0 +1,138 @@
+"""Learned arbitration (fuzzy-q-arbiter, goal-progress reward) and learning in goal episodes."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from sitframe.config import validate_config
+from sitframe.errors import InputError
+from sitframe.experiment import Experiment
+from sitframe.loop import TrialSpec, simulate
+from sitframe.pluginmanager import Registry, get_plugin_manager
+from sitframe.plugins.learned_arbiter import FuzzyQArbiter, GoalProgressReward, goal_sector
+from sitframe.records import Context, LearnedPolicy, Proposal, Transition
+from sitframe.resolve import Resolved
+from sitframe.world import Goal, load_world
+
+STATE = {"centers": np.array([[0.5] * 8, [3.0] * 8]), "m": 1.2}
+WORLD = load_world("goal")
+
+
+def ctx(x: float, y: float, theta_deg: float = 0.0, goal=(5.0, 5.0), it: int = 1,
+        u=(1.0, 0.0), nearest: float = 1.0) -> Context:
+    return Context(it, np.array([x, y, math.radians(theta_deg)]), np.full(8, nearest),
+                   np.asarray(u, float), nearest, WORLD, Goal(np.asarray(goal, float), 0.3))
+
+
+def goal_run(**arbiter) -> dict:
+    return validate_config({
+        "experiment": {"trials": 1, "iterations": 200, "world": "goal", "stages": ["learn"]},
+        "interpreter": {"component": "fcm", "c": 2},
+        "behaviours": {"avoid": {"component": "fuzzy-q", "headings": [90, 0, -90],
+                                 "reward": "obstacle-avoidance", "p": 10_000},
+                       "goal": {"component": "goal"}},
+        "arbiter": {"component": "fuzzy-q-arbiter", "reward": "goal-progress", **arbiter},
+        "goal": {"episodes": 3, "timeout": 20, "train": "episodes", "worlds": ["goal"]},
+    })
+
+
+def test_goal_sector_is_centred_ahead_and_counter_clockwise():
+    assert goal_sector(ctx(0, 0, goal=(5, 0.5)), 4) == 0       # ahead
+    assert goal_sector(ctx(0, 0, goal=(0, 5)), 4) == 1         # left
+    assert goal_sector(ctx(0, 0, goal=(-5, -0.5)), 4) == 2     # behind
+    assert goal_sector(ctx(0, 0, goal=(0, -5)), 4) == 3        # right
+    assert goal_sector(ctx(0, 0, theta_deg=90, goal=(0, -5)), 4) == 2
+
+
+def test_reward_pays_new_approach_only_and_punishes_collision():
+    r = GoalProgressReward(progress=100, time=-1, collision=-50, goal=50)
+    ok, hit = SimpleNamespace(collided=False), SimpleNamespace(collided=True)
+
+    def tr(a, b, out=ok):
+        return Transition(a, None, out, b)  # type: ignore[arg-type]
+
+    assert r(tr(ctx(0, 5, it=0), ctx(1, 5))) == pytest.approx(100 * 1 - 1)  # 1 m closer
+    assert r(tr(ctx(1, 5), ctx(0.5, 5))) == -1      # moved away: time only
+    assert r(tr(ctx(0.5, 5), ctx(0.8, 5))) == -1    # closer, but not closer than ever
+    assert r(tr(ctx(0.8, 5), ctx(1.5, 5))) == pytest.approx(100 * 0.5 - 1)
+    assert r(tr(ctx(1.5, 5), ctx(1.5, 5), hit)) == -50
+    assert r(tr(ctx(1.5, 5), ctx(4.9, 5))) == 50     # inside the goal disc
+    # a new goal (next episode) restarts the record distance
+    assert r(tr(ctx(4.9, 5), ctx(4.9, 5, goal=(0, 0)))) == -1
+
+
+def test_weights_follow_the_rules_and_policy_round_trips():
+    arb = FuzzyQArbiter(actions=[{"avoid": 1}, {"goal": 1}, {"avoid": 1, "goal": 3}],
+                        stall_iterations=0)
+    arb._bind(["avoid", "goal"])
+    arb.reset(np.random.default_rng(0), 2, 10)
+    rules = np.zeros(8, dtype=np.intp)
+    rules[0], rules[1] = 2, 1     # ahead: situation 0 -> 1/4 avoid, situation 1 -> goal
+    arb.rules = rules
+    arb.learner = None
+    props = {"avoid": Proposal(60.0, None), "goal": Proposal(-20.0, None)}
+    p, w = arb.combine(ctx(0, 0, goal=(5, 0), u=(0.5, 0.5)), props)
+    np.testing.assert_allclose(w, [0.125, 0.875])
+    assert p.heading_deg == pytest.approx(0.125 * 60 - 0.875 * 20)
+    pol = arb.policy()
+    assert list(pol.outputs) == ["ahead", "left", "behind", "right"]
+    other = FuzzyQArbiter(actions=[{"avoid": 1}, {"goal": 1}, {"avoid": 1, "goal": 3}],
+                          stall_iterations=0)
+    other._bind(["avoid", "goal"])
+    other.load_policy(LearnedPolicy(dict(reversed(pol.outputs.items()))))  # a log sorts them
+    other.reset(np.random.default_rng(1), 2, 10)
+    np.testing.assert_array_equal(other.rules, rules)
+    with pytest.raises(ValueError, match="goal contexts"):
+        FuzzyQArbiter(stall_iterations=5).load_policy(pol)
+
+
+def test_bad_arbiter_config_names_the_key():
+    reg = Registry.collect(get_plugin_manager())
+    with pytest.raises(InputError, match="names behaviour 'folow'") as info:
+        Resolved.build(goal_run(actions=[{"folow": 1}]), reg)
+    assert "actions[0].folow" in str(info.value)
+    with pytest.raises(InputError, match="sectors"):
+        Resolved.build(goal_run(sectors=3), reg)
+    cfg = goal_run()
+    cfg["goal"]["train"] = "episode"
+    with pytest.raises(InputError, match="'world', 'episodes'") as info:
+        Resolved.build(cfg, reg).protocol("goal-episodes")
+    assert "goal.train" in str(info.value)
+
+
+@pytest.fixture(scope="module")
+def learned() -> tuple[Experiment, object]:
+    exp = Experiment(goal_run())
+    (t,) = exp.run(interpreter_state=STATE).trials
+    return exp, t
+
+
+def test_learning_trial_is_a_chain_of_goal_episodes_and_learns_the_arbitration(learned):
+    _exp, t = learned
+    first = t.episodes["learn/first_iteration"]
+    goals = t.episodes["learn/goal"]
+    assert first[0] == 0 and len(first) >= 10 and np.all(np.diff(first) <= 20)
+    assert len(goals) == len(first) and len({tuple(g) for g in goals.tolist()}) == len(first)
+    pose = t.arrays["pose"]
+    for e, f in enumerate(first[1:], start=1):  # each episode starts at a new start pose
+        assert math.hypot(*(pose[f, :2] - pose[f - 1, :2])) > 0.3 or t.episodes[
+            "learn/success"][e - 1]
+    # the jumps between episodes are not distance travelled
+    assert t.summary["distance_m"] < 0.15 * 1.5 * 200 + 1e-9
+    q = t.behaviours["arbiter"]["arbitration/q"]
+    assert np.count_nonzero(q) > 0 and "arbiter" in t.policies
+    again = Experiment(goal_run()).run(interpreter_state=STATE).trials[0]
+    np.testing.assert_array_equal(again.arrays["pose"], pose)  # deterministic
+
+
+def test_learned_arbitration_runs_frozen_in_goal_episodes(learned):
+    exp, t = learned
+    spec = TrialSpec(index=0, seed=3, world="goal", iterations=20, learn=False,
+                     interpreter_state=STATE, policies=dict(t.policies), protocol="goal-episodes")
+    r = simulate(exp.res, spec)
+    assert r.summary["eval/goal/episodes"] == 3
+    assert set(r.episodes["success"].tolist()) <= {True, False}
