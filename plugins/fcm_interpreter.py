@@ -9,7 +9,9 @@ the clustering, :func:`sitframe.fcm.memberships`.
 Config (``[interpreter]``)::
 
     component = "fcm"
-    c = 8          # number of situations
+    c = 8          # number of situations, or "auto" (chosen from the validity measures)
+    auto_cs = [4, 6, 8, 10, 12, 14, 16, 18, 20]   # candidates for c = "auto"
+    auto_trials = 10                                # FCM restarts per candidate
     m = 1.2        # fuzziness (membership exponent 2/(m-1) = 10)
     trials = 50    # FCM restarts
     sweep = []     # optional list of c values for the validity-vs-c sweep (Fig. 4.5)
@@ -24,6 +26,20 @@ Feature space. The thesis clusters raw ranges with the Euclidean distance, so a
 ranges apart and compress long ones. Live readings are fuzzified in the same
 space. The logged state keeps ``centers`` in metres (for plots and tables)
 and adds ``feature_centers``, which the memberships use.
+
+``c = "auto"``. The thesis chose c by looking at the validity measures against
+c (Fig. 4.5) and at the learned behaviour. Most measures cannot choose c on
+their own: the partition coefficient and the normalised index fall and the
+partition entropy rises with c for any data, and the objective J_m always
+falls. The relative fuzziness R_f (the share of fuzzy to non-fuzzy
+memberships, Eq. 4.10) does not drift with c: it is smallest where the data
+falls into the crispest groups. The rule: run the c sweep over ``auto_cs``
+(``auto_trials`` restarts each, one trial chosen per c as usual), keep the c
+whose chosen trial has no empty cluster (``min_card > 0``), and take the one
+with the smallest R_f (ties, e.g. several perfectly crisp partitions: the
+largest minimum hard tendency ``min_ht``, then the smaller c); then cluster with that c and
+``trials`` restarts as for a fixed c. The sweep is logged (``auto_cs``,
+``auto_rf``, ``auto_c``). Until ``fit`` has run, ``n_situations`` is ``None``.
 """
 
 from __future__ import annotations
@@ -50,7 +66,7 @@ class FCMInterpreter:
     def __init__(
         self,
         *,
-        c: int = 8,
+        c: int | str = 8,
         m: float = 1.2,
         trials: int = 50,
         tol: float = 1e-5,
@@ -58,9 +74,20 @@ class FCMInterpreter:
         sweep: list[int] | None = None,
         transform: str = "range",
         offset: float = 0.1,
+        auto_cs: list[int] = (4, 6, 8, 10, 12, 14, 16, 18, 20),  # type: ignore[assignment]
+        auto_trials: int = 10,
     ) -> None:
         # (upper bounds keep the trials' arrays in memory; c is bounded by the samples)
-        self.c = int(P.number("c", c, lo=2, integer=True))
+        self.auto = isinstance(c, str)
+        if self.auto and c != "auto":
+            raise ValueError(f"c = '{c}': expected an integer >= 2 or \"auto\"")
+        self.c: int | None = None if self.auto else int(P.number("c", c, lo=2, integer=True))
+        self.auto_cs = [int(P.number(f"auto_cs[{i}]", v, lo=2, integer=True))
+                        for i, v in enumerate(auto_cs)]
+        if not self.auto_cs or len(set(self.auto_cs)) != len(self.auto_cs):
+            raise ValueError(f"auto_cs = {list(auto_cs)}: expected distinct integers >= 2")
+        self.auto_trials = int(P.number("auto_trials", auto_trials, lo=1, hi=MAX_TRIALS,
+                                        integer=True))
         self.m = float(P.number("m", m, lo=1.0, lo_open=True))
         self.trials = int(P.number("trials", trials, lo=1, hi=MAX_TRIALS, integer=True))
         self.tol = float(P.number("tol", tol, lo=0.0, lo_open=True))
@@ -73,7 +100,7 @@ class FCMInterpreter:
         self.feature_centers: np.ndarray | None = None
 
     @property
-    def n_situations(self) -> int:
+    def n_situations(self) -> int | None:
         return self.c
 
     def features(self, X: np.ndarray) -> np.ndarray:
@@ -99,6 +126,10 @@ class FCMInterpreter:
         ``pmap`` (given by the run when it has a worker pool) spreads the FCM
         trials over the workers; the result is the same without it.
         """
+        auto: dict[str, Any] = {}
+        if self.auto:
+            auto = self.choose_c(X, rng)
+            self.c = auto["auto_c"]
         res = cluster_trials(self.features(X), self.c, n_trials=self.trials, m=self.m,
                              tol=self.tol, max_iter=self.max_iter, seed=rng, pmap=pmap)
         self.feature_centers = np.asarray(res.centers[res.chosen], dtype=float)
@@ -114,6 +145,7 @@ class FCMInterpreter:
             "measure_names": list(res.measures),
             "trial_measures": np.column_stack(
                 [np.asarray(v, float) for v in res.measures.values()]),
+            **auto,
         }
         if self.sweep:
             sw = sweep_c(self.features(X), self.sweep, n_trials=self.trials, m=self.m, seed=rng)
@@ -121,6 +153,22 @@ class FCMInterpreter:
             out["sweep_measures"] = np.column_stack(
                 [np.asarray(sw.measures[k], float) for k in out["measure_names"]])
         return out
+
+    def choose_c(self, X: np.ndarray, rng: np.random.Generator) -> dict[str, Any]:
+        """The ``c = "auto"`` rule (module docstring): the smallest R_f over ``auto_cs``."""
+        cs = sorted(c for c in self.auto_cs if c <= len(X))
+        if not cs:
+            raise ValueError(f"auto_cs {self.auto_cs}: every candidate exceeds the {len(X)} "
+                             "collected samples")
+        sw = sweep_c(self.features(X), cs, n_trials=self.auto_trials, m=self.m, tol=self.tol,
+                     max_iter=self.max_iter, seed=rng)
+        rf = np.where(sw.measures["min_card"] > 0, sw.measures["rf"], np.inf)
+        if not np.isfinite(rf).any():
+            rf = np.asarray(sw.measures["rf"], float)
+        tied = np.isclose(rf, rf.min())  # (e.g. several perfectly crisp partitions, R_f = 0)
+        best = int(np.argmax(np.where(tied, sw.measures["min_ht"], -np.inf)))
+        return {"auto_c": int(sw.cs[best]), "auto_cs": np.asarray(sw.cs),
+                "auto_rf": np.asarray(sw.measures["rf"], float)}
 
     def memberships(self, reading: np.ndarray) -> np.ndarray:
         if self.transform == "range":
@@ -140,6 +188,8 @@ class FCMInterpreter:
                              f"{state.get('offset', self.offset)}), this config "
                              f"'{self.transform}' (offset {self.offset})")
         centers = np.asarray(state["centers"], dtype=float)
+        if self.auto and centers.ndim == 2 and centers.shape[0] >= 1:
+            self.c = centers.shape[0]  # (c = "auto": the logged clustering's c)
         if centers.ndim != 2 or centers.shape[0] != self.c:
             raise ValueError(f"logged centres have shape {centers.shape}, expected ({self.c}, d) "
                              f"for c = {self.c}")

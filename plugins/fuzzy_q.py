@@ -29,6 +29,16 @@ Config (``[behaviours.LABEL]``)::
     tie_break = "first"    # greedy ties (never-updated situations): "first" or "centre"
     q_init = "constant"
     q_init_value = 0.0
+    new_row_optimism = 0.5 # evolving situations: a new row's pull towards q_init_value
+
+With an evolving interpreter (``plugins/evolving.py``, the contract in
+:mod:`sitframe.situations`) the rows follow the situations:
+``situations_changed`` grows a new situation's row from its neighbours'
+rows (membership-weighted, pulled towards the optimistic ``q_init_value`` by
+``new_row_optimism``) and combines merged rows visit-weighted
+(:meth:`sitframe.learning.FuzzyQLearner.situations_changed`);
+``situation_errors`` reports the last update's absolute TD errors per
+situation, from which the interpreter splits situations the task finds hard.
 """
 
 from __future__ import annotations
@@ -44,6 +54,7 @@ from sitframe import (
     PolicyOutput,
     Proposal,
     QLearningParams,
+    SituationEvent,
     SituationFCS,
     Transition,
     hookimpl,
@@ -81,6 +92,7 @@ class FuzzyQBehaviour:
         terminal_on_collision: bool = False,
         min_updates: int = 0,
         tie_break: str = "first",
+        new_row_optimism: float = 0.5,
     ) -> None:
         self.singletons: dict[str, np.ndarray] = {
             "heading": np.asarray(P.number_list("headings", list(headings), lo=-90, hi=90))
@@ -101,6 +113,8 @@ class FuzzyQBehaviour:
             terminal_on_collision=terminal_on_collision, min_updates=min_updates,
             tie_break=tie_break,
         )
+        self.new_row_optimism = float(P.number("new_row_optimism", new_row_optimism,
+                                               lo=0.0, hi=1.0))
         self.learners: dict[str, FuzzyQLearner] = {}
         self.fcs: dict[str, SituationFCS] = {}
         self.fixed: dict[str, np.ndarray] = {}
@@ -164,6 +178,20 @@ class FuzzyQBehaviour:
         for out, lr in self.learners.items():
             if lr.update(u0, reward, u1, collided, it):
                 self.fcs[out].set_rules(lr.rule_base)
+
+    # -- evolving situations (sitframe.situations) ------------------------------
+    def situations_changed(self, event: SituationEvent) -> None:
+        """Grow or combine the learned rows when the interpreter's situations change."""
+        for out, lr in self.learners.items():
+            lr.situations_changed(event, self.new_row_optimism)
+            self.fcs[out].set_rules(lr.rule_base)
+
+    def situation_errors(self) -> np.ndarray | None:
+        """(c,) absolute TD errors of the last ``learn``, summed over the learned outputs."""
+        if not self.learners:
+            return None
+        errs = [lr.td_abs for lr in self.learners.values()]
+        return errs[0] if len(errs) == 1 else np.sum(errs, axis=0)
 
     # -- results ---------------------------------------------------------
     def trial_data(self) -> dict[str, Any]:

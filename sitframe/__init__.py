@@ -52,6 +52,7 @@ _PUBLIC: dict[str, str] = {
     "describe_prototype": "clustering",
     "SituationFCS": "fuzzy", "FuzzyQLearner": "learning", "QLearningParams": "learning",
     "greedy_actions": "learning", "softmax_choice": "learning",
+    "SituationEvent": "situations",
     # metrics that know no behaviour (for evaluation protocols)
     "path_length": "metrics", "heading_change_per_m": "metrics", "spl": "metrics",
     # logs

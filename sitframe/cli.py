@@ -383,6 +383,8 @@ def _finite(x: Any) -> Any:
 def run_json(result: Any) -> dict[str, Any]:
     """The ``run --json`` document (keys are a contract; see the README)."""
     trials = []
+    # (the run's number of situations; an evolving interpreter's trials each report their own)
+    situations = len(result.interpreter_state.get("centers", ()))
     for tr in result.trials:
         s = tr.summary
         rule_base = {f"{label}.{out}": [float(v) for v in o.values()]
@@ -399,6 +401,7 @@ def run_json(result: Any) -> dict[str, Any]:
             "collisions": s["collisions"],
             "collisions_per_1000": _finite(s["collisions_per_1000"]),
             "coverage": _finite(s["coverage"]),
+            "situations": int(s.get("situations", situations)),
             "evaluation": {k[5:]: _finite(v) for k, v in s.items() if k.startswith("eval/")},
         }
         trials.append(entry)

@@ -67,13 +67,31 @@ class Sensor(Protocol):
 
 @runtime_checkable
 class SituationInterpreter(Protocol):
-    """Turns a reading into memberships of ``n_situations`` fuzzy situations."""
+    """Turns a reading into memberships of ``n_situations`` fuzzy situations.
+
+    **Evolving situations** (optional extension, :mod:`sitframe.situations`).
+    An interpreter with the class attribute ``evolving = True`` may create,
+    split, merge and prune situations during a learning trial. Then
+    ``n_situations`` is its *capacity* (situation ids ``0 .. c - 1``, given
+    in order and never reused; memberships are 0 for ids not alive), and it
+    has ``events() -> list[SituationEvent]`` (drained by the core after each
+    learning iteration and handed to every behaviour's optional
+    ``situations_changed(event)``), optionally ``observe_errors(errors)``
+    (the learners' per-situation absolute TD errors, see
+    :meth:`Behaviour.situation_errors`). It must not change in a frozen
+    evaluation (``trial_start`` with kind ``"evaluate"``); its ``state()``
+    after a learning trial is that trial's own final situations, logged under
+    ``/trials/NNNN/situations`` and used by the trial's evaluations and by
+    ``sitframe evaluate LOG --trial K``. Without a cluster stage (and without
+    ``clusters_from``) the run starts from its unfitted ``state()``.
+    """
 
     name: ClassVar[str]
 
     @property
     def n_situations(self) -> int:
-        """Number ``c`` of situations (known from the config, before ``fit``)."""
+        """Number ``c`` of situations (known from the config, before ``fit``; ``None`` if
+        only ``fit`` decides it, e.g. ``c = "auto"``; an evolving interpreter's capacity)."""
         ...
 
     def fit(self, X: np.ndarray, rng: np.random.Generator) -> dict[str, Any]:
@@ -158,6 +176,22 @@ class Behaviour(Protocol):
 
     def policy(self) -> LearnedPolicy | None:
         """Optional. The policy learned in the trial that just ended (``None``: nothing learned)."""
+        ...
+
+    def situations_changed(self, event: Any) -> None:
+        """Optional. The interpreter's situations changed (evolving interpreters only).
+
+        ``event`` is a :class:`sitframe.situations.SituationEvent`: a situation
+        ``event.id`` was created or split off (initialise its per-situation
+        state from ``event.parents`` weighted by ``event.weights``), merged
+        (``event.removed`` absorbed into ``event.id``) or pruned. Called after
+        ``learn`` and before the next ``propose``; events come in order.
+        """
+        ...
+
+    def situation_errors(self) -> np.ndarray | None:
+        """Optional. (c,) absolute TD errors the last ``learn`` attributed to each situation
+        (0 where nothing was updated); an evolving interpreter splits where they stay large."""
         ...
 
     def load_policy(self, policy: LearnedPolicy) -> None:

@@ -68,7 +68,9 @@ def evaluate_log(
         raise InputError(f"trial {trial} has no learned policy to evaluate", file=log_path,
                          key="trials")
     clusters_from = Config.of(cfg).experiment.clusters_from
-    if log.has("cluster/state") or not clusters_from:
+    if tl.situations:  # situations that evolved in the trial: its own final ones
+        state = tl.situations_part("state")
+    elif log.has("cluster/state") or not clusters_from:
         state = log.interpreter_state()
     else:  # a run that reused situations from another log (e.g. a goal run)
         state = open_log(clusters_from).interpreter_state()
@@ -191,8 +193,11 @@ def rule_base_table(result: Any) -> Any:
     if not outs:
         return table
     centers = result.interpreter_state.get("centers")
-    for i in range(outs[0][2].rules.size):
-        desc = describe_prototype(centers[i], result.sensor_angles_deg) \
+    rows: Any = range(outs[0][2].rules.size)
+    if own := getattr(best, "situations", {}).get("state"):  # evolving: the best trial's ids
+        rows, centers = [int(i) for i in own["ids"]], own["centers"]
+    for n, i in enumerate(rows):
+        desc = describe_prototype(centers[n], result.sensor_angles_deg) \
             if centers is not None and len(result.sensor_angles_deg) == np.shape(centers)[1] \
             else ""
         row = [f"S{i}", desc]

@@ -195,13 +195,20 @@ class Experiment:
     def needs_clusters(self, interpreter_state: dict[str, Any] | None,
                        collected: Collected | None = None) -> bool:
         """Whether :meth:`prepare` would collect/cluster (raises if the stages cannot)."""
-        if interpreter_state is not None:
+        if interpreter_state is not None or (collected is None and self.starts_online()):
             return False
         if collected is None and "collect" not in self.config.experiment.stages:
             raise InputError("the run needs clusters: include 'collect' and 'cluster' "
                              "in experiment.stages or reuse clusters from a log",
                              file=self.source, key="experiment.stages")
         return True
+
+    def starts_online(self) -> bool:
+        """Whether the situations start from nothing: an evolving interpreter
+        (:mod:`sitframe.situations`) in a run without a cluster stage."""
+        return ("cluster" not in self.config.experiment.stages
+                and not self.config.experiment.clusters_from
+                and bool(getattr(self.res.interpreter(), "evolving", False)))
 
     def record_collected(self, collected: Collected) -> None:
         """Hand the collect stage's output to observers."""
@@ -222,6 +229,12 @@ class Experiment:
         the cluster stage, so the run's own log is self-contained for
         ``evaluate`` and ``analyse`` (not again when resuming: the log has them).
         """
+        if interpreter_state is None and collected is None and self.starts_online():
+            interp = self.res.interpreter()
+            interpreter_state = call(self.res.origins["interpreter"], "state", interp.state)
+            if not self.info.extra.get("resume"):
+                self.record_clusters({"fitted": "on-line, from no situations"}, interpreter_state)
+            return interpreter_state
         if not self.needs_clusters(interpreter_state, collected):
             if not self.info.extra.get("resume"):
                 source = self.config.experiment.clusters_from or "given by the caller"

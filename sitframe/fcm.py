@@ -497,7 +497,14 @@ class MembershipFunction:
     def __call__(self, x: np.ndarray) -> np.ndarray:
         """Return the (c,) memberships of one (d,) reading; they sum to 1."""
         diff = self.centers - x
-        d2 = np.einsum("ij,ij->i", diff, diff)
+        return self.from_d2(np.einsum("ij,ij->i", diff, diff))
+
+    def from_d2(self, d2: np.ndarray) -> np.ndarray:
+        """Memberships from the (c,) squared distances of one reading to the centres.
+
+        For a caller that already has the distances (e.g. an interpreter whose
+        centres change on-line): the same formula and floor as :meth:`__call__`.
+        """
         dmin = d2.min()
         if dmin <= 0.0:
             on = d2 <= 0.0

@@ -76,7 +76,11 @@ def sitframe_interpreters() -> list[Any]:
     Called once per run, when components are resolved. An interpreter is
     fitted on collected readings (the *cluster* stage) and then turns each live
     reading into memberships of ``c`` situations; see
-    :class:`sitframe.components.SituationInterpreter`.
+    :class:`sitframe.components.SituationInterpreter`. An *evolving*
+    interpreter (``evolving = True``) changes its situations during learning
+    trials and reports each change as a
+    :class:`sitframe.situations.SituationEvent` that behaviours follow in
+    ``situations_changed(event)`` (the contract: :mod:`sitframe.situations`).
 
     :return: A list of factories with unique ``name`` attributes, called with
         the keys of the config's ``[interpreter]`` table.

@@ -38,10 +38,14 @@ Choices where the thesis is ambiguous (all configurable):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from sitframe import params as P
+
+if TYPE_CHECKING:
+    from sitframe.situations import SituationEvent
 
 UPDATE_RULES = ("thesis", "standard")
 TEMPERATURE_MODES = ("relative", "absolute")
@@ -224,6 +228,10 @@ class FuzzyQLearner:
         self.n_changes = 0
         self.updates = np.zeros(c, dtype=np.int64)
         self._rows = np.arange(c)
+        #: (c,) absolute TD error of each rule updated by the last :meth:`update` (0 elsewhere).
+        self.td_abs = np.zeros(c)
+        #: Rows merged away or pruned by :meth:`situations_changed` (left out of ``min_updates``).
+        self.removed = np.zeros(c, dtype=bool)
         # Records: one row per rule-base change (snapshots) and per iteration.
         self._snap_iter: list[int] = [0]
         self._snap_rules: list[np.ndarray] = [self.rule_base.copy()]
@@ -271,11 +279,12 @@ class FuzzyQLearner:
         bool
             Whether the rule base was changed (so a controller must reload it).
         """
-        if self.converged_at is not None:
-            return False
         prm = self.params
         q = self.q
         active = np.flatnonzero(u_before >= prm.activation) if prm.activation > 0 else self._rows
+        if self.converged_at is not None:
+            self._monitor(active, u_before, reward, u_after, collided)
+            return False
         if active.size:
             v_next = 0.0 if (collided and prm.terminal_on_collision) else \
                 float(u_after @ q.max(axis=1))
@@ -283,15 +292,38 @@ class FuzzyQLearner:
             w = u_before[active]
             cur = q[active, acts]
             if prm.update == "thesis":
-                q[active, acts] = cur + prm.alpha * (w * reward + prm.gamma * w * v_next - cur)
+                delta = w * reward + prm.gamma * w * v_next - cur
+                q[active, acts] = cur + prm.alpha * delta
             else:
-                q[active, acts] = cur + prm.alpha * w * (reward + prm.gamma * v_next - cur)
+                delta = reward + prm.gamma * v_next - cur
+                q[active, acts] = cur + prm.alpha * w * delta
             self.updates[active] += 1
+            self.td_abs[:] = 0.0
+            self.td_abs[active] = np.abs(delta)
+        else:
+            self.td_abs[:] = 0.0
         self.since_change += 1
         if collided or self.since_change >= prm.b:
             self._change(iteration)
             return True
         return False
+
+    def _monitor(self, active: np.ndarray, u_before: np.ndarray, reward: float,
+                 u_after: np.ndarray, collided: bool) -> None:
+        """After convergence: the TD errors the frozen rules would get (``td_abs``), no update.
+
+        Learning has stopped, but an evolving interpreter still needs to know
+        where the frozen rule base fits the task badly (it may split there).
+        """
+        self.td_abs[:] = 0.0
+        if active.size == 0:
+            return
+        prm = self.params
+        v_next = 0.0 if (collided and prm.terminal_on_collision) else \
+            float(u_after @ self.q.max(axis=1))
+        cur = self.q[active, self.rule_base[active]]
+        w = u_before[active] if prm.update == "thesis" else 1.0
+        self.td_abs[active] = np.abs(w * reward + prm.gamma * w * v_next - cur)
 
     def _change(self, iteration: int) -> None:
         self.since_change = 0
@@ -303,7 +335,7 @@ class FuzzyQLearner:
             self.greedy = greedy
         self.n_changes += 1
         if self.stable_changes >= self.params.p and (
-                self.params.min_updates == 0 or self.updates.min() >= self.params.min_updates):
+                self.params.min_updates == 0 or self._min_updates() >= self.params.min_updates):
             self.converged_at = iteration + 1
             self.rule_base = greedy.copy()
         else:
@@ -312,6 +344,59 @@ class FuzzyQLearner:
         self._snap_rules.append(self.rule_base.copy())
         self._snap_greedy.append(greedy)
         self._snap_q.append(self.q.copy())
+
+    def _min_updates(self) -> int:
+        """Fewest updates of a situation that counts (with evolving situations: rows that were
+        updated at least once and not removed; ids not yet created are not situations)."""
+        if not self.removed.any() and not self._evolving:
+            return int(self.updates.min())
+        live = self.updates[~self.removed & (self.updates > 0)]
+        return int(live.min()) if live.size else 0
+
+    _evolving = False
+
+    def situations_changed(self, event: SituationEvent, optimism: float = 0.5) -> None:
+        """Follow an evolving interpreter's change of situations (:mod:`sitframe.situations`).
+
+        * ``create``/``split``: the new row is its parents' rows weighted by the
+          event's weights (their FCM memberships at the new prototype: what the
+          blended controller did there), pulled towards the optimistic initial
+          value, ``(1 - optimism) * sum_j w_j Q_j + optimism * q_init_value``,
+          so the neighbours' ranking of actions is kept but the gaps shrink and
+          the soft-max tries the others. Its greedy action is learned anew:
+          convergence is re-opened (the rule base of a new situation was never
+          learned). Without parents the row is ``q_init_value``.
+        * ``merge``: the survivor's row is the visit-weighted mean (``updates``)
+          of the merged rows; the absorbed rows are reset and marked removed.
+        * ``prune``: the row is reset and marked removed.
+        """
+        self._evolving = True
+        q0 = float(self.params.q_init_value)
+        i = int(event.id)
+        if event.kind in ("create", "split"):
+            if event.parents:
+                prior = np.asarray(event.weights) @ self.q[list(event.parents)]
+                self.q[i] = (1.0 - optimism) * prior + optimism * q0
+            else:
+                self.q[i] = q0
+            self.updates[i] = 0
+            self.removed[i] = False
+            if self.converged_at is not None:
+                self.converged_at = None
+                self.stable_changes = 0
+            return
+        if event.kind == "merge":
+            rows = [int(j) for j in event.parents]
+            visits = self.updates[rows].astype(float) + 1.0
+            self.q[i] = (visits / visits.sum()) @ self.q[rows]
+            self.updates[i] = int(self.updates[rows].sum())
+        for j in event.removed:
+            self.q[j] = q0
+            self.updates[j] = 0
+            self.removed[j] = True
+        self.greedy = greedy_actions(self.q, self.params.tie_break)
+        if self.converged_at is not None:
+            self.rule_base = self.greedy.copy()
 
     def final_rule_base(self) -> np.ndarray:
         """The greedy rule base (the converged one if learning converged)."""

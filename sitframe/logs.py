@@ -123,7 +123,7 @@ from sitframe.records import LearnedPolicy, PolicyOutput, RunInfo, SensorSpec, T
 #: Per-iteration sensor readings (``sonar`` in logs from before contract v2).
 READING = "reading"
 #: Groups of a trial that are not per-iteration arrays.
-_TRIAL_GROUPS = ("summary", "behaviours", "episodes", "plugins")
+_TRIAL_GROUPS = ("summary", "behaviours", "episodes", "plugins", "situations")
 
 SCHEMA = "sitframe-log"
 SCHEMA_VERSION = 1
@@ -545,6 +545,8 @@ def _write_trial(g: h5py.Group, trial: TrialResult, behaviour_labels: list[str] 
         pg = g.require_group("plugins").require_group(plugin)
         for k, v in data.items():
             _write_value(pg, k, v)
+    for k, v in trial.situations.items():
+        _write_value(g.require_group("situations"), k, v)
 
 
 def _summary_row(g: h5py.Group) -> dict[str, Any]:
@@ -647,6 +649,9 @@ class TrialLog:
         Evaluation / goal-episode arrays.
     plugins
         Plugin name -> flattened dict of the data it handed for the trial.
+    situations
+        With an evolving interpreter: flattened ``state/...``, ``events/...`` and
+        ``count`` of the trial's situations (empty otherwise).
     """
 
     index: int
@@ -657,6 +662,13 @@ class TrialLog:
     behaviours: dict[str, dict[str, Any]]
     episodes: dict[str, Any] = field(default_factory=dict)
     plugins: dict[str, dict[str, Any]] = field(default_factory=dict)
+    situations: dict[str, Any] = field(default_factory=dict)
+
+    def situations_part(self, part: str) -> dict[str, Any]:
+        """``"state"`` (the trial's final interpreter state) or ``"events"`` of
+        :attr:`situations`, unflattened one level; empty for a fixed interpreter."""
+        head = f"{part}/"
+        return {k[len(head):]: v for k, v in self.situations.items() if k.startswith(head)}
 
     def policy(self, label: str) -> dict[str, np.ndarray]:
         """The learned rule bases (``output -> (c,) action indices``) of behaviour ``label``."""
@@ -881,8 +893,9 @@ class Log:
                        if "plugins" in g else {})
             summary = dict(_read_group(g["summary"])) if "summary" in g else {}
             summary = {k.replace(".", "/"): v for k, v in summary.items()}
+            situations = _read_group(g["situations"]) if "situations" in g else {}
             return TrialLog(int(g.attrs["index"]), int(g.attrs["seed"]), str(g.attrs["world"]),
-                            summary, arrays, behaviours, episodes, plugins)
+                            summary, arrays, behaviours, episodes, plugins, situations)
 
     def summary(self) -> np.ndarray:
         """The root summary table (structured array, one row per finished trial)."""
@@ -975,6 +988,9 @@ def _check_layout(f: h5py.File, path: str) -> None:
             fail("cluster/state/centers", f"expected a finite (c, d) array of centres, got "
                  f"shape {c.shape}, dtype {c.dtype}")
         shape = c.shape
+        capacity = f["cluster/state"].attrs.get("capacity")  # evolving situations: id slots
+        if capacity is not None:
+            shape = (int(capacity), shape[1])
     for name in _trial_names(f, path):
         g = _trial_group(f, name, path)
         if not isinstance(g, h5py.Group):

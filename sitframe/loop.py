@@ -60,6 +60,7 @@ from sitframe.records import (
 )
 from sitframe.resolve import Resolved
 from sitframe.robot import Command, RobotParams, step_robot
+from sitframe.situations import SituationTracker
 from sitframe.world import Goal, World
 
 #: Seed stages (:func:`stage_seed`); ``STAGE_BATCH``: the episode batches of a run that
@@ -248,6 +249,7 @@ def simulate(
             call(og[key], "trial_start", comp.trial_start, tinfo, trial=k)
     default_speed = res.config.experiment.default_speed
     robot = res.robot
+    track = SituationTracker.start(interp, spec.learn, components, og, k)  # evolving situations
 
     d = res.run.sensor.dim
     pose_a = np.empty((L + 1, 3))
@@ -312,6 +314,8 @@ def simulate(
                 rew_a[lb][t] = r
                 step_at = at_l
                 beh.learn(tr, r)
+            if track is not None:
+                track.step(t)
             pose_a[t] = ctx.pose
             sonar_a[t] = ctx.reading
             u_a[t] = ctx.memberships
@@ -373,8 +377,12 @@ def simulate(
     episodes = {} if chain is None else chain.record(arrays["pose"], summary)
     result = TrialResult(spec.index, spec.seed, world.name, arrays, bdata, summary, episodes,
                          policies=policies)
+    if track is not None:
+        result.situations = call(og["interpreter"], "state", track.finish, pose_a[: n + 1], d,
+                                 trial=k)
+        summary["situations"] = result.situations["count"]
     _collect_plugin_data(result, components, tinfo, og, res)
-    for ev_spec in evaluation_specs(spec, result.policies):
+    for ev_spec in evaluation_specs(spec, result.policies, result.situations.get("state")):
         attach_evaluation(result, ev_spec.world, simulate(res, ev_spec))
     return result
 
@@ -617,10 +625,13 @@ def _collect_plugin_data(result: TrialResult, components: list[tuple[str, Any]],
             add(impl.plugin_name, where, data)
 
 
-def evaluation_specs(spec: TrialSpec, policies: dict[str, LearnedPolicy]) -> list[TrialSpec]:
+def evaluation_specs(spec: TrialSpec, policies: dict[str, LearnedPolicy],
+                     situations: dict[str, Any] | None = None) -> list[TrialSpec]:
     """The evaluations of a finished trial (one spec per ``spec.evaluate`` world).
 
-    ``policies`` are the trial's learned policies (``TrialResult.policies``).
+    ``policies`` are the trial's learned policies (``TrialResult.policies``);
+    ``situations`` the trial's final interpreter state when its situations
+    evolved (``TrialResult.situations["state"]``), else the spec's is used.
     With a ``spec.protocol`` each evaluation is a batch of its episodes
     (:func:`run_batch`) with these policies, else one frozen-policy run of
     ``eval_iterations`` from the world's start.
@@ -632,7 +643,8 @@ def evaluation_specs(spec: TrialSpec, policies: dict[str, LearnedPolicy]) -> lis
     return [dataclasses.replace(
         spec, seed=stage_seed(spec.seed % (2**63), STAGE_EVAL, k), world=wname,
         iterations=spec.eval_iterations, learn=False, policies=dict(policies), evaluate=(),
-        observed=False) for k, wname in enumerate(spec.evaluate)]
+        observed=False, interpreter_state=situations or spec.interpreter_state)
+        for k, wname in enumerate(spec.evaluate)]
 
 
 #: Per-iteration arrays of a frozen-policy evaluation kept in the log (enough to

@@ -63,3 +63,38 @@ def spl(success: np.ndarray, straight: np.ndarray, path: np.ndarray) -> float:
     if success.size == 0:
         return float("nan")
     return float(np.mean(success * straight / np.maximum(path, straight)))
+
+
+def frontal_between_prototypes(pose: np.ndarray, collision: np.ndarray, contact: np.ndarray,
+                               memberships: np.ndarray, *, cone_deg: float = 30.0,
+                               top: float = 0.5) -> np.ndarray:
+    """(L,) whether each iteration's collision was frontal and began between prototypes.
+
+    A collision at iteration ``t`` (the step from ``pose[t]``) is *frontal* when
+    the contact point lies within ``cone_deg`` of the heading at ``pose[t]``, and
+    *began between prototypes* when the reading the controller acted on at ``t``
+    had no dominant situation: its largest membership is below ``top`` (the
+    blended rules then turn by a compromise of their headings, which is the
+    failure a finer situation can remove).
+
+    Parameters
+    ----------
+    pose
+        (L + 1, 3) or (L, 3) poses (x [m], y [m], theta [rad]); row ``t`` is the
+        pose the iteration started from.
+    collision
+        (L,) bool.
+    contact
+        (L, 2) contact point [m] of each collision (NaN where none).
+    memberships
+        (L, c) memberships of each iteration's reading.
+    """
+    coll = np.asarray(collision, dtype=bool)
+    L = coll.size
+    p = np.asarray(pose, dtype=float)[:L]
+    rel = np.asarray(contact, dtype=float)[:L] - p[:, :2]
+    bearing = np.degrees(np.arctan2(rel[:, 1], rel[:, 0]) - p[:, 2])
+    bearing = (bearing + 180.0) % 360.0 - 180.0
+    with np.errstate(invalid="ignore"):
+        frontal = np.abs(bearing) <= cone_deg
+    return coll & frontal & (np.asarray(memberships)[:L].max(axis=1) < top)

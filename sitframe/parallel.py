@@ -294,7 +294,8 @@ class TrialPipeline:
         if kind == "learn":
             self._learning -= 1
             handle, spec = info
-            evs = evaluation_specs(spec, value.policies) if _splittable(spec) else []
+            evs = (evaluation_specs(spec, value.policies, value.situations.get("state"))
+                   if _splittable(spec) else [])
             if not evs:
                 return value
             self._partial[tag] = [value, [None] * len(evs), len(evs), [ev.world for ev in evs]]
@@ -501,10 +502,12 @@ class DaskExecutor(PoolExecutor):
     address
         The scheduler's address, e.g. ``tcp://10.0.0.5:8786``.
     timeout
-        Seconds to wait for the connection before raising :class:`InputError`.
+        Seconds to wait for the connection before raising :class:`InputError`
+        (default :data:`DASK_CONNECT_TIMEOUT`, read when called).
     """
 
-    def __init__(self, address: str, timeout: float = DASK_CONNECT_TIMEOUT) -> None:
+    def __init__(self, address: str, timeout: float | None = None) -> None:
+        timeout = DASK_CONNECT_TIMEOUT if timeout is None else timeout
         try:
             from distributed import Client
         except ImportError:
@@ -601,11 +604,12 @@ def make_executor(workers: int | None = None, scheduler: str | None = None,
 
 
 def log_contents(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """Every dataset of an HDF5 log and every attribute below the root, by path.
+    """Every dataset and group of an HDF5 log and every attribute below the root, by path.
 
     Root attributes are left out: they describe the run (``created``,
     ``status``), not its results. Trial attributes (index, seed, world, and
-    the summary scalars) are included as ``"<group>@<attr>"``.
+    the summary scalars) are included as ``"<group>@<attr>"``; a group is
+    included as ``"<group>/"`` (value ``None``), so an empty group counts too.
     """
     import h5py
 
@@ -614,6 +618,8 @@ def log_contents(path: str | os.PathLike[str]) -> dict[str, Any]:
         def visit(name: str, obj: Any) -> None:
             if isinstance(obj, h5py.Dataset):
                 out[name] = obj[()]
+            else:
+                out[f"{name}/"] = None
             for k, v in obj.attrs.items():
                 out[f"{name}@{k}"] = v
         f.visititems(visit)  # hard links only; trials not yet packed are in their own files:
@@ -629,7 +635,9 @@ def compare_logs(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> list[s
     """Paths whose contents differ between two logs, bit for bit (empty = identical).
 
     Compares every dataset (dtype, shape and bytes) and every non-root
-    attribute, as :func:`log_contents` lists them.
+    attribute, and which groups exist, as :func:`log_contents` lists them.
+    Variable-length strings (object arrays) are compared by value, since their
+    bytes are pointers.
     """
     import numpy as np
 
@@ -637,7 +645,9 @@ def compare_logs(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> list[s
     diff = sorted(set(ca) ^ set(cb))
     for key in sorted(set(ca) & set(cb)):
         x, y = np.asarray(ca[key]), np.asarray(cb[key])
-        if x.dtype != y.dtype or x.shape != y.shape or x.tobytes() != y.tobytes():
+        same = x.dtype == y.dtype and x.shape == y.shape and (
+            x.tolist() == y.tolist() if x.dtype.kind == "O" else x.tobytes() == y.tobytes())
+        if not same:
             diff.append(key)
     return diff
 

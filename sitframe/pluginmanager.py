@@ -148,10 +148,12 @@ def _load_entry_points(pm: pluggy.PluginManager, info: dict[str, PluginInfo]) ->
     clashes: list[str] = []
     pm.sitframe_clashes = clashes  # type: ignore[attr-defined]
     for dist in importlib.metadata.distributions():
-        for ep in dist.entry_points:
-            if ep.group != GROUP or pm.is_blocked(ep.name):
-                continue
-            dist_name = dist.metadata["name"]
+        eps = [ep for ep in dist.entry_points if ep.group == GROUP and not pm.is_blocked(ep.name)]
+        if not eps:
+            continue
+        # (each metadata access parses the METADATA file, README included: once per dist)
+        dist_name, dist_version = dist.metadata["name"], dist.version
+        for ep in eps:
             name = ep.name
             if name in seen:
                 if seen[name] == (dist_name, ep.value):
@@ -164,7 +166,7 @@ def _load_entry_points(pm: pluggy.PluginManager, info: dict[str, PluginInfo]) ->
                     continue
             else:
                 seen[name] = (dist_name, ep.value)
-            pinfo = PluginInfo(name, "entry point", dist_name, dist.version)
+            pinfo = PluginInfo(name, "entry point", dist_name, dist_version)
             try:
                 plugin = ep.load()
             except Exception as exc:  # noqa: BLE001 - any import failure is the plugin's

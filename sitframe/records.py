@@ -186,6 +186,11 @@ class TrialResult:
         Plugin name -> arrays/scalars that plugin handed for the trial
         (component ``trial_end`` or observer ``sitframe_trial_data``); written
         to ``/trials/NNNN/plugins/<plugin>/``.
+    situations
+        Only with an evolving interpreter: ``state`` (the final situations, a
+        state its ``load_state`` takes), ``events`` (the history, arrays of
+        :func:`sitframe.situations.history_arrays`) and ``count``; written to
+        ``/trials/NNNN/situations/``.
     """
 
     index: int
@@ -197,6 +202,9 @@ class TrialResult:
     episodes: dict[str, np.ndarray] = field(default_factory=dict)
     policies: dict[str, LearnedPolicy] = field(default_factory=dict)
     plugin_data: dict[str, dict[str, Any]] = field(default_factory=dict)
+    #: With an evolving interpreter (:mod:`sitframe.situations`): the trial's final
+    #: situations (``state``), their history (``events``) and final number (``count``).
+    situations: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -54,7 +54,7 @@ import dataclasses
 import math
 import tomllib
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cache, cached_property
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -396,6 +396,13 @@ def load_world(name_or_path: str | Path | World) -> World:
             f"unknown world {name!r}{did_you_mean(name, names)}; expected a path to a .toml "
             f"file or one of: {', '.join(names)}"
         )
+    return _shipped_world(name)
+
+
+@cache
+def _shipped_world(name: str) -> World:
+    """A shipped world, parsed once per process (package data does not change; a World is
+    immutable, so every caller may share it)."""
     res = resources.files(_WORLDS_PACKAGE) / f"{name}.toml"
     return parse_world(res.read_text(encoding="utf-8"), file=str(res))
 

@@ -34,3 +34,13 @@ def two_runs(tmp_path_factory):
     a = run_config(folder, cfg, "a.h5")[1]
     b = run_config(folder, cfg, "b.h5", "--seed", "6")[1]
     return a, b
+
+
+@pytest.fixture(scope="session")
+def interrupted_reference(tmp_path_factory):
+    """``(config, log)`` of the uninterrupted serial run an interrupted and resumed run must
+    reproduce bit for bit (shared by test_resume and test_hostile_input)."""
+    from helpers import INTERRUPTED, run_config
+
+    return run_config(tmp_path_factory.mktemp("interrupted"), INTERRUPTED, "reference.h5",
+                      "--workers", "1")

@@ -45,6 +45,14 @@ iterations = {eval_iterations}
 """
 
 
+#: The run that the interrupt tests (kill -9, Ctrl-C, SIGTERM, with 1 and 2 workers) stop
+#: part-way and resume: 8 trials, so that a signal sent once the first trial is in the log
+#: lands while most of the run is still to come (fixture ``interrupted_reference``).
+INTERRUPTED_TRIALS, INTERRUPTED_ITERATIONS = 8, 300
+INTERRUPTED = small_config(name="resume", trials=INTERRUPTED_TRIALS,
+                           iterations=INTERRUPTED_ITERATIONS, seed=5)
+
+
 def run_config(folder, config: str, out_name: str, *argv: str):
     """Write ``config`` to ``folder/<stem>.toml``, ``sitframe run`` it into ``folder/out_name``
     with ``--json`` plus ``argv``, assert exit 0; return ``(config_path, log_path)``."""

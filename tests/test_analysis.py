@@ -115,7 +115,15 @@ def test_convergence_table_and_comparison(log, tiny_log):
     assert len(rb.rows) == 6 and {"T0", "T1"} <= {c.rstrip("*") for c in rb.columns}
     cmp = A.compare_runs(log, tiny_log, names=("a", "b"))
     assert cmp.columns == ["Metric", "a", "b"]
-    assert all(r[1] == r[2] for r in cmp.rows)  # the same log twice
+    rows = {r[0]: r[1:] for r in cmp.rows}
+    assert rows["Finished trials"] == ["2", "2"]  # (the same log in both columns)
+    cov = s["coverage"]
+    assert rows["Coverage, learning world"][0] == f"{cov.mean():.2f} ± {cov.std(ddof=1):.2f}"
+    conv = s["converged"] > 0.5
+    assert rows["Converged trials"][0] == f"{int(conv.sum())}/2"
+    coll = s["eval.novel-1.collisions_per_1000"]
+    assert rows["Evaluation novel-1: collisions [/1000 it.]"][1] == \
+        f"{coll.mean():.1f} ± {coll.std(ddof=1):.1f}"
 
 
 # ----------------------------------------------------------------------- figures

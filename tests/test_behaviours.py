@@ -179,6 +179,23 @@ def test_cdb_general_rules_and_speed():
     assert w.tolist() == [1.0, 0.0]
 
 
+@pytest.mark.parametrize(
+    ("sets", "d", "expected"),
+    [  # memberships summing to 0.5 (a dip between the sets) and to 2 (two full sets)
+        ({"close": [0, 0, 0.2, 0.6], "far": [0.4, 0.8, 3, 3]}, 0.5, [0.5, 0.5]),
+        ({"close": [0, 0, 0.5, 0.8], "far": [0.2, 0.4, 3, 3]}, 0.45, [0.5, 0.5]),
+        ({"close": [0, 0, 0.2, 0.6], "far": [0.3, 0.7, 3, 3]}, 0.4, [0.5 / 0.75, 0.25 / 0.75]),
+    ],
+)
+def test_cdb_normalises_when_context_sets_do_not_sum_to_one(sets, d, expected):
+    """The command is the centre of gravity of the proposals, whatever the set shapes."""
+    props = {"avoid": Proposal(60.0, 0.1), "goal": Proposal(-30.0, 0.3)}
+    p, w = CDBArbiter(sets=sets, rules={"close": "avoid", "far": "goal"}).combine(near(d), props)
+    assert w == pytest.approx(expected) and w.sum() == pytest.approx(1.0)
+    assert p.heading_deg == pytest.approx(expected[0] * 60.0 - expected[1] * 30.0)
+    assert p.speed_m_s == pytest.approx(expected[0] * 0.1 + expected[1] * 0.3)
+
+
 def test_cdb_gap_falls_back_to_nearest_set():
     cdb = CDBArbiter(sets={"close": [0, 0, 0.2, 0.3], "far": [0.8, 1.0, 3, 3]},
                      rules={"close": "avoid", "far": "goal"})
@@ -217,3 +234,34 @@ def test_priority_switching():
     assert only.combine(near(1.0), PROPS)[1].tolist() == [1.0, 0.0]
     with pytest.raises(InputError, match="at most one condition"):
         PriorityArbiter(rules=[{"behaviour": "a", "nearest_blow": 1.0}])
+
+
+def test_priority_defaults_threshold_half_a_metre_and_activation_half():
+    d = PriorityArbiter()
+    assert d.combine(near(0.49), PROPS)[1].tolist() == [1.0, 0.0]
+    assert d.combine(near(0.51), PROPS)[1].tolist() == [0.0, 1.0]
+    labels = list(PROPS)
+    assert d.winner(3.0, labels, [0.5, None]) == 0  # an activation of 0.5 is enough
+    assert d.winner(0.1, labels, [0.49, None]) == 1  # below it, even when close
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "key"),
+    [
+        ({"threshold": -0.1}, "threshold"),
+        ({"activation": 1.5}, "activation"),
+        ({"activation": -0.1}, "activation"),
+        ({"rules": []}, "rules"),
+        ({"rules": "avoid"}, "rules"),
+        ({"rules": [{"nearest_below": 1.0}]}, "rules[0]"),
+        ({"rules": [{"behaviour": "a", "nearest_below": 1.0, "nearest_above": 2.0}]},
+         "rules[0]"),
+        ({"rules": [{"behaviour": "a", "farthest": 1.0}]}, "rules[0]"),
+        ({"rules": [{"behaviour": "a", "activation_above": 1.5}]}, "rules[0].activation_above"),
+        ({"rules": [{"behaviour": "a", "nearest_below": -1.0}]}, "rules[0].nearest_below"),
+    ],
+)
+def test_priority_bad_parameters_name_their_key(kwargs, key):
+    with pytest.raises(InputError) as info:
+        PriorityArbiter(**kwargs)
+    assert info.value.key == key

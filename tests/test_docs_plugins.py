@@ -40,6 +40,7 @@ import pytest
 
 from sitframe.cli import main
 from sitframe.logs import open_log
+from sitframe.parallel import compare_logs
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "plugins.md"
 
@@ -319,6 +320,7 @@ def test_same_log_with_two_workers(tutorial: Tutorial, monkeypatch: pytest.Monke
                  "logs/tutorial-w2.h5", "--json", "--workers", "2"]) == 0, capsys.readouterr().err
     serial = open_log(tutorial.root / "logs" / "tutorial.h5")
     pool = open_log(tutorial.root / "logs" / "tutorial-w2.h5")
+    assert compare_logs(serial.path, pool.path) == []  # bit for bit, plugin data included
     for k in (0, 1):
         a, b = serial.trial(k), pool.trial(k)
         np.testing.assert_array_equal(a.arrays["pose"], b.arrays["pose"])

@@ -24,7 +24,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from helpers import ROOM, small_config
+from helpers import INTERRUPTED_TRIALS, ROOM, small_config
 
 from sitframe.cli import main
 from sitframe.logs import open_log
@@ -254,26 +254,27 @@ def test_14_extreme_worlds_are_refused_naming_the_limit(tmp_path, capsys, walls,
     assert time.perf_counter() - t0 < 5
 
 
-def test_14_free_cells_of_many_obstacles_is_fast_and_unchanged():
+def test_14_free_cells_of_many_obstacles_are_those_of_the_direct_test():
+    """The per-obstacle computation of free cells (time proportional to the room plus the
+    obstacles; its speed is measured by benchmarks, not asserted here) gives the cells of
+    the direct test, in a room of many obstacles and in shipped rooms."""
     from sitframe.world import load_world, parse_world
 
     rows = ['name = "many"', "[robot]", "start = [0.5, 0.5, 0]", "[[walls]]",
-            "points = [[0, 0], [60, 0], [60, 60], [0, 60], [0, 0]]"]
-    for i in range(58):
-        for j in range(58):
-            x, y = 1.5 + i, 1.5 + j
+            "points = [[0, 0], [16, 0], [16, 16], [0, 16], [0, 0]]"]
+    for i in range(14):
+        for j in range(14):
+            x, y = 1.5 + i, 1.4 + j + 0.05 * i
             square = [[x, y], [x + 0.2, y], [x + 0.2, y + 0.2], [x, y + 0.2]]
             rows += ["[[obstacles]]", f"points = {square}"]
-    world = parse_world("\n".join(rows))
-    t0 = time.perf_counter()
-    cells = world.free_cells()
-    assert time.perf_counter() - t0 < 10 and len(world.obstacles) == 3364
-    for w in (load_world("training"), load_world("novel-2")):  # same cells as the direct test
+    many = parse_world("\n".join(rows))
+    assert len(many.obstacles) == 196
+    for w in (many, load_world("training"), load_world("novel-2")):
         x0, y0, x1, y1 = w.bounds
         gx, gy = np.meshgrid(np.arange(x0 + 0.25, x1, 0.5), np.arange(y0 + 0.25, y1, 0.5))
         c = np.stack([gx.ravel(), gy.ravel()], axis=1)
         assert w.free_cells().tobytes() == c[w.is_free(c)].tobytes()
-    assert cells.shape[1] == 2
+    assert 0 < len(many.free_cells()) < 32 * 32
 
 
 def test_15_world_path_that_is_a_folder_names_the_config_and_key(tmp_path, capsys):
@@ -425,10 +426,14 @@ def test_13_disk_full_at_start_leaves_nothing(tmp_path, capsys, monkeypatch):
 def test_13_failed_analyse_leaves_no_half_written_folder(base, tmp_path, capsys, monkeypatch):
     import sitframe.analysis.report as report
 
-    def broken(*_a, **_k):
-        raise OSError(errno.ENOSPC, "No space left on device")
+    figure = report._Writer.figure
 
-    monkeypatch.setattr(report, "_write_index", broken)
+    def disk_full_after_the_first_file(self, *args, **kwargs):
+        if os.listdir(self.r.out_dir):  # the folder is half-written when the disk fills up
+            raise OSError(errno.ENOSPC, "No space left on device")
+        figure(self, *args, **kwargs)
+
+    monkeypatch.setattr(report._Writer, "figure", disk_full_after_the_first_file)
     refused(capsys, ["analyse", base, "-o", tmp_path / "an"], "an: -o:", "No space left")
     assert not (tmp_path / "an").exists()
     (tmp_path / "keep").mkdir()
@@ -554,12 +559,9 @@ def test_11_closed_stdout_and_non_utf8_names(base, tmp_path):
 
 
 @pytest.mark.parametrize("workers", ["1", "2"])
-def test_12_sigterm_aborts_like_ctrl_c_and_resumes_identically(tmp_path, workers):
-    cfg = tmp_path / "t.toml"
-    cfg.write_text(small_config(name="term", trials=6, iterations=1500, seed=4))
-    ref = tmp_path / "ref.h5"
-    subprocess.run([sys.executable, "-m", "sitframe.cli", "run", str(cfg), "--out", str(ref),
-                    "--workers", "1", "--json"], check=True, stdout=subprocess.DEVNULL)
+def test_12_sigterm_aborts_like_ctrl_c_and_resumes_identically(interrupted_reference, tmp_path,
+                                                               workers):
+    cfg, ref = interrupted_reference
     out = tmp_path / "t.h5"
     proc = subprocess.Popen([sys.executable, "-c", _CLI, "run", str(cfg), "--out", str(out),
                              "--workers", workers, "--json"], stdout=subprocess.DEVNULL,
@@ -574,13 +576,17 @@ def test_12_sigterm_aborts_like_ctrl_c_and_resumes_identically(tmp_path, workers
         time.sleep(0.02)
     proc.send_signal(signal.SIGTERM)
     err = proc.communicate(timeout=60)[1].decode()
-    status = open_log(out).status
-    assert (proc.returncode, status) in ((143, "aborted"), (0, "complete")), err
+    log = open_log(out)
     assert "Traceback" not in err and "leaked" not in err
-    if status == "aborted":
-        assert err.strip().splitlines() == ["sitframe: terminated"]
-        subprocess.run([sys.executable, "-m", "sitframe.cli", "run", "--resume", str(out),
-                        "--workers", workers, "--json"], check=True, stdout=subprocess.DEVNULL)
+    if (proc.returncode, log.status) == (0, "complete"):  # (a resume would prove nothing)
+        pytest.skip("the run finished before SIGTERM arrived")
+    assert (proc.returncode, log.status) == (143, "aborted"), err
+    assert err.strip().splitlines() == ["sitframe: terminated"]
+    have = log.trial_indices()
+    assert 1 <= len(have) < INTERRUPTED_TRIALS and have == list(range(len(have)))
+    res = subprocess.run([sys.executable, "-m", "sitframe.cli", "run", "--resume", str(out),
+                          "--workers", workers, "--json"], check=True, capture_output=True)
+    assert json.loads(res.stdout)["resumed_trials"] == list(range(len(have), INTERRUPTED_TRIALS))
     assert compare_logs(ref, out) == []
 
 
@@ -606,7 +612,7 @@ def test_1_sweep_refuses_a_point_log_another_process_writes(tmp_path, capsys):
 
 
 def test_12_sigterm_aborts_a_sweep(tmp_path):
-    sweep = _sweep_file(tmp_path, trials=4, iterations=1500)
+    sweep = _sweep_file(tmp_path, trials=6, iterations=300)
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-c", _CLI, "sweep", str(sweep), "--out", str(out),
                              "--workers", "2", "--json"], stdout=subprocess.DEVNULL,
@@ -623,7 +629,8 @@ def test_12_sigterm_aborts_a_sweep(tmp_path):
     err = proc.communicate(timeout=60)[1].decode()
     statuses = [open_log(p).status for p in sorted(out.glob("*.h5"))]
     assert proc.returncode in (143, 0) and "Traceback" not in err, err
-    if proc.returncode == 143:
-        assert err.strip().splitlines() == ["sitframe: terminated"]
-        assert "aborted" in statuses and set(statuses) <= {"aborted", "complete"}
     assert not list(out.glob("*.part")) and not list(out.glob("*.lock"))
+    if proc.returncode == 0:  # (nothing was left to abort)
+        pytest.skip("the sweep finished before SIGTERM arrived")
+    assert err.strip().splitlines() == ["sitframe: terminated"]
+    assert "aborted" in statuses and set(statuses) <= {"aborted", "complete"}

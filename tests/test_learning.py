@@ -117,6 +117,28 @@ def test_converges_when_greedy_is_stable_for_p_changes_then_freezes():
     assert list(data["final_rule_base"]) == [0, 2]
 
 
+def test_a_greedy_change_restarts_the_count_of_stable_changes():
+    """Convergence means p rule-base changes in a row without a new greedy rule base."""
+    lr = _learner(b=1, p=3)
+    lr.q[:] = [[5.0, 0.0, 0.0], [0.0, 0.0, 5.0]]
+    lr.greedy = lr.q.argmax(axis=1)
+    u = np.array([0.0, 0.0])  # nothing activated: Q moves only when the test says
+    for t in range(2):
+        lr.update(u, 0.0, u, False, t)
+    assert lr.stable_changes == 2 and lr.converged_at is None
+    lr.q[0] = [0.0, 5.0, 0.0]  # situation 0 now prefers action 1
+    lr.update(u, 0.0, u, False, 2)
+    assert lr.stable_changes == 0 and lr.converged_at is None
+    for t in range(3, 5):
+        lr.update(u, 0.0, u, False, t)
+    assert lr.converged_at is None
+    lr.update(u, 0.0, u, False, 5)
+    assert lr.converged_at == 6  # 3 stable changes after the one at iteration 3
+    assert list(lr.rule_base) == [1, 2]
+    greedy = lr.data(6)["snapshot_greedy"][1:]  # (the first row is the initial Q's)
+    assert greedy.tolist() == [[0, 2]] * 2 + [[1, 2]] * 4
+
+
 def test_learner_is_deterministic():
     def run():
         lr = FuzzyQLearner(4, 7, QLearningParams(), np.random.default_rng(7), 200)

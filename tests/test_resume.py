@@ -11,14 +11,14 @@ import time
 
 import numpy as np
 import pytest
-from helpers import run_config, small_config
+from helpers import INTERRUPTED_ITERATIONS, INTERRUPTED_TRIALS, run_json
 
 from sitframe.cli import main
 from sitframe.errors import InputError
 from sitframe.logs import open_log
 from sitframe.parallel import compare_logs
 
-CONFIG = small_config(name="resume", trials=8, seed=5)
+N_TRIALS, ITERATIONS = INTERRUPTED_TRIALS, INTERRUPTED_ITERATIONS
 
 #: Runs the CLI with Python's own SIGINT handler even if the test runner was
 #: started with SIGINT ignored (as background jobs of a non-interactive shell are).
@@ -26,10 +26,9 @@ _CLI = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_han
         "from sitframe.cli import console_main; sys.exit(console_main(sys.argv[1:]))")
 
 
-@pytest.fixture(scope="module")
-def reference(tmp_path_factory):
-    return run_config(tmp_path_factory.mktemp("resume"), CONFIG, "reference.h5",
-                      "--workers", "1")
+@pytest.fixture
+def reference(interrupted_reference):
+    return interrupted_reference
 
 
 def _start(cfg, out, *extra):
@@ -66,14 +65,16 @@ def test_kill_9_then_resume_reproduces_uninterrupted_run(reference, tmp_path, ca
     proc.kill()  # SIGKILL
     proc.communicate(timeout=30)  # (also closes the stderr pipe)
     log = open_log(out)  # always opens
-    assert log.status in ("running", "complete")
     have = log.trial_indices()
-    assert len(have) >= 1 and have == list(range(len(have)))  # written in trial order
+    if log.status == "complete":  # (a resume of a complete log proves nothing)
+        pytest.skip("the run finished before it was killed")
+    assert log.status == "running"
+    assert 1 <= len(have) < N_TRIALS and have == list(range(len(have)))  # in trial order
     for k in have:  # every finished trial is intact
-        assert log.trial(k).arrays["pose"].shape == (301, 3)
+        assert log.trial(k).arrays["pose"].shape == (ITERATIONS + 1, 3)
 
-    assert main(["run", "--resume", str(out), "--workers", workers, "--json"]) == 0
-    capsys.readouterr()
+    doc = run_json(capsys, "run", "--resume", str(out), "--workers", workers, "--json")
+    assert doc["resumed_trials"] == list(range(len(have), N_TRIALS))
     assert open_log(out).status == "complete"
     assert compare_logs(ref, out) == []
     assert sorted(p.name for p in tmp_path.iterdir()) == ["killed.h5"]  # packed: one file
@@ -98,8 +99,8 @@ def test_sigint_marks_aborted_exit_130_and_resume_completes(reference, tmp_path,
     have = log.trial_indices()
     assert len(have) >= 1 and have == list(range(len(have)))
 
-    assert main(["run", "--resume", str(out), "--json"]) == 0
-    capsys.readouterr()
+    doc = run_json(capsys, "run", "--resume", str(out), "--json")
+    assert doc["resumed_trials"] == list(range(len(have), N_TRIALS))
     assert open_log(out).status == "complete"
     assert compare_logs(ref, out) == []
 
@@ -146,7 +147,58 @@ def test_resume_warns_when_the_code_changed(reference, tmp_path, capsys):
         f.attrs["status"] = "aborted"
         del f["trials/0007"]
     capsys.readouterr()
-    assert main(["run", "--resume", str(out), "--json"]) == 0
-    err = capsys.readouterr().err
-    assert "warning" in err and "code of sitframe or its plugins changed" in err
+    assert main(["run", "--resume", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert "warning" in captured.err and "code of sitframe or its plugins changed" in captured.err
+    assert f"resumed {out}: ran trial(s) [7]" in captured.out  # the plain report
     assert open_log(out).status == "complete"
+    assert compare_logs(ref, out) == []  # (root attributes, such as code_hash, aside)
+
+
+def _unfinished_copy(ref, out, drop=(5, 6, 7)):
+    import h5py
+
+    out.write_bytes(ref.read_bytes())
+    with h5py.File(out, "a") as f:
+        f.attrs["status"] = "aborted"
+        for k in drop:
+            del f[f"trials/{k:04d}"]
+
+
+def test_resume_reports_and_runs_exactly_the_missing_trials(reference, tmp_path, capsys):
+    _cfg, ref = reference
+    out = tmp_path / "gaps.h5"
+    _unfinished_copy(ref, out, drop=(2, 6))
+    capsys.readouterr()
+    doc = run_json(capsys, "run", "--resume", str(out), "--json")
+    assert doc["resumed_trials"] == [2, 6]
+    assert [t["trial"] for t in doc["trials"]] == [2, 6]
+    assert compare_logs(ref, out) == []
+
+
+@pytest.mark.parametrize(
+    ("edit", "key"),
+    [
+        (lambda text: text.replace("iterations = 300", "iterations = 299"), "config_hash"),
+        (lambda text: text.replace("seed = 5", "seed = 6"), "config_hash"),
+    ],
+    ids=["iterations", "seed"],
+)
+def test_resume_refuses_a_log_whose_config_changed(reference, tmp_path, capsys, edit, key):
+    """Trials of two configurations must never end up in one log."""
+    import h5py
+
+    _cfg, ref = reference
+    out = tmp_path / "edited.h5"
+    _unfinished_copy(ref, out)
+    with h5py.File(out, "a") as f:
+        text = f.attrs["config"]
+        assert edit(text) != text
+        f.attrs["config"] = edit(text)
+    before = out.read_bytes()
+    capsys.readouterr()
+    assert main(["run", "--resume", str(out), "--json"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{out}: {key}:" in err
+    assert "resuming would mix two configurations" in err
+    assert out.read_bytes() == before

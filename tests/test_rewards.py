@@ -49,3 +49,20 @@ def test_speed_reward_stopping_distance_threshold():
     assert r(tr(0.40, 0.20, speed=0.3)) == pytest.approx(-20.0)
     # at 0.1 m/s it stays 0.30 m (the larger of the two)
     assert r(tr(0.40, 0.20, speed=0.1)) == pytest.approx(30.0)
+
+
+def test_speed_reward_boundaries_and_parameters():
+    r = SpeedReward()
+    assert r(tr(0.30, 0.20, speed=0.1)) == pytest.approx(30.0)  # at 30 cm: not yet "near"
+    assert r(tr(0.25, 0.25, speed=0.1)) == pytest.approx(30.0)  # holding its distance
+    custom = SpeedReward(collision=-5.0, near=0.5, base=1.0, per_mm_s=0.01)
+    assert custom(tr(0.45, 0.40, speed=0.2)) == pytest.approx(-5.0)  # (0.40 - 0.45) m in cm
+    assert custom(tr(0.6, 0.4, speed=0.2)) == pytest.approx(1.0 + 0.01 * 200)
+    assert custom(tr(0.6, 0.4, collided=True)) == -5.0
+    oa = ObstacleAvoidanceReward(collision=-1.0, base=5.0, heading_cost=0.5)
+    assert oa(tr(1.0, 1.0, heading=-4.0)) == pytest.approx(3.0)
+    assert oa(tr(1.0, 1.0, collided=True)) == -1.0
+    for cls, key in ((SpeedReward, "near"), (SpeedReward, "near_time_s"),
+                     (ObstacleAvoidanceReward, "heading_cost")):
+        with pytest.raises(ValueError, match=key):
+            cls(**{key: -0.1})

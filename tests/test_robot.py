@@ -189,15 +189,15 @@ def test_start_inside_wall_backs_off(thin_world: World) -> None:
 
 
 def test_params_validation() -> None:
-    with pytest.raises(ValueError, match="radius"):
+    with pytest.raises(InputError, match="radius") as info:  # an InputError is a ValueError
         RobotParams(radius=-1)
+    assert isinstance(info.value, ValueError) and info.value.key == "radius"
     with pytest.raises(ValueError, match="recovery"):
         RobotParams(recovery="bounce")
     with pytest.raises(ValueError, match="min_speed"):
         RobotParams(min_speed=0.5, max_speed=0.3)
     with pytest.raises(ValueError, match="substep_s"):
         RobotParams(substep_s=1.0)
-    assert isinstance(RobotParams(radius=-1) if False else InputError("x"), ValueError)
     with pytest.raises(TypeError, match="heading_change_deg"):
         Command("left", 0.1)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="finite"):

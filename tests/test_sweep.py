@@ -144,8 +144,9 @@ def test_bad_sweeps_one_line_exit_2(swept, tmp_path, capsys, grid, pattern):
     assert not out.exists()
 
 
-def test_sweep_unreachable_scheduler_exit_2(swept, tmp_path, capsys):
+def test_sweep_unreachable_scheduler_exit_2(swept, tmp_path, capsys, monkeypatch):
     pytest.importorskip("distributed")
+    monkeypatch.setattr("sitframe.parallel.DASK_CONNECT_TIMEOUT", 0.5)  # (default 5 s)
     d, _out = swept
     out = tmp_path / "never"
     capsys.readouterr()

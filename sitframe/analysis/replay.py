@@ -29,6 +29,7 @@ import numpy as np
 
 from sitframe.analysis import results as R
 from sitframe.errors import InputError
+from sitframe.situations import count_per_iteration
 from sitframe.world import parse_world
 
 __all__ = ["DEFAULT_FRAMES", "replay"]
@@ -152,6 +153,12 @@ def replay(
     labels = R.situation_labels(lg)
     if len(labels) != u.shape[1]:
         labels = [f"S{i}" for i in range(u.shape[1])]
+    alive = ""  # evolving situations: how many exist at each iteration
+    if tr.situations:
+        n0 = len(np.asarray(lg.interpreter_state().get("ids", [])))
+        counts = (np.full(L, int(tr.situations["count"])) if evaluation is not None else
+                  count_per_iteration(tr.situations_part("events"), n0, L))
+        alive = "  ({} situations)"
     conv = 0 if evaluation is not None else R.convergence_iteration(tr)
     frozen = "frozen (evaluation)" if evaluation is not None else "frozen (converged)"
 
@@ -219,7 +226,7 @@ def replay(
         rw = f"   reward {reward[i]:+6.1f}" if reward is not None else ""
         text.set_text(
             f"it. {i:5d}  t = {i * 1.5:7.1f} s   {phase}\n"
-            f"situation {labels[s]} (u = {u[i, s]:.2f})\n"
+            f"situation {labels[s]} (u = {u[i, s]:.2f}){alive and alive.format(counts[i])}\n"
             f"command   heading {cmd[i, 0]:+6.1f} deg, speed {cmd[i, 1]:.2f} m/s{rw}")
         flash.set_text("COLLISION" if coll[i] else "")
         return [path_line, body, heading, rays, hits, crosses, text, flash]

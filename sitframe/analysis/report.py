@@ -335,6 +335,8 @@ def analyse(
                                      file=lg.path, key="--trial")
             rep.trials = chosen
             worlds = _worlds(lg)
+            if get(idx[0]).situations:
+                _situation_figures(W, lg, {k: get(k) for k in idx}, chosen, worlds, radius)
             for k in chosen:
                 _trial_figures(W, lg, get(k), worlds, window, path_iterations, radius, LP)
         rep.seconds = time.perf_counter() - t0
@@ -434,6 +436,43 @@ def _trial_figures(W: _Writer, lg: Log, tr: TrialLog, worlds: dict[str, Any], wi
             lambda: R.lookup_table(lg, tr))
     W.table(sec, f"rule_base_trial{k}", f"Learned rule base of trial {k} with max Q per "
             "situation (Tables 5.6, 5.7)", lambda: R.rule_base_table(lg, tr))
+
+
+def _situation_figures(W: _Writer, lg: Log, trials: dict[int, TrialLog], chosen: list[int],
+                       worlds: dict[str, Any], radius: float) -> None:
+    """Evolving situations: their number against iterations, where they were made, and the
+    final prototypes of the chosen trials."""
+    from sitframe.analysis import clustering_plots as CP  # matplotlib: start-up time
+    from sitframe.analysis import situation_plots as SP  # matplotlib: start-up time
+
+    sec = "Evolving situations"
+    start = len(np.asarray(lg.interpreter_state().get("ids", [])))
+    finals = [int(t.situations.get("count", 0)) for t in trials.values()]
+    W.figure(sec, "situation_counts.png",
+             f"Number of situations against iterations, every trial (final: median "
+             f"{np.median(finals):g}, range {min(finals)}-{max(finals)})",
+             lambda: SP.plot_situation_counts(SP.counts_of(trials, start),
+                                              f"Situations during learning, {len(trials)} "
+                                              "trials"))
+    world = worlds.get(next(iter(trials.values())).world)
+    if world is not None:
+        W.figure(sec, "situation_events.png",
+                 "Where the robot was when situations were created, split, merged or pruned "
+                 "(all trials)",
+                 lambda: SP.plot_event_map(world, {k: t.situations_part("events")
+                                                  for k, t in trials.items()},
+                                           "Situation events in the learning room",
+                                           robot_radius=radius))
+    spec = lg.sensor
+    for k in chosen:
+        state = trials[k].situations_part("state")
+        ids = np.asarray(state.get("ids", []), dtype=int)
+        if ids.size:
+            W.figure(sec, f"final_prototypes_trial{k}.png",
+                     f"Final situations of trial {k}: prototypes (ids as in the log)",
+                     lambda s=state, i=ids: CP.plot_prototypes(
+                         np.asarray(s["centers"]), spec.angles_deg, max_range=spec.max_range,
+                         labels=[f"id {j}" for j in i]))
 
 
 def _count(tr: TrialLog, s: int, e: int) -> int:

@@ -1,0 +1,206 @@
+"""Situations that change during a trial: the events, and the core's side of them.
+
+A *fixed* interpreter (``fcm``) has the same ``n_situations`` situations for
+the whole run. An **evolving** interpreter (class attribute ``evolving =
+True``, e.g. ``plugins/evolving.py``) creates, splits, merges and prunes
+situations while a learning trial runs. The contract keeps every array of
+the loop fixed-size:
+
+* ``n_situations`` is the interpreter's **capacity**: the number of situation
+  *ids* ``0 .. n_situations - 1``. Ids are given out in order and never
+  reused; memberships are ``(n_situations,)`` as always, zero for every id
+  that is not alive (not yet created, merged away or pruned), and sum to 1
+  over the alive ones (the FCM formula over the alive prototypes).
+* After each learning iteration the core drains ``interpreter.events()`` (a
+  list of :class:`SituationEvent`, oldest first) and hands each event to
+  every behaviour (and a learning arbiter) that has
+  ``situations_changed(event)``, in config order, before the next
+  ``propose``. A learning behaviour grows or combines its per-situation rows
+  there (``plugins/fuzzy_q.py``: a new row from its parents' rows,
+  membership-weighted and pulled towards the optimistic initial value;
+  merged rows visit-weighted).
+* If a learning behaviour has ``situation_errors()`` -- the (c,) absolute
+  TD errors its last ``learn`` attributed to each situation (0 where it
+  updated nothing) -- and the interpreter has ``observe_errors(errors)``, the
+  core passes the sum over the behaviours on, each iteration, before draining
+  the events: this is what lets an interpreter split situations where the
+  *task* is hard, not only where the readings are new.
+* A frozen evaluation (``trial_start`` with ``mode == "evaluate"``) must not
+  change the situations.
+* At the end of a learning trial the interpreter's ``state()`` is that
+  trial's **own final situations**: the core logs it under
+  ``/trials/NNNN/situations/state``, with the event history under
+  ``/trials/NNNN/situations/events/`` (:func:`history_arrays`), adds the
+  summary scalar ``situations`` (the number alive at the end), and evaluates
+  the trial's frozen policies with those situations -- in the run, and in
+  ``sitframe evaluate LOG --trial K``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from sitframe.contract import call
+
+#: Event kinds, and their codes in the log (``events/kind``).
+KINDS = ("create", "split", "merge", "prune")
+
+
+@dataclass(frozen=True)
+class SituationEvent:
+    """One structural change of an evolving interpreter's situations.
+
+    Attributes
+    ----------
+    kind
+        ``"create"`` (a reading poorly covered by every situation),
+        ``"split"`` (a situation whose TD errors stay large gets a sibling),
+        ``"merge"`` (near-duplicates: ``removed`` are absorbed into ``id``) or
+        ``"prune"`` (``id`` never wins and is removed).
+    id
+        The new situation (create, split), the survivor (merge) or the removed
+        one (prune).
+    parents
+        Ids the new situation is initialised from (create, split: its nearest
+        alive situations; merge: the survivor and the absorbed ids).
+    weights
+        (len(parents),) non-negative weights summing to 1: for create/split the
+        FCM memberships of the new prototype among ``parents``; for merge the
+        share of each merged situation's evidence (its accumulated membership).
+    prototype
+        (d,) the prototype of ``id`` after the event, metres (reading units).
+    removed
+        Ids that stop existing (merge: the absorbed ones; prune: ``(id,)``).
+    """
+
+    kind: str
+    id: int
+    parents: tuple[int, ...] = ()
+    weights: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    prototype: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    removed: tuple[int, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValueError(f"situation event kind '{self.kind}', expected one of {KINDS}")
+        w = np.asarray(self.weights, dtype=float)
+        if w.shape != (len(self.parents),) or (w.size and (
+                not np.isfinite(w).all() or (w < 0).any() or abs(w.sum() - 1.0) > 1e-6)):
+            raise ValueError(f"situation event weights {w.tolist()} for parents "
+                             f"{list(self.parents)}: expected one non-negative weight per "
+                             "parent, summing to 1")
+
+
+class SituationTracker:
+    """The core's side of an evolving interpreter during one learning trial.
+
+    Parameters
+    ----------
+    interpreter
+        The trial's interpreter (``evolving = True``).
+    followers
+        Each component's ``situations_changed`` (wrapped to name it on a fault).
+    error_sources
+        The learning behaviours' ``situation_errors`` methods.
+    """
+
+    def __init__(self, interpreter: Any, followers: list[Any], error_sources: list[Any]) -> None:
+        self.interp = interpreter
+        self.events = interpreter.events
+        self.followers = followers
+        self.observe = getattr(interpreter, "observe_errors", None) if error_sources else None
+        self.error_sources = error_sources
+        self.log: list[tuple[int, SituationEvent]] = []
+
+    @classmethod
+    def start(cls, interpreter: Any, learning: bool, components: list[tuple[str, Any]],
+              origins: dict[str, Any], trial: int) -> SituationTracker | None:
+        """The tracker of a learning trial with an evolving interpreter (else ``None``).
+
+        ``components`` are ``(config key, component)`` of the trial; behaviours
+        and the arbiter with ``situations_changed`` follow the events, those
+        with ``situation_errors`` feed the interpreter's ``observe_errors``.
+        """
+        if not (learning and getattr(interpreter, "evolving", False)):
+            return None
+
+        def via(key: str, method: str, fn: Any) -> Any:
+            return lambda *a: call(origins[key], method, fn, *a, trial=trial)
+
+        follow, errors = [], []
+        for key, comp in components:
+            if not (key.startswith("behaviours.") or key == "arbiter") or key.endswith(".reward"):
+                continue
+            if hasattr(comp, "situations_changed"):
+                follow.append(via(key, "situations_changed", comp.situations_changed))
+            if hasattr(comp, "situation_errors"):
+                errors.append(via(key, "situation_errors", comp.situation_errors))
+        tracker = cls(interpreter, follow, errors)
+        tracker.events = via("interpreter", "events", interpreter.events)
+        if tracker.observe is not None:
+            tracker.observe = via("interpreter", "observe_errors", tracker.observe)
+        return tracker
+
+    def step(self, iteration: int) -> None:
+        """After iteration ``iteration``'s learning: pass TD errors on, deliver the events."""
+        if self.observe is not None:
+            errs = None
+            for src in self.error_sources:
+                e = src()
+                if e is not None:
+                    errs = e if errs is None else errs + e
+            if errs is not None:
+                self.observe(errs)
+        events = self.events()
+        if not events:
+            return
+        for ev in events:
+            if not isinstance(ev, SituationEvent):
+                raise TypeError(f"events() returned a {type(ev).__name__}, expected "
+                                "sitframe.situations.SituationEvent")
+            self.log.append((iteration, ev))
+            for follow in self.followers:
+                follow(ev)
+
+    def finish(self, pose: np.ndarray, d: int) -> dict[str, Any]:
+        """The trial's situations for the log: final state, events and count."""
+        state = self.interp.state()
+        alive = int(np.asarray(state.get("ids", state.get("centers", []))).shape[0])
+        return {"state": state, "events": history_arrays(self.log, pose, d), "count": alive}
+
+
+def history_arrays(log: list[tuple[int, SituationEvent]], pose: np.ndarray,
+                   d: int) -> dict[str, np.ndarray]:
+    """Events as arrays: ``iteration`` (n,), ``kind`` (n,) codes into :data:`KINDS`,
+    ``id`` (n,), ``removed`` (n,) (the first removed id, -1 if none), ``prototype``
+    (n, d) metres and ``pose`` (n, 3) where the robot was (x [m], y [m], theta [rad])."""
+    n = len(log)
+    it = np.asarray([t for t, _ in log], dtype=np.int64)
+    rows = np.clip(it, 0, len(pose) - 1)
+    proto = np.zeros((n, d))
+    for i, (_t, ev) in enumerate(log):
+        if ev.prototype.size == d:
+            proto[i] = ev.prototype
+    return {
+        "iteration": it,
+        "kind": np.asarray([KINDS.index(ev.kind) for _, ev in log], dtype=np.int8),
+        "id": np.asarray([ev.id for _, ev in log], dtype=np.int64),
+        "removed": np.asarray([ev.removed[0] if ev.removed else -1 for _, ev in log],
+                              dtype=np.int64),
+        "prototype": proto,
+        "pose": np.asarray(pose, dtype=float)[rows].reshape(n, 3),
+    }
+
+
+def count_per_iteration(events: dict[str, np.ndarray], initial: int, iterations: int
+                        ) -> np.ndarray:
+    """(iterations,) number of alive situations after each iteration, from logged events."""
+    delta = np.zeros(iterations + 1, dtype=np.int64)
+    kinds = np.asarray(events.get("kind", []), dtype=int)
+    its = np.asarray(events.get("iteration", []), dtype=int)
+    step = np.where(kinds <= KINDS.index("split"), 1, -1)
+    np.add.at(delta, np.clip(its, 0, iterations), step)
+    return initial + np.cumsum(delta)[:iterations]

@@ -1,0 +1,194 @@
+"""Evolving situations: the interpreter's rules, the learner's rows, the log and evaluate."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import run_config, run_json, small_config
+
+from sitframe.learning import FuzzyQLearner, QLearningParams
+from sitframe.logs import open_log
+from sitframe.plugins.evolving import EvolvingInterpreter
+from sitframe.plugins.fcm_interpreter import FCMInterpreter
+from sitframe.records import TrialInfo
+from sitframe.situations import SituationEvent, count_per_iteration
+
+
+def _interp(**kw) -> EvolvingInterpreter:
+    kw = {"capacity": 6, "create_distance": 0.5, "create_after": 2, "transform": "range",
+          "adapt": False, "merge_distance": 0.0, "split_ratio": 0.0, **kw}
+    ev = EvolvingInterpreter(**kw)
+    ev.load_state(ev.state())
+    return ev
+
+
+def _start(ev: EvolvingInterpreter, kind: str = "learn") -> None:
+    ev.trial_start(TrialInfo(0, kind, None, 100, np.random.default_rng(0)))
+
+
+def test_creates_from_nothing_after_k_poorly_covered_readings() -> None:
+    ev = _interp()
+    _start(ev)
+    a, b = np.zeros(3), np.full(3, 2.0)
+    u = ev.memberships(a)
+    assert u.shape == (6,) and u[0] == 1.0  # the first reading is situation 0
+    (first,) = ev.events()
+    assert (first.kind, first.id, first.parents) == ("create", 0, ())
+    ev.memberships(b)  # one far reading: not yet
+    assert ev.events() == []
+    u = ev.memberships(b)  # the second in a row creates situation 1 at their mean
+    (new,) = ev.events()
+    assert (new.kind, new.id, new.parents) == ("create", 1, (0,))
+    np.testing.assert_allclose(new.prototype, b)
+    assert u[1] == pytest.approx(1.0) and u[2:].sum() == 0.0
+    # the FCM formula over the alive prototypes, with the clustering's m
+    x = np.full(3, 0.5)
+    d2 = np.array([np.sum(x ** 2), np.sum((x - 2.0) ** 2)])
+    w = (d2.min() / d2) ** (1 / (1.2 - 1))
+    np.testing.assert_allclose(ev.memberships(x)[:2], w / w.sum())
+
+
+def test_merge_keeps_the_older_id_and_ids_are_never_reused() -> None:
+    ev = _interp(merge_distance=1.0, check_every=3)
+    ev.load_state({"ids": np.array([0, 1]), "feature_centers": np.array([[0.0, 0], [0.5, 0]]),
+                   "evidence": np.array([3.0, 1.0]), "next_id": 2, "capacity": 6,
+                   "transform": "range", "offset": 0.1, "m": 1.2})
+    _start(ev)
+    for _ in range(3):
+        ev.memberships(np.zeros(2))
+    (merge,) = ev.events()
+    assert (merge.kind, merge.id, merge.removed) == ("merge", 0, (1,))
+    np.testing.assert_allclose(merge.weights, [0.75, 0.25])
+    np.testing.assert_allclose(merge.prototype, [0.125, 0.0])
+    for _ in range(2):  # a new situation gets id 2, not the freed 1
+        ev.memberships(np.full(2, 3.0))
+    assert [e.id for e in ev.events()] == [2]
+    assert ev.state()["ids"].tolist() == [0, 2]
+
+
+def test_frozen_evaluation_changes_nothing_and_state_round_trips() -> None:
+    ev = _interp(adapt=True)
+    _start(ev)
+    for x in (np.zeros(2), np.full(2, 3.0), np.full(2, 3.0), np.ones(2)):
+        ev.memberships(x)
+    state = ev.state()
+    ev2 = _interp(adapt=True)
+    ev2.load_state(state)
+    _start(ev2, "evaluate")
+    for x in (np.full(2, 9.0),) * 5:
+        u = ev2.memberships(x)
+    assert ev2.events() == []
+    np.testing.assert_array_equal(ev2.state()["feature_centers"], state["feature_centers"])
+    assert u.sum() == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="capacity"):
+        _interp(capacity=8).load_state(state)
+
+
+def test_starts_from_an_fcm_state() -> None:
+    fcm = FCMInterpreter(c=3, transform="log")
+    fcm.load_state({"centers": np.array([[0.2, 0.2], [1.0, 1.0], [3.0, 3.0]]),
+                    "transform": "log", "offset": 0.1, "m": 1.2})
+    ev = _interp(transform="log", c=3)
+    ev.load_state(fcm.state())
+    assert ev.state()["ids"].tolist() == [0, 1, 2]
+    _start(ev, "evaluate")
+    np.testing.assert_allclose(ev.memberships(np.array([0.5, 0.9]))[:3],
+                               fcm.memberships(np.array([0.5, 0.9])))
+
+
+def test_split_where_td_errors_stay_large() -> None:
+    ev = _interp(split_ratio=2.0, split_min_updates=2, split_min_distance=0.1, check_every=9,
+                 create_distance=10.0)
+    ev.load_state({"ids": np.arange(3), "feature_centers": np.array([[0.0, 0], [5, 0], [10, 0]]),
+                   "evidence": np.ones(3), "next_id": 3, "capacity": 6,
+                   "transform": "range", "offset": 0.1, "m": 1.2})
+    _start(ev)
+    readings = [np.array([v, 0.0]) for v in (1.0, 4.5, 9.5)] * 3
+    for t, x in enumerate(readings):
+        ev.memberships(x)
+        if t:  # the learner's errors concern the previous reading: large in situation 0
+            err = np.zeros(6)
+            j = (t - 1) % 3
+            err[j] = 1.0 if j == 0 else 0.1
+            ev.observe_errors(err)
+    (split,) = ev.events()
+    assert (split.kind, split.id) == ("split", 3)
+    np.testing.assert_allclose(split.prototype, [1.0, 0.0])
+
+
+def test_learner_rows_follow_the_situations() -> None:
+    prm = QLearningParams(q_init_value=10.0)
+    lr = FuzzyQLearner(4, 3, prm, np.random.default_rng(0), 10)
+    lr.q[0] = [0.0, 20.0, 4.0]
+    lr.q[1] = [8.0, 0.0, 4.0]
+    lr.updates[:2] = [3, 1]
+    lr.situations_changed(SituationEvent("create", 2, (0, 1), np.array([0.75, 0.25])), 0.5)
+    np.testing.assert_allclose(lr.q[2], 0.5 * np.array([2.0, 15.0, 4.0]) + 5.0)
+    lr.situations_changed(SituationEvent("merge", 0, (0, 1), np.array([0.5, 0.5]),
+                                         removed=(1,)))
+    np.testing.assert_allclose(lr.q[0], (4 * np.array([0.0, 20, 4]) + 2 * np.array([8.0, 0, 4]))
+                               / 6)
+    assert lr.updates[0] == 4 and lr.removed[1] and lr.q[1].tolist() == [10.0] * 3
+    with pytest.raises(ValueError, match="weights"):
+        SituationEvent("create", 3, (0, 1), np.array([0.5, 0.6]))
+
+
+def test_count_per_iteration() -> None:
+    ev = {"iteration": np.array([0, 2, 2, 4]), "kind": np.array([0, 0, 2, 3])}
+    assert count_per_iteration(ev, 0, 6).tolist() == [1, 1, 1, 1, 0, 0]
+
+
+ONLINE = """
+[interpreter]
+component = "evolving"
+transform = "log"
+capacity = 24
+create_distance = 1.2
+"""
+
+
+def _online_config(iterations: int = 200) -> str:
+    cfg = small_config(trials=1, iterations=iterations).replace(
+        '[interpreter]\ncomponent = "fcm"\nc = 6\ntrials = 4', ONLINE.strip())
+    return cfg.replace("[experiment]", '[experiment]\nstages = ["learn", "evaluate"]')
+
+
+def test_online_run_logs_history_and_evaluates_own_situations(tmp_path, capsys) -> None:
+    _cfg, out = run_config(tmp_path, _online_config(), "online.h5")
+    assert '"situations"' in capsys.readouterr().out
+    tl = open_log(str(out)).trial(0)
+    state, events = tl.situations_part("state"), tl.situations_part("events")
+    n = int(tl.situations["count"])
+    assert n >= 2 and state["ids"].size == n and events["pose"].shape == (events["kind"].size, 3)
+    assert tl.summary["situations"] == n and tl.arrays["memberships"].shape[1] == 24
+    ev = run_json(capsys, "evaluate", str(out), "--world", "novel-1", "--trial", "0",
+                  "--iterations", "100", "--json")
+    assert ev["iterations"] == 100
+    assert ev["collisions"] == tl.summary["eval/novel-1/collisions"]
+
+
+def test_auto_c_picks_the_crispest_partition_and_loads_any_c() -> None:
+    rng = np.random.default_rng(1)
+    centres = np.array([[0.3, 0.3], [2.5, 0.4], [1.2, 2.6]])
+    X = np.concatenate([c + 0.05 * rng.standard_normal((60, 2)) for c in centres])
+    fcm = FCMInterpreter(c="auto", auto_cs=[2, 3, 4, 5], auto_trials=3, trials=3)
+    assert fcm.n_situations is None
+    out = fcm.fit(X, np.random.default_rng(0))
+    assert out["auto_c"] == 3 == fcm.n_situations and out["auto_rf"].shape == (4,)
+    again = FCMInterpreter(c="auto")
+    again.load_state(fcm.state())
+    assert again.n_situations == 3
+    with pytest.raises(ValueError, match="auto"):
+        FCMInterpreter(c="many")
+
+
+def test_a_sweep_starts_online_runs_from_no_situations(tmp_path) -> None:
+    from sitframe.cli import main
+
+    (tmp_path / "base.toml").write_text(_online_config(iterations=100))
+    (tmp_path / "s.toml").write_text('[sweep]\nbase = "base.toml"\n[grid]\n'
+                                     '"interpreter.create_distance" = [1.0]\n')
+    assert main(["sweep", str(tmp_path / "s.toml"), "--out", str(tmp_path / "o"),
+                 "--workers", "1"]) == 0
+    (log,) = (tmp_path / "o").glob("*.h5")
+    assert open_log(str(log)).trial(0).situations["count"] >= 1

@@ -1,0 +1,82 @@
+"""Mutation testing of the modules where a silent bug changes results (run outside the suite).
+
+``mutmut`` (3.x) derives a module's name from its path, but in this repository the
+built-in plugins live in ``plugins/`` and import as ``sitframe.plugins``. So this script
+copies the package into a scratch folder laid out as it is installed (``sitframe/``,
+``sitframe/plugins/``, ``sitframe/worlds/``, ``tests/``, ``pyproject.toml`` with the
+``[tool.mutmut]`` table), runs ``mutmut run`` there on the modules asked for, and prints
+``mutmut results``. The per-module test subsets keep a run practical; see README,
+"Mutation testing".
+
+Usage::
+
+    nice -n 10 python tools/mutation.py [MODULE ...] [--tests FILE ...] [--workdir DIR]
+                                        [--fresh]
+
+MODULE is a dotted name as installed (``sitframe.fcm``, ``sitframe.plugins.rewards``);
+none = every module of ``[tool.mutmut] only_mutate``. ``--tests`` replaces the test
+files of ``pytest_add_cli_args_test_selection`` (a fast subset for the modules asked for).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def build(workdir: Path, fresh: bool, tests: list[str], modules: list[str]) -> None:
+    """Copy the sources into ``workdir`` with the installed package layout."""
+    if fresh and workdir.exists():
+        shutil.rmtree(workdir)
+    workdir.mkdir(parents=True, exist_ok=True)
+    pkg = workdir / "sitframe"
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
+    for src, dst in ((ROOT / "sitframe", pkg), (ROOT / "plugins", pkg / "plugins"),
+                     (ROOT / "worlds", pkg / "worlds"), (ROOT / "tests", workdir / "tests")):
+        if dst.exists():
+            shutil.rmtree(dst)
+        shutil.copytree(src, dst, ignore=ignore)
+    text = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
+    if tests:
+        start = text.index("pytest_add_cli_args_test_selection = [")
+        end = text.index("]", start) + 1
+        text = text[:start] + f"pytest_add_cli_args_test_selection = {tests!r}" + text[end:]
+    if modules:  # generate mutants of the modules asked for only
+        start = text.index("only_mutate = [")
+        end = text.index("]", start) + 1
+        files = [m.replace(".", "/") + ".py" for m in modules]
+        text = text[:start] + f"only_mutate = {files!r}" + text[end:]
+    target = workdir / "pyproject.toml"
+    if not target.exists() or target.read_text(encoding="utf-8") != text:
+        target.write_text(text.replace("'", '"'), encoding="utf-8")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("modules", nargs="*", help="dotted module names (default: all configured)")
+    ap.add_argument("--workdir", type=Path,
+                    default=Path(tempfile.gettempdir()) / "sitframe-mutation")
+    ap.add_argument("--tests", nargs="+", default=[], metavar="FILE",
+                    help="test files to run against the mutants (default: the configured ones)")
+    ap.add_argument("--fresh", action="store_true", help="discard earlier results")
+    args = ap.parse_args(argv)
+    build(args.workdir, args.fresh, args.tests, args.modules)
+    mutmut = [sys.executable, "-m", "mutmut"] if shutil.which("mutmut") is None else ["mutmut"]
+    names = [f"{m}.*" for m in args.modules]
+    # derandomized property-based tests (as in CI): a mutant's verdict must not depend on
+    # which examples a run happens to draw
+    env = {**os.environ, "CI": "1"}
+    code = subprocess.call([*mutmut, "run", *names], cwd=args.workdir, env=env)
+    subprocess.call([*mutmut, "results"], cwd=args.workdir, env=env)
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())
