@@ -1,7 +1,9 @@
 """Observer plugin: writes the run to an HDF5 log (layout in :mod:`sitframe.logs`).
 
 It holds no file open: every stage and every finished trial is one
-copy-on-write transaction (:class:`sitframe.logs.LogWriter`), so a run
+crash-safe transaction (:class:`sitframe.logs.LogWriter`: a trial goes to its
+own file, linked from the run file; the run's end packs them into the run
+file, whatever its status), so a run
 killed at any moment leaves a readable log whose root ``status`` says
 ``running`` (never finished) or ``aborted`` (Ctrl-C), with every trial
 written so far intact; ``sitframe run --resume LOG`` finishes it (the run

@@ -13,6 +13,7 @@
     sitframe presets
     sitframe plugins
     sitframe sweep SWEEP.toml [--workers K | --scheduler ADDRESS] [--out DIR] [--json]
+    sitframe pack LOG
 
 Trials run in a local process pool (``--workers``, default one per core;
 ``--workers 1`` runs them in this process, the only mode in which
@@ -121,12 +122,12 @@ EXTRA_COMMANDS: dict[str, str] = {"analyse": "sitframe.analysis.commands",
                                   "replay": "sitframe.analysis.commands_replay",
                                   "compare": "sitframe.analysis.commands_compare",
                                   "export": "sitframe.analysis.commands_export",
-                                  "sweep": "sitframe.sweep"}
+                                  "sweep": "sitframe.sweep", "pack": "sitframe.pack"}
 
 
 #: Commands that read a log given on the command line: an exception while they use its
 #: contents means the log is damaged (valid HDF5, wrong layout), reported in one line.
-_LOG_READERS = ("evaluate", "analyse", "replay", "export")
+_LOG_READERS = ("evaluate", "analyse", "replay", "export", "pack")
 
 
 def main(argv: list[str] | None = None) -> int:

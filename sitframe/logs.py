@@ -37,30 +37,50 @@ Layout (schema ``sitframe-log``, version :data:`SCHEMA_VERSION`)::
                           components (trial_end) or observers
                           (sitframe_trial_data); an evaluation's under eval/<world>/
     /summary              structured table, one row per finished trial
+                          (resizable: rows are appended as trials finish)
 
 Every dataset has a ``units`` or ``description`` attribute where it helps,
 and every dataset is stored with a Fletcher-32 checksum per chunk: damaged
 data fails to read (an :class:`InputError` naming the log) instead of being
 returned as wrong numbers; :meth:`Log.check` reads everything.
 
-Crash safety: an HDF5 file left open by a process that dies can be
-unreadable, so the writer never holds the file open across a run. Each stage
-and each finished trial is one short transaction, and transactions are
-copy-on-write: the log is copied to a scratch file in the same folder
-(``LOG.<random>.part``, created with :func:`tempfile.mkstemp`, so a
-pre-existing file or symlink is never written through), the copy is opened
-(append) → written → flushed → closed, and then atomically renamed over the
-log (:func:`os.replace`). A process killed at *any* moment (even inside a
-write) therefore leaves the previous, consistent log (at most a stale
-scratch file, removed by the next writer of the log), so a ``kill -9`` costs
-at most the trial in progress, the file always opens, and ``status =
-"running"`` tells the reader it did not complete. A write that fails (e.g.
-a full disk) removes its scratch file and leaves the published log as it
-was. Readers never block the writer (it never opens the published file for
-writing). The copy makes writing a run of ``N`` trials cost O(N²) bytes
-copied, which is negligible next to simulation for logs up to a few hundred
-MB. The rename protects against process death, not against power loss (no
-fsync).
+Crash safety and cost: an HDF5 file left open by a process that dies can
+be unreadable, so the writer never holds a published file open. Each stage
+and each finished trial is one short transaction, and a transaction only
+ever publishes a complete, closed file by an atomic rename
+(:func:`os.replace`) of a scratch file written beside it (``*.part``,
+created with :func:`tempfile.mkstemp`, so a pre-existing file or symlink is
+never written through):
+
+* A finished trial is written to its own file, ``LOG.trials/NNNN.h5`` (the
+  trial group's contents at the file's root), and then linked from the run
+  file as ``/trials/NNNN`` by an HDF5 external link; its row is appended to
+  ``/summary``. The run file (root attributes, stages, links, summary) is
+  changed copy-on-write: copied to a scratch file, opened, changed, closed
+  and renamed over the log. It holds no trial data, so a trial costs the
+  same to write whether it is the first or the thousandth (see
+  ``benchmarks/bench_log.py``).
+* The run's end (any status but ``running``: ``complete``, ``aborted``,
+  ``failed``) *packs* the log: one transaction copies every linked trial
+  file into the run file and publishes it, then the trial files and the
+  folder are removed. A finished log is one self-contained HDF5 file, laid
+  out as above. ``sitframe pack LOG`` does the same for a log a killed run
+  left (without resuming it).
+
+A process killed at *any* moment (even inside a write) therefore leaves the
+last published run file and the trial files it links (at most a stale
+scratch file, or a trial file not yet linked, removed by the next writer of
+the log), so a ``kill -9`` costs at most the trial in progress, the log
+always opens, and ``status = "running"`` tells the reader it did not
+complete. Until it is packed, such a log is the file *and* its
+``LOG.trials`` folder: move or archive them together (or pack first). The
+reader follows a trial's link only to ``<log>.trials/NNNN.h5`` beside the
+log, for trial NNNN, and only if it is a regular file. A write that fails
+(e.g. a full disk) removes its scratch files and leaves the published log
+as it was. Readers never block the writer (it never opens a published file
+for writing; a reader that opened the log just before packing published it
+may find a trial file gone, and reading again sees the packed log). The
+rename protects against process death, not against power loss (no fsync).
 
 One log has one writer: the writing process holds an exclusive
 :func:`fcntl.flock` on ``LOG.lock`` (beside the log) from its first
@@ -81,11 +101,12 @@ import json
 import os
 import re
 import shutil
+import stat
 import tempfile
 import time
 import tomllib
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -220,47 +241,99 @@ def _write_error(exc: OSError, path: Path) -> InputError:
                       "transaction", file=str(path), key="--out")
 
 
+def shard_folder(path: str | os.PathLike[str]) -> Path:
+    """The folder beside the log ``LOG`` holding its unpacked trial files (``LOG.trials``)."""
+    return Path(str(path) + ".trials")
+
+
+#: A trial file: ``NNNN.h5`` in the shard folder; a scratch file in it ends ``.part``.
+_SHARD_NAME = re.compile(r"\d{4,}\.h5")
+#: What the external link of an unpacked trial names: ``<log name>.trials/NNNN.h5``.
+_SHARD_LINK = re.compile(r"([^/\\]+)\.trials/(\d{4,})\.h5")
+
+
 class LogWriter:
-    """Writes one run's log by short copy-on-write transactions.
+    """Writes one run's log by short crash-safe transactions (see the module docstring).
 
     Parameters
     ----------
     path
-        The HDF5 file. Created by :meth:`start`; its folder is created if needed.
+        The HDF5 run file. Created by :meth:`start`; its folder is created if needed.
 
     Notes
     -----
-    Every method is one transaction (see the module docstring): the published
-    file at ``path`` is only ever replaced by a complete, closed HDF5 file,
-    and only by the process holding the log's lock (:func:`lock_log`, taken
-    by the first transaction).
+    A finished trial is written to its own file in :func:`shard_folder`
+    (scratch name, then renamed) and linked from the run file by a
+    copy-on-write transaction of the run file, which holds only the run's
+    attributes, stages, links and summary table: writing a trial costs the
+    same whether it is the first or the thousandth. The end of the run
+    (:meth:`set_status` with a final status) packs the trials into the run
+    file. The published run file is only ever replaced by a complete, closed
+    HDF5 file, and only by the process holding the log's lock
+    (:func:`lock_log`, taken by the first transaction).
     """
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
         self.path = Path(path)
+        self.shards = shard_folder(self.path)
         self.part = self.path.with_name(self.path.name + ".part")  # the last scratch file used
 
-    def _scratch(self) -> Path:
-        """A new, empty scratch file beside the log (unique name, never a symlink)."""
+    def _scratch(self, folder: Path | None = None) -> Path:
+        """A new, empty scratch file in ``folder`` (default: beside the log; unique name,
+        never a symlink)."""
         lock_log(self.path)
-        fd, name = tempfile.mkstemp(prefix=self.path.name + ".", suffix=".part",
-                                    dir=self.path.parent)
+        prefix = self.path.name if folder is None else ""
+        fd, name = tempfile.mkstemp(prefix=prefix + ".", suffix=".part",
+                                    dir=folder or self.path.parent)
         os.close(fd)
         self.part = Path(name)
         return self.part
 
     def remove_stale(self) -> None:
-        """Remove scratch files left by a killed writer (call holding the lock)."""
+        """Remove what a killed writer left (call holding the lock): scratch files, and
+        trial files the published log does not link (written, but never committed)."""
         lock_log(self.path)
         mine = re.compile(re.escape(self.path.name) + r"(\.[a-z0-9_]{8})?\.part")
         for name in glob.glob(glob.escape(str(self.path)) + "*.part"):
             if mine.fullmatch(Path(name).name):
                 Path(name).unlink(missing_ok=True)
+        self._clear_shards(keep=self._linked())
+
+    def _linked(self) -> set[str]:
+        """Names of the trial files the published log links (empty if it cannot be read)."""
+        try:
+            with h5py.File(self.path, "r") as f:
+                trials = f.get("trials")
+                links = [trials.get(n, getlink=True) for n in trials] \
+                    if isinstance(trials, h5py.Group) else []
+        except (OSError, ValueError, KeyError):
+            return set()
+        return {Path(lk.filename).name for lk in links if isinstance(lk, h5py.ExternalLink)}
+
+    def _clear_shards(self, keep: set[str] | frozenset[str] = frozenset()) -> None:
+        """Remove the shard folder's trial and scratch files not in ``keep``; the folder too
+        if that empties it (nothing else in it is touched)."""
+        if self.shards.is_symlink() or not self.shards.is_dir():
+            return
+        for p in self.shards.iterdir():
+            if (p.name.endswith(".part") or _SHARD_NAME.fullmatch(p.name)) and p.name not in keep:
+                p.unlink(missing_ok=True)
+        with suppress(OSError):
+            self.shards.rmdir()
+
+    @contextmanager
+    def _transaction(self) -> Iterator[None]:
+        """Signals wait for the block's end; an OSError becomes a one-line InputError."""
+        with deferred_interrupt():  # a Ctrl-C lands between transactions, never inside one
+            try:
+                yield
+            except OSError as exc:
+                raise _write_error(exc, self.path) from None
 
     @contextmanager
     def _open(self) -> Iterator[h5py.File]:
-        """Copy the log, open the copy for appending, publish it atomically on success."""
-        with deferred_interrupt():  # a Ctrl-C lands between transactions, never inside one
+        """Copy the run file, open the copy for appending, publish it atomically on success."""
+        with self._transaction():
             tmp: Path | None = None
             try:
                 tmp = self._scratch()
@@ -269,24 +342,25 @@ class LogWriter:
                     yield f
                     f.flush()
                 os.replace(tmp, self.path)
-            except BaseException as exc:
+            except BaseException:
                 if tmp is not None:
                     tmp.unlink(missing_ok=True)
-                if isinstance(exc, OSError):
-                    raise _write_error(exc, self.path) from None
                 raise
 
     def start(self, info: RunInfo, *, resume: bool = False) -> None:
         """Create the file with the run's attributes (``status = "running"``).
 
         Takes the log's lock first (:func:`lock_log`). With ``resume=True``
-        the existing log is kept (stale scratch files left by a killed writer
-        are removed) and only its status is set to ``running``.
+        the existing log is kept (what a killed writer left is removed,
+        :meth:`remove_stale`) and only its status is set to ``running``.
+        Otherwise the trial files of a log this one replaces are removed once
+        the new log is published.
         """
         self.remove_stale()
         if not resume:
             with deferred_interrupt():
                 self._create(info)
+            self._clear_shards()
         else:
             self.set_status("running")
 
@@ -341,32 +415,109 @@ class LogWriter:
                 _write_value(g, k, v)
 
     def trial(self, trial: TrialResult, behaviour_labels: list[str] | None = None) -> None:
-        """Write a finished trial and refresh the root summary table."""
+        """Write a finished trial and add its row to the root summary table."""
         self.trials([trial], behaviour_labels)
 
     def trials(self, trials: list[TrialResult], behaviour_labels: list[str] | None = None) -> None:
-        """Write several finished trials in one transaction (one copy of the log)."""
+        """Write several finished trials: one file each, linked in one transaction."""
         if not trials:
             return
-        with self._open() as f:
-            for trial in trials:
+        written: list[Path] = []
+        with self._transaction():
+            try:
+                rows = []
+                for trial in trials:
+                    shard, row = self._write_shard(trial, behaviour_labels)
+                    written.append(shard)
+                    rows.append(row)
+                with self._open() as f:
+                    links = f.require_group("trials")
+                    for row, shard in zip(rows, written, strict=True):
+                        name = f"{row['trial']:04d}"
+                        if links.get(name, getlink=True) is not None:
+                            del links[name]
+                        links[name] = h5py.ExternalLink(f"{self.shards.name}/{shard.name}", "/")
+                    _add_summary_rows(f, rows)
+            except BaseException:
+                linked = self._linked()  # a trial file the published log links stays
+                for p in written:
+                    if p.name not in linked:
+                        p.unlink(missing_ok=True)
+                raise
+
+    def _write_shard(self, trial: TrialResult, behaviour_labels: list[str] | None
+                     ) -> tuple[Path, dict[str, Any]]:
+        """Write one trial to its own file (scratch name, renamed when closed); return the
+        file and the trial's row of the summary table."""
+        if self.shards.is_symlink():
+            raise InputError(f"'{self.shards.name}' beside the log is a symlink; refusing to "
+                             "write the log's trials through it", file=str(self.path),
+                             key="--out")
+        self.shards.mkdir(exist_ok=True)
+        tmp = self._scratch(self.shards)
+        try:
+            with h5py.File(tmp, "w") as f:
                 _write_trial(f, trial, behaviour_labels)
-            _write_summary(f)
+                row = _summary_row(f)
+            shard = self.shards / f"{trial.index:04d}.h5"
+            os.replace(tmp, shard)
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
+        return shard, row
 
     def set_status(self, status: str, failure: str | None = None) -> None:
-        """Set the root ``status`` (and ``failure``, the one-line reason a run failed)."""
+        """Set the root ``status`` (and ``failure``, the one-line reason a run failed).
+
+        Any status but ``running`` ends the run: the trial files are packed
+        into the run file in the same transaction (:meth:`pack`).
+        """
+        self._commit(status, failure, pack=status != "running")
+
+    def pack(self) -> None:
+        """Copy every linked trial file into the run file (one transaction), then remove
+        the trial files: the log becomes one self-contained HDF5 file."""
+        self._commit(None, None, pack=True)
+
+    def _commit(self, status: str | None, failure: str | None, *, pack: bool) -> None:
+        packed: list[Path] = []
         with self._open() as f:
-            f.attrs["status"] = status
+            if status is not None:
+                f.attrs["status"] = status
             if failure:
                 f.attrs["failure"] = failure
+            if pack:
+                packed = _pack_trials(f, str(self.path))
+        for p in packed:
+            p.unlink(missing_ok=True)
+        for folder in {p.parent for p in packed} - {self.shards}:  # (a renamed log's)
+            with suppress(OSError):
+                folder.rmdir()
+        if self.shards.is_dir():
+            self._clear_shards(keep=self._linked())
 
 
-def _write_trial(f: h5py.File, trial: TrialResult, behaviour_labels: list[str] | None) -> None:
-    trials = f.require_group("trials")
-    name = f"{trial.index:04d}"
-    if name in trials:
+def _pack_trials(f: h5py.File, path: str) -> list[Path]:
+    """Replace every external trial link of ``f`` by a copy of the trial file's contents;
+    return the files copied."""
+    trials = f.get("trials")
+    if not isinstance(trials, h5py.Group):
+        return []
+    done = []
+    for name in list(trials):
+        link = trials.get(name, getlink=True)
+        if not isinstance(link, h5py.ExternalLink):
+            continue
+        src = _shard_file(path, name, link)
         del trials[name]
-    g = trials.create_group(name)
+        with h5py.File(src, "r") as s:
+            f.copy(s["/"], trials, name=name)
+        done.append(src)
+    return done
+
+
+def _write_trial(g: h5py.Group, trial: TrialResult, behaviour_labels: list[str] | None) -> None:
+    """Write one trial's attributes, arrays and groups into ``g``."""
     g.attrs["index"] = trial.index
     g.attrs["seed"] = np.uint64(trial.seed)
     g.attrs["world"] = trial.world
@@ -398,32 +549,59 @@ def _write_trial(f: h5py.File, trial: TrialResult, behaviour_labels: list[str] |
         _write_value(g.require_group("situations"), k, v)
 
 
-def _summary_rows(f: h5py.File) -> tuple[list[str], list[dict[str, Any]]]:
-    rows = []
-    keys: dict[str, None] = {}
-    for name in sorted(f["trials"]):
-        s = f["trials"][name]["summary"].attrs
-        row = {"trial": int(f["trials"][name].attrs["index"])}
-        for k in s:
-            v = s[k]
-            if isinstance(v, bool | int | float | np.integer | np.floating | np.bool_):
-                row[k] = v
-                keys[k] = None
-        rows.append(row)
-    return ["trial", *keys], rows
+def _summary_row(g: h5py.Group) -> dict[str, Any]:
+    """A trial group's row of the summary table: its index and numeric summary attributes
+    (booleans included; in HDF5's attribute order, by name)."""
+    row = {"trial": int(g.attrs["index"])}
+    s = g["summary"].attrs if "summary" in g else {}
+    for k in s:
+        v = s[k]
+        if isinstance(v, bool | int | float | np.integer | np.floating | np.bool_):
+            row[k] = v
+    return row
 
 
-def _write_summary(f: h5py.File) -> None:
-    cols, rows = _summary_rows(f)
-    dtype = [("trial", "i4")] + [(c, "f8") for c in cols[1:]]
-    table = np.zeros(len(rows), dtype=dtype)
+def _summary_table(cols: list[str], rows: list[dict[str, Any]]) -> np.ndarray:
+    table = np.zeros(len(rows), dtype=[("trial", "i4")] + [(c, "f8") for c in cols[1:]])
     for i, row in enumerate(rows):
         table[i]["trial"] = row["trial"]
         for c in cols[1:]:
             table[i][c] = float(row.get(c, np.nan))
+    return table
+
+
+def _add_summary_rows(f: h5py.File, rows: list[dict[str, Any]]) -> None:
+    """Append the rows of trials just linked to the root summary table.
+
+    The table is what :func:`_write_summary` builds from every trial (rows in
+    trial order, columns in order of first appearance), kept up to date by
+    appending; only a trial that goes before a logged one or brings a new
+    column (rare: a resumed gap, a plugin adding a summary key) rebuilds it.
+    """
+    ds = f.get("summary")
+    index = [r["trial"] for r in rows]
+    if isinstance(ds, h5py.Dataset) and ds.maxshape == (None,) and ds.dtype.names:
+        cols = list(ds.dtype.names)
+        n = len(ds)
+        last = int(ds[n - 1]["trial"]) if n else -1
+        if index == sorted(set(index)) and index[0] > last and \
+                all(set(r) <= set(cols) for r in rows):
+            ds.resize((n + len(rows),))
+            ds[n:] = _summary_table(cols, rows)
+            return
+    _write_summary(f)
+
+
+def _write_summary(f: h5py.File) -> None:
+    """(Re)build the root summary table from every trial's summary attributes."""
+    trials = f["trials"]
+    rows = [_summary_row(trials[name]) for name in sorted(trials)]
+    keys = dict.fromkeys(k for row in rows for k in row)
+    table = _summary_table(list(keys), rows)
     if "summary" in f:
         del f["summary"]
-    ds = f.create_dataset("summary", data=table, chunks=True, fletcher32=True)
+    ds = f.create_dataset("summary", data=table, chunks=True, maxshape=(None,),
+                          fletcher32=True)
     ds.attrs["description"] = "one row per finished trial; booleans as 0/1, missing as NaN"
 
 
@@ -645,8 +823,13 @@ class Log:
                 obj[()]
 
         with self._file() as f:
-            f.visititems(read)
+            f.visititems(read)  # hard links only: the trials in their own files are read below
             _check_layout(f, self.path)
+            for name in _trial_names(f, self.path):
+                g = _trial_group(f, name, self.path)
+                if g is not None and g.file != f:
+                    dict(g.attrs)
+                    g.visititems(read)
 
     def has(self, group: str) -> bool:
         with self._file() as f:
@@ -654,9 +837,15 @@ class Log:
 
     def trial_indices(self) -> list[int]:
         with self._file() as f:
-            if "trials" not in f:
-                return []
-            return sorted(int(f["trials"][n].attrs["index"]) for n in f["trials"])
+            out = []
+            for name in _trial_names(f, self.path):
+                link = f["trials"].get(name, getlink=True)
+                if isinstance(link, h5py.ExternalLink):  # checked: NNNN.h5 for trial NNNN
+                    _shard_file(self.path, name, link)
+                    out.append(int(name))
+                else:
+                    out.append(int(f["trials"][name].attrs["index"]))
+            return sorted(out)
 
     def stage(self, name: str) -> dict[str, Any]:
         """Flattened dict of a stage group (``collect`` or ``cluster``)."""
@@ -677,13 +866,13 @@ class Log:
     def trial(self, index: int) -> TrialLog:
         """Read trial ``index`` (an InputError lists the trials present if it is missing)."""
         with self._file() as f:
-            name = f"trials/{index:04d}"
-            if name not in f:
+            _trial_names(f, self.path)
+            g = _trial_group(f, f"{index:04d}", self.path)
+            if g is None:
                 have = self.trial_indices()
                 raise InputError(f"the log has no trial {index}; it has "
                                  f"{have if have else 'no finished trials'}",
                                  file=self.path, key="trials")
-            g = f[name]
             arrays = {}
             for k, item in g.items():
                 if k in _TRIAL_GROUPS:
@@ -730,6 +919,55 @@ class Log:
         return iterations_frame(self, trials)
 
 
+def _trial_names(f: h5py.File, path: str) -> list[str]:
+    """The names in ``/trials`` (none if absent; an InputError if it is not a group)."""
+    trials = f.get("trials")
+    if trials is None:
+        return []
+    if not isinstance(trials, h5py.Group):
+        raise InputError("expected a group of trial groups, got a dataset", file=path,
+                         key="trials")
+    return list(trials)
+
+
+def _trial_group(f: h5py.File, name: str, path: str) -> h5py.Group | h5py.Dataset | None:
+    """``/trials/<name>`` (None if absent), following its link only if it is a trial file of
+    the log (:func:`_shard_file`): a log never makes the reader open another file."""
+    trials = f["trials"]
+    link = trials.get(name, getlink=True)
+    if link is None:
+        return None
+    if isinstance(link, h5py.SoftLink):
+        raise InputError(f"is a soft link to '{link.path}'; expected a trial group",
+                         file=path, key=f"trials/{name}")
+    if isinstance(link, h5py.ExternalLink):
+        _shard_file(path, name, link)
+    return trials[name]
+
+
+def _shard_file(path: str, name: str, link: h5py.ExternalLink) -> Path:
+    """The trial file an unpacked trial links to, checked: ``LOG.trials/NNNN.h5`` beside
+    the log for trial NNNN, an existing regular file, linked at its root."""
+    m = _SHARD_LINK.fullmatch(link.filename)
+    if m is None or link.path != "/" or not name.isdigit() or int(m.group(2)) != int(name):
+        raise InputError(f"links to '{link.filename}:{link.path}'; expected the trial's own "
+                         f"file <log>.trials/{name}.h5 beside the log", file=path,
+                         key=f"trials/{name}")
+    target = Path(path).parent / link.filename
+    try:
+        mode = os.stat(target, follow_symlinks=False).st_mode
+    except OSError:
+        raise InputError(f"trial {int(name)} is in '{link.filename}', which is missing: a log "
+                         f"still being written (or killed) is its .h5 file and the folder "
+                         f"'{m.group(1)}.trials' beside it; move them together, or pack the log "
+                         "into one file first (sitframe pack LOG)", file=path,
+                         key=f"trials/{name}") from None
+    if not stat.S_ISREG(mode):
+        raise InputError(f"'{link.filename}' is not a regular file (expected the trial's own "
+                         "HDF5 file)", file=path, key=f"trials/{name}")
+    return target
+
+
 def _check_layout(f: h5py.File, path: str) -> None:
     """The parts of the layout that readers index with, checked so that a valid HDF5 file
     with damaged contents is one clear :class:`InputError` (naming the item), not a wrong
@@ -753,9 +991,13 @@ def _check_layout(f: h5py.File, path: str) -> None:
         capacity = f["cluster/state"].attrs.get("capacity")  # evolving situations: id slots
         if capacity is not None:
             shape = (int(capacity), shape[1])
-    for name, g in (trials or {}).items():
+    for name in _trial_names(f, path):
+        g = _trial_group(f, name, path)
         if not isinstance(g, h5py.Group):
             fail(f"trials/{name}", "expected a trial group, got a dataset")
+        if g.file != f and g.attrs.get("index") != int(name):
+            fail(f"trials/{name}", f"its file holds trial {g.attrs.get('index')!r}, expected "
+                 f"{int(name)}")
         for ds, axis in (("memberships", 0), (READING, 1), ("sonar", 1)):
             if shape is not None and isinstance(g.get(ds), h5py.Dataset) and \
                     g[ds].shape[1:] != (shape[axis],):

@@ -622,7 +622,12 @@ def log_contents(path: str | os.PathLike[str]) -> dict[str, Any]:
                 out[f"{name}/"] = None
             for k, v in obj.attrs.items():
                 out[f"{name}@{k}"] = v
-        f.visititems(visit)
+        f.visititems(visit)  # hard links only; trials not yet packed are in their own files:
+        trials = f.get("trials")
+        for t in trials if isinstance(trials, h5py.Group) else ():
+            if isinstance(trials.get(t, getlink=True), h5py.ExternalLink):
+                visit(f"trials/{t}", trials[t])
+                trials[t].visititems(lambda n, o, t=t: visit(f"trials/{t}/{n}", o))
     return out
 
 

@@ -77,7 +77,7 @@ def test_kill_9_then_resume_reproduces_uninterrupted_run(reference, tmp_path, ca
     assert doc["resumed_trials"] == list(range(len(have), N_TRIALS))
     assert open_log(out).status == "complete"
     assert compare_logs(ref, out) == []
-    assert not (tmp_path / "killed.h5.part").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["killed.h5"]  # packed: one file
 
 
 def test_sigint_marks_aborted_exit_130_and_resume_completes(reference, tmp_path, capsys):

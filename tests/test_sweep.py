@@ -185,3 +185,31 @@ def test_shipped_sweeps_load(name):
         assert laser.name == "sensor=laser-fov_deg=180-beams=16-max_range=4_seed=9"
         assert laser.experiment.cfg["sensor"] == {"component": "laser", "fov_deg": 180,
                                                   "beams": 16, "max_range": 4.0}
+
+
+def test_sweep_on_a_two_worker_dask_cluster_gives_the_local_summaries(swept, tmp_path, capsys):
+    """Two of the local sweep's points (c = 4), their trials spread over two Dask workers."""
+    distributed = pytest.importorskip("distributed")
+    d, local = swept
+    (d / "dask.toml").write_text(SWEEP.replace('"interpreter.c" = [4, 5]', "")
+                                 + '[set]\n"interpreter.c" = 4\n')
+    out = tmp_path / "dask"
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                                  protocol="tcp", host="127.0.0.1",
+                                  dashboard_address=None) as cluster:
+        assert main(["sweep", str(d / "dask.toml"), "--out", str(out), "--scheduler",
+                     cluster.scheduler_address, "--json"]) == 0
+        ran = [w.state.executed_count for w in cluster.workers.values()]
+    capsys.readouterr()
+    assert len(ran) == 2 and min(ran) > 0, ran  # both workers ran stages or trials
+
+    def rows(folder):
+        with open(folder / "summary.csv", encoding="utf-8") as fh:
+            return {r["point"]: {k: v for k, v in r.items() if k not in ("point", "log",
+                                                                        "interpreter.c")}
+                    for r in csv.DictReader(fh)}
+
+    there, here = rows(out), rows(local)
+    for update in ("thesis", "standard"):
+        assert there[f"update={update}"] == here[f"update={update}_c=4"]
+        assert compare_logs(local / f"update={update}_c=4.h5", out / f"update={update}.h5") == []
