@@ -316,40 +316,23 @@ def step_robot(
     T = params.control_period_s
     r = params.radius
     path = v * T
-    segs = world.segment_set
     pose_before = pose if isinstance(pose, np.ndarray) else np.asarray(pose, dtype=float)
-
-    # --- 1. which segments can the swept disc (or the back-off) reach at all?
-    near = None
-    if segs.n:
-        reach = path + r + params.recovery_backoff_m + 1e-9
-        wx = x0 - segs.ax
-        wy = y0 - segs.ay
-        t = (wx * segs.ex + wy * segs.ey) * segs.inv_len2
-        np.clip(t, 0.0, 1.0, out=t)
-        dx = wx - t * segs.ex
-        dy = wy - t * segs.ey
-        d2 = dx * dx + dy * dy
-        idx = np.flatnonzero(d2 < reach * reach)
-        if idx.size:
-            near = _near_set(segs, idx)
-
+    times = _times(T, params.substep_s)
+    r2 = r * r
+    # --- 1., 2. which segments can the swept disc (or the back-off) reach, which substep
+    # touches one first?
+    near, k, end = _sweep(world.segment_set, times, (x0, y0, th0, v, omega, t_turn),
+                          path + r + params.recovery_backoff_m + 1e-9, r2)
     if near is None:  # open space: nothing to hit, pure-Python closed form
         x, y, th = _pose_at(T, x0, y0, th0, v, omega, t_turn)
         final = np.array([x, y, _wrap(th)])
         return StepOutcome(pose_before, final, False, _NAN2, final, path,
                            math.degrees(th - th0))
-
-    # --- 2. all substeps against the near segments at once
-    times = _times(T, params.substep_s)
-    xs, ys, ths = _poses_at(times, x0, y0, th0, v, omega, t_turn)
-    r2 = r * r
-    bad = (_dist2_cols(xs, ys, near) < r2).any(axis=1)
-    k = int(bad.argmax())
-    if not bad[k]:
-        final = np.array([xs[-1], ys[-1], _wrap(float(ths[-1]))])
+    if k < 0:
+        final = np.array([end[0], end[1], _wrap(end[2])])
         return StepOutcome(pose_before, final, False, _NAN2, final, path,
-                           math.degrees(float(ths[-1]) - th0))
+                           math.degrees(end[2] - th0))
+    xs, ys, ths = _poses_at(times, x0, y0, th0, v, omega, t_turn)
 
     # --- 3. refine the contact between the last free substep and the first bad one
     if k == 0:  # started inside: no forward motion
@@ -416,14 +399,51 @@ def step_robot(
                        heading_change, backoff, math.degrees(turn))
 
 
+def _sweep(segs: geo.SegmentSet, times: np.ndarray, plan: tuple[float, ...], reach: float,
+           r2: float) -> tuple[geo.SegmentSet | None, int, tuple[float, float, float]]:
+    """Steps 1-2 of :func:`step_robot`: the segments within ``reach`` of the start and
+    the first substep (of ``times``) whose disc (``r2`` = radius²) touches one of them.
+
+    Returns ``(near, k, end)``: ``near`` is None when nothing is within reach; ``k``
+    is -1 when no substep touches, and ``end`` then the pose at ``times[-1]``.
+    The compiled kernel (:func:`sitframe.kernels.sweep_disc`) and the numpy code
+    give the same numbers.
+    """
+    x0, y0, th0, v, omega, t_turn = plan
+    kern = geo.kernels()
+    if kern is not None:
+        if segs.n == 0:
+            return None, -1, (x0, y0, th0)
+        th_end = th0 + omega * t_turn
+        idx = np.empty(segs.n, dtype=np.intp)
+        end = np.empty(3)
+        k, m = kern.sweep_disc(np.array((*plan, math.cos(th_end), math.sin(th_end),
+                                         reach * reach, r2)), times, segs.packed, idx, end)
+        if m == 0:
+            return None, -1, (x0, y0, th0)
+        return _near_set(segs, idx[:m]), k, (float(end[0]), float(end[1]), float(end[2]))
+    if segs.n == 0:
+        return None, -1, (x0, y0, th0)
+    d2 = _dist2_cols(np.array([x0]), np.array([y0]), segs)[0]
+    idx = np.flatnonzero(d2 < reach * reach)
+    if idx.size == 0:
+        return None, -1, (x0, y0, th0)
+    near = _near_set(segs, idx)
+    xs, ys, ths = _poses_at(times, x0, y0, th0, v, omega, t_turn)
+    bad = (_dist2_cols(xs, ys, near) < r2).any(axis=1)
+    k = int(bad.argmax())
+    if not bad[k]:
+        return near, -1, (float(xs[-1]), float(ys[-1]), float(ths[-1]))
+    return near, k, (float(xs[k]), float(ys[k]), float(ths[k]))
+
+
 def _near_set(segs: geo.SegmentSet, idx: np.ndarray) -> geo.SegmentSet:
     """Sub-set of ``segs`` without recomputing the derived arrays."""
     sub = geo.SegmentSet.__new__(geo.SegmentSet)
     sub.segments = segs.segments[idx]
     sub.n = idx.size
-    sub.ax, sub.ay = segs.ax[idx], segs.ay[idx]
-    sub.ex, sub.ey = segs.ex[idx], segs.ey[idx]
-    sub.inv_len2 = segs.inv_len2[idx]
+    sub.packed = segs.packed[:, idx]
+    sub.ax, sub.ay, sub.ex, sub.ey, sub.inv_len2 = sub.packed
     sub.lo, sub.hi = segs.lo[idx], segs.hi[idx]
     return sub
 
