@@ -157,15 +157,15 @@ class SonarRing:
         reach = self.max_range + self.robot_radius
         dist = cast_rays(world.segment_set, pose[0], pose[1], self._ray_rel + float(pose[2]),
                          reach)
-        if self.rays_per_beam > 1:
-            dist = dist.reshape(self._n, self.rays_per_beam).min(axis=1)
+        if self.rays_per_beam > 1:  # (the ufuncs themselves: this runs every iteration)
+            dist = np.minimum.reduce(dist.reshape(self._n, self.rays_per_beam), axis=1)
         # a ray that hit nothing reads exactly max_range (no rounding from - radius)
         reading = np.where(dist >= reach, self.max_range, dist - self.robot_radius)
         if self.noise_std > 0.0:
             reading = reading + rng.normal(0.0, self.noise_std, self._n)
         if self.dropout > 0.0:
             reading = np.where(rng.random(self._n) < self.dropout, self.max_range, reading)
-        return np.clip(reading, 0.0, self.max_range)
+        return np.minimum(np.maximum(reading, 0.0, out=reading), self.max_range, out=reading)
 
     def __repr__(self) -> str:
         return (f"SonarRing({self._n} beams, max_range={self.max_range:g} m, "

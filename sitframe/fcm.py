@@ -462,6 +462,9 @@ def memberships(X: np.ndarray, centers: np.ndarray, m: float) -> np.ndarray:
     return u[0] if single else u
 
 
+_min, _sum = np.minimum.reduce, np.add.reduce
+
+
 class MembershipFunction:
     """Memberships of one reading at a time, for a controller's hot loop.
 
@@ -498,12 +501,14 @@ class MembershipFunction:
         """Return the (c,) memberships of one (d,) reading; they sum to 1."""
         diff = self.centers - x
         d2 = np.einsum("ij,ij->i", diff, diff)
-        dmin = d2.min()
+        dmin = _min(d2)  # (the ufuncs' own reduce: ndarray.min/sum add a Python layer)
         if dmin <= 0.0:
             on = d2 <= 0.0
             return on / on.sum()
-        w = np.maximum(dmin / d2, self.floor) ** self.p
-        return w / w.sum()
+        w = np.maximum(dmin / d2, self.floor)
+        w **= self.p
+        w /= _sum(w)
+        return w
 
 
 @_ignore_underflow

@@ -275,10 +275,11 @@ class FuzzyQLearner:
             return False
         prm = self.params
         q = self.q
-        active = np.flatnonzero(u_before >= prm.activation) if prm.activation > 0 else self._rows
+        active = (u_before >= prm.activation).nonzero()[0] if prm.activation > 0 else \
+            self._rows
         if active.size:
             v_next = 0.0 if (collided and prm.terminal_on_collision) else \
-                float(u_after @ q.max(axis=1))
+                float(u_after @ np.maximum.reduce(q, axis=1))
             acts = self.rule_base[active]
             w = u_before[active]
             cur = q[active, acts]

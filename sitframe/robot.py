@@ -149,6 +149,9 @@ class Command:
     speed_m_s: float = 0.15
 
     def __post_init__(self) -> None:
+        h, s = self.heading_change_deg, self.speed_m_s
+        if h.__class__ is float and s.__class__ is float and h - h == 0.0 and s - s == 0.0:
+            return  # two finite floats (the loop's case, made every iteration)
         for name in ("heading_change_deg", "speed_m_s"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | float | np.number):
