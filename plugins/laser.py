@@ -53,7 +53,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from sitframe import RunContext, World, cast_rays, hookimpl
+from sitframe import RunContext, World, hookimpl, rim_ranges
 from sitframe import params as P
 
 __all__ = ["LaserScanner", "sitframe_sensors"]
@@ -145,16 +145,13 @@ class LaserScanner:
             (beams,) ranges [m] from the rim, in [0, max_range], ordered as
             :attr:`angles_deg`.
         """
-        reach = self.max_range + self.robot_radius
-        dist = cast_rays(world.segment_set, pose[0], pose[1],
-                         self._angles_rad + float(pose[2]), reach)
-        # a beam that hit nothing reads exactly max_range (no rounding from - radius)
-        reading = np.where(dist >= reach, self.max_range, dist - self.robot_radius)
+        reading = rim_ranges(world.segment_set, pose[0], pose[1],
+                             self._angles_rad + float(pose[2]), self.max_range, self.robot_radius)
         if self.noise_std > 0.0:
             reading = reading + rng.normal(0.0, self.noise_std, self.beams)
         if self.dropout > 0.0:
             reading = np.where(rng.random(self.beams) < self.dropout, self.max_range, reading)
-        return np.clip(reading, 0.0, self.max_range)
+        return np.minimum(np.maximum(reading, 0.0, out=reading), self.max_range, out=reading)
 
     def __repr__(self) -> str:
         return (f"LaserScanner({self.beams} beams over {self.fov_deg:g} deg, "

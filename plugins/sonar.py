@@ -57,7 +57,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from sitframe import RunContext, World, cast_rays, hookimpl
+from sitframe import RunContext, World, hookimpl, rim_ranges
 from sitframe import params as P
 
 __all__ = ["SonarRing", "sitframe_sensors"]
@@ -154,13 +154,8 @@ class SonarRing:
         numpy.ndarray
             (d,) ranges [m] from the rim, in [0, max_range].
         """
-        reach = self.max_range + self.robot_radius
-        dist = cast_rays(world.segment_set, pose[0], pose[1], self._ray_rel + float(pose[2]),
-                         reach)
-        if self.rays_per_beam > 1:  # (the ufuncs themselves: this runs every iteration)
-            dist = np.minimum.reduce(dist.reshape(self._n, self.rays_per_beam), axis=1)
-        # a ray that hit nothing reads exactly max_range (no rounding from - radius)
-        reading = np.where(dist >= reach, self.max_range, dist - self.robot_radius)
+        reading = rim_ranges(world.segment_set, pose[0], pose[1], self._ray_rel + float(pose[2]),
+                             self.max_range, self.robot_radius, self.rays_per_beam)
         if self.noise_std > 0.0:
             reading = reading + rng.normal(0.0, self.noise_std, self._n)
         if self.dropout > 0.0:

@@ -44,8 +44,8 @@ _PUBLIC: dict[str, str] = {
     # worlds, robot and geometry
     "World": "world", "Goal": "world", "load_world": "world",
     "RobotParams": "robot", "Command": "robot", "StepOutcome": "robot",
-    "cast_rays": "geometry", "raycast": "geometry", "point_segment_distance": "geometry",
-    "min_distance": "geometry",
+    "cast_rays": "geometry", "rim_ranges": "geometry", "raycast": "geometry",
+    "point_segment_distance": "geometry", "min_distance": "geometry",
     # situations and learning building blocks
     "fcm": "fcm", "memberships": "fcm", "MembershipFunction": "fcm",
     "cluster_trials": "clustering", "sweep_c": "clustering", "TaskMap": "clustering",

@@ -14,7 +14,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-
 # The ufuncs' own reductions (``ndarray.sum``/``max`` add a Python layer; the
 # controller runs every iteration).
 _sum, _max = np.add.reduce, np.maximum.reduce

@@ -41,6 +41,7 @@ __all__ = [
     "polygon_self_intersection",
     "polyline_segments",
     "raycast",
+    "rim_ranges",
     "segments_intersect",
 ]
 
@@ -350,6 +351,51 @@ def cast_rays(segments: SegmentSet, x: float, y: float, angles_rad: np.ndarray,
                         np.sin(ang)[:, None], segments, float(max_range))
     out = np.empty(ang.shape[0])
     k.cast(float(x), float(y), np.cos(ang), np.sin(ang), segments.packed, float(max_range), out)
+    return out
+
+
+def rim_ranges(segments: SegmentSet, x: float, y: float, angles_rad: np.ndarray,
+               max_range: float, radius: float, group: int = 1) -> np.ndarray:
+    """What a range finder on a disc reads: ranges from the rim, for sensors in the loop.
+
+    Rays of ``max_range + radius`` from the disc's centre ``(x, y)``; a ray
+    that hits nothing reads exactly ``max_range``, one that hits reads the
+    distance from the rim (``hit - radius``, negative when the disc overlaps
+    a segment). With ``group > 1`` each reading is the nearest of ``group``
+    consecutive rays (a beam's cone sampled by several rays).
+
+    Parameters
+    ----------
+    segments
+        The world's :class:`SegmentSet` (``world.segment_set``).
+    x, y
+        The disc's centre [m].
+    angles_rad
+        (n * group,) world-frame ray directions [rad], beam by beam.
+    max_range
+        Largest reading [m], > 0.
+    radius
+        Distance from the centre to the rim [m], >= 0.
+    group
+        Rays per reading.
+
+    Returns
+    -------
+    numpy.ndarray
+        (n,) readings [m] in ``[-radius, max_range]``.
+    """
+    ang = np.asarray(angles_rad, dtype=np.float64)
+    n = ang.shape[0] // group
+    k = kernels()
+    if k is None or segments.n == 0:
+        reach = max_range + radius
+        dist = cast_rays(segments, x, y, ang, reach)
+        if group > 1:
+            dist = dist.reshape(n, group).min(axis=1)
+        return np.where(dist >= reach, max_range, dist - radius)
+    out = np.empty(n)
+    k.ranges(float(x), float(y), np.cos(ang), np.sin(ang), segments.packed, float(max_range),
+             float(radius), int(group), out)
     return out
 
 

@@ -4,10 +4,13 @@ Each kernel is the scalar-loop twin of numpy code kept in
 :mod:`sitframe.geometry` and :mod:`sitframe.robot` (the reference, and the
 path taken when numba is missing or ``SITFRAME_NUMBA=0``). A kernel performs
 the *same* IEEE operations in the same order as its numpy twin -- products,
-sums, quotients, comparisons, ``min``/``max``, and ``cos``/``sin`` from the C
-library -- so its results are bit-identical (``tests/test_kernels.py`` checks
-it). That rules out ``fastmath`` (which would reorder and fuse operations),
-and it is why the trigonometry of the ray directions stays in numpy.
+sums, quotients, comparisons, ``min``/``max`` -- so its results are
+bit-identical (``tests/test_kernels.py`` checks it). That rules out
+``fastmath`` (which would reorder and fuse operations). It is also why every
+``sin``/``cos`` stays in numpy, between kernels: numpy takes them from the C
+library on some CPUs and from its own vector library (SVML) on others (AVX-512),
+and the two differ in the last bit; a kernel calling the C library would then
+change results on those CPUs.
 
 Why compiled: one sonar read is 40 rays against 40 wall edges and one robot
 step 31 substeps against the edges within reach; in numpy each costs some
@@ -26,7 +29,8 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["cast", "cast_each", "sweep_disc"]
+__all__ = ["arc_angles", "arc_poses", "backoff", "cast", "cast_each", "first_contact",
+           "linspace", "near_segments", "nearest_point", "ranges"]
 
 _EPS = 1e-12  # the hit tolerance of sitframe.geometry._raycast
 _INV_PI = 1.0 / math.pi
@@ -86,20 +90,21 @@ def cast_each(px: np.ndarray, py: np.ndarray, dx: np.ndarray, dy: np.ndarray, se
 
 
 @njit(**_JIT)
-def _pose(t: float, x0: float, y0: float, th0: float, v: float, omega: float, t_turn: float,
-          cos_end: float, sin_end: float) -> tuple[float, float, float]:  # pragma: no cover
-    """One sample of :func:`sitframe.robot._poses_at`, the same operations."""
-    tt = t if t < t_turn else t_turn
-    half = (0.5 * omega) * tt
-    y = math.pi * (half * _INV_PI)  # numpy.sinc(half / pi)
-    if y == 0.0:
-        y = _SINC_EPS
-    chord = (v * tt) * (math.sin(y) / y)
-    ang = th0 + half
-    ts = v * (t - tt)
-    return (x0 + chord * math.cos(ang) + ts * cos_end,
-            y0 + chord * math.sin(ang) + ts * sin_end,
-            th0 + omega * tt)
+def ranges(x: float, y: float, dx: np.ndarray, dy: np.ndarray, seg: np.ndarray, max_range: float,
+           radius: float, group: int, out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """Range-finder readings (twin of :func:`sitframe.geometry.rim_ranges`) into ``out``.
+
+    Rays of ``max_range + radius`` from ``(x, y)``; ``out[g]`` is the nearest hit of
+    rays ``g * group ... (g + 1) * group - 1`` less ``radius``, or ``max_range``.
+    """
+    reach = max_range + radius
+    for g in range(out.size):
+        best = reach
+        for i in range(g * group, (g + 1) * group):
+            d = _ray(x, y, dx[i], dy[i], seg, reach)
+            if d < best:
+                best = d
+        out[g] = max_range if best >= reach else best - radius
 
 
 @njit(**_JIT)
@@ -118,43 +123,119 @@ def _dist2(px: float, py: float, seg: np.ndarray, j: int) -> float:  # pragma: n
 
 
 @njit(**_JIT)
-def sweep_disc(plan: np.ndarray, times: np.ndarray, seg: np.ndarray, near: np.ndarray,
-               out: np.ndarray) -> tuple[int, int]:  # pragma: no cover - compiled
-    """The swept-disc test of :func:`sitframe.robot.step_robot` (steps 1 and 2).
-
-    Parameters
-    ----------
-    plan
-        ``x0, y0, th0, v, omega, t_turn, cos(th_end), sin(th_end), reach², r²``.
-    times
-        (n,) substep times [s].
-    seg
-        Packed ``(5, S)`` segment set.
-    near
-        (S,) int scratch: receives the indices of the segments within reach.
-    out
-        (3,) receives the pose at ``times[-1]`` when no substep collides.
-
-    Returns
-    -------
-    (k, n_near)
-        ``n_near`` segments within reach (their indices in ``near[:n_near]``);
-        ``k`` the first substep whose disc touches one of them, -1 if none.
-    """
-    x0, y0, th0, v, omega, t_turn = plan[0], plan[1], plan[2], plan[3], plan[4], plan[5]
-    cos_end, sin_end, reach2, r2 = plan[6], plan[7], plan[8], plan[9]
+def near_segments(x: float, y: float, seg: np.ndarray, reach2: float,
+                  idx: np.ndarray) -> int:  # pragma: no cover - compiled
+    """Indices (into ``idx``) of the segments closer than ``sqrt(reach2)``; returns their count."""
     m = 0
     for j in range(seg.shape[1]):
-        if _dist2(x0, y0, seg, j) < reach2:
-            near[m] = j
+        if _dist2(x, y, seg, j) < reach2:
+            idx[m] = j
             m += 1
-    if m == 0:
-        return -1, 0
-    x = y = th = 0.0
-    for k in range(times.size):
-        x, y, th = _pose(times[k], x0, y0, th0, v, omega, t_turn, cos_end, sin_end)
-        for i in range(m):
-            if _dist2(x, y, seg, near[i]) < r2:
-                return k, m
-    out[0], out[1], out[2] = x, y, th
-    return -1, m
+    return m
+
+
+@njit(**_JIT)
+def first_contact(xs: np.ndarray, ys: np.ndarray, seg: np.ndarray,
+                  r2: float) -> int:  # pragma: no cover - compiled
+    """The first point ``(xs[k], ys[k])`` closer than ``sqrt(r2)`` to a segment; -1 if none."""
+    for k in range(xs.size):
+        for j in range(seg.shape[1]):
+            if _dist2(xs[k], ys[k], seg, j) < r2:
+                return k
+    return -1
+
+
+@njit(**_JIT)
+def nearest_point(x: float, y: float, seg: np.ndarray) -> tuple[float, float]:  # pragma: no cover
+    """The point nearest ``(x, y)`` on the segments (twin of ``geometry.nearest_on_segments``)."""
+    best, bx, by = np.inf, np.nan, np.nan
+    for j in range(seg.shape[1]):
+        wx = x - seg[0, j]
+        wy = y - seg[1, j]
+        t = (wx * seg[2, j] + wy * seg[3, j]) * seg[4, j]
+        if t < 0.0:
+            t = 0.0
+        elif t > 1.0:
+            t = 1.0
+        dx = wx - t * seg[2, j]
+        dy = wy - t * seg[3, j]
+        d2 = dx * dx + dy * dy
+        if d2 < best or j == 0:  # (argmin: the first of equal minima)
+            best, bx, by = d2, seg[0, j] + t * seg[2, j], seg[1, j] + t * seg[3, j]
+    return bx, by
+
+
+@njit(**_JIT)
+def linspace(start: float, stop: float, out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """``numpy.linspace(start, stop, out.size)`` into ``out``, the same operations."""
+    num = out.size
+    div = num - 1
+    delta = stop - start
+    step = delta / div if div > 0 else np.nan
+    for i in range(num):
+        if div <= 0:
+            v = i * delta
+        elif step == 0.0:
+            v = (i / div) * delta
+        else:
+            v = i * step
+        out[i] = v + start
+    if num > 1:
+        out[num - 1] = stop
+
+
+@njit(**_JIT)
+def arc_angles(t: np.ndarray, th0: float, omega: float, t_turn: float, sinc_arg: np.ndarray,
+               ang: np.ndarray) -> None:  # pragma: no cover - compiled
+    """First half of ``robot._poses_at``: the arguments of its ``sinc`` and ``cos``/``sin``."""
+    for i in range(t.size):
+        tt = t[i] if t[i] < t_turn else t_turn
+        half = (0.5 * omega) * tt
+        y = math.pi * (half * _INV_PI)  # numpy.sinc(half / pi) = sin(y) / y
+        sinc_arg[i] = _SINC_EPS if y == 0.0 else y
+        ang[i] = th0 + half
+
+
+@njit(**_JIT)
+def arc_poses(t: np.ndarray, plan: np.ndarray, sinc_arg: np.ndarray, sin_sinc: np.ndarray,
+              cos_ang: np.ndarray, sin_ang: np.ndarray,
+              out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """Second half of ``robot._poses_at``: poses (3, n) from the sines and cosines.
+
+    ``plan`` is ``x0, y0, th0, v, omega, t_turn, cos(th_end), sin(th_end)``.
+    """
+    x0, y0, th0, v, omega, t_turn, cos_end, sin_end = plan
+    for i in range(t.size):
+        tt = t[i] if t[i] < t_turn else t_turn
+        chord = (v * tt) * (sin_sinc[i] / sinc_arg[i])
+        ts = v * (t[i] - tt)
+        out[0, i] = x0 + chord * cos_ang[i] + ts * cos_end
+        out[1, i] = y0 + chord * sin_ang[i] + ts * sin_end
+        out[2, i] = th0 + omega * tt
+
+
+@njit(**_JIT)
+def backoff(cx: float, cy: float, nx: float, ny: float, length: float, seg: np.ndarray,
+            r2: float, inside: bool, s: np.ndarray) -> tuple[int, float, float]:  # pragma: no cover
+    """The back-off of ``robot.step_robot`` (step 4) along ``(nx, ny)``, ``s.size`` samples.
+
+    Returns ``(m, x, y)``: the last sample ``m`` of the free prefix and its point.
+    """
+    linspace(0.0, length, s)
+    m = -1
+    x = y = 0.0
+    floor = 0.0
+    for i in range(s.size):
+        bx = cx + s[i] * nx
+        by = cy + s[i] * ny
+        d2 = np.inf
+        for j in range(seg.shape[1]):
+            d = _dist2(bx, by, seg, j)
+            if d < d2:
+                d2 = d
+        if i == 0:
+            floor = (d2 if d2 < r2 else r2) - 1e-15
+        if not (d2 >= (floor if inside else r2)):
+            break
+        m, x, y = i, bx, by
+    return m, x, y

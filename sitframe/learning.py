@@ -275,19 +275,26 @@ class FuzzyQLearner:
             return False
         prm = self.params
         q = self.q
-        active = (u_before >= prm.activation).nonzero()[0] if prm.activation > 0 else \
-            self._rows
-        if active.size:
+        # Scalar Python: usually one or two rules are active, and a handful of numpy
+        # calls on such tiny arrays would cost more than the arithmetic. The operations
+        # (and their order) are those of the array expressions they replaced.
+        u0 = u_before.tolist()
+        act = prm.activation
+        active = [i for i, w in enumerate(u0) if w >= act] if act > 0 else range(len(u0))
+        if active:
             v_next = 0.0 if (collided and prm.terminal_on_collision) else \
                 float(u_after @ np.maximum.reduce(q, axis=1))
-            acts = self.rule_base[active]
-            w = u_before[active]
-            cur = q[active, acts]
-            if prm.update == "thesis":
-                q[active, acts] = cur + prm.alpha * (w * reward + prm.gamma * w * v_next - cur)
-            else:
-                q[active, acts] = cur + prm.alpha * w * (reward + prm.gamma * v_next - cur)
-            self.updates[active] += 1
+            rules = self.rule_base.tolist()
+            alpha, gamma, thesis = prm.alpha, prm.gamma, prm.update == "thesis"
+            target = reward + gamma * v_next
+            for i in active:
+                w, a = u0[i], rules[i]
+                cur = q.item(i, a)
+                if thesis:
+                    q[i, a] = cur + alpha * (w * reward + gamma * w * v_next - cur)
+                else:
+                    q[i, a] = cur + alpha * w * (target - cur)
+                self.updates[i] += 1
         self.since_change += 1
         if collided or self.since_change >= prm.b:
             self._change(iteration)
