@@ -145,13 +145,17 @@ class LaserScanner:
             (beams,) ranges [m] from the rim, in [0, max_range], ordered as
             :attr:`angles_deg`.
         """
+        exact = self.noise_std == 0.0 and self.dropout == 0.0  # (then clipped in the same call)
         reading = rim_ranges(world.segment_set, pose[0], pose[1],
-                             self._angles_rad + float(pose[2]), self.max_range, self.robot_radius)
+                             self._angles_rad + float(pose[2]), self.max_range, self.robot_radius,
+                             clip=exact)
+        if exact:
+            return reading
         if self.noise_std > 0.0:
             reading = reading + rng.normal(0.0, self.noise_std, self.beams)
         if self.dropout > 0.0:
             reading = np.where(rng.random(self.beams) < self.dropout, self.max_range, reading)
-        return np.minimum(np.maximum(reading, 0.0, out=reading), self.max_range, out=reading)
+        return np.clip(reading, 0.0, self.max_range)
 
     def __repr__(self) -> str:
         return (f"LaserScanner({self.beams} beams over {self.fov_deg:g} deg, "

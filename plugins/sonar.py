@@ -154,13 +154,16 @@ class SonarRing:
         numpy.ndarray
             (d,) ranges [m] from the rim, in [0, max_range].
         """
+        exact = self.noise_std == 0.0 and self.dropout == 0.0  # (then clipped in the same call)
         reading = rim_ranges(world.segment_set, pose[0], pose[1], self._ray_rel + float(pose[2]),
-                             self.max_range, self.robot_radius, self.rays_per_beam)
+                             self.max_range, self.robot_radius, self.rays_per_beam, clip=exact)
+        if exact:
+            return reading
         if self.noise_std > 0.0:
             reading = reading + rng.normal(0.0, self.noise_std, self._n)
         if self.dropout > 0.0:
             reading = np.where(rng.random(self._n) < self.dropout, self.max_range, reading)
-        return np.minimum(np.maximum(reading, 0.0, out=reading), self.max_range, out=reading)
+        return np.clip(reading, 0.0, self.max_range)
 
     def __repr__(self) -> str:
         return (f"SonarRing({self._n} beams, max_range={self.max_range:g} m, "

@@ -52,6 +52,8 @@ from typing import Literal, ParamSpec, TypeVar
 
 import numpy as np
 
+from sitframe.kernels import kernels
+
 __all__ = [
     "FCMResult",
     "MEASURE_DIRECTIONS",
@@ -501,6 +503,15 @@ class MembershipFunction:
         """Return the (c,) memberships of one (d,) reading; they sum to 1."""
         diff = self.centers - x
         d2 = np.einsum("ij,ij->i", diff, diff)
+        kern = kernels()
+        if kern is not None and d2.size <= kern.PAIRWISE_MAX:  # (same arithmetic, compiled)
+            w = np.empty(d2.size)
+            if kern.fcm_ratios(d2, self.floor, w) <= 0.0:
+                on = d2 <= 0.0
+                return on / on.sum()
+            w **= self.p
+            kern.normalize(w)
+            return w
         dmin = _min(d2)  # (the ufuncs' own reduce: ndarray.min/sum add a Python layer)
         if dmin <= 0.0:
             on = d2 <= 0.0

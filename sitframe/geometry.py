@@ -24,10 +24,10 @@ them.
 from __future__ import annotations
 
 import math
-import os
-from typing import Any
 
 import numpy as np
+
+from sitframe.kernels import kernels
 
 __all__ = [
     "SegmentSet",
@@ -143,27 +143,6 @@ class SegmentSet:
 
 def _segment_set(segments: np.ndarray | SegmentSet) -> SegmentSet:
     return segments if isinstance(segments, SegmentSet) else SegmentSet(segments)
-
-
-_KERNELS: list[Any] = []
-
-
-def kernels() -> Any:
-    """The compiled kernels (:mod:`sitframe.kernels`), or ``None`` for the numpy path.
-
-    ``None`` when numba cannot be imported or the environment variable
-    ``SITFRAME_NUMBA`` is ``0`` (read once, at the first call). Both paths give
-    bit-identical results; the kernels are some ten times faster.
-    """
-    if not _KERNELS:
-        k = None
-        if os.environ.get("SITFRAME_NUMBA", "1").strip() != "0":
-            try:  # imported here, not at the top: numba's import costs ~0.3 s of start-up,
-                from sitframe import kernels as k  # paid only by commands that simulate
-            except ImportError:
-                k = None
-        _KERNELS.append(k)
-    return _KERNELS[0]
 
 
 # ----------------------------------------------------------------------------- distances
@@ -355,7 +334,8 @@ def cast_rays(segments: SegmentSet, x: float, y: float, angles_rad: np.ndarray,
 
 
 def rim_ranges(segments: SegmentSet, x: float, y: float, angles_rad: np.ndarray,
-               max_range: float, radius: float, group: int = 1) -> np.ndarray:
+               max_range: float, radius: float, group: int = 1, *,
+               clip: bool = False) -> np.ndarray:
     """What a range finder on a disc reads: ranges from the rim, for sensors in the loop.
 
     Rays of ``max_range + radius`` from the disc's centre ``(x, y)``; a ray
@@ -378,24 +358,28 @@ def rim_ranges(segments: SegmentSet, x: float, y: float, angles_rad: np.ndarray,
         Distance from the centre to the rim [m], >= 0.
     group
         Rays per reading.
+    clip
+        Clip the readings to ``[0, max_range]`` as well (a sensor without
+        noise: ``numpy.clip`` of the result, in the same call).
 
     Returns
     -------
     numpy.ndarray
-        (n,) readings [m] in ``[-radius, max_range]``.
+        (n,) readings [m] in ``[-radius, max_range]`` (``[0, max_range]`` with ``clip``).
     """
     ang = np.asarray(angles_rad, dtype=np.float64)
     n = ang.shape[0] // group
     k = kernels()
-    if k is None or segments.n == 0:
+    if k is None:
         reach = max_range + radius
         dist = cast_rays(segments, x, y, ang, reach)
         if group > 1:
             dist = dist.reshape(n, group).min(axis=1)
-        return np.where(dist >= reach, max_range, dist - radius)
+        out = np.where(dist >= reach, max_range, dist - radius)
+        return np.clip(out, 0.0, max_range) if clip else out
     out = np.empty(n)
     k.ranges(float(x), float(y), np.cos(ang), np.sin(ang), segments.packed, float(max_range),
-             float(radius), int(group), out)
+             float(radius), int(group), bool(clip), out)
     return out
 
 

@@ -57,6 +57,7 @@ from typing import Any
 import numpy as np
 
 from sitframe import geometry as geo
+from sitframe.kernels import kernels
 from sitframe.params import choice, number
 from sitframe.world import World
 
@@ -233,7 +234,7 @@ def _poses_at(t: np.ndarray, x0: float, y0: float, th0: float, v: float, omega: 
               t_turn: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Closed-form arc-then-straight poses at times ``t`` (arrays x, y, theta)."""
     th_end = th0 + omega * t_turn
-    kern = geo.kernels()
+    kern = kernels()
     if kern is not None:  # the same arithmetic around numpy's sin and cos (sitframe.kernels)
         buf = np.empty((5, t.size))
         kern.arc_angles(t, th0, omega, t_turn, buf[0], buf[1])
@@ -408,7 +409,7 @@ def _near(segs: geo.SegmentSet, x: float, y: float, reach: float) -> geo.Segment
     """The segments closer than ``reach`` to ``(x, y)``, or None if there are none."""
     if segs.n == 0:
         return None
-    kern = geo.kernels()
+    kern = kernels()
     if kern is not None:
         idx = np.empty(segs.n, dtype=np.intp)
         idx = idx[: kern.near_segments(x, y, segs.packed, reach * reach, idx)]
@@ -419,7 +420,7 @@ def _near(segs: geo.SegmentSet, x: float, y: float, reach: float) -> geo.Segment
 
 def _first_contact(xs: np.ndarray, ys: np.ndarray, near: geo.SegmentSet, r2: float) -> int:
     """The first of the (n,) points ``xs, ys`` where the disc (radius² ``r2``) touches, or -1."""
-    kern = geo.kernels()
+    kern = kernels()
     if kern is not None:
         return int(kern.first_contact(xs, ys, near.packed, r2))
     bad = (_dist2_cols(xs, ys, near) < r2).any(axis=1)
@@ -429,7 +430,7 @@ def _first_contact(xs: np.ndarray, ys: np.ndarray, near: geo.SegmentSet, r2: flo
 
 def _linspace(start: float, stop: float, num: int) -> np.ndarray:
     """``numpy.linspace(start, stop, num)``."""
-    kern = geo.kernels()
+    kern = kernels()
     if kern is None:
         return np.linspace(start, stop, num)
     out = np.empty(num)
@@ -439,7 +440,7 @@ def _linspace(start: float, stop: float, num: int) -> np.ndarray:
 
 def _nearest_point(x: float, y: float, near: geo.SegmentSet) -> np.ndarray:
     """(2,) the point of the segments nearest ``(x, y)`` (the contact point)."""
-    kern = geo.kernels()
+    kern = kernels()
     if kern is not None:
         return np.array(kern.nearest_point(x, y, near.packed))
     return geo.nearest_on_segments(np.array([[x, y]]), near)[2][0]
@@ -452,7 +453,7 @@ def _backoff(cx: float, cy: float, nx: float, ny: float, length: float, near: ge
     ``inside``: the disc started inside a wall; then any sample no closer to a wall
     than the first is free. Returns (distance backed off, x, y).
     """
-    kern = geo.kernels()
+    kern = kernels()
     if kern is not None:
         s = np.empty(_BACKOFF_SAMPLES)
         m, x, y = kern.backoff(cx, cy, nx, ny, length, near.packed, r2, inside, s)
