@@ -14,9 +14,10 @@ imported (a platform without wheels) or when the environment variable
 ``SITFRAME_NUMBA`` is ``0``; the tests compare the two.
 
 Costs: importing numba and loading the kernels from numba's on-disk cache
-takes some 0.3-0.5 s once per process (a forkserver worker pool loads them
-once, in the forkserver); compiling them, the first time after an install,
-some 10 s.
+(all of them, when :mod:`sitframe.kernels_numba` is imported) takes some
+0.3-0.5 s once per process; a worker pool's forkserver preloads them, so its
+workers start with them loaded. Compiling them, the first time after an
+install, takes some 10 s (``benchmarks/bench_sim.py --first-call`` measures both).
 """
 
 from __future__ import annotations
@@ -24,9 +25,14 @@ from __future__ import annotations
 import os
 from types import ModuleType
 
-__all__ = ["kernels"]
+__all__ = ["kernels", "wanted"]
 
 _LOADED: list[ModuleType | None] = []
+
+
+def wanted() -> bool:
+    """Whether the kernels are to be used (``SITFRAME_NUMBA`` is not ``0``)."""
+    return os.environ.get("SITFRAME_NUMBA", "1").strip() != "0"
 
 
 def kernels() -> ModuleType | None:
@@ -36,7 +42,7 @@ def kernels() -> ModuleType | None:
     """
     if not _LOADED:
         k = None
-        if os.environ.get("SITFRAME_NUMBA", "1").strip() != "0":
+        if wanted():
             try:  # imported here, not at the top: numba's import costs ~0.3 s of start-up,
                 from sitframe import kernels_numba as k  # paid only by commands that simulate
             except ImportError:

@@ -322,3 +322,30 @@ def label_strengths(onehot: np.ndarray, u: np.ndarray,
                 best = v
         out[a] = best
     return _pairwise_sum(out, n)
+
+
+def _warm() -> None:
+    """Load (or, the first time, compile) every kernel now, with the types the loop uses.
+
+    Run at import, so a process importing this module -- a worker pool's
+    forkserver preloads it -- has them all, and its forked workers inherit them.
+    """
+    seg = np.array([[0.0], [1.0], [1.0], [0.0], [1.0]])  # one segment (0, 1)-(1, 1)
+    one = np.ones(2)
+    out, idx = np.empty(2), np.empty(1, dtype=np.intp)
+    cast(0.0, 0.0, one, one, seg, 3.0, out)
+    cast_each(one, one, one, one, seg, 3.0, out)
+    ranges(0.0, 0.0, one, one, seg, 3.0, 0.1, 1, True, out)
+    near_segments(0.0, 0.0, seg, 1.0, idx)
+    first_contact(one, one, seg, 0.01)
+    nearest_point(0.0, 0.0, seg)
+    linspace(0.0, 1.0, out)
+    arc_angles(one, 0.0, 1.0, 0.5, out, np.empty(2))
+    arc_poses(one, np.ones(8), one, one, one, one, np.empty((3, 2)))
+    backoff(0.0, 0.0, 1.0, 0.0, 0.05, seg, 0.01, False, np.empty(3))
+    fcm_ratios(one, 1e-9, out)
+    normalize(out)
+    label_strengths(np.ones((2, 2)), one, out)
+
+
+_warm()

@@ -49,6 +49,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from sitframe import kernels
 from sitframe.config import config_hash, to_toml
 from sitframe.errors import InputError, PluginFault, TaskCancelled
 from sitframe.interrupts import deferred_interrupt
@@ -425,8 +426,9 @@ def start_method() -> str:
 
 def _mp_context(method: str) -> mp.context.BaseContext:
     ctx = mp.get_context(method)
-    if method == "forkserver":
-        ctx.set_forkserver_preload(["sitframe.parallel", "sitframe.scheduler", "sitframe.loop"])
+    if method == "forkserver":  # (workers fork from it with the compiled kernels loaded)
+        ctx.set_forkserver_preload(["sitframe.parallel", "sitframe.scheduler", "sitframe.loop",
+                                    *(["sitframe.kernels_numba"] if kernels.wanted() else [])])
     return ctx
 
 
