@@ -38,8 +38,8 @@ PLUGINS = ("sonar", "fcm_interpreter", "fuzzy_q", "rewards", "arbiters")
 def _time_trials(iterations: int, repeats: int) -> list[float]:
     """Seconds per learning trial of ``obstacle-avoidance`` with this process's sitframe."""
     from sitframe.config import load_config, validate_config
+    from sitframe.experiment import Experiment
     from sitframe.pluginmanager import get_plugin_manager
-    from sitframe.scheduler import Experiment
 
     mods = [importlib.import_module(f"sitframe.plugins.{m}") for m in PLUGINS]
     cfg, source, _ = load_config("obstacle-avoidance")
@@ -102,8 +102,8 @@ def main() -> None:
         return
 
     from sitframe.config import load_config
-    from sitframe.experiment import prepare_experiment
     from sitframe.logs import LogWriter
+    from sitframe.prepare import prepare_experiment
 
     cfg, source, _ = load_config("obstacle-avoidance")
     cfg["experiment"].update(trials=1, iterations=args.iterations, stages=["collect", "cluster"])

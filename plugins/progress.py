@@ -4,6 +4,10 @@ Shown only when the run asks for it (``RunInfo.extra["progress"]``; the CLI
 sets it when stderr is a terminal and ``--json`` is not given). Iteration
 updates are throttled to every 100 iterations to keep the loop fast.
 
+Runs that share a ``RunInfo.extra["progress_group"]`` (the points of a sweep)
+share one pair of bars, whose totals grow as each run starts; several runs
+in one process show on one rich display, closed when the last run ends.
+
 When trials run in worker processes (``--workers K > 1``, ``--scheduler``),
 ``sitframe_step`` fires in the workers, where this plugin has no bar
 (``RunInfo.extra["step_hooks"]`` is false in the main process): only the
@@ -16,7 +20,13 @@ from typing import Any
 
 from sitframe import RunInfo, StepRecord, TrialResult, hookimpl
 
-_state: dict[str, Any] = {}
+#: The shared display, its bars per group (``{"trials": id, "iterations": id}``) and
+#: the group of each run still running (by run name).
+_state: dict[str, Any] = {"progress": None, "bars": {}, "runs": {}}
+
+
+def _group(run: RunInfo) -> str:
+    return str(run.extra.get("progress_group") or run.name)
 
 
 @hookimpl
@@ -25,34 +35,52 @@ def sitframe_run_start(run: RunInfo) -> None:
         return
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
-    progress = Progress("[progress.description]{task.description}", BarColumn(),
-                        MofNCompleteColumn(), TimeRemainingColumn(), transient=False)
-    progress.start()
-    total = run.n_trials * run.iterations
-    _state["progress"] = progress
+    if _state["progress"] is None:
+        _state["progress"] = Progress("[progress.description]{task.description}", BarColumn(),
+                                      MofNCompleteColumn(), TimeRemainingColumn(),
+                                      transient=False)
+        _state["progress"].start()
+    progress, group = _state["progress"], _group(run)
+    bars = _state["bars"].setdefault(group, {})
+    _state["runs"][run.name] = group
+    want = {"trials": run.n_trials}
     if run.extra.get("step_hooks", True):
-        _state["task"] = progress.add_task(f"{run.name}: iterations", total=total)
-    _state["trials"] = progress.add_task(f"{run.name}: trials", total=run.n_trials)
+        want["iterations"] = run.n_trials * run.iterations
+    for kind, n in want.items():
+        if kind in bars:
+            progress.update(bars[kind], total=progress.tasks[bars[kind]].total + n)
+        else:
+            bars[kind] = progress.add_task(f"{group}: {kind}", total=n)
+
+
+def _bar(kind: str) -> tuple[Any, Any] | tuple[None, None]:
+    """The display and the bar of ``kind`` for the only running group (steps carry no run)."""
+    progress = _state["progress"]
+    if progress is None or len(_state["bars"]) != 1:
+        return None, None
+    bars = next(iter(_state["bars"].values()))
+    return (progress, bars[kind]) if kind in bars else (None, None)
 
 
 @hookimpl
 def sitframe_step(record: StepRecord) -> None:
-    progress = _state.get("progress")
-    if progress is not None and "task" in _state and \
-            record.transition.before.iteration % 100 == 99:
-        progress.advance(_state["task"], 100)
+    if record.transition.before.iteration % 100 == 99:
+        progress, bar = _bar("iterations")
+        if progress is not None:
+            progress.advance(bar, 100)
 
 
 @hookimpl
 def sitframe_trial_end(run: RunInfo, trial: TrialResult) -> None:
-    progress = _state.get("progress")
-    if progress is not None:
-        progress.advance(_state["trials"], 1)
+    group = _state["runs"].get(run.name)
+    if group is not None:
+        _state["progress"].advance(_state["bars"][group]["trials"], 1)
 
 
 @hookimpl
 def sitframe_run_end(run: RunInfo, status: str) -> None:
-    progress = _state.pop("progress", None)
-    if progress is not None:
-        progress.stop()
-    _state.clear()
+    if _state["runs"].pop(run.name, None) is None:
+        return
+    if not _state["runs"]:
+        _state["progress"].stop()
+        _state.update(progress=None, bars={})

@@ -41,11 +41,12 @@ import math
 import os
 import signal
 import sys
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 from sitframe import __version__
-from sitframe.errors import PLUGIN_FAULT_EXIT, InputError, PluginError, PluginFault
+from sitframe.errors import PLUGIN_FAULT_EXIT, InputError, PluginError, PluginFault, note
 
 # start-up time: this module is imported whenever the command line builds its parser
 # (``sitframe --help`` and every command), so what only one command needs is imported
@@ -247,7 +248,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise InputError("missing EXPERIMENT (a preset name or a .toml config), or give "
                          "--resume LOG", key="run")
     exp, kwargs = _prepare_run(args)
-    n_tasks = exp.info.n_trials if "learn" in exp.cfg["experiment"]["stages"] else 0
+    n_tasks = exp.info.n_trials if "learn" in exp.config.experiment.stages else 0
     exp.executor = make_executor(args.workers, args.scheduler, n_tasks)
     result = _execute(exp, kwargs, replacing=True)
     if args.json:
@@ -268,7 +269,7 @@ def _claim(out: str, *, replacing: bool = False, key: str = "--out") -> None:
             what = f"the existing log (status {open_log(out).status})"
         except InputError:
             what = "the existing file (not a readable sitframe log)"
-        print(f"sitframe: note: {out}: replacing {what}", file=sys.stderr)
+        note(f"{out}: replacing {what}")
 
 
 def _execute(exp: Any, kwargs: dict[str, Any], *, replacing: bool = False,
@@ -329,7 +330,8 @@ def _run_resume(args: argparse.Namespace) -> int:
 
 def _prepare_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
     from sitframe.config import load_config
-    from sitframe.experiment import prepare_experiment
+    from sitframe.parallel import make_executor
+    from sitframe.prepare import make_prerequisites, prepare_experiment
 
     _positive("trials", args.trials)
     _positive("iterations", args.iterations)
@@ -342,6 +344,10 @@ def _prepare_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
         if val is not None:  # (paths on the command line are relative to the working folder)
             e[key] = _abspath(val) if key in ("world", "clusters_from") else val
     out = args.out or str(Path("logs") / f"{e['name']}.h5")
+    make_prerequisites(cfg, base_dir,
+                       executor_for=partial(make_executor, args.workers, args.scheduler),
+                       plugins_dirs=tuple(args.plugins_dir),
+                       progress=not args.json and sys.stderr.isatty(), say=note)
     exp, kwargs = prepare_experiment(cfg, source=source, base_dir=base_dir, out=out,
                                      plugins_dirs=tuple(args.plugins_dir),
                                      progress=not args.json and sys.stderr.isatty())
@@ -416,7 +422,7 @@ def print_run(result: Any) -> None:
                   f"{s['coverage']:.2f}")
     console.print(t)
     if result.trials:
-        from sitframe.experiment import rule_base_table
+        from sitframe.evaluation import rule_base_table
 
         console.print(rule_base_table(result))
     if result.info.out:
@@ -430,7 +436,7 @@ def print_run(result: Any) -> None:
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from sitframe.config import MAX_ITERATIONS, MAX_TRIALS
-    from sitframe.experiment import evaluate_log
+    from sitframe.evaluation import evaluate_log
 
     _positive("iterations", args.iterations, MAX_ITERATIONS)
     _positive("goal-episodes", args.goal_episodes, MAX_TRIALS)

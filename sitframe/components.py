@@ -109,7 +109,7 @@ class Reward(Protocol):
     Optional: a method ``metrics(arrays) -> dict[str, float]`` that scores a
     finished trial's per-iteration arrays (``pose``, ``sonar``, ``command``,
     ``collision``, ... as in the log) by the behaviour's own measure of
-    quality. :func:`sitframe.experiment.evaluate_log` adds what it returns to
+    quality. :func:`sitframe.evaluation.evaluate_log` adds what it returns to
     every evaluation (the wall-following reward reports
     ``wall_band_fraction`` this way). It is not part of the protocol check.
     """
@@ -191,7 +191,7 @@ class Arbiter(Protocol):
         """Return the fused proposal and the (k,) weight given to each proposal, in order.
 
         A fused speed of ``None`` means the run's ``experiment.default_speed``.
-        The scheduler clips the result to the robot's limits.
+        The run driver clips the result to the robot's limits.
         """
         ...
 

@@ -28,7 +28,7 @@ thesis's Table A.1):
     behaviour = "LABEL"}`` to start from a learned policy (``trial = "best"``
     picks the trial whose frozen rule base ranked best on collisions and
     coverage when evaluated in the log's own learning world; see
-    :func:`sitframe.experiment.best_trial`), then the
+    :func:`sitframe.prepare.best_trial`), then the
     behaviour's own parameters.
 ``[arbiter]``
     ``component`` (default ``"single"``) and its parameters.
@@ -40,6 +40,11 @@ thesis's Table A.1):
     (``"random"`` or ``"world"``), ``radius``, ``margin``: the parameters of
     the ``goal-episodes`` evaluation protocol (``plugins/goal_episodes.py``)
     that a goal run's evaluate stage uses.
+``[prerequisites]``
+    ``"LOG PATH" = "EXPERIMENT"``: a log this config reads (``clusters_from``,
+    ``policy_from.log``) and the experiment (preset name or .toml path) that
+    makes it; ``sitframe run`` makes a missing one first, or reuses a complete
+    one of the same config (:func:`sitframe.prepare.make_prerequisites`).
 ``[plugins]``
     ``dirs``: folders of loose plugin modules, relative to the config file.
     Every ``*.py`` file in them is imported, i.e. **runs**, when the config
@@ -61,10 +66,12 @@ naming the file and the key path.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import hashlib
 import importlib.resources
 import re
 import tomllib
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -104,6 +111,9 @@ DEFAULTS: dict[str, dict[str, Any]] = {
              "pairs": "random", "radius": 0.3, "margin": 0.1},
     "plugins": {"dirs": []},
 }
+#: Optional sections without defaults (absent from a config that does not use them, so the
+#: config's text, and so its hash, stays what it was before they existed).
+OPTIONAL_SECTIONS = ("prerequisites",)
 
 _CORE_KEYS = {s: set(v) for s, v in DEFAULTS.items() if s not in ("behaviours",)}
 
@@ -118,6 +128,112 @@ _COMPONENT_SECTIONS = ("sensor", "interpreter", "arbiter")
 #: Keys of a ``[behaviours.LABEL]`` (or ``[arbiter]``) table that the core reads and that
 #: are not the component's parameters (the one definition; resolve and sweep use it).
 META_KEYS = ("component", "reward", "reward_params", "policy_from")
+
+
+@dataclass(frozen=True)
+class Component:
+    """A component table: the registered ``name`` and the component's own ``params``.
+
+    ``reward``, ``reward_params`` and ``policy_from`` are the reserved keys
+    (:data:`META_KEYS`) the core reads from behaviour and arbiter tables.
+    """
+
+    name: str
+    params: dict[str, Any]
+    reward: str | None = None
+    reward_params: dict[str, Any] = dataclasses.field(default_factory=dict)
+    policy_from: dict[str, Any] | None = None
+
+    @classmethod
+    def of(cls, table: dict[str, Any]) -> Component:
+        return cls(table["component"], {k: v for k, v in table.items() if k not in META_KEYS},
+                   table.get("reward"), dict(table.get("reward_params", {})),
+                   table.get("policy_from"))
+
+
+@dataclass(frozen=True)
+class ExperimentSection:
+    """``[experiment]``: what runs, how long, where (see the module docstring)."""
+
+    name: str
+    description: str
+    seed: int
+    trials: int
+    iterations: int
+    stages: tuple[str, ...]
+    world: str
+    default_speed: float
+    clusters_from: str
+
+
+@dataclass(frozen=True)
+class CollectSection:
+    """``[collect]``: how sensor data for the cluster stage is recorded."""
+
+    mode: str
+    worlds: tuple[str, ...]
+    speed: float
+    rate_hz: float
+    wander_samples: int
+
+
+@dataclass(frozen=True)
+class EvaluateSection:
+    """``[evaluate]``: the worlds and length of each trial's frozen-policy evaluation."""
+
+    worlds: tuple[str, ...]
+    iterations: int
+
+
+@dataclass(frozen=True)
+class Config:
+    """A validated config, typed: what the core reads (built by :meth:`of`).
+
+    The plain dict it is built from stays the config's serial form (the
+    log's TOML, sweep keys); ``tables`` holds every table as validated, for
+    plugins that read a table by name (an evaluation protocol's, e.g. ``[goal]``).
+    """
+
+    experiment: ExperimentSection
+    robot: dict[str, Any]
+    sensor: Component
+    collect: CollectSection
+    interpreter: Component
+    behaviours: dict[str, Component]
+    arbiter: Component
+    evaluate: EvaluateSection
+    plugin_dirs: tuple[str, ...]
+    prerequisites: dict[str, str]
+    tables: dict[str, dict[str, Any]]
+
+    @classmethod
+    def of(cls, cfg: dict[str, Any]) -> Config:
+        """The typed view of a config validated by :func:`validate_config`."""
+        e, c, v = cfg["experiment"], cfg["collect"], cfg["evaluate"]
+        return cls(
+            ExperimentSection(e["name"], e["description"], int(e["seed"]), int(e["trials"]),
+                              int(e["iterations"]), tuple(e["stages"]), e["world"],
+                              float(e["default_speed"]), e["clusters_from"]),
+            dict(cfg["robot"]), Component.of(cfg["sensor"]),
+            CollectSection(c["mode"], tuple(c["worlds"]), float(c["speed"]),
+                           float(c["rate_hz"]), int(c["wander_samples"])),
+            Component.of(cfg["interpreter"]),
+            {label: Component.of(t) for label, t in cfg["behaviours"].items()},
+            Component.of(cfg["arbiter"]),
+            EvaluateSection(tuple(v["worlds"]), int(v["iterations"])),
+            tuple(cfg["plugins"]["dirs"]), dict(cfg.get("prerequisites", {})),
+            {k: t for k, t in cfg.items() if isinstance(t, dict)})
+
+    def worlds(self) -> list[str]:
+        """The worlds the stages name, once each: the learning world, then the collection
+        rooms (if it collects) and the evaluation rooms (if it evaluates)."""
+        e = self.experiment
+        names = [e.world]
+        if "collect" in e.stages:
+            names += self.collect.worlds
+        if "evaluate" in e.stages:
+            names += self.evaluate.worlds
+        return list(dict.fromkeys(names))
 
 
 def list_presets() -> list[str]:
@@ -179,7 +295,7 @@ def parse_config(text: str, *, file: str | None = None) -> dict[str, Any]:
 def validate_config(raw: dict[str, Any], *, file: str | None = None) -> dict[str, Any]:
     """Validate a config dict and return a new dict with defaults filled in."""
     cfg = copy.deepcopy(DEFAULTS)
-    sections = set(DEFAULTS)
+    sections = {*DEFAULTS, *OPTIONAL_SECTIONS}
     for section, value in raw.items():
         if section not in sections:
             raise InputError(
@@ -201,6 +317,9 @@ def validate_config(raw: dict[str, Any], *, file: str | None = None) -> dict[str
             cfg[section] = table
         elif section == "robot":
             cfg["robot"] = _validate_robot(value, file)
+        elif section == "prerequisites":
+            cfg[section] = {log: _at(P.string, log, run, file, section)
+                            for log, run in value.items()}
         else:
             known = _CORE_KEYS[section]
             for key in value:

@@ -9,6 +9,7 @@ so the CLI can print one line and exit with status 2.
 from __future__ import annotations
 
 import difflib
+import sys
 from collections.abc import Iterable
 from typing import Any
 
@@ -98,6 +99,11 @@ class PluginFault(PluginError):
 def _fault(message: str, where: str, method: str, trial: int | None,
            iteration: int | None) -> PluginFault:
     return PluginFault(message, where=where, method=method, trial=trial, iteration=iteration)
+
+
+def note(message: str) -> None:
+    """One line on stderr saying what a command chose to do for the user (not an error)."""
+    print(f"sitframe: note: {message}", file=sys.stderr)
 
 
 def did_you_mean(word: str, choices: Iterable[str]) -> str:

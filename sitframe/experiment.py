@@ -1,471 +1,531 @@
-"""High-level entry points: prepare a run from a config, evaluate a log, print rule bases.
+"""The run driver: an experiment's stages, in order, reported to the observers.
 
-These glue :mod:`sitframe.config`, :mod:`sitframe.scheduler` (with :mod:`sitframe.loop`) and
-:mod:`sitframe.logs` together for the CLI and for notebooks::
-
-    from sitframe.config import load_config
-    from sitframe.experiment import prepare_experiment
-    cfg, source, base = load_config("obstacle-avoidance")
-    cfg["experiment"]["trials"] = 2
-    exp, kwargs = prepare_experiment(cfg, source=source, out="logs/oa.h5")
-    result = exp.run(**kwargs)
+Stages of an experiment (DESIGN section 3): **collect** sensor data →
+**cluster** (fit the situation interpreter) → **learn** (N independent
+trials, :mod:`sitframe.loop`) → **evaluate** (each trial's frozen policy in
+other worlds, or an evaluation protocol's episodes). Components come from
+:mod:`sitframe.resolve`; trials go to an executor (this process, a worker
+pool or a Dask cluster, :mod:`sitframe.parallel`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-import math
+import inspect
 import os
-from pathlib import Path
+import platform
+import threading
+import time
+from dataclasses import dataclass, field
 from typing import Any
 
-import h5py
 import numpy as np
+import pluggy
 
-from sitframe.clustering import average_ranks, describe_prototype
-from sitframe.collect import trajectory_poses
-from sitframe.config import META_KEYS, load_config, validate_config
-from sitframe.errors import InputError
-from sitframe.logs import Log, open_log
-from sitframe.loop import STAGE_BATCH, STAGE_EVAL, TrialSpec, batch_scores, simulate, stage_seed
+from sitframe import __version__
+from sitframe.collect import Collected, collect_trajectories, collect_wander, concat_collected
+from sitframe.config import config_hash, to_toml
+from sitframe.contract import (
+    BoundaryError,
+    call,
+    check_data,
+    fault,
+    sensor_spec_mismatch,
+)
+from sitframe.errors import InputError, PluginError, PluginFault, TaskCancelled
+from sitframe.loop import (
+    STAGE_BATCH,
+    STAGE_CLUSTER,
+    STAGE_COLLECT,
+    STAGE_TRIALS,
+    TrialSpec,
+    simulate,
+    stage_seed,
+    step_hook_of,
+)
+from sitframe.parallel import InOrder, SerialExecutor, TrialPipeline
 from sitframe.pluginmanager import Registry, get_plugin_manager
-from sitframe.records import LearnedPolicy
+from sitframe.records import (
+    RunInfo,
+    TrialResult,
+)
 from sitframe.resolve import Resolved
-from sitframe.scheduler import Experiment
 
 
-def _resolve_path(path: str, base_dir: str) -> str:
-    p = Path(path)
-    return str(p if p.is_absolute() or base_dir in ("", ".") else Path(base_dir) / p)
+@dataclass
+class RunResult:
+    """What :func:`run_experiment` returns (also the basis of ``run --json``)."""
+
+    info: RunInfo
+    trials: list[TrialResult]
+    wall_seconds: float
+    status: str
+    interpreter_state: dict[str, Any] = field(default_factory=dict)
+    sensor_angles_deg: np.ndarray | None = None
 
 
-def prepare_experiment(
-    cfg: dict[str, Any],
-    *,
-    source: str | None = None,
-    base_dir: str = ".",
-    out: str | None = None,
-    plugins_dirs: tuple[str, ...] = (),
-    progress: bool = False,
-    config_plugins: bool = True,
-) -> tuple[Experiment, dict[str, Any]]:
-    """Validate ``cfg``, resolve its components and the logs it reuses.
-
-    Everything that can be wrong with the input is checked here, before a
-    single byte is written. Relative paths in the config (worlds, logs,
-    plugin folders) resolve against ``base_dir``, the config file's folder.
-    What the run reads from other logs is fingerprinted in
-    ``experiment.info.extra["inputs"]`` (written to the log; ``run --resume``
-    compares it).
+class Experiment:
+    """A configured experiment ready to run its stages.
 
     Parameters
     ----------
-    config_plugins
-        Load the config's ``[plugins] dirs`` (False when the config comes
-        from a log: a log alone never decides which code runs).
-
-    Returns
-    -------
-    (experiment, run_kwargs)
-        Call ``experiment.run(**run_kwargs)``.
+    cfg
+        Validated config (:func:`sitframe.config.load_config`).
+    source
+        Where the config came from (for messages).
+    pm
+        Plugin manager; a fresh one from :func:`get_plugin_manager` by default.
+    out
+        HDF5 log path (written by the logger plugin), or ``None``.
+    plugins_dirs
+        Folders of loose plugin modules (also loaded by worker processes).
+    executor
+        Runs the trials (:mod:`sitframe.parallel`); default
+        :class:`~sitframe.parallel.SerialExecutor` (in this process, with ``sitframe_step``).
+    base_dir
+        Folder that world paths in the config are relative to (the config
+        file's folder).
     """
-    cfg = validate_config(cfg, file=source)
-    dirs = tuple(_resolve_path(d, base_dir) for d in cfg["plugins"]["dirs"]) \
-        if config_plugins else ()
-    dirs += plugins_dirs
-    exp = Experiment(cfg, source=source, out=out, plugins_dirs=dirs, base_dir=base_dir)
-    exp.info.extra["progress"] = progress
-    kwargs: dict[str, Any] = {}
-    _check_collect(exp, cfg, source)
-    checked: dict[str, Log] = {}
-    inputs: dict[str, str] = {}
 
-    checked_keys: dict[str, str] = {}
+    def __init__(self, cfg: dict[str, Any], *, source: str | None = None,
+                 pm: pluggy.PluginManager | None = None, out: str | None = None,
+                 plugins_dirs: tuple[str, ...] = (), executor: Any = None,
+                 base_dir: str = ".") -> None:
+        self.cfg = cfg
+        self.source = source
+        self.base_dir = base_dir
+        self.plugins_dirs = tuple(plugins_dirs)
+        self.executor = executor or SerialExecutor()
+        self.pm = pm or get_plugin_manager(plugins_dirs=plugins_dirs)
+        self.registry = Registry.collect(self.pm)
+        self.res = Resolved.build(cfg, self.registry, source, base_dir=base_dir)
+        #: The typed config (what the run reads); :attr:`cfg` is its serial form.
+        self.config = self.res.config
+        self.out = out
+        text = to_toml(cfg)
+        e = self.config.experiment
+        names = self.config.worlds()
+        #: The run's evaluation protocol (:meth:`Resolved.protocol_name`); None = frozen.
+        self.protocol = self.res.protocol_name()
+        self.eval_worlds = list(self.config.evaluate.worlds)
+        if self.protocol is not None and "evaluate" in e.stages:
+            self.eval_worlds = self.res.protocol_worlds(self.protocol)
+            names += self.eval_worlds
+        worlds = {n: self.res.world(n, "experiment.world" if n == e.world else "worlds").text
+                  for n in dict.fromkeys(names)}
+        plugins = [dataclasses.asdict(info) for info, _c in self.registry.plugins_table()]
+        self.info = RunInfo(
+            name=e.name, config=cfg, config_text=text, config_hash=config_hash(text),
+            seed=e.seed, out=out, n_trials=e.trials, iterations=e.iterations, plugins=plugins,
+            worlds=worlds,
+            extra={"versions": versions(), "source": source or "",
+                   "sensor": self.res.run.sensor.as_dict()},
+        )
 
-    def source_log(path: str, key: str) -> Log:
-        """Open a log this run builds on, read whole once (checksums): intact logs only."""
-        if path not in checked:
-            checked_keys[path] = key
-            checked[path] = open_log(path)
-            checked[path].check()
-        return checked[path]
+    # -- stages ------------------------------------------------------------
+    def collect(self) -> Collected:
+        c = self.config.collect
+        rng = np.random.default_rng(stage_seed(self.info.seed, STAGE_COLLECT))
+        worlds = [self.res.world(n, "collect.worlds") for n in c.worlds]
+        sensor = self.res.sensor()
+        o = self.res.origins["sensor"]
+        parts = []
+        if c.mode in ("trajectory", "both"):
+            parts.append(call(o, "read", collect_trajectories, worlds, sensor, rng,
+                              speed=c.speed, rate_hz=c.rate_hz, params=self.res.robot))
+        if c.mode in ("wander", "both"):
+            parts.append(call(o, "read", collect_wander, worlds, sensor, rng,
+                              n_samples=c.wander_samples, speed=c.speed,
+                              rate_hz=c.rate_hz, params=self.res.robot))
+        collected = concat_collected(parts)
+        why = sensor_spec_mismatch(collected.samples[0], self.res.run.sensor.dim) \
+            if len(collected.samples) else None
+        bad = ~np.isfinite(collected.samples).all(axis=1)
+        if why is None and bad.any():
+            why = sensor_spec_mismatch(collected.samples[int(np.argmax(bad))],
+                                       self.res.run.sensor.dim)
+        if why is not None:
+            raise PluginFault(f"{why} (collect stage)", where=str(o), method="read")
+        return collected
 
-    clusters_from = cfg["experiment"]["clusters_from"]
-    if clusters_from:
-        path = _resolve_path(clusters_from, base_dir)
-        log = source_log(path, "experiment.clusters_from")
-        state = log.interpreter_state()
-        logged_sensor = validate_config(log.config, file=path)["sensor"]
-        if logged_sensor != cfg["sensor"]:
-            raise InputError(
-                f"its situations were fitted on readings of sensor {logged_sensor}, but this "
-                f"config reads {cfg['sensor']}; use the same [sensor] table",
-                file=path, key="sensor")
-        _check_state(exp.res, state, path)
-        kwargs["interpreter_state"] = state
-        inputs["clusters_from"] = fingerprint(state)
-    policies: dict[str, LearnedPolicy] = {}
-    for label, table in cfg["behaviours"].items():
-        pf = table.get("policy_from")
-        if not pf:
-            continue
-        path = _resolve_path(pf["log"], base_dir)
-        log = source_log(path, f"behaviours.{label}.policy_from")
-        which = pf.get("trial", 0)
-        trial = log.trial(best_trial(log) if which == "best" else int(which))
-        src_label = pf.get("behaviour", label)
-        if src_label not in trial.behaviours:
-            raise InputError(f"trial {trial.index} has no behaviour '{src_label}' (it has "
-                             f"{', '.join(trial.behaviours) or 'none'})", file=path,
-                             key=f"behaviours.{label}.policy_from.behaviour")
-        policy = _logged_policy(trial, src_label, path)
-        if policy is None:
-            raise InputError(f"behaviour '{src_label}' of trial {trial.index} has no learned "
-                             "policy (no policy/... datasets)", file=path, key="trials")
-        policies[label] = policy
-        inputs[f"policy_from/{label}"] = fingerprint(
-            {f"{kind}/{out}": getattr(o, kind) for out, o in policy.outputs.items()
-             for kind in ("rules", "actions")})
-    exp.info.extra["inputs"] = inputs
-    if policies:
-        kwargs["policies"] = policies
-    if out:
-        inputs = {path: f"the log it reads ({what})" for path, what in checked_keys.items()}
-        inputs[source or ""] = "the run's config"
-        for name, w in exp.res._worlds.items():
-            inputs[w.source or ""] = f"world '{name}'"
-        check_out(out, inputs)
-    return exp, kwargs
+    def cluster(self, samples: np.ndarray,
+                pmap: Any = None) -> tuple[dict[str, Any], dict[str, Any]]:
+        """Fit the interpreter on ``samples``; ``pmap`` is passed on if its ``fit`` takes one."""
+        rng = np.random.default_rng(stage_seed(self.info.seed, STAGE_CLUSTER))
+        interp = self.res.interpreter()
+        c = getattr(interp, "n_situations", None)
+        if isinstance(c, int) and len(samples) < c:
+            raise InputError(f"the collect stage recorded {len(samples)} samples, fewer than the "
+                             f"{c} situations to fit; expected at least {c}: collect more "
+                             "(collect.worlds, collect.rate_hz, collect.mode) or lower c",
+                             file=self.source, key="interpreter.c")
+        o = self.res.origins["interpreter"]
+        if pmap is not None and "pmap" in inspect.signature(interp.fit).parameters:
+            fit = call(o, "fit", interp.fit, samples, rng, pmap=pmap)
+        else:
+            fit = call(o, "fit", interp.fit, samples, rng)
+        state = call(o, "state", interp.state)
+        for what, d in (("fit", fit), ("state", state)):
+            try:
+                check_data(d, "the fitted interpreter, to log")
+            except BoundaryError as exc:
+                raise PluginFault(str(exc), where=str(o), method=what) from None
+        return fit or {}, state
+
+    def trial_spec(self, k: int, interpreter_state: dict[str, Any],
+                   policies: dict[str, dict[str, np.ndarray]] | None = None) -> TrialSpec:
+        e = self.config.experiment
+        evaluate = tuple(self.eval_worlds) if "evaluate" in e.stages else ()
+        return TrialSpec(
+            index=k, seed=stage_seed(self.info.seed, STAGE_TRIALS, k), world=e.world,
+            iterations=e.iterations, learn=True, interpreter_state=interpreter_state,
+            policies=policies or {}, evaluate=evaluate,
+            eval_iterations=self.config.evaluate.iterations, protocol=self.protocol)
+
+    # -- phases (``run`` composes them; a sweep interleaves them across runs) --
+    def begin(self) -> None:
+        """Announce the run to observers (the logger creates, or on resume reopens, the log)."""
+        self.info.extra.setdefault("step_hooks", bool(self.executor.in_process))
+        if self.out and "code_hash" not in self.info.extra:
+            from sitframe.logs import code_fingerprint  # h5py: imported only when a run logs
+
+            self.info.extra["code_hash"] = code_fingerprint(self.info.plugins)
+        self._notify("sitframe_run_start", run=self.info)
+
+    def needs_clusters(self, interpreter_state: dict[str, Any] | None,
+                       collected: Collected | None = None) -> bool:
+        """Whether :meth:`prepare` would collect/cluster (raises if the stages cannot)."""
+        if interpreter_state is not None:
+            return False
+        if collected is None and "collect" not in self.config.experiment.stages:
+            raise InputError("the run needs clusters: include 'collect' and 'cluster' "
+                             "in experiment.stages or reuse clusters from a log",
+                             file=self.source, key="experiment.stages")
+        return True
+
+    def record_collected(self, collected: Collected) -> None:
+        """Hand the collect stage's output to observers."""
+        self._notify("sitframe_stage_end", run=self.info, stage="collect", data={
+            "samples": collected.samples, "poses": collected.poses,
+            "source": collected.source, "worlds": list(collected.worlds)})
+
+    def record_clusters(self, fit: dict[str, Any], state: dict[str, Any]) -> None:
+        """Hand the cluster stage's output to observers."""
+        self._notify("sitframe_stage_end", run=self.info, stage="cluster",
+                                        data={**fit, "state": state})
+
+    def prepare(self, interpreter_state: dict[str, Any] | None = None,
+                collected: Collected | None = None) -> dict[str, Any]:
+        """Collect and cluster (unless ``interpreter_state`` is given); return the state.
+
+        Situations given from elsewhere (``clusters_from``) are still recorded as
+        the cluster stage, so the run's own log is self-contained for
+        ``evaluate`` and ``analyse`` (not again when resuming: the log has them).
+        """
+        if not self.needs_clusters(interpreter_state, collected):
+            if not self.info.extra.get("resume"):
+                source = self.config.experiment.clusters_from or "given by the caller"
+                self.record_clusters({"reused_from": source}, interpreter_state)
+            return interpreter_state  # type: ignore[return-value]
+        if collected is None:
+            collected = self.collect()
+            self.record_collected(collected)
+        fit, state = self.cluster(collected.samples, getattr(self.executor, "task_map", None))
+        self.record_clusters(fit, state)
+        return state
+
+    def trial_specs(self, interpreter_state: dict[str, Any],
+                    policies: dict[str, dict[str, np.ndarray]] | None = None,
+                    trials: list[int] | None = None) -> list[TrialSpec]:
+        """Specs of the trials to run: the learning trials (all, or the indices ``trials``),
+        or, in a run with an evaluation protocol that does not learn, one batch of its
+        episodes per world (trial ``j``: world ``j``, seed of stage :data:`STAGE_BATCH`).
+
+        A learning trial evaluates its own learned policies (:func:`evaluation_specs`).
+        """
+        stages = self.config.experiment.stages
+        if "learn" in stages:
+            idx = range(self.info.n_trials) if trials is None else trials
+            return [self.trial_spec(k, interpreter_state, policies) for k in idx]
+        if self.protocol is None or "evaluate" not in stages:
+            return []
+        return [TrialSpec(index=j, seed=stage_seed(self.info.seed, STAGE_BATCH, j), world=name,
+                          iterations=int(self.res.protocol(self.protocol).iterations),
+                          learn=False, interpreter_state=interpreter_state,
+                          policies=policies or {}, protocol=self.protocol)
+                for j, name in enumerate(self.eval_worlds)]
+
+    def trial_done(self, result: TrialResult) -> None:
+        """Hand a finished trial to observers (call in trial order)."""
+        self._notify("sitframe_trial_end", run=self.info, trial=result)
+
+    def _notify(self, hook_name: str, **kwargs: Any) -> None:
+        """Call an observer hook's implementations, in pluggy's order, each one once.
+
+        An implementation that raises does not stop the others (the logger,
+        which runs last, still writes the finished trial); the first failure
+        is then raised as one :class:`PluginFault` naming its plugin.
+        """
+        hook = getattr(self.pm.hook, hook_name)
+        impls = hook.get_hookimpls()
+        if any(getattr(i, "hookwrapper", False) or getattr(i, "wrapper", False) for i in impls):
+            hook(**kwargs)  # wrappers need pluggy's own call loop
+            return
+        first: BaseException | None = None
+        for impl in reversed(impls):  # pluggy calls the last registered first
+            if first is not None and hook_name == "sitframe_run_end":
+                # an observer that fails at the end fails the run: the later ones
+                # (the logger runs last) record it
+                kwargs["status"] = "failed"
+                self.info.extra.setdefault("failure", str(first))
+            try:
+                impl.function(*[kwargs[a] for a in impl.argnames])
+            except (KeyboardInterrupt, TaskCancelled):
+                raise
+            except Exception as exc:  # noqa: BLE001 - reported below, naming the plugin
+                if first is None:
+                    where = f"plugin {self.registry.describe_plugin(impl.plugin_name)}"
+                    first = exc if isinstance(exc, InputError | PluginError) else fault(
+                        exc, where, hook_name, getattr(kwargs.get("trial"), "index", None))
+                    if first is not exc:
+                        first.__cause__ = exc
+        if first is not None:
+            raise first
+
+    def finish(self, status: str) -> None:
+        """Tell observers the run ended with ``status`` (complete, aborted, failed)."""
+        self._notify("sitframe_run_end", run=self.info, status=status)
+
+    def run(self, *, interpreter_state: dict[str, Any] | None = None,
+            collected: Collected | None = None,
+            policies: dict[str, dict[str, np.ndarray]] | None = None,
+            trials: list[int] | None = None,
+            skip: set[int] | frozenset[int] = frozenset()) -> RunResult:
+        """Run the configured stages; observers see every stage and trial.
+
+        ``interpreter_state`` (e.g. read from an earlier log) skips collect
+        and cluster. ``trials`` restricts which learning-trial indices run;
+        ``skip`` drops any spec (learning trial or episode batch) whose index
+        is in it (resume: the ones already in the log). See :func:`drive`.
+        """
+        return drive([(self, RunPlan(interpreter_state, collected, policies, trials,
+                                     frozenset(skip)))], self.executor)[0]
 
 
-def check_out(out: str, inputs: dict[str, str]) -> None:
-    """Refuse an output path that is a folder, one of the run's ``inputs`` (path -> what it
-    is), or an existing file that is not an HDF5 log: the run would destroy it."""
-    p = Path(out)
-    if not p.exists():
-        return
-    if p.is_dir():
-        raise InputError("output path is a folder (expected an .h5 file path)", key="--out")
-    for path, what in inputs.items():
-        try:
-            same = bool(path) and os.path.samefile(p, path)
-        except OSError:
-            same = False
-        if same:
-            raise InputError(f"is {what}; the run would overwrite its own input: choose "
-                             "another --out", file=out, key="--out")
-    if not h5py.is_hdf5(p):
-        raise InputError("exists and is not an HDF5 log; refusing to replace it: choose another "
-                         "--out or remove the file", file=out, key="--out")
+@dataclass(frozen=True)
+class RunPlan:
+    """What one run of :func:`drive` starts from (all optional).
+
+    Attributes
+    ----------
+    interpreter_state
+        Situations fitted elsewhere (skips collect and cluster).
+    collected
+        Collected samples to cluster (skips collect).
+    policies
+        Frozen learned policies per behaviour label (``policy_from``).
+    trials
+        Learning-trial indices to run (default all).
+    skip
+        Indices of specs not to run (resume: those already in the log).
+    """
+
+    interpreter_state: dict[str, Any] | None = None
+    collected: Collected | None = None
+    policies: dict[str, Any] | None = None
+    trials: list[int] | None = None
+    skip: frozenset[int] = frozenset()
+
+    @classmethod
+    def of(cls, kwargs: dict[str, Any]) -> RunPlan:
+        """From ``prepare_experiment``'s run keyword arguments."""
+        return cls(**{k: (frozenset(v) if k == "skip" else v) for k, v in kwargs.items()})
 
 
-def fingerprint(arrays: dict[str, Any]) -> str:
-    """SHA-256 over named arrays (name, dtype, shape and bytes, in name order)."""
-    h = hashlib.sha256()
-    for k in sorted(arrays):
-        a = np.ascontiguousarray(arrays[k])
-        h.update(f"{k}\0{a.dtype.str}\0{a.shape}\0".encode())
-        h.update(a.tobytes())
-    return h.hexdigest()
+class _Runs:
+    """The runs of one :func:`drive` call: their specs, release order, results and status."""
+
+    def __init__(self, runs: list[tuple[Experiment, RunPlan]], pipe: TrialPipeline,
+                 handles: list[Any]) -> None:
+        self.runs, self.pipe, self.handles = runs, pipe, handles
+        self.status = ["pending"] * len(runs)
+        self.states: list[dict[str, Any]] = [{} for _ in runs]
+        self.release: list[InOrder] = [InOrder(()) for _ in runs]
+        self.results: list[list[TrialResult]] = [[] for _ in runs]
+
+    def add_trials(self, i: int, state: dict[str, Any]) -> None:
+        exp, plan = self.runs[i]
+        self.states[i] = state
+        specs = [s for s in exp.trial_specs(state, plan.policies, plan.trials)
+                 if s.index not in plan.skip]
+        self.release[i] = InOrder(s.index for s in specs)
+        self.pipe.add_trials(((i, s.index), self.handles[i], s) for s in specs)
+        if not specs:
+            self.finish(i, "complete")
+
+    def trial(self, i: int, k: int, result: TrialResult) -> None:
+        for r in self.release[i].add(k, result):
+            self.results[i].append(r)
+            self.runs[i][0].trial_done(r)
+        if self.release[i].complete:
+            self.finish(i, "complete")
+
+    def finish(self, i: int, status: str) -> None:
+        self.status[i] = status
+        self.runs[i][0].finish(status)
+
+    def stop(self, exc: BaseException) -> None:
+        """Mark every run still running ``aborted`` (Ctrl-C) or ``failed``."""
+        status = "aborted" if isinstance(exc, KeyboardInterrupt) else "failed"
+        for i, st in enumerate(self.status):
+            if st != "running":
+                continue
+            if isinstance(exc, PluginFault):
+                self.runs[i][0].info.extra["failure"] = str(exc)
+            self.finish(i, status)
 
 
-#: Most samples the collect stage may record (beyond this the arrays do not fit in memory).
-MAX_COLLECT_SAMPLES = 10_000_000
+def drive(runs: list[tuple[Experiment, RunPlan]], executor: Any) -> list[RunResult]:
+    """The run lifecycle, shared by ``run``, ``run --resume`` and ``sweep``.
 
+    Each run is announced to its observers (:meth:`Experiment.begin`), gets
+    its situations (given, or collected and clustered), and its trials go to
+    ``executor`` through one :class:`~sitframe.parallel.TrialPipeline`; each
+    run's finished trials reach its observers (the HDF5 logger) in this
+    process, in trial order, as soon as each trial and all before it have
+    finished (:class:`~sitframe.parallel.InOrder`), and the run ends
+    ``complete``. With several runs on a pool (a sweep), every run's collect
+    and cluster stages are tasks too, so all runs' work shares the workers.
 
-def _check_collect(exp: Experiment, cfg: dict[str, Any], source: str | None) -> None:
-    """Data collection that cannot work, found before anything is written: a world without
-    trajectories, far too many samples, a wander rate the robot cannot hold, or fewer
-    samples than situations to fit."""
-    e, c = cfg["experiment"], cfg["collect"]
-    if e["clusters_from"] or "collect" not in e["stages"]:
-        return
-    rate, speed = float(c["rate_hz"]), float(c["speed"])
-    n = 0
-    if c["mode"] in ("wander", "both"):  # wandering holds each command 1/rate_hz seconds
-        try:
-            dataclasses.replace(exp.res.robot, control_period_s=1.0 / rate)
-        except InputError as exc:
-            raise InputError(f"wander mode holds each command 1/rate_hz s: {exc.message}",
-                             file=source, key="collect.rate_hz") from None
-        except (ValueError, TypeError) as exc:
-            raise InputError(f"wander mode holds each command 1/rate_hz s: {exc}",
-                             file=source, key="collect.rate_hz") from None
-        n += int(c["wander_samples"]) * len(c["worlds"])
-    if c["mode"] in ("trajectory", "both"):
-        turn_step = math.radians(exp.res.robot.max_turn_rate_deg_s) / rate
-        worlds = []
-        estimate = 0.0  # upper bound: samples along the paths + turning on the spot
-        for i, name in enumerate(c["worlds"]):
-            world = exp.res.world(name, "collect.worlds")
-            if not world.trajectories:
-                raise InputError(f"world '{name}' has no [[trajectories]] to collect along; "
-                                 "expected a data-collection room (e.g. collect-1) or "
-                                 "collect.mode = \"wander\"", file=source,
-                                 key=f"collect.worlds[{i}]")
-            for t in world.trajectories:
-                estimate += float(np.hypot(*np.diff(t, axis=0).T).sum()) * rate / speed
-                estimate += len(t) * (math.pi / turn_step if turn_step > 0 else 0.0) + 1
-            worlds.append(world)
-        if estimate > MAX_COLLECT_SAMPLES:
-            raise InputError(f"the trajectories would give about {estimate:.3g} samples "
-                             f"(length x rate_hz / speed, plus turns); expected at most "
-                             f"{MAX_COLLECT_SAMPLES}: lower rate_hz or raise speed",
-                             file=source, key="collect.rate_hz")
-        n += sum(len(trajectory_poses(t, speed / rate, turn_step_rad=turn_step))
-                 for w in worlds for t in w.trajectories)
-    k = getattr(exp.res.interpreter(), "n_situations", None)
-    if isinstance(k, int) and n < k:
-        raise InputError(f"the collect stage would record {n} samples, fewer than the {k} "
-                         f"situations to fit; expected at least {k}: collect more "
-                         "(collect.worlds, collect.rate_hz, collect.mode) or lower c",
-                         file=source, key="interpreter.c")
-
-
-def _check_state(res: Resolved, state: dict[str, Any], path: str) -> None:
-    """Load a logged interpreter state into a fresh interpreter (InputError if it does not fit)."""
+    Ctrl-C (KeyboardInterrupt) or a failure cancels the pending tasks, leaves
+    the trials already handed to observers in the logs, marks every run
+    still running ``aborted`` (Ctrl-C) or ``failed`` and re-raises.
+    """
+    t0 = time.perf_counter()
+    for exp, _plan in runs:
+        exp.executor = executor
+    handles = [exp if executor.in_process else Setup.of(exp) for exp, _plan in runs]
+    pipe = TrialPipeline(executor, run_trial)
+    book = _Runs(runs, pipe, handles)
     try:
-        res.interpreter().load_state(state)
-    except (ValueError, KeyError, TypeError) as exc:
-        why = f"missing {exc}" if isinstance(exc, KeyError) else exc
-        raise InputError(f"its situations do not fit this config's interpreter: {why}",
-                         file=path, key="cluster/state") from None
+        with pipe:
+            for i, (exp, plan) in enumerate(runs):
+                book.status[i] = "running"  # (observers hear the end even if begin fails)
+                exp.begin()
+                if exp.needs_clusters(plan.interpreter_state, plan.collected) and \
+                        len(runs) > 1 and not executor.in_process:
+                    pipe.add_call(i, run_clusters, handles[i])
+                    continue
+                if len(runs) == 1 and "learn" in exp.config.experiment.stages:
+                    if isinstance(handles[i], Setup):  # forked workers inherit what is built
+                        _cache.setdefault(handles[i].key, exp)
+                    executor.warm(warm_up, handles[i])  # workers start while we cluster
+                book.add_trials(i, exp.prepare(plan.interpreter_state, plan.collected))
+            for kind, tag, value in pipe:
+                if kind == "call":
+                    collected, fit, state = value
+                    runs[tag][0].record_collected(collected)
+                    runs[tag][0].record_clusters(fit, state)
+                    book.add_trials(tag, state)
+                else:
+                    book.trial(*tag, value)
+    except BaseException as exc:
+        book.stop(exc)
+        raise
+    wall = time.perf_counter() - t0
+    return [RunResult(exp.info, book.results[i], wall, book.status[i], book.states[i],
+                      exp.res.run.sensor.angles_deg) for i, (exp, _plan) in enumerate(runs)]
 
 
-def best_trial(log: Log) -> int:
-    """The trial whose frozen rule base did best in the log's learning world.
+# ---------------------------------------------------------------------------
+# What a worker receives and runs
+# ---------------------------------------------------------------------------
 
-    Quality is judged, as the project judges it everywhere, by collisions
-    *and* coverage: each trial is ranked by ``eval/<learning world>/
-    collisions_per_1000`` (fewest first) and by ``eval/<learning
-    world>/coverage`` (most first), ties sharing their average rank, and the
-    trial with the smallest sum of the two ranks is chosen; ties go to fewer
-    collisions per 1000 iterations after convergence, then to the lowest
-    index. Collisions alone would favour a rule base that loops in one corner
-    of the room (few collisions because it hardly goes anywhere). Only the
-    learning world is used, never the other evaluation rooms, so choosing a
-    trial this way does not peek at rooms the robot is later tested in.
 
-    Raises
-    ------
-    InputError
-        The log has no trials, or no evaluation in its learning world.
+@dataclass(frozen=True)
+class Setup:
+    """What a worker needs to rebuild an experiment's components (picklable).
+
+    Attributes
+    ----------
+    key
+        Cache key: hash of the resolved config and the plugin folders.
+    cfg
+        The validated config.
+    source
+        Where the config came from (for messages).
+    plugins_dirs
+        Folders of loose plugin modules to load.
+    base_dir
+        Absolute folder the config's world paths are relative to.
     """
-    table = log.summary()
-    world = log.config.get("experiment", {}).get("world", "training")
-    column = f"eval.{world}.collisions_per_1000"
-    names = table.dtype.names or ()
-    if table.size == 0 or column not in names:
-        raise InputError(f"cannot pick the best trial: the log has no evaluation in its learning "
-                         f"world '{world}' (include 'evaluate' and '{world}' in the run)",
-                         file=log.path, key="summary")
-    after = table["collisions_per_1000_after_convergence"] if \
-        "collisions_per_1000_after_convergence" in names else np.zeros(table.size)
-    coverage = table[f"eval.{world}.coverage"] if f"eval.{world}.coverage" in names \
-        else np.zeros(table.size)
-    return _best_of(table["trial"], table[column], coverage, after)
+
+    key: str
+    cfg: dict[str, Any]
+    source: str | None
+    plugins_dirs: tuple[str, ...]
+    base_dir: str = "."
+
+    @classmethod
+    def of(cls, experiment: Experiment) -> Setup:
+        dirs = tuple(os.path.abspath(d) for d in experiment.plugins_dirs)
+        base = os.path.abspath(experiment.base_dir)
+        key = config_hash(to_toml(experiment.cfg) + "\0" + "\0".join((*dirs, base)))
+        return cls(key, experiment.cfg, experiment.source, dirs, base)
 
 
-#: How :func:`best_trial` chooses, in one line (shown by ``sitframe run``).
-BEST_TRIAL_RULE = "smallest rank sum of (fewest collisions, most coverage)"
+_cache: dict[str, Experiment] = {}
+_cache_lock = threading.Lock()
 
 
-def _best_of(index: Any, eval_collisions: Any, coverage: Any, after_collisions: Any) -> int:
-    """The rule of :func:`best_trial` on parallel sequences (NaN ranks worst)."""
-    coll = np.nan_to_num(np.asarray(eval_collisions, float), nan=np.inf)
-    cov = np.nan_to_num(np.asarray(coverage, float), nan=-np.inf)
-    score = average_ranks(coll) + average_ranks(-cov)
-    order = np.lexsort((np.asarray(index),
-                        np.nan_to_num(np.asarray(after_collisions, float), nan=np.inf), score))
-    return int(np.asarray(index)[order[0]])
+def _experiment(handle: Experiment | Setup) -> Experiment:
+    """The experiment of a task: the caller's own (in-process executors) or, in a worker,
+    one rebuilt from its :class:`Setup` (built once per worker; thread-safe)."""
+    if isinstance(handle, Experiment):
+        return handle
+    with _cache_lock:
+        exp = _cache.get(handle.key)
+        if exp is None:
+            exp = Experiment(handle.cfg, source=handle.source, plugins_dirs=handle.plugins_dirs,
+                             base_dir=handle.base_dir)
+            if len(_cache) > 16:  # a long-lived Dask worker serving many sweeps
+                _cache.clear()
+            _cache[handle.key] = exp
+        return exp
 
 
-def evaluate_log(
-    log_path: str,
-    *,
-    world: str,
-    trial: int = 0,
-    iterations: int = 1000,
-    seed: int = 0,
-    plugins_dirs: tuple[str, ...] = (),
-    goal_episodes: int = 0,
-    arbiter: str | None = None,
-    fusion: str = "goal-finding",
-) -> dict[str, Any]:
-    """Run trial ``trial``'s frozen policies from a log in ``world``.
+def run_trial(handle: Experiment | Setup, spec: TrialSpec) -> TrialResult:
+    """Task: run one trial and return its data (``sitframe_step`` fires where it runs)."""
+    exp = _experiment(handle)
+    return simulate(exp.res, spec, step_hook=step_hook_of(exp.pm))
 
-    Without ``goal_episodes``: one ``iterations``-long run from the world's
-    start. Returns ``iterations``, ``collisions``, ``collisions_per_1000``,
-    ``distance_m``, ``mean_speed_m_s``, ``coverage``, plus whatever the
-    ``metrics(arrays)`` method of each of the log's reward components returns
-    (a reward may define one to score its own behaviour, e.g. the
-    wall-following reward adds ``wall_band_fraction`` and
-    ``wall_distance_rmse_m``). ``arbiter`` replaces the log's arbiter.
 
-    With ``goal_episodes = N``: N episodes of the run's evaluation protocol
-    (one batch, :func:`sitframe.loop.run_batch`; its table's
-    ``episodes`` set to N), e.g. random goal episodes
-    (``plugins/goal_episodes.py``) in ``world``. If the log's config has a
-    protocol (a goal run) it is used; otherwise the behaviours, arbiter and ``[goal]`` table
-    come from the ``fusion`` config (a preset name or a TOML path; default the
-    ``goal-finding`` preset), whose behaviour with a ``policy_from`` is
-    replaced by the log's learned behaviour (its table and its policy), with
-    the log's situations. ``arbiter`` names another arbiter (its own
-    parameters are kept if the fusion config configures that arbiter, else
-    its defaults). Returns ``episodes``, ``success_rate``,
-    ``collisions_per_episode``, ``collision_free_rate``, ``spl``,
-    ``mean_time_s``, ``heading_change_per_m``, ``mean_path_length_m``.
-    """
-    log = open_log(log_path)
-    log.check()
-    cfg = validate_config(log.config, file=log_path)
-    tl = log.trial(trial)
-    policies = {label: p for label in tl.behaviours
-                if (p := _logged_policy(tl, label, log_path)) is not None}
-    if not policies:
-        raise InputError(f"trial {trial} has no learned policy to evaluate", file=log_path,
-                         key="trials")
-    if log.has("cluster/state") or not cfg["experiment"]["clusters_from"]:
-        state = log.interpreter_state()
-    else:  # a run that reused situations from another log (e.g. a goal run)
-        state = open_log(cfg["experiment"]["clusters_from"]).interpreter_state()
-    pm = get_plugin_manager(plugins_dirs=plugins_dirs)
-    registry = Registry.collect(pm)
-    if arbiter is not None:
-        registry.get("arbiter", arbiter, key="--arbiter")
-    source = log_path
-    if goal_episodes:
-        res0 = Resolved.build(cfg, registry, log_path)
-        if res0.protocol_name() is None:
-            cfg, policies, source = _fusion_config(cfg, policies, fusion, log_path)
-    if arbiter is not None:
-        params = cfg["arbiter"] if cfg["arbiter"].get("component") == arbiter else {}
-        cfg["arbiter"] = {**params, "component": arbiter}
-    res = Resolved.build(cfg, registry, source)
-    res.world(world, key="--world")
-    _check_state(res, state, log_path)
-    if goal_episodes:
-        name = res.protocol_name()
-        if name is None:
-            raise InputError("no component names an evaluation_protocol to run episodes of; "
-                             "expected a behaviour such as 'goal'", file=source,
-                             key="behaviours")
-        table = res.protocol(name).table
-        cfg[table] = {**cfg[table], "episodes": goal_episodes}
-        spec = TrialSpec(index=trial, seed=stage_seed(seed, STAGE_BATCH, 0), world=world,
-                         iterations=int(res.protocol(name).iterations), learn=False,
-                         interpreter_state=state, policies=policies, protocol=name)
-        result = simulate(res, spec)
-        return {"log": log_path, "world": world, "trial": trial,
-                "arbiter": cfg["arbiter"]["component"], **batch_scores(result)}
-    spec = TrialSpec(index=trial, seed=stage_seed(seed, STAGE_EVAL, trial), world=world,
-                     iterations=iterations, learn=False, interpreter_state=state,
-                     policies=policies)
-    result = simulate(res, spec)
-    s = result.summary
-    out = {
-        "log": log_path, "world": world, "trial": trial,
-        "iterations": s["iterations"], "collisions": s["collisions"],
-        "collisions_per_1000": s["collisions_per_1000"], "distance_m": s["distance_m"],
-        "mean_speed_m_s": s["mean_speed_m_s"], "coverage": s["coverage"],
+def run_clusters(handle: Experiment | Setup
+                 ) -> tuple[Collected, dict[str, Any], dict[str, Any]]:
+    """Task: the collect and cluster stages (``collected, fit, state``)."""
+    exp = _experiment(handle)
+    collected = exp.collect()
+    fit, state = exp.cluster(collected.samples)
+    return collected, fit, state
+
+
+def warm_up(handle: Experiment | Setup) -> int:
+    """Task: build the components now; returns the worker's pid."""
+    _experiment(handle)
+    return os.getpid()
+
+
+def versions() -> dict[str, str]:
+    """Versions of sitframe, Python and the numerical/IO stack."""
+    import h5py
+    import scipy
+
+    return {
+        "sitframe": __version__, "python": platform.python_version(), "numpy": np.__version__,
+        "scipy": scipy.__version__, "h5py": h5py.__version__, "hdf5": h5py.version.hdf5_version,
+        "pluggy": pluggy.__version__ if hasattr(pluggy, "__version__") else "",
     }
-    for _label, (_beh, reward) in res.behaviours().items():
-        metrics = getattr(reward, "metrics", None)
-        if metrics is not None:
-            out.update(metrics(result.arrays))
-    return out
 
 
-def _logged_policy(trial: Any, label: str, path: str) -> LearnedPolicy | None:
-    """A trial's learned policy of ``label``, located at the log on error."""
-    try:
-        return trial.learned_policy(label)
-    except InputError as exc:
-        raise exc.at(file=path) from None
-
-
-def _fusion_config(log_cfg: dict[str, Any], policies: dict[str, LearnedPolicy],
-                   fusion: str, log_path: str
-                   ) -> tuple[dict[str, Any], dict[str, LearnedPolicy], str]:
-    """The fusion config with the log's learned behaviour in its ``policy_from`` slot."""
-    fcfg, fsource, _base = load_config(fusion)
-    slots = [lb for lb, t in fcfg["behaviours"].items() if t.get("policy_from")]
-    if not slots:
-        raise InputError("no behaviour has a policy_from table to receive the log's learned "
-                         "behaviour", file=fsource, key="behaviours")
-    slot = slots[0]
-    want = fcfg["behaviours"][slot]["policy_from"].get("behaviour", slot)
-    src = want if want in policies else next(iter(policies))
-    table = {k: v for k, v in log_cfg["behaviours"][src].items()
-             if k == "component" or k not in META_KEYS}
-    behaviours = {}
-    for lb, t in fcfg["behaviours"].items():
-        behaviours[lb] = table if lb == slot else {k: v for k, v in t.items()
-                                                   if k != "policy_from"}
-    fcfg["behaviours"] = behaviours
-    for section in ("sensor", "interpreter", "robot"):
-        fcfg[section] = log_cfg[section]
-    fcfg["experiment"]["clusters_from"] = ""
-    return validate_config(fcfg, file=fsource), {slot: policies[src]}, fsource
-
-
-def format_action(value: float, unit: str) -> str:
-    """An action value for a table: ``+30°``, ``0.20 m/s``, or the number and its unit."""
-    if unit == "deg":
-        return f"{value:+.0f}°"
-    if unit == "m/s":
-        return f"{value:.2f} m/s"
-    return f"{value:.3g} {unit}".rstrip()
-
-
-def rule_base_table(result: Any) -> Any:
-    """A rich Table of the learned rule bases of a run, one row per situation.
-
-    For each learned output: the action most trials chose for the situation
-    and in how many trials (thesis Tables A.2/A.3), and the action of the trial
-    that ``policy_from.trial = "best"`` would pick (:func:`best_trial`:
-    collisions and coverage when evaluated in the learning world; trial 0
-    when there is no such evaluation). Situations are described from their prototypes.
-    """
-    from collections import Counter
-
-    from rich.table import Table
-
-    trials = result.trials
-    world = result.info.config["experiment"]["world"]
-    key = f"eval/{world}/collisions_per_1000"
-    ranked = [t for t in trials if key in t.summary]
-    best = trials[0]
-    if ranked:
-        k = _best_of([t.index for t in ranked], [t.summary[key] for t in ranked],
-                     [t.summary.get(f"eval/{world}/coverage", 0.0) for t in ranked],
-                     [t.summary["collisions_per_1000_after_convergence"] for t in ranked])
-        best = next(t for t in ranked if t.index == k)
-    why = (f"best trial {best.index}: {BEST_TRIAL_RULE} when evaluated in '{world}'"
-           if ranked else f"trial {best.index}: no evaluation in the learning world")
-    table = Table(title=f"learned rule bases of {len(trials)} trials",
-                  caption=f"most trials = the most frequent action (how many trials); {why}")
-    table.add_column("situation", justify="right")
-    table.add_column("description")
-    outs = [(label, out, o) for label, pol in best.policies.items()
-            for out, o in pol.outputs.items()]
-    for label, out, _o in outs:
-        table.add_column(f"{label}.{out}\nmost trials", justify="right")
-        table.add_column(f"{label}.{out}\ntrial {best.index}", justify="right")
-    if not outs:
-        return table
-    centers = result.interpreter_state.get("centers")
-    for i in range(outs[0][2].rules.size):
-        desc = describe_prototype(centers[i], result.sensor_angles_deg) \
-            if centers is not None and len(result.sensor_angles_deg) == np.shape(centers)[1] \
-            else ""
-        row = [f"S{i}", desc]
-        for label, out, o in outs:
-            votes = Counter(int(t.policies[label].outputs[out].rules[i]) for t in trials
-                            if label in t.policies)
-            action, count = votes.most_common(1)[0]
-            row.append(f"{format_action(o.actions[action], o.unit)} ({count}/{len(trials)})")
-            row.append(format_action(o.actions[int(o.rules[i])], o.unit))
-        table.add_row(*row)
-    return table
+__all__ = ["Experiment", "RunPlan", "RunResult", "Setup", "drive", "run_clusters",
+           "run_trial", "versions"]

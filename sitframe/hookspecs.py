@@ -19,7 +19,7 @@ interfaces the created components must satisfy are in
 :mod:`sitframe.components`.
 
 *Observer hooks* (``sitframe_run_start`` ... ``sitframe_run_end``) are called
-by the scheduler as a run progresses. They return nothing (but
+by the run driver (:mod:`sitframe.experiment`) as a run progresses. They return nothing (but
 ``sitframe_trial_data``); every implementation is called. The HDF5 logger and
 the progress bar are plugins on these hooks. Observer hooks are called in the
 process that writes the run (the main process), so an observer never sees a

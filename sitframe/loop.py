@@ -385,7 +385,7 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
     sensor, interp, arbiter = parts.sensor, parts.interp, parts.arbiter
     world, goal, rng = env.world, env.goal, env.rng
     d, c, n_labels = res.run.sensor.dim, parts.c, len(parts.behaviours)
-    default_speed = float(res.cfg["experiment"]["default_speed"])
+    default_speed = res.config.experiment.default_speed
     robot = res.robot
     at_read, at_u = _Step(og["sensor"], "read"), _Step(og["interpreter"], "memberships")
     at_combine, at_core = _Step(og["arbiter"], "combine"), _Step(None, "step")

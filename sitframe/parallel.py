@@ -1,12 +1,15 @@
 """Run trials in parallel: a local process pool or a Dask distributed cluster.
 
-Both executors follow the protocol of :class:`sitframe.scheduler.SerialExecutor`:
-``map(experiment, specs)`` yields one :class:`~sitframe.records.TrialResult`
-per spec **in spec order**, each as soon as it and every earlier trial are
-done. Workers only compute: each rebuilds the components from the config and
-the plugin folders (cached per worker, keyed by the config's hash) and
-returns the trial's arrays; the calling process hands them to the observers,
-so exactly one process writes the HDF5 log, in trial order.
+Every executor (:class:`SerialExecutor` in this process, :class:`ProcessExecutor`,
+:class:`DaskExecutor`) has the same small protocol: ``submit(fn, *args)`` a task,
+``wait_first(futures)``, ``cancel(futures)``, ``capacity`` and ``shutdown``.
+:class:`TrialPipeline` feeds trials to any of them and :class:`InOrder` releases
+finished trials in trial order; the run driver (:func:`sitframe.experiment.drive`)
+composes the two for ``run``, ``run --resume`` and ``sweep`` alike. Workers only
+compute: each rebuilds the components from the config and the plugin folders
+(cached per worker, keyed by the config's hash) and returns the trial's arrays;
+the calling process hands them to the observers, so exactly one process writes
+the HDF5 log, in trial order.
 
 Results are bit-identical to a serial run: a trial depends only on its
 :class:`~sitframe.loop.TrialSpec` (its seed is spawned from the run seed
@@ -46,18 +49,14 @@ import sys
 import threading
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from sitframe import kernels
-from sitframe.config import config_hash, to_toml
 from sitframe.errors import InputError, PluginFault, TaskCancelled
 from sitframe.interrupts import deferred_interrupt
-from sitframe.loop import TrialSpec, attach_evaluation, evaluation_specs, simulate, step_hook_of
-from sitframe.scheduler import Experiment, SerialExecutor
+from sitframe.loop import TrialSpec, attach_evaluation, evaluation_specs
 
 if TYPE_CHECKING:
-    from sitframe.collect import Collected
     from sitframe.records import TrialResult
 
 #: Seconds to wait for a Dask scheduler before giving up.
@@ -65,77 +64,8 @@ DASK_CONNECT_TIMEOUT = 5.0
 
 
 # ---------------------------------------------------------------------------
-# What a worker receives and runs
+# Worker side
 # ---------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Setup:
-    """What a worker needs to rebuild an experiment's components (picklable).
-
-    Attributes
-    ----------
-    key
-        Cache key: hash of the resolved config and the plugin folders.
-    cfg
-        The validated config.
-    source
-        Where the config came from (for messages).
-    plugins_dirs
-        Folders of loose plugin modules to load.
-    base_dir
-        Absolute folder the config's world paths are relative to.
-    """
-
-    key: str
-    cfg: dict[str, Any]
-    source: str | None
-    plugins_dirs: tuple[str, ...]
-    base_dir: str = "."
-
-    @classmethod
-    def of(cls, experiment: Experiment) -> Setup:
-        dirs = tuple(os.path.abspath(d) for d in experiment.plugins_dirs)
-        base = os.path.abspath(experiment.base_dir)
-        key = config_hash(to_toml(experiment.cfg) + "\0" + "\0".join((*dirs, base)))
-        return cls(key, experiment.cfg, experiment.source, dirs, base)
-
-
-_cache: dict[str, Experiment] = {}
-_cache_lock = threading.Lock()
-
-
-def _experiment(setup: Setup) -> Experiment:
-    """The worker's experiment for ``setup`` (built once per worker; thread-safe)."""
-    with _cache_lock:
-        exp = _cache.get(setup.key)
-        if exp is None:
-            exp = Experiment(setup.cfg, source=setup.source, plugins_dirs=setup.plugins_dirs,
-                             base_dir=setup.base_dir)
-            if len(_cache) > 16:  # a long-lived Dask worker serving many sweeps
-                _cache.clear()
-            _cache[setup.key] = exp
-        return exp
-
-
-def run_trial(setup: Setup, spec: TrialSpec) -> TrialResult:
-    """Worker entry point: run one trial and return its data."""
-    exp = _experiment(setup)  # sitframe_step observers fire here, in the worker
-    return simulate(exp.res, spec, step_hook=step_hook_of(exp.pm))
-
-
-def run_clusters(setup: Setup) -> tuple[Collected, dict[str, Any], dict[str, Any]]:
-    """Worker entry point: the collect and cluster stages (``collected, fit, state``)."""
-    exp = _experiment(setup)
-    collected = exp.collect()
-    fit, state = exp.cluster(collected.samples)
-    return collected, fit, state
-
-
-def warm_up(setup: Setup) -> int:
-    """Worker entry point: build the components now; returns the worker's pid."""
-    _experiment(setup)
-    return os.getpid()
 
 
 #: Worker-side state: whether a task is running, and whether the run was cancelled.
@@ -194,13 +124,17 @@ def _worker_init(lifeline: Any = None, inherited_writer: Any = None) -> None:
 
 
 class PoolExecutor:
-    """Shared logic of the parallel executors: ``submit`` plus the ordered ``map``.
+    """The executor protocol: tasks submitted, waited for and cancelled.
 
     Subclasses provide :meth:`submit`, :meth:`wait_first`, :meth:`cancel`,
-    :attr:`capacity` and :meth:`shutdown`.
+    :attr:`capacity` and :meth:`shutdown`. ``in_process`` executors run tasks
+    in the calling process, on the caller's own experiment (so
+    ``sitframe_step`` observers fire); the others receive a picklable
+    :class:`~sitframe.experiment.Setup` and rebuild the experiment.
     """
 
-    fires_step_hooks = False
+    #: Tasks run in this process (and ``sitframe_step`` observers fire).
+    in_process = False
     #: Tasks the workers can run at once.
     capacity: int = 1
 
@@ -214,27 +148,13 @@ class PoolExecutor:
     def cancel(self, futures: Iterable[Any]) -> None:  # pragma: no cover
         raise NotImplementedError
 
-    def start(self, experiment: Experiment) -> None:
-        """Called before the collect stage: a chance to warm the workers up."""
+    def warm(self, fn: Callable[[Any], Any], arg: Any) -> None:
+        """Called before the collect stage: a chance to start the workers (``fn(arg)`` each)."""
 
     @property
     def task_map(self) -> _TaskMap:
         """This pool as a :class:`~sitframe.clustering.TaskMap` (used by the clustering stage)."""
         return _TaskMap(self)
-
-    def map(self, experiment: Experiment, specs: list[TrialSpec]) -> Iterator[TrialResult]:
-        """Run ``specs`` on the workers; yield the results in spec order."""
-        setup = Setup.of(experiment)
-        pipe = TrialPipeline(self)
-        pipe.add_trials((k, setup, spec) for k, spec in enumerate(specs))
-        ready: dict[int, TrialResult] = {}
-        nxt = 0
-        with pipe:
-            for _kind, k, result in pipe:
-                ready[k] = result
-                while nxt in ready:
-                    yield ready.pop(nxt)
-                    nxt += 1
 
     def shutdown(self, cancel: bool = False) -> None:
         """Release the workers (``cancel=True``: drop queued and stop running work)."""
@@ -265,6 +185,33 @@ class _TaskMap:
             raise
 
 
+class InOrder:
+    """Releases results in a given order of keys, each once it and all before it arrived.
+
+    The one place where finished trials are put back in trial order (the log
+    is written in that order whatever order the workers finish in).
+    """
+
+    def __init__(self, order: Iterable[Any]) -> None:
+        self.order = list(order)
+        self._waiting: dict[Any, Any] = {}
+        self.released = 0
+
+    def add(self, key: Any, value: Any) -> list[Any]:
+        """Record ``value`` for ``key``; return the values now released, in order."""
+        self._waiting[key] = value
+        out = []
+        while self.released < len(self.order) and self.order[self.released] in self._waiting:
+            out.append(self._waiting.pop(self.order[self.released]))
+            self.released += 1
+        return out
+
+    @property
+    def complete(self) -> bool:
+        """Whether every key has been released."""
+        return self.released == len(self.order)
+
+
 def _earlier(tag: Any, other: Any) -> bool:
     """Whether task ``tag`` comes before ``other`` in release order (tags of one kind)."""
     try:
@@ -279,7 +226,7 @@ def _splittable(spec: TrialSpec) -> bool:
 
 
 class TrialPipeline:
-    """Feeds trials to a :class:`PoolExecutor` and yields them as they complete.
+    """Feeds trials to an executor and yields them as they complete.
 
     Each trial is split into its learning part and its frozen-policy
     evaluations (:func:`~sitframe.loop.evaluation_specs`), which run as
@@ -292,22 +239,32 @@ class TrialPipeline:
     :func:`~sitframe.loop.simulate` attaches them, so the assembled
     result is identical to a serial one.
 
+    Parameters
+    ----------
+    executor
+        Where the tasks run.
+    run
+        The task: ``run(handle, spec) -> TrialResult`` (module-level, so a
+        pool can pickle it by reference).
+
     Iterating yields ``("trial", tag, TrialResult)`` when a trial is complete
     and ``("call", tag, value)`` when a call added by :meth:`add_call` returns,
     in completion order. Use it as a context manager: leaving it early (an
     error, Ctrl-C) cancels every task still pending.
     """
 
-    def __init__(self, executor: PoolExecutor, window: int | None = None) -> None:
+    def __init__(self, executor: PoolExecutor, run: Callable[[Any, TrialSpec], TrialResult],
+                 window: int | None = None) -> None:
         self.executor = executor
-        self.window = window or executor.capacity + 1
-        self._queue: deque[tuple[Any, Setup, TrialSpec]] = deque()
+        self.run = run
+        self.window = window or executor.capacity + (0 if executor.in_process else 1)
+        self._queue: deque[tuple[Any, Any, TrialSpec]] = deque()
         self._inflight: dict[Any, tuple[str, Any, Any]] = {}
         self._partial: dict[Any, list[Any]] = {}
         self._learning = 0
 
-    def add_trials(self, items: Iterable[tuple[Any, Setup, TrialSpec]]) -> None:
-        """Queue trials as ``(tag, setup, spec)``; they start as the window allows."""
+    def add_trials(self, items: Iterable[tuple[Any, Any, TrialSpec]]) -> None:
+        """Queue trials as ``(tag, handle, spec)``; they start as the window allows."""
         self._queue.extend(items)
 
     def add_call(self, tag: Any, fn: Callable[..., Any], *args: Any) -> None:
@@ -316,11 +273,44 @@ class TrialPipeline:
 
     def _fill(self) -> None:
         while self._queue and self._learning < self.window:
-            tag, setup, spec = self._queue.popleft()
+            tag, handle, spec = self._queue.popleft()
             learn = dataclasses.replace(spec, evaluate=()) if _splittable(spec) else spec
-            fut = self.executor.submit(run_trial, setup, learn)
-            self._inflight[fut] = ("learn", tag, (setup, spec))
+            fut = self.executor.submit(self.run, handle, learn)
+            self._inflight[fut] = ("learn", tag, (handle, spec))
             self._learning += 1
+
+    def _fault(self, failure: tuple[Any, PluginFault] | None, kind: str, tag: Any,
+               exc: PluginFault) -> tuple[Any, PluginFault]:
+        """Plugin code failed in task ``tag``. Trials before it still finish and reach the
+        log (as in a serial run); nothing after it starts, what is running is dropped."""
+        if kind == "learn":
+            self._learning -= 1
+        if failure is None or _earlier(tag, failure[0]):
+            failure = (tag, exc)
+        self._queue = deque(q for q in self._queue if _earlier(q[0], failure[0]))
+        return failure
+
+    def _done(self, kind: str, tag: Any, info: Any, value: Any) -> TrialResult | None:
+        """A finished task's trial when it is complete (else its evaluations are submitted)."""
+        if kind == "learn":
+            self._learning -= 1
+            handle, spec = info
+            evs = evaluation_specs(spec, value.policies) if _splittable(spec) else []
+            if not evs:
+                return value
+            self._partial[tag] = [value, [None] * len(evs), len(evs), [ev.world for ev in evs]]
+            for i, ev in enumerate(evs):
+                self._inflight[self.executor.submit(self.run, handle, ev)] = ("eval", tag, i)
+            return None
+        entry = self._partial[tag]
+        entry[1][info] = value
+        entry[2] -= 1
+        if entry[2]:
+            return None
+        result, done, _n, worlds = self._partial.pop(tag)
+        for world, ev_result in zip(worlds, done, strict=True):
+            attach_evaluation(result, world, ev_result)
+        return result
 
     def __iter__(self) -> Iterator[tuple[str, Any, Any]]:
         failure: tuple[Any, PluginFault] | None = None  # (tag, fault) of the earliest fault
@@ -335,14 +325,7 @@ class TrialPipeline:
                 try:
                     value = fut.result()  # re-raises a worker's exception here
                 except PluginFault as exc:
-                    # Plugin code failed in this trial. Trials before it still finish and
-                    # reach the log (as in a serial run); nothing after it starts, and
-                    # what is already running is waited for but dropped.
-                    if kind == "learn":
-                        self._learning -= 1
-                    if failure is None or _earlier(tag, failure[0]):
-                        failure = (tag, exc)
-                    self._queue = deque(q for q in self._queue if _earlier(q[0], failure[0]))
+                    failure = self._fault(failure, kind, tag, exc)
                     continue
                 if failure is not None and not _earlier(tag, failure[0]):
                     if kind == "learn":
@@ -350,28 +333,8 @@ class TrialPipeline:
                     continue
                 if kind == "call":
                     yield "call", tag, value
-                    continue
-                if kind == "learn":
-                    self._learning -= 1
-                    setup, spec = info
-                    evs = evaluation_specs(spec, value.policies) if _splittable(spec) else []
-                    if not evs:
-                        yield "trial", tag, value
-                        continue
-                    self._partial[tag] = [value, [None] * len(evs), len(evs),
-                                          [ev.world for ev in evs]]
-                    for i, ev in enumerate(evs):
-                        self._inflight[self.executor.submit(run_trial, setup, ev)] = \
-                            ("eval", tag, i)
-                    continue
-                entry = self._partial[tag]
-                entry[1][info] = value
-                entry[2] -= 1
-                if entry[2] == 0:
-                    result, done, _n, worlds = self._partial.pop(tag)
-                    for world, ev_result in zip(worlds, done, strict=True):
-                        attach_evaluation(result, world, ev_result)
-                    yield "trial", tag, result
+                elif (trial := self._done(kind, tag, info, value)) is not None:
+                    yield "trial", tag, trial
 
     def cancel(self) -> None:
         """Drop queued trials and cancel every task in flight."""
@@ -388,28 +351,51 @@ class TrialPipeline:
             self.cancel()
 
 
-class InlineExecutor(PoolExecutor):
-    """Runs each task in this process when it is submitted (``--workers 1`` for sweeps).
+class _Deferred(cf.Future):  # type: ignore[type-arg]
+    """A task of :class:`SerialExecutor`: run when waited for, in this process."""
 
-    Behaves like a one-worker pool, so code written for :class:`TrialPipeline`
-    runs unchanged; ``sitframe_step`` observers do not fire.
+    def __init__(self, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
+        super().__init__()
+        self._call: tuple[Callable[..., Any], tuple[Any, ...]] | None = (fn, args)
+
+    def run(self) -> None:
+        if self._call is None:
+            return
+        (fn, args), self._call = self._call, None
+        try:
+            self.set_result(fn(*args))
+        except Exception as exc:  # noqa: BLE001 - delivered through the future, like a pool
+            self.set_exception(exc)
+
+    def result(self, timeout: float | None = None) -> Any:
+        self.run()
+        return super().result(timeout)
+
+
+class SerialExecutor(PoolExecutor):
+    """Runs each task in this process, one at a time (``--workers 1``).
+
+    A task runs when it is waited for, in the order submitted, on the
+    caller's own experiment: ``sitframe_step`` observers fire, and a trial
+    reaches the observers before the next one starts.
     """
 
+    in_process = True
     capacity = 1
 
     def submit(self, fn: Callable[..., Any], *args: Any) -> cf.Future[Any]:
-        fut: cf.Future[Any] = cf.Future()
-        try:
-            fut.set_result(fn(*args))
-        except Exception as exc:  # noqa: BLE001 - delivered through the future, like a pool
-            fut.set_exception(exc)
-        return fut
+        return _Deferred(fn, args)
 
     def wait_first(self, futures: Iterable[Any]) -> set[Any]:
+        futures = list(futures)
+        pending = [f for f in futures if not f.done()]
+        if pending and len(pending) == len(futures):
+            pending[0].run()
         return {f for f in futures if f.done()}
 
     def cancel(self, futures: Iterable[Any]) -> None:
-        pass
+        for f in futures:
+            f.cancel()
 
 
 def start_method() -> str:
@@ -427,7 +413,7 @@ def start_method() -> str:
 def _mp_context(method: str) -> mp.context.BaseContext:
     ctx = mp.get_context(method)
     if method == "forkserver":  # (workers fork from it with the compiled kernels loaded)
-        ctx.set_forkserver_preload(["sitframe.parallel", "sitframe.scheduler", "sitframe.loop",
+        ctx.set_forkserver_preload(["sitframe.parallel", "sitframe.experiment", "sitframe.loop",
                                     *(["sitframe.kernels_numba"] if kernels.wanted() else [])])
     return ctx
 
@@ -439,7 +425,7 @@ class ProcessExecutor(PoolExecutor):
     ----------
     workers
         Number of worker processes (at least 1; 1 still uses a subprocess,
-        the CLI uses :class:`~sitframe.scheduler.SerialExecutor` for 1).
+        the CLI uses :class:`SerialExecutor` for 1).
     """
 
     def __init__(self, workers: int) -> None:
@@ -462,13 +448,9 @@ class ProcessExecutor(PoolExecutor):
                                                 initializer=_worker_init, initargs=initargs)
         return self._pool
 
-    def start(self, experiment: Experiment) -> None:
-        setup = Setup.of(experiment)
-        if start_method() == "fork":  # children inherit the built components
-            with _cache_lock:
-                _cache.setdefault(setup.key, experiment)
+    def warm(self, fn: Callable[[Any], Any], arg: Any) -> None:
         for _ in range(self.workers):  # one submit per worker starts them all now
-            self.submit(warm_up, setup)
+            self.submit(fn, arg)
 
     @property
     def capacity(self) -> int:  # type: ignore[override]
@@ -592,7 +574,7 @@ def _check_address(address: str) -> str:
 
 
 def make_executor(workers: int | None = None, scheduler: str | None = None,
-                  n_tasks: int | None = None, *, pool: bool = False) -> Any:
+                  n_tasks: int | None = None) -> PoolExecutor:
     """The executor the CLI options ask for.
 
     Parameters
@@ -604,9 +586,6 @@ def make_executor(workers: int | None = None, scheduler: str | None = None,
         ``--scheduler``: a Dask scheduler address (``workers`` must be ``None``).
     n_tasks
         How many trials will run (no more workers than that are started).
-    pool
-        Always return a :class:`PoolExecutor` (an :class:`InlineExecutor`
-        instead of :class:`~sitframe.scheduler.SerialExecutor` for one worker).
     """
     if scheduler is not None:
         if workers is not None:
@@ -619,7 +598,7 @@ def make_executor(workers: int | None = None, scheduler: str | None = None,
     if n_tasks is not None:
         k = min(k, max(n_tasks, 1))
     if k <= 1:
-        return InlineExecutor() if pool else SerialExecutor()
+        return SerialExecutor()
     return ProcessExecutor(k)
 
 
@@ -660,6 +639,5 @@ def compare_logs(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> list[s
     return diff
 
 
-__all__ = ["DaskExecutor", "InlineExecutor", "PoolExecutor", "ProcessExecutor", "Setup",
-           "TaskCancelled", "TrialPipeline", "compare_logs", "log_contents", "make_executor",
-           "run_clusters", "run_trial"]
+__all__ = ["DaskExecutor", "InOrder", "PoolExecutor", "ProcessExecutor", "SerialExecutor",
+           "TaskCancelled", "TrialPipeline", "compare_logs", "log_contents", "make_executor"]

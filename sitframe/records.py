@@ -1,4 +1,4 @@
-"""Immutable records passed between the scheduler and components.
+"""Immutable records passed between the run driver and components.
 
 They hold references to arrays the loop already computed (no copies), so they
 are cheap to build every iteration. Treat every array in them as read-only.

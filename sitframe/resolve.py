@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from sitframe.config import META_KEYS
+from sitframe.config import Component, Config
 from sitframe.contract import (
     Origin,
     call,
@@ -31,18 +32,6 @@ from sitframe.records import (
 )
 from sitframe.robot import RobotParams
 from sitframe.world import World, load_world
-
-
-def config_worlds(cfg: dict[str, Any]) -> list[str]:
-    """The worlds a config's stages name, once each: the learning world, then the
-    collection rooms (if it collects) and the evaluation rooms (if it evaluates)."""
-    e = cfg["experiment"]
-    names = [e["world"]]
-    if "collect" in e["stages"]:
-        names += cfg["collect"]["worlds"]
-    if "evaluate" in e["stages"]:
-        names += cfg["evaluate"]["worlds"]
-    return list(dict.fromkeys(names))
 
 
 @dataclass
@@ -63,6 +52,11 @@ class Resolved:
     origins: dict[str, Origin] = field(default_factory=dict)
     run: RunContext | None = None
     base_dir: str = "."
+
+    @cached_property
+    def config(self) -> Config:
+        """The typed view of :attr:`cfg` (what the core reads)."""
+        return Config.of(self.cfg)
 
     @classmethod
     def build(cls, cfg: dict[str, Any], registry: Registry, file: str | None = None,
@@ -92,24 +86,24 @@ class Resolved:
         except (ValueError, TypeError) as exc:
             raise InputError(str(exc), file=file, key="robot") from None
         res = cls(cfg, registry, file, robot, base_dir=base_dir)
-        sensor = res._create("sensor", "sensor", cfg["sensor"], bind=False)
+        sensor = res._create("sensor", "sensor", res.config.sensor, bind=False)
         o = res.origins["sensor"]
         spec = call(o, "angles_deg", lambda: SensorSpec(
             str(sensor.name), np.asarray(sensor.angles_deg, dtype=np.float64).reshape(-1),
             float(sensor.max_range), str(getattr(sensor, "unit", "m"))))
-        interp = res._create("interpreter", "interpreter", cfg["interpreter"], bind=False)
+        interp = res._create("interpreter", "interpreter", res.config.interpreter, bind=False)
         c = call(res.origins["interpreter"], "n_situations", lambda: interp.n_situations)
         if c is not None and (isinstance(c, bool) or not isinstance(c, int | np.integer) or c < 1):
             raise PluginFault(f"n_situations is {c!r}, expected a positive integer",
                               where=str(res.origins["interpreter"]), method="n_situations")
-        e = cfg["experiment"]
-        loaded = {n: res.world(n, "experiment.world" if n == e["world"] else "worlds")
-                  for n in dict.fromkeys([*config_worlds(cfg), *worlds])}
-        res.run = RunContext(robot, spec, tuple(cfg["behaviours"]), None if c is None else int(c),
-                             loaded, int(e["seed"]), int(e["iterations"]),
-                             float(e["default_speed"]))
+        e = res.config.experiment
+        loaded = {n: res.world(n, "experiment.world" if n == e.world else "worlds")
+                  for n in dict.fromkeys([*res.config.worlds(), *worlds])}
+        res.run = RunContext(robot, spec, tuple(res.config.behaviours),
+                             None if c is None else int(c), loaded, e.seed, e.iterations,
+                             e.default_speed)
         res._bind(sensor, "sensor")
-        res._check_sensor(sensor, spec, loaded[e["world"]])
+        res._check_sensor(sensor, spec, loaded[e.world])
         res._bind(interp, "interpreter")
         res.behaviours()
         res.arbiter()
@@ -124,11 +118,10 @@ class Resolved:
         if why is not None:
             raise PluginFault(why, where=str(o), method="read")
 
-    def _create(self, kind: str, key: str, table: dict[str, Any], *, bind: bool = True,
+    def _create(self, kind: str, key: str, table: Component, *, bind: bool = True,
                 needs: tuple[str, ...] = ()) -> Any:
-        params = {k: v for k, v in table.items() if k not in META_KEYS}
-        comp = self.registry.create(kind, table["component"], params, file=self.file, key=key)
-        entry = self.registry.get(kind, table["component"])
+        comp = self.registry.create(kind, table.name, table.params, file=self.file, key=key)
+        entry = self.registry.get(kind, table.name)
         origin = Origin(self.registry.describe_plugin(entry.plugin), kind, entry.name, key,
                         entry.plugin)
         self.origins[key] = origin
@@ -155,34 +148,34 @@ class Resolved:
             raise fault(exc, o, "bind") from exc
 
     def sensor(self) -> Any:
-        return self._create("sensor", "sensor", self.cfg["sensor"])
+        return self._create("sensor", "sensor", self.config.sensor)
 
     def interpreter(self) -> Any:
-        return self._create("interpreter", "interpreter", self.cfg["interpreter"])
+        return self._create("interpreter", "interpreter", self.config.interpreter)
 
     def arbiter(self) -> Any:
-        table = self.cfg["arbiter"]
+        table = self.config.arbiter
         return self._create("arbiter", "arbiter", table,
-                            needs=("learn",) if "reward" in table else ())
+                            needs=("learn",) if table.reward is not None else ())
 
     def arbiter_reward(self) -> Any | None:
         """The reward the arbiter learns from (``[arbiter] reward = ...``), or ``None``."""
-        return self._reward("arbiter", self.cfg["arbiter"])
+        return self._reward("arbiter", self.config.arbiter)
 
-    def _reward(self, key: str, table: dict[str, Any]) -> Any | None:
+    def _reward(self, key: str, table: Component) -> Any | None:
         """The reward a behaviour's or the arbiter's table names (``reward``, ``reward_params``)."""
-        if "reward" not in table:
+        if table.reward is None:
             return None
-        return self._create("reward", f"{key}.reward", {
-            "component": table["reward"], **dict(table.get("reward_params", {}))})
+        return self._create("reward", f"{key}.reward", Component(table.reward,
+                                                                 table.reward_params))
 
     def behaviours(self) -> dict[str, tuple[Any, Any | None]]:
         """Label -> (behaviour, reward or None), in config order."""
         out = {}
-        for label, table in self.cfg["behaviours"].items():
+        for label, table in self.config.behaviours.items():
             key = f"behaviours.{label}"
-            needs = (("learn",) if "reward" in table else ()) + \
-                (("load_policy",) if "policy_from" in table else ())
+            needs = (("learn",) if table.reward is not None else ()) + \
+                (("load_policy",) if table.policy_from is not None else ())
             out[label] = (self._create("behaviour", key, table, needs=needs),
                           self._reward(key, table))
         return out
@@ -206,14 +199,14 @@ class Resolved:
         """A fresh evaluation protocol ``name``, created from its config table (but ``worlds``)."""
         entry = self.registry.get("protocol", name, file=self.file, key="behaviours")
         table = str(getattr(entry.factory, "table", "evaluate"))
-        params = {k: v for k, v in self.cfg.get(table, {}).items() if k != "worlds"}
-        return self._create("protocol", table, {**params, "component": name})
+        params = {k: v for k, v in self.config.tables.get(table, {}).items() if k != "worlds"}
+        return self._create("protocol", table, Component(name, params))
 
     def protocol_worlds(self, name: str) -> list[str]:
         """The worlds of protocol ``name``'s table, loaded and checked (``check_world``)."""
         proto = self.protocol(name)
         table = proto.table
-        names = list(self.cfg[table]["worlds"])
+        names = list(self.config.tables[table]["worlds"])
         for j, wname in enumerate(names):
             key = f"{table}.worlds[{j}]"
             world = self.world(wname, key=key)

@@ -26,8 +26,8 @@ from typing import Any
 
 from sitframe.config import validate_config
 from sitframe.errors import InputError
-from sitframe.experiment import _check_state, prepare_experiment
 from sitframe.logs import code_fingerprint, open_log
+from sitframe.prepare import check_state, prepare_experiment
 
 
 def prepare_resume(
@@ -95,11 +95,11 @@ def prepare_resume(
         logged_code != code_fingerprint(exp.info.plugins)
     if log.has("cluster/state"):
         kwargs["interpreter_state"] = log.interpreter_state()
-        _check_state(exp.res, kwargs["interpreter_state"], p)
+        check_state(exp.res, kwargs["interpreter_state"], p)
     have = set(log.trial_indices())
     kwargs["skip"] = frozenset(have)
     missing = [k for k in range(exp.info.n_trials) if k not in have]
-    if "learn" not in cfg["experiment"]["stages"]:
+    if "learn" not in exp.config.experiment.stages:
         missing = []
     return exp, kwargs, missing
 

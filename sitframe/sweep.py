@@ -64,14 +64,16 @@ import re
 import sys
 import time
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from sitframe.config import META_KEYS
-from sitframe.errors import InputError, did_you_mean
+from sitframe.errors import InputError, did_you_mean, note
 
 # start-up time: this module is imported whenever the command line builds its parser
 # (``sitframe --help`` and every command), so what only one command needs is imported
@@ -117,12 +119,14 @@ class Sweep:
 # ---------------------------------------------------------------------------
 
 
-def load_sweep(path: str, *, out: str | None = None,
-               plugins_dirs: tuple[str, ...] = ()) -> Sweep:
+def load_sweep(path: str, *, out: str | None = None, plugins_dirs: tuple[str, ...] = (),
+               prerequisites: Callable[[dict[str, Any], str], Any] | None = None) -> Sweep:
     """Read and validate a sweep file; prepare every grid point's experiment.
 
-    Nothing is written. Raises :class:`InputError` (file, key, suggestion)
-    for anything wrong.
+    Nothing is written, unless ``prerequisites(base_cfg, base_dir)`` is given: it
+    is called before the points are prepared, to make the logs the base config
+    builds on (:func:`sitframe.prepare.make_prerequisites`). Raises
+    :class:`InputError` (file, key, suggestion) for anything wrong.
     """
     from sitframe.config import load_config
 
@@ -211,6 +215,8 @@ def load_sweep(path: str, *, out: str | None = None,
     desc = head.get("description", "")
     sweep = Sweep(name, str(p), base, base_cfg, base_source, base_dir, fixed, dict(grid),
                   out_dir, desc if isinstance(desc, str) else "")
+    if prerequisites is not None:
+        prerequisites(base_cfg, base_dir)
     sweep.points = _prepare_points(sweep, plugins_dirs)
     return sweep
 
@@ -355,7 +361,7 @@ def point_names(grid: dict[str, list[Any]], *, file: str | None = None
 
 def _prepare_points(sweep: Sweep, plugins_dirs: tuple[str, ...]) -> list[Point]:
     from sitframe.config import validate_config
-    from sitframe.experiment import prepare_experiment
+    from sitframe.prepare import prepare_experiment
 
     points = []
     for name, values in point_names(sweep.grid, file=sweep.file):
@@ -388,108 +394,33 @@ def _prepare_points(sweep: Sweep, plugins_dirs: tuple[str, ...]) -> list[Point]:
 
 
 def run_sweep(sweep: Sweep, executor: Any, *, progress: bool = False) -> dict[str, Any]:
-    """Run every point's stages and trials through ``executor`` (a pool executor).
+    """Run every point's stages and trials through ``executor`` (one run lifecycle,
+    :func:`sitframe.experiment.drive`, for all points at once).
 
     Each point's log is written in this process, in trial order, as trials
     finish; this process holds every point log's lock for the whole sweep.
     Ctrl-C (or SIGTERM) cancels pending work, marks unfinished points
-    ``aborted`` and re-raises.
+    ``aborted`` and re-raises. ``progress`` shows the progress plugin's bar
+    over all points' trials.
 
     Returns
     -------
     dict
         ``{"name", "out", "wall_seconds", "points": [summary row per point]}``.
     """
+    from sitframe.experiment import RunPlan, drive
     from sitframe.logs import lock_log
-    from sitframe.parallel import Setup, TrialPipeline, run_clusters
 
     t0 = time.perf_counter()
-    points = sweep.points
-    for pt in points:  # one writer per log: refuse before any point writes anything
+    for pt in sweep.points:  # one writer per log: refuse before any point writes anything
         lock_log(pt.log)
-    status = ["pending"] * len(points)
-    buffers: list[dict[int, Any]] = [{} for _ in points]
-    expected: list[list[int]] = [[] for _ in points]
-    done: list[int] = [0] * len(points)
-    setups = [Setup.of(pt.experiment) for pt in points]
-    total = sum(pt.experiment.info.n_trials for pt in points
-                if "learn" in pt.experiment.cfg["experiment"]["stages"])
-    bar = _Progress(total, sweep.name) if progress else None
-    pipe = TrialPipeline(executor)
-
-    def add_trials(i: int, state: dict[str, Any]) -> None:
-        pt = points[i]
-        specs = pt.experiment.trial_specs(state, pt.run_kwargs.get("policies"))
-        expected[i] = [s.index for s in specs]
-        pipe.add_trials(((i, s.index), setups[i], s) for s in specs)
-        if not specs:
-            finish(i, "complete")
-
-    def finish(i: int, st: str) -> None:
-        status[i] = st
-        points[i].experiment.finish(st)
-
-    try:
-        with pipe:
-            for i, pt in enumerate(points):
-                exp = pt.experiment
-                exp.begin()
-                status[i] = "running"
-                state = pt.run_kwargs.get("interpreter_state")
-                if exp.needs_clusters(state):
-                    pipe.add_call(i, run_clusters, setups[i])
-                else:
-                    add_trials(i, state)
-            for kind, tag, value in pipe:
-                if kind == "call":
-                    collected, fit, state = value
-                    exp = points[tag].experiment
-                    exp.record_collected(collected)
-                    exp.record_clusters(fit, state)
-                    add_trials(tag, state)
-                    continue
-                i, k = tag
-                buffers[i][k] = value
-                order = expected[i]
-                while done[i] < len(order) and order[done[i]] in buffers[i]:
-                    points[i].experiment.trial_done(buffers[i].pop(order[done[i]]))
-                    done[i] += 1
-                    if bar is not None:
-                        bar.advance()
-                if done[i] == len(order):
-                    finish(i, "complete")
-    except BaseException as exc:
-        st = "aborted" if isinstance(exc, KeyboardInterrupt) else "failed"
-        for i, s in enumerate(status):
-            if s == "running":
-                finish(i, st)
-        raise
-    finally:
-        if bar is not None:
-            bar.stop()
-    rows = [summarise_point(pt) for pt in points]
+    for pt in sweep.points:
+        pt.experiment.info.extra["progress"] = progress
+        pt.experiment.info.extra["progress_group"] = f"sweep {sweep.name}"
+    drive([(pt.experiment, RunPlan.of(pt.run_kwargs)) for pt in sweep.points], executor)
+    rows = [summarise_point(pt) for pt in sweep.points]
     return {"name": sweep.name, "out": str(sweep.out), "keys": list(sweep.grid),
             "wall_seconds": round(time.perf_counter() - t0, 3), "points": rows}
-
-
-class _Progress:
-    """A rich progress bar over all trials of the sweep (stderr)."""
-
-    def __init__(self, total: int, name: str) -> None:
-        from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
-
-        self.progress = Progress("[progress.description]{task.description}", BarColumn(),
-                                 MofNCompleteColumn(), TimeRemainingColumn(),
-                                 console=Console(stderr=True))
-        self.progress.start()
-        self.task = self.progress.add_task(f"sweep {name}: trials", total=total)
-
-    def advance(self) -> None:
-        self.progress.advance(self.task, 1)
-
-    def stop(self) -> None:
-        self.progress.stop()
 
 
 # ---------------------------------------------------------------------------
@@ -707,9 +638,15 @@ def main(args: argparse.Namespace) -> int:
 
     if args.workers is not None and args.workers < 1:
         raise InputError(f"must be at least 1, got {args.workers}", key="--workers")
-    sweep = load_sweep(args.sweep, out=args.out, plugins_dirs=tuple(args.plugins_dir))
+    from sitframe.prepare import make_prerequisites
+
+    dirs = tuple(args.plugins_dir)
+    executor_for = partial(make_executor, args.workers, args.scheduler)
+    sweep = load_sweep(args.sweep, out=args.out, plugins_dirs=dirs, prerequisites=lambda c, b:
+                       make_prerequisites(c, b, executor_for=executor_for, plugins_dirs=dirs,
+                                          say=note))
     total = sum(pt.experiment.info.n_trials for pt in sweep.points)
-    executor = make_executor(args.workers, args.scheduler, total, pool=True)
+    executor = make_executor(args.workers, args.scheduler, total)
     failed = True
     try:
         result = run_sweep(sweep, executor,

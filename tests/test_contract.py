@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parent.parent
 def test_every_public_name_resolves_and_import_stays_light():
     for name in sitframe.__all__:
         assert getattr(sitframe, name) is not None, name
-    code = ("import sys, sitframe; print(sorted(m for m in ('sitframe.scheduler', "
+    code = ("import sys, sitframe; print(sorted(m for m in ('sitframe.experiment', "
             "'sitframe.logs', 'h5py', 'scipy') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, cwd=ROOT)

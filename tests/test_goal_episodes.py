@@ -14,11 +14,12 @@ import pytest
 from sitframe.cli import main
 from sitframe.config import load_config, preset_text, validate_config
 from sitframe.errors import InputError
-from sitframe.experiment import evaluate_log, prepare_experiment
+from sitframe.evaluation import evaluate_log
 from sitframe.logs import open_log
 from sitframe.loop import TrialSpec, batch_scores, simulate
 from sitframe.pluginmanager import Registry, get_plugin_manager
 from sitframe.plugins.goal_episodes import AGGREGATE_KEYS, GoalEpisodes, goal_pairs, world_pairs
+from sitframe.prepare import prepare_experiment
 from sitframe.resolve import Resolved
 from sitframe.world import load_world, parse_world
 
@@ -207,9 +208,8 @@ def test_learning_goal_run_evaluates_each_trials_learned_policy():
     (Before, the episodes ran as extra trials after the learning trials with the
     untrained behaviour: the rule base all zeros.)
     """
-    from sitframe.loop import evaluation_specs
-    from sitframe.parallel import InlineExecutor
-    from sitframe.scheduler import Experiment
+    from sitframe.experiment import Experiment
+    from sitframe.loop import evaluation_specs, simulate
 
     cfg = validate_config({
         "experiment": {"trials": 2, "iterations": 80, "world": "goal",
@@ -226,9 +226,10 @@ def test_learning_goal_run_evaluates_each_trials_learned_policy():
     exp = Experiment(cfg)
     result = exp.run(interpreter_state=STATE)
     assert [t.index for t in result.trials] == [0, 1]  # no extra batch with an untrained policy
-    # a pool runs the batches as separate tasks (TrialPipeline) and attaches them the same way
-    pooled = Experiment(cfg, executor=InlineExecutor()).run(interpreter_state=STATE)
-    for t, p in zip(result.trials, pooled.trials, strict=True):
+    # the run drives the batches as separate tasks (TrialPipeline) and attaches them exactly
+    # as one simulate() call with the evaluations inline does
+    inline = [simulate(exp.res, exp.trial_spec(k, STATE)) for k in (0, 1)]
+    for t, p in zip(result.trials, inline, strict=True):
         assert json.dumps(t.summary, default=str) == json.dumps(p.summary, default=str)
         np.testing.assert_array_equal(t.episodes["eval/goal/pose"], p.episodes["eval/goal/pose"])
     rules = [t.policies["avoid"].outputs["heading"].rules for t in result.trials]

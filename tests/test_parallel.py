@@ -12,13 +12,12 @@ from helpers import run_config, run_json, small_config
 from sitframe.cli import main
 from sitframe.logs import open_log
 from sitframe.parallel import (
-    InlineExecutor,
     ProcessExecutor,
+    SerialExecutor,
     TaskCancelled,
     compare_logs,
     make_executor,
 )
-from sitframe.scheduler import SerialExecutor
 
 SMALL = small_config(trials=5, seed=11, eval_worlds=("novel-1", "training"))
 
@@ -101,7 +100,6 @@ def test_bad_parallel_options_exit_2(serial_log, tmp_path, capsys, argv, pattern
 def test_make_executor_choices():
     assert isinstance(make_executor(1, None, 10), SerialExecutor)
     assert isinstance(make_executor(4, None, 1), SerialExecutor)  # one trial: no pool
-    assert isinstance(make_executor(1, None, 10, pool=True), InlineExecutor)
     ex = make_executor(3, None, 10)
     assert isinstance(ex, ProcessExecutor) and ex.workers == 3
     ex = make_executor(8, None, 2)

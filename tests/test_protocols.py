@@ -10,8 +10,8 @@ import pytest
 from sitframe import Proposal, hookimpl
 from sitframe.config import validate_config
 from sitframe.errors import InputError, PluginFault
+from sitframe.experiment import Experiment
 from sitframe.pluginmanager import get_plugin_manager
-from sitframe.scheduler import Experiment
 
 STATE = {"centers": np.array([[0.5] * 8, [3.0] * 8]), "m": 1.2}
 

@@ -139,11 +139,16 @@ def test_not_hdf5_and_wrong_schema(tmp_path, capsys):
     assert "unknown log schema version 99" in capsys.readouterr().err
 
 
-def test_speed_needs_a_heading_log(tmp_path, capsys, monkeypatch):
+def test_a_missing_log_without_prerequisite_is_one_line(tmp_path, capsys, monkeypatch):
+    """A config that reads a log it names no prerequisite for: one line, nothing run.
+    (The shipped presets name theirs: tests/test_prerequisites.py.)"""
     monkeypatch.chdir(tmp_path)
-    assert main(["run", "speed"]) == 2
+    (tmp_path / "c.toml").write_text(SMALL.replace('seed = 3', 'seed = 3\nclusters_from = '
+                                                   '"logs/obstacle-avoidance.h5"'))
+    assert main(["run", "c.toml"]) == 2
     err = capsys.readouterr().err
-    assert "logs/obstacle-avoidance.h5: log file not found" in err
+    assert err.count("\n") == 1 and "logs/obstacle-avoidance.h5: log file not found" in err
+    assert not (tmp_path / "logs").exists() or not any((tmp_path / "logs").iterdir())
 
 
 def test_reused_situations_are_recorded_and_sensor_must_match(small_run, tmp_path, capsys):
@@ -190,22 +195,22 @@ def test_same_seed_in_two_separate_processes_is_bit_identical(tmp_path):
 
 
 def test_best_of_weighs_collisions_and_coverage():
-    from sitframe.experiment import _best_of
+    from sitframe.prepare import best_of
 
     idx = [0, 1, 2, 3]
     # trial 1 never collides but hardly moves (a looper); trial 2 is nearly as
     # safe and covers the room: the rank sums are 6, 5, 3, 6
-    assert _best_of(idx, [3.0, 0.0, 1.0, 2.0], [0.30, 0.05, 0.40, 0.10], [0, 0, 0, 0]) == 2
+    assert best_of(idx, [3.0, 0.0, 1.0, 2.0], [0.30, 0.05, 0.40, 0.10], [0, 0, 0, 0]) == 2
     # equal rank sums: fewer collisions after convergence, then the lower index
-    assert _best_of([0, 1], [1.0, 2.0], [0.1, 0.2], [5.0, 1.0]) == 1
-    assert _best_of([0, 1], [1.0, 2.0], [0.1, 0.2], [1.0, 1.0]) == 0
+    assert best_of([0, 1], [1.0, 2.0], [0.1, 0.2], [5.0, 1.0]) == 1
+    assert best_of([0, 1], [1.0, 2.0], [0.1, 0.2], [1.0, 1.0]) == 0
     # a trial without an evaluation (NaN) ranks last
-    assert _best_of([0, 1], [np.nan, 9.0], [np.nan, 0.1], [0, 0]) == 1
+    assert best_of([0, 1], [np.nan, 9.0], [np.nan, 0.1], [0, 0]) == 1
 
 
 def test_best_trial_uses_only_the_learning_world(tmp_path, capsys):
     from sitframe.errors import InputError
-    from sitframe.experiment import best_trial
+    from sitframe.prepare import best_trial
 
     cfg = tmp_path / "best.toml"
     cfg.write_text(small_config(trials=3, iterations=200, eval_worlds=("training", "novel-1")))

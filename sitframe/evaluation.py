@@ -1,0 +1,206 @@
+"""Evaluate a log's learned policies in any world, and print its rule bases.
+
+``evaluate_log`` runs one trial's frozen policies (or a batch of an evaluation
+protocol's episodes) in a world file of the user's choice; ``rule_base_table``
+is the table ``sitframe run`` prints.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from sitframe.clustering import describe_prototype
+from sitframe.config import META_KEYS, Config, load_config, validate_config
+from sitframe.errors import InputError
+from sitframe.logs import open_log
+from sitframe.loop import STAGE_BATCH, STAGE_EVAL, TrialSpec, batch_scores, simulate, stage_seed
+from sitframe.pluginmanager import Registry, get_plugin_manager
+from sitframe.prepare import BEST_TRIAL_RULE, best_of, check_state, logged_policy
+from sitframe.records import LearnedPolicy
+from sitframe.resolve import Resolved
+
+
+def evaluate_log(
+    log_path: str,
+    *,
+    world: str,
+    trial: int = 0,
+    iterations: int = 1000,
+    seed: int = 0,
+    plugins_dirs: tuple[str, ...] = (),
+    goal_episodes: int = 0,
+    arbiter: str | None = None,
+    fusion: str = "goal-finding",
+) -> dict[str, Any]:
+    """Run trial ``trial``'s frozen policies from a log in ``world``.
+
+    Without ``goal_episodes``: one ``iterations``-long run from the world's
+    start. Returns ``iterations``, ``collisions``, ``collisions_per_1000``,
+    ``distance_m``, ``mean_speed_m_s``, ``coverage``, plus whatever the
+    ``metrics(arrays)`` method of each of the log's reward components returns
+    (a reward may define one to score its own behaviour, e.g. the
+    wall-following reward adds ``wall_band_fraction`` and
+    ``wall_distance_rmse_m``). ``arbiter`` replaces the log's arbiter.
+
+    With ``goal_episodes = N``: N episodes of the run's evaluation protocol
+    (one batch, :func:`sitframe.loop.run_batch`; its table's
+    ``episodes`` set to N), e.g. random goal episodes
+    (``plugins/goal_episodes.py``) in ``world``. If the log's config has a
+    protocol (a goal run) it is used; otherwise the behaviours, arbiter and ``[goal]`` table
+    come from the ``fusion`` config (a preset name or a TOML path; default the
+    ``goal-finding`` preset), whose behaviour with a ``policy_from`` is
+    replaced by the log's learned behaviour (its table and its policy), with
+    the log's situations. ``arbiter`` names another arbiter (its own
+    parameters are kept if the fusion config configures that arbiter, else
+    its defaults). Returns ``episodes``, ``success_rate``,
+    ``collisions_per_episode``, ``collision_free_rate``, ``spl``,
+    ``mean_time_s``, ``heading_change_per_m``, ``mean_path_length_m``.
+    """
+    log = open_log(log_path)
+    log.check()
+    cfg = validate_config(log.config, file=log_path)
+    tl = log.trial(trial)
+    policies = {label: p for label in tl.behaviours
+                if (p := logged_policy(tl, label, log_path)) is not None}
+    if not policies:
+        raise InputError(f"trial {trial} has no learned policy to evaluate", file=log_path,
+                         key="trials")
+    clusters_from = Config.of(cfg).experiment.clusters_from
+    if log.has("cluster/state") or not clusters_from:
+        state = log.interpreter_state()
+    else:  # a run that reused situations from another log (e.g. a goal run)
+        state = open_log(clusters_from).interpreter_state()
+    pm = get_plugin_manager(plugins_dirs=plugins_dirs)
+    registry = Registry.collect(pm)
+    if arbiter is not None:
+        registry.get("arbiter", arbiter, key="--arbiter")
+    source = log_path
+    if goal_episodes:
+        res0 = Resolved.build(cfg, registry, log_path)
+        if res0.protocol_name() is None:
+            cfg, policies, source = _fusion_config(cfg, policies, fusion, log_path)
+    if arbiter is not None:
+        params = cfg["arbiter"] if cfg["arbiter"].get("component") == arbiter else {}
+        cfg["arbiter"] = {**params, "component": arbiter}
+    res = Resolved.build(cfg, registry, source)
+    res.world(world, key="--world")
+    check_state(res, state, log_path)
+    if goal_episodes:
+        name = res.protocol_name()
+        if name is None:
+            raise InputError("no component names an evaluation_protocol to run episodes of; "
+                             "expected a behaviour such as 'goal'", file=source,
+                             key="behaviours")
+        table = res.protocol(name).table
+        cfg[table] = {**cfg[table], "episodes": goal_episodes}
+        res = Resolved.build(cfg, registry, source)  # (with the episodes asked for)
+        spec = TrialSpec(index=trial, seed=stage_seed(seed, STAGE_BATCH, 0), world=world,
+                         iterations=int(res.protocol(name).iterations), learn=False,
+                         interpreter_state=state, policies=policies, protocol=name)
+        result = simulate(res, spec)
+        return {"log": log_path, "world": world, "trial": trial,
+                "arbiter": res.config.arbiter.name, **batch_scores(result)}
+    spec = TrialSpec(index=trial, seed=stage_seed(seed, STAGE_EVAL, trial), world=world,
+                     iterations=iterations, learn=False, interpreter_state=state,
+                     policies=policies)
+    result = simulate(res, spec)
+    s = result.summary
+    out = {
+        "log": log_path, "world": world, "trial": trial,
+        "iterations": s["iterations"], "collisions": s["collisions"],
+        "collisions_per_1000": s["collisions_per_1000"], "distance_m": s["distance_m"],
+        "mean_speed_m_s": s["mean_speed_m_s"], "coverage": s["coverage"],
+    }
+    for _label, (_beh, reward) in res.behaviours().items():
+        metrics = getattr(reward, "metrics", None)
+        if metrics is not None:
+            out.update(metrics(result.arrays))
+    return out
+
+
+def _fusion_config(log_cfg: dict[str, Any], policies: dict[str, LearnedPolicy],
+                   fusion: str, log_path: str
+                   ) -> tuple[dict[str, Any], dict[str, LearnedPolicy], str]:
+    """The fusion config with the log's learned behaviour in its ``policy_from`` slot."""
+    fcfg, fsource, _base = load_config(fusion)
+    slots = [lb for lb, t in fcfg["behaviours"].items() if t.get("policy_from")]
+    if not slots:
+        raise InputError("no behaviour has a policy_from table to receive the log's learned "
+                         "behaviour", file=fsource, key="behaviours")
+    slot = slots[0]
+    want = fcfg["behaviours"][slot]["policy_from"].get("behaviour", slot)
+    src = want if want in policies else next(iter(policies))
+    table = {k: v for k, v in log_cfg["behaviours"][src].items()
+             if k == "component" or k not in META_KEYS}
+    behaviours = {}
+    for lb, t in fcfg["behaviours"].items():
+        behaviours[lb] = table if lb == slot else {k: v for k, v in t.items()
+                                                   if k != "policy_from"}
+    fcfg["behaviours"] = behaviours
+    for section in ("sensor", "interpreter", "robot"):
+        fcfg[section] = log_cfg[section]
+    fcfg["experiment"]["clusters_from"] = ""
+    return validate_config(fcfg, file=fsource), {slot: policies[src]}, fsource
+
+
+def format_action(value: float, unit: str) -> str:
+    """An action value for a table: ``+30°``, ``0.20 m/s``, or the number and its unit."""
+    if unit == "deg":
+        return f"{value:+.0f}°"
+    if unit == "m/s":
+        return f"{value:.2f} m/s"
+    return f"{value:.3g} {unit}".rstrip()
+
+
+def rule_base_table(result: Any) -> Any:
+    """A rich Table of the learned rule bases of a run, one row per situation.
+
+    For each learned output: the action most trials chose for the situation
+    and in how many trials (thesis Tables A.2/A.3), and the action of the trial
+    that ``policy_from.trial = "best"`` would pick (:func:`best_trial`:
+    collisions and coverage when evaluated in the learning world; trial 0
+    when there is no such evaluation). Situations are described from their prototypes.
+    """
+    from collections import Counter
+
+    from rich.table import Table
+
+    trials = result.trials
+    world = Config.of(result.info.config).experiment.world
+    key = f"eval/{world}/collisions_per_1000"
+    ranked = [t for t in trials if key in t.summary]
+    best = trials[0]
+    if ranked:
+        k = best_of([t.index for t in ranked], [t.summary[key] for t in ranked],
+                     [t.summary.get(f"eval/{world}/coverage", 0.0) for t in ranked],
+                     [t.summary["collisions_per_1000_after_convergence"] for t in ranked])
+        best = next(t for t in ranked if t.index == k)
+    why = (f"best trial {best.index}: {BEST_TRIAL_RULE} when evaluated in '{world}'"
+           if ranked else f"trial {best.index}: no evaluation in the learning world")
+    table = Table(title=f"learned rule bases of {len(trials)} trials",
+                  caption=f"most trials = the most frequent action (how many trials); {why}")
+    table.add_column("situation", justify="right")
+    table.add_column("description")
+    outs = [(label, out, o) for label, pol in best.policies.items()
+            for out, o in pol.outputs.items()]
+    for label, out, _o in outs:
+        table.add_column(f"{label}.{out}\nmost trials", justify="right")
+        table.add_column(f"{label}.{out}\ntrial {best.index}", justify="right")
+    if not outs:
+        return table
+    centers = result.interpreter_state.get("centers")
+    for i in range(outs[0][2].rules.size):
+        desc = describe_prototype(centers[i], result.sensor_angles_deg) \
+            if centers is not None and len(result.sensor_angles_deg) == np.shape(centers)[1] \
+            else ""
+        row = [f"S{i}", desc]
+        for label, out, o in outs:
+            votes = Counter(int(t.policies[label].outputs[out].rules[i]) for t in trials
+                            if label in t.policies)
+            action, count = votes.most_common(1)[0]
+            row.append(f"{format_action(o.actions[action], o.unit)} ({count}/{len(trials)})")
+            row.append(format_action(o.actions[int(o.rules[i])], o.unit))
+        table.add_row(*row)
+    return table
