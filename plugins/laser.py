@@ -23,8 +23,8 @@ step-by-step guide):
    the config loader adds the file and table) and lays the beams out once.
 2. ``bind(run)`` learns the robot's radius from the run, unless the config
    gave ``robot_radius``.
-3. ``read`` casts every beam in one vectorised :func:`sitframe.cast_rays`
-   call against the world's cached edges and draws from the given ``rng``
+3. ``read`` casts every beam in one :func:`sitframe.rim_ranges` call (ranges
+   from the rim) against the world's cached edges and draws from the given ``rng``
    only when ``noise_std`` or ``dropout`` is on, so runs stay reproducible.
 
 In a run config::

@@ -9,8 +9,11 @@ floats. To add your own:
    ``__init__`` and validate them there (raise ``ValueError`` naming the
    parameter; the config loader turns it into a one-line error).
 2. Use the world's cached geometry: ``world.segment_set`` holds every wall and
-   obstacle edge; :func:`sitframe.cast_rays` casts all rays in one vectorised
-   call. Everything a plugin needs is importable from ``sitframe`` itself.
+   obstacle edge; :func:`sitframe.cast_rays` casts all rays in one call, and
+   :func:`sitframe.rim_ranges` turns them into a range finder's reading
+   (ranges from the robot's rim, the nearest of each beam's rays). Both run
+   compiled kernels when numba is installed (:mod:`sitframe.kernels`).
+   Everything a plugin needs is importable from ``sitframe`` itself.
 3. Take all randomness from the ``rng`` you are given (never ``np.random``),
    and draw from it only when an option needs it, so runs stay reproducible.
 4. Register the class from a hook::

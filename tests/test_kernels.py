@@ -23,13 +23,14 @@ from sitframe.world import World, parse_world
 
 pytest.importorskip("numba")
 
-K = kernels.kernels()
+K = kernels.load()
 if K is None:  # (SITFRAME_NUMBA=0)
     pytest.skip("compiled kernels switched off", allow_module_level=True)
 
 
 def both(monkeypatch: pytest.MonkeyPatch, fn):  # noqa: ANN001, ANN201 - any callable
     """``(fn() with kernels, fn() with numpy)``."""
+    assert kernels.kernels() is K  # (loaded by kernels.load() above)
     fast = fn()
     with monkeypatch.context() as m:
         m.setattr(kernels, "_LOADED", [None])
