@@ -368,7 +368,10 @@ def rim_ranges(segments: SegmentSet, x: float, y: float, angles_rad: np.ndarray,
         (n,) readings [m] in ``[-radius, max_range]`` (``[0, max_range]`` with ``clip``).
     """
     ang = np.asarray(angles_rad, dtype=np.float64)
-    n = ang.shape[0] // group
+    n = ang.shape[0] // group if group >= 1 else 0
+    if n * group != ang.shape[0]:
+        raise ValueError(f"rim_ranges: {ang.shape[0]} rays do not make groups of {group!r}; "
+                         "expected a positive group size that divides the number of rays")
     k = kernels()
     if k is None:
         reach = max_range + radius

@@ -160,3 +160,8 @@ def test_linspace_follows_numpy() -> None:
     for a, b in [(0.0, 1.5), (0.35, 0.4), (1e-310, 2e-310), (2.0, 2.0), (0.1, 0.0)]:
         K.linspace(a, b, out)
         assert np.array_equal(out, np.linspace(a, b, 17))
+
+
+def test_rim_ranges_rejects_ragged_groups(room: World) -> None:
+    with pytest.raises(ValueError, match="do not make groups of 3"):
+        geo.rim_ranges(room.segment_set, 1.0, 1.0, np.zeros(8), 3.0, 0.15, 3)
