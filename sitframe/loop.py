@@ -13,6 +13,9 @@ One control iteration (1.5 s of robot time)::
 
 Every value crossing from plugin code is checked (:mod:`sitframe.contract`).
 A :class:`TrialSpec` is picklable, so worker processes run the same loop.
+:func:`simulate` creates the trial's components (:class:`_TrialParts`), runs
+the loop (:func:`_run_loop`) and hands every iteration to one
+:class:`Recorder`, which owns the per-iteration arrays.
 
 Seeds: the run seed ``S`` gives each stage and each trial its own
 :class:`numpy.random.SeedSequence` (``spawn_key`` = stage, trial), so trial
@@ -216,7 +219,7 @@ def simulate(
                    [lb for lb, *_ in parts.learners])
     start = np.array(world.start if spec.start is None else spec.start, dtype=float)
     n = _run_loop(res, spec, parts, rec, _Env(world, goal, rng, start), step_hook, protocol)
-    arrays = rec.arrays(n, parts, res.origins, spec.index)
+    arrays = rec.arrays(n, res.origins, spec.index)
     result = _trial_result(res, spec, world, parts, arrays)
     for ev_spec in evaluation_specs(spec, result.policies):
         attach_evaluation(result, ev_spec.world, simulate(res, ev_spec))
@@ -336,8 +339,7 @@ class Recorder:
         if rewards:
             self._rewards.append(tuple(rewards.values()))
 
-    def arrays(self, n: int, parts: _TrialParts, origins: dict[str, Origin],
-               trial: int) -> dict[str, np.ndarray]:
+    def arrays(self, n: int, origins: dict[str, Origin], trial: int) -> dict[str, np.ndarray]:
         """The first ``n`` iterations' arrays (the final pose is the last of ``pose``).
 
         Checks every reading, membership vector and weight first (vectorised,
