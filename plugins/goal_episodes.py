@@ -142,8 +142,8 @@ class GoalEpisodes:
 
     def __init__(self, *, episodes: int = 50, timeout: int = 300, min_distance: float = 3.0,
                  pairs: str = "random", radius: float = 0.3, margin: float = 0.1) -> None:
-        self.episodes = int(P.number("episodes", episodes, lo=1, integer=True))
-        self.iterations = int(P.number("timeout", timeout, lo=1, integer=True))
+        self.episodes = int(P.number("episodes", episodes, lo=1, hi=100_000, integer=True))
+        self.iterations = int(P.number("timeout", timeout, lo=1, hi=10_000_000, integer=True))
         self.min_distance = P.number("min_distance", min_distance, lo=0.0)
         self.pairs = P.choice("pairs", pairs, PAIR_MODES)
         self.radius = P.number("radius", radius, lo=0.0, lo_open=True)

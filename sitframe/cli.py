@@ -46,6 +46,7 @@ from pathlib import Path
 from typing import Any
 
 from sitframe import __version__
+from sitframe import params as P
 from sitframe.errors import PLUGIN_FAULT_EXIT, InputError, PluginError, PluginFault, note
 
 # start-up time: this module is imported whenever the command line builds its parser
@@ -118,12 +119,14 @@ def build_parser() -> argparse.ArgumentParser:
 #: ``add_arguments(parser)`` and ``main(args) -> int`` (exit status).
 EXTRA_COMMANDS: dict[str, str] = {"analyse": "sitframe.analysis.commands",
                                   "replay": "sitframe.analysis.commands_replay",
+                                  "compare": "sitframe.analysis.commands_compare",
+                                  "export": "sitframe.analysis.commands_export",
                                   "sweep": "sitframe.sweep"}
 
 
 #: Commands that read a log given on the command line: an exception while they use its
 #: contents means the log is damaged (valid HDF5, wrong layout), reported in one line.
-_LOG_READERS = ("evaluate", "analyse", "replay")
+_LOG_READERS = ("evaluate", "analyse", "replay", "export")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -217,10 +220,8 @@ def _dispatch(args: argparse.Namespace) -> int:
 
 
 def _positive(name: str, value: int | None, hi: int | None = None) -> None:
-    if value is not None and value < 1:
-        raise InputError(f"must be at least 1, got {value}", key=f"--{name}")
-    if value is not None and hi is not None and value > hi:
-        raise InputError(f"must be at most {hi}, got {value}", key=f"--{name}")
+    if value is not None:
+        P.number(f"--{name}", value, lo=1, hi=hi, integer=True)
 
 
 # ---------------------------------------------------------------------------

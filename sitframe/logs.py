@@ -702,6 +702,20 @@ class Log:
                 return np.zeros(0, dtype=[("trial", "i4")])
             return f["summary"][()]
 
+    def summary_frame(self) -> Any:
+        """The summary table as a pandas DataFrame (needs pandas; see
+        :func:`sitframe.frames.summary_frame`)."""
+        from sitframe.frames import summary_frame  # pandas is optional: loaded on use
+
+        return summary_frame(self)
+
+    def iterations_frame(self, trials: list[int] | None = None) -> Any:
+        """Per-iteration arrays of the learning trials as one pandas DataFrame (needs pandas;
+        see :func:`sitframe.frames.iterations_frame`)."""
+        from sitframe.frames import iterations_frame  # pandas is optional: loaded on use
+
+        return iterations_frame(self, trials)
+
 
 def _check_layout(f: h5py.File, path: str) -> None:
     """The parts of the layout that readers index with, checked so that a valid HDF5 file

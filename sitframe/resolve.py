@@ -107,6 +107,10 @@ class Resolved:
         res._bind(interp, "interpreter")
         res.behaviours()
         res.arbiter()
+        for name in registry.names("protocol"):  # a protocol's own table is checked now
+            if getattr(registry.get("protocol", name).factory, "table", None) in \
+                    res.config.tables:
+                res.protocol(name)
         return res
 
     def _check_sensor(self, sensor: Any, spec: SensorSpec, world: World) -> None:
@@ -197,16 +201,24 @@ class Resolved:
 
     def protocol(self, name: str) -> Any:
         """A fresh evaluation protocol ``name``, created from its config table (but ``worlds``)."""
-        entry = self.registry.get("protocol", name, file=self.file, key="behaviours")
-        table = str(getattr(entry.factory, "table", "evaluate"))
+        table = self._protocol_table(name)
         params = {k: v for k, v in self.config.tables.get(table, {}).items() if k != "worlds"}
         return self._create("protocol", table, Component(name, params))
+
+    def _protocol_table(self, name: str) -> str:
+        """The config table holding protocol ``name``'s parameters."""
+        entry = self.registry.get("protocol", name, file=self.file, key="behaviours")
+        return str(getattr(entry.factory, "table", "evaluate"))
 
     def protocol_worlds(self, name: str) -> list[str]:
         """The worlds of protocol ``name``'s table, loaded and checked (``check_world``)."""
         proto = self.protocol(name)
         table = proto.table
-        names = list(self.config.tables[table]["worlds"])
+        names = self.config.tables[table].get("worlds")
+        if not isinstance(names, list) or not names or \
+                not all(isinstance(n, str) and n for n in names):
+            raise InputError(f"expected a non-empty list of world names, got {names!r}",
+                             file=self.file, key=f"{table}.worlds")
         for j, wname in enumerate(names):
             key = f"{table}.worlds[{j}]"
             world = self.world(wname, key=key)

@@ -128,9 +128,36 @@ def load_sweep(path: str, *, out: str | None = None, plugins_dirs: tuple[str, ..
     builds on (:func:`sitframe.prepare.make_prerequisites`). Raises
     :class:`InputError` (file, key, suggestion) for anything wrong.
     """
-    from sitframe.config import load_config
-
     p = Path(path)
+    raw = _read_sweep_file(p, path)
+    head = _check_head(raw.get("sweep", {}), path, out)
+    name = head.get("name", p.stem)
+    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_.=-]+", name):
+        raise InputError(f"expected a name of letters, digits, '_', '-', '.', got {name!r}",
+                         file=path, key="sweep.name")
+    base_cfg, base_source, base_dir = _load_base(head["base"], p, path)
+    fixed: dict[str, Any] = dict(raw.get("set", {}))
+    for key, short in (("trials", "experiment.trials"), ("seed", "experiment.seed")):
+        if key in head:
+            fixed[short] = head[key]
+    grid = raw.get("grid", {})
+    _check_grid(grid, fixed, path)
+    plugins = _registry(base_cfg, base_dir, plugins_dirs)
+    for where, keys in (("set", fixed), ("grid", grid)):
+        for key in keys:
+            check_key(key, base_cfg, plugins, file=path, where=where)
+    out_dir = Path(out or head.get("out") or Path("logs") / "sweeps" / name)
+    desc = head.get("description", "")
+    sweep = Sweep(name, str(p), head["base"], base_cfg, base_source, base_dir, fixed,
+                  dict(grid), out_dir, desc if isinstance(desc, str) else "")
+    if prerequisites is not None:
+        prerequisites(base_cfg, base_dir)
+    sweep.points = _prepare_points(sweep, plugins_dirs)
+    return sweep
+
+
+def _read_sweep_file(p: Path, path: str) -> dict[str, Any]:
+    """The sweep file's TOML, with only the sections ``sweep``, ``set`` and ``grid``."""
     if not p.is_file():
         raise InputError("sweep file not found (expected a .toml sweep definition)", file=path)
     try:
@@ -145,7 +172,11 @@ def load_sweep(path: str, *, out: str | None = None, plugins_dirs: tuple[str, ..
                              "; expected sweep, set, grid", file=path, key=section)
         if not isinstance(raw[section], dict):
             raise InputError("expected a table", file=path, key=section)
-    head = raw.get("sweep", {})
+    return raw
+
+
+def _check_head(head: dict[str, Any], path: str, out: str | None) -> dict[str, Any]:
+    """The ``[sweep]`` table: known keys, a ``base``, an ``out`` inside the working folder."""
     for key in head:
         if key not in _SWEEP_KEYS:
             raise InputError(f"unknown key{did_you_mean(key, _SWEEP_KEYS)}; expected one of "
@@ -153,29 +184,40 @@ def load_sweep(path: str, *, out: str | None = None, plugins_dirs: tuple[str, ..
     if "base" not in head:
         raise InputError("missing 'base' (a preset name or the path of an experiment .toml)",
                          file=path, key="sweep.base")
-    base = head["base"]
-    if not isinstance(base, str) or not base:
-        raise InputError(f"expected a preset name or a path, got {base!r}", file=path,
+    if not isinstance(head["base"], str) or not head["base"]:
+        raise InputError(f"expected a preset name or a path, got {head['base']!r}", file=path,
                          key="sweep.base")
-    name = head.get("name", p.stem)
-    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_.=-]+", name):
-        raise InputError(f"expected a name of letters, digits, '_', '-', '.', got {name!r}",
-                         file=path, key="sweep.name")
+    if "out" in head:
+        if not isinstance(head["out"], str) or not head["out"]:
+            raise InputError(f"expected a folder path (string), got {head['out']!r}",
+                             file=path, key="sweep.out")
+        rel = Path(head["out"])
+        if out is None and (rel.is_absolute() or ".." in rel.parts):
+            raise InputError(f"expected a folder inside the working folder (relative, no '..'), "
+                             f"got {head['out']!r}; give --out DIR on the command line to write "
+                             "elsewhere", file=path, key="sweep.out")
+    return head
+
+
+def _load_base(base: str, p: Path, path: str) -> tuple[dict[str, Any], str, str]:
+    """The base experiment: a preset name, or a .toml path relative to the sweep file."""
+    from sitframe.config import load_config
+
     base_arg = base
     if base.endswith(".toml") or "/" in base:
         bp = Path(base)
         base_arg = str(bp if bp.is_absolute() else p.parent / bp)
     try:
-        base_cfg, base_source, base_dir = load_config(base_arg)
+        return load_config(base_arg)
     except InputError as exc:
         if exc.file in (None, base_arg) and exc.key is None:
             raise InputError(exc.message, file=path, key="sweep.base") from None
         raise
-    fixed: dict[str, Any] = dict(raw.get("set", {}))
-    for key, short in (("trials", "experiment.trials"), ("seed", "experiment.seed")):
-        if key in head:
-            fixed[short] = head[key]
-    grid = raw.get("grid", {})
+
+
+def _check_grid(grid: dict[str, Any], fixed: dict[str, Any], path: str) -> None:
+    """Every grid axis a non-empty list of distinct values, not also fixed; not too many
+    points; no run names set (a sweep names its points' runs)."""
     if not grid:
         raise InputError("the grid is empty (expected [grid] with at least one "
                          "\"dotted.key\" = [values])", file=path, key="grid")
@@ -193,32 +235,11 @@ def load_sweep(path: str, *, out: str | None = None, plugins_dirs: tuple[str, ..
     if n_points > MAX_POINTS:
         raise InputError(f"the grid has {n_points} points; expected at most {MAX_POINTS}",
                          file=path, key="grid")
-    if "out" in head and (not isinstance(head["out"], str) or not head["out"]):
-        raise InputError(f"expected a folder path (string), got {head['out']!r}", file=path,
-                         key="sweep.out")
     for where, keys in (("set", fixed), ("grid", grid)):
         if "experiment.name" in keys:
             raise InputError("a sweep names every point's run itself (<sweep name>/<point>); "
                              "expected [sweep] name instead", file=path,
                              key=f"{where}.experiment.name")
-    if "out" in head and out is None:
-        rel = Path(head["out"])
-        if rel.is_absolute() or ".." in rel.parts:
-            raise InputError(f"expected a folder inside the working folder (relative, no '..'), "
-                             f"got {head['out']!r}; give --out DIR on the command line to write "
-                             "elsewhere", file=path, key="sweep.out")
-    plugins = _registry(base_cfg, base_dir, plugins_dirs)
-    for where, keys in (("set", fixed), ("grid", grid)):
-        for key in keys:
-            check_key(key, base_cfg, plugins, file=path, where=where)
-    out_dir = Path(out or head.get("out") or Path("logs") / "sweeps" / name)
-    desc = head.get("description", "")
-    sweep = Sweep(name, str(p), base, base_cfg, base_source, base_dir, fixed, dict(grid),
-                  out_dir, desc if isinstance(desc, str) else "")
-    if prerequisites is not None:
-        prerequisites(base_cfg, base_dir)
-    sweep.points = _prepare_points(sweep, plugins_dirs)
-    return sweep
 
 
 def _registry(cfg: dict[str, Any], base_dir: str, plugins_dirs: tuple[str, ...]) -> Any:

@@ -62,6 +62,7 @@ from typing import Any
 import numpy as np
 
 from sitframe import geometry as geo
+from sitframe import params as P
 from sitframe.errors import InputError, did_you_mean
 
 __all__ = ["DEFAULT_ROBOT_RADIUS", "Goal", "World", "list_worlds", "load_world", "parse_world"]
@@ -451,7 +452,7 @@ def parse_world(text: str, *, file: str | None = None) -> World:
     start = _numbers(robot["start"], 3, "robot.start", file, what="[x, y, heading_deg]")
     radius = DEFAULT_ROBOT_RADIUS
     if "radius" in robot:
-        radius = _positive(robot["radius"], "robot.radius", file)
+        radius = _number(robot["radius"], "robot.radius", file, positive=True)
 
     walls = tuple(_shapes(data, "walls", file, min_points=2, polygon=False))
     if not walls:
@@ -466,7 +467,8 @@ def parse_world(text: str, *, file: str | None = None) -> World:
     if "goal" in data:
         g = _table(data, "goal", _GOAL_KEYS, "position", "[x, y]", file)
         pos = _numbers(g["position"], 2, "goal.position", file, what="[x, y]")
-        goal = Goal(_readonly(pos), _positive(g.get("radius", 0.3), "goal.radius", file))
+        goal = Goal(_readonly(pos), _number(g.get("radius", 0.3), "goal.radius", file,
+                                                      positive=True))
 
     meta = data.get("meta", {})
     if not isinstance(meta, dict):
@@ -597,22 +599,13 @@ def _check_keys(table: dict[str, Any], allowed: tuple[str, ...], prefix: str, fi
             )
 
 
-def _number(v: Any, key: str, file: str | None) -> float:
-    if isinstance(v, bool) or not isinstance(v, int | float):
-        raise InputError(f"expected a number, got {v!r}", file=file, key=key)
-    if not math.isfinite(v):
-        raise InputError(f"expected a finite number, got {v!r}", file=file, key=key)
-    if abs(v) > MAX_COORD:
-        raise InputError(f"expected a number within ±{MAX_COORD:g} (metres, or degrees for a "
-                         f"heading), got {v!r}", file=file, key=key)
-    return float(v)
-
-
-def _positive(v: Any, key: str, file: str | None) -> float:
-    x = _number(v, key, file)
-    if x <= 0:
-        raise InputError(f"expected a number > 0, got {v!r}", file=file, key=key)
-    return x
+def _number(v: Any, key: str, file: str | None, *, positive: bool = False) -> float:
+    """A coordinate or length (metres; degrees for a heading) within ±:data:`MAX_COORD`."""
+    try:
+        return float(P.number(key, v, lo=0.0 if positive else -MAX_COORD, hi=MAX_COORD,
+                              lo_open=positive))
+    except InputError as exc:
+        raise exc.at(file=file) from None
 
 
 def _numbers(v: Any, n: int, key: str, file: str | None, *, what: str) -> np.ndarray:

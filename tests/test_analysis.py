@@ -164,6 +164,12 @@ def test_analyse_command_writes_index(tiny_log, tmp_path, capsys):
                  f"rule_base_trial{k}.md"):
         assert (out / name).exists(), name
     assert "Incomplete" not in index
+    page = (out / "index.html").read_text()  # the page shows every figure and table
+    assert captured.out.startswith(str(out / "index.html"))
+    for png in out.glob("*.png"):
+        assert f'<img src="{png.name}"' in page
+    assert page.count("<table") >= 5 and 'id="replay-data"' in page
+    assert "http://" not in page and "https://" not in page  # nothing from the network
 
 
 def test_analyse_aborted_log_reports_what_is_missing(tiny_log, tmp_path, capsys):

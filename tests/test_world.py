@@ -106,7 +106,7 @@ BAD_CASES = [
     (_bad("start = [1.0, 1.0, 90.0]", "start = [8, 1.0, 0]"), "robot.start", "outside the walls"),
     (_bad("position = [5, 1]", "position = [9, 1]"), "goal.position", "outside the walls"),
     (_bad("position = [5, 1]", "position = [4.5, 3]"), "goal.position", "inside an obstacle"),
-    (_bad("radius = 0.3", "radius = -1"), "goal.radius", "> 0"),
+    (_bad("radius = 0.3", "radius = -1"), "goal.radius", "(0.0, 10000.0]"),
     (_bad("radius = 0.3", "radius = 0.3\ncolour = 'red'"), "goal.colour", "expected one of"),
     (_bad("[robot]", "robot = 3\n[robt]"), "robt", "did you mean 'robot'"),
     (GOOD.replace("[[walls]]\npoints = [[0, 0], [6, 0], [6, 4], [0, 4], [0, 0]]",

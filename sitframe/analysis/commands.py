@@ -2,21 +2,24 @@
 
 Figures (PNG) and tables (Markdown + CSV) go to ``<log stem>-analysis/`` next
 to the log, or into DIR, with an ``index.md`` that links them with one-line
-captions. An incomplete log (aborted run, missing stages or trials) is
-analysed as far as it goes; what is missing is listed in ``index.md`` and
-summarised in one line on stderr.
+captions and an ``index.html`` that shows them on one page with the run's
+metadata, config and plugins and an interactive replay of every trial. An
+incomplete log (aborted run, missing stages or trials) is analysed as far as
+it goes; what is missing is listed in both indexes and summarised in one line
+on stderr.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 # start-up time: this module is imported whenever the command line builds its parser
 # (``sitframe --help`` and every command), so what only one command needs is imported
 # inside the function that needs it.
 
-HELP = "write the figures and tables of a log (PNG, Markdown, CSV) with an index.md"
+HELP = "write the figures and tables of a log (PNG, Markdown, CSV), index.html with a replay"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -56,5 +59,6 @@ def main(args: argparse.Namespace) -> int:
               + "; ".join(rep.problems), file=sys.stderr)
     n_fig = sum(1 for _s, f, _c in rep.files if f.endswith(".png"))
     n_tab = len(rep.files) - n_fig
-    print(f"{rep.index}  ({n_fig} figures, {n_tab} tables, {rep.seconds:.1f} s)")
+    print(f"{rep.html}  ({n_fig} figures, {n_tab} tables, replay, {rep.seconds:.1f} s; "
+          f"also {os.path.basename(rep.index)})")
     return 0

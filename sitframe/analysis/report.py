@@ -1,4 +1,4 @@
-"""Write every figure and table a log supports into a folder, with an ``index.md``.
+"""Write every figure and table a log supports into a folder, with index.html and index.md.
 
 This is what ``sitframe analyse LOG [-o DIR]`` runs; from Python::
 
@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from sitframe.analysis import results as R
+from sitframe.analysis.report_html import write_report_html
 from sitframe.errors import InputError
 from sitframe.logs import Log, TrialLog
 from sitframe.world import parse_world
@@ -82,6 +83,11 @@ class AnalysisReport:
     def index(self) -> str:
         """Path of ``index.md``."""
         return os.path.join(self.out_dir, "index.md")
+
+    @property
+    def html(self) -> str:
+        """Path of ``index.html`` (the page with every figure, table and the replay)."""
+        return os.path.join(self.out_dir, "index.html")
 
 
 def log_problems(log: R.LogLike) -> list[str]:
@@ -146,6 +152,7 @@ class _Writer:
     def __init__(self, report: AnalysisReport, dpi: int) -> None:
         self.r = report
         self.dpi = dpi
+        self.tables: dict[str, R.Table] = {}  # stem -> table, for the HTML page
 
     def figure(self, section: str, name: str, caption: str, make: Callable[[], Any]) -> None:
         try:
@@ -165,6 +172,7 @@ class _Writer:
             self.r.skipped.append(f"{stem}.md/.csv: {exc}")
             return
         t.save(os.path.join(self.r.out_dir, stem))
+        self.tables[stem] = t
         self.r.files.append((section, f"{stem}.md", caption + f" ([CSV]({stem}.csv))"))
 
 
@@ -284,19 +292,21 @@ def analyse(
 
         # ------------------------------------------------------------- learning
         idx = lg.trial_indices()
+        loaded: dict[int, TrialLog] = {}
+
+        def get(k: int) -> TrialLog:
+            if k not in loaded:
+                loaded[k] = lg.trial(k)
+            return loaded[k]
+
         if idx:
             sec = "Learning (all trials)"
             W.table(sec, "convergence", "Convergence and quality of every trial (Table 5.9)",
                     lambda: R.convergence_table(lg))
-            loaded: dict[int, TrialLog] = {}
-
-            def get(k: int) -> TrialLog:
-                if k not in loaded:
-                    loaded[k] = lg.trial(k)
-                return loaded[k]
 
             W.table(sec, "rule_bases", "Learned action per situation in every trial, and the most "
-                    "frequent one (Tables A.2/A.3)", lambda: R.rule_bases_across_trials(lg))
+                    "frequent one (Tables A.2/A.3)",
+                    lambda: R.rule_bases_across_trials(lg, read=get))
 
             def curves() -> Any:
                 rewards, conv = {}, {}
@@ -328,8 +338,9 @@ def analyse(
             for k in chosen:
                 _trial_figures(W, lg, get(k), worlds, window, path_iterations, radius, LP)
         rep.seconds = time.perf_counter() - t0
-        _write_index(rep, lg)
+        write_report_html(rep, lg, {k: get(k) for k in idx}, W.tables)
         rep.seconds = time.perf_counter() - t0
+        _write_index(rep, lg)
         for name in sorted(os.listdir(scratch)):
             os.replace(scratch / name, out / name)
         scratch.rmdir()
@@ -432,6 +443,8 @@ def _count(tr: TrialLog, s: int, e: int) -> int:
 def _write_index(rep: AnalysisReport, lg: Log) -> None:
     a = lg.attrs
     lines = [f"# Analysis of `{os.path.basename(lg.path)}`", "",
+             "Open [index.html](index.html) for the same figures and tables on one page "
+             "with an interactive replay of every trial.", "",
              f"- log: `{lg.path}`",
              f"- experiment: {a.get('name', '?')}, created {a.get('created', '?')}, "
              f"seed {a.get('seed', '?')}",

@@ -27,6 +27,7 @@ import io
 import json
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -595,8 +596,12 @@ def rule_base_table(log: LogLike, trial: int | TrialLog, label: str | None = Non
 
 
 def rule_bases_across_trials(log: LogLike, label: str | None = None,
-                             output: str = "heading") -> Table:
+                             output: str = "heading", *,
+                             read: Callable[[int], TrialLog] | None = None) -> Table:
     """Every trial's learned action per situation, and the most frequent one (Tables A.2/A.3).
+
+    ``read`` reads trial ``k`` (default :meth:`sitframe.logs.Log.trial`; a caller
+    that already holds the trials passes its cache).
 
     Returns
     -------
@@ -610,7 +615,7 @@ def rule_bases_across_trials(log: LogLike, label: str | None = None,
     acts: list[np.ndarray] = []
     conv: list[bool] = []
     for k in idx:
-        tr = lg.trial(k)
+        tr = (read or lg.trial)(k)
         lb, out = learned_output(tr, label, output)
         acts.append(_policy_output(tr, lb, out).values())
         conv.append(convergence_iteration(tr, lb) is not None)
