@@ -13,15 +13,33 @@ what the vectorised step buys.
 Run::
 
     python benchmarks/bench_sim.py [--world training] [--iterations 2000] [--repeats 5]
+
+``--against REV`` times this checkout's loop and git revision ``REV``'s
+(exported to a temporary folder) in one run, alternating fresh processes of
+each, and prints both medians and their ratio (issue 17: >= 40,000 control
+iterations per second, twice the rate before the compiled kernels).
+``--first-call`` measures what the compiled kernels cost a fresh process:
+importing numba and loading them from numba's cache, and compiling them with
+an empty cache (the first run after an install)::
+
+    python benchmarks/bench_sim.py --against ef46ff4 --repeats 11
+    python benchmarks/bench_sim.py --first-call
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
+import os
 import statistics
+import subprocess
+import sys
+import tarfile
+import tempfile
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
@@ -79,6 +97,89 @@ def run(world: World, step: StepFn, iterations: int, seed: int) -> tuple[float, 
     return time.perf_counter() - t0, collisions
 
 
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _load_kernels() -> None:
+    """Load the compiled kernels now (a revision without them: nothing to load)."""
+    try:
+        from sitframe.kernels import load
+    except ImportError:
+        return
+    load()
+
+
+def _rates(world_name: str, iterations: int, repeats: int, seed: int) -> list[float]:
+    """Control iterations per second of ``repeats`` wander runs (this process's sitframe)."""
+    world = load_world(world_name)
+    _load_kernels()
+    run(world, step_robot, 200, seed)  # warm up caches
+    return [iterations / run(world, step_robot, iterations, seed + k)[0] for k in range(repeats)]
+
+
+def _against(rev: str, args: argparse.Namespace) -> None:
+    with tempfile.TemporaryDirectory() as tmp:
+        old = Path(tmp) / "rev"
+        old.mkdir()
+        tar = Path(tmp) / "rev.tar"
+        tar.write_bytes(subprocess.run(["git", "-C", str(ROOT), "archive", rev], check=True,
+                                       capture_output=True).stdout)
+        with tarfile.open(tar) as tf:
+            tf.extractall(old, filter="data")
+        trees = {rev: old, "this checkout": ROOT}
+        rates: dict[str, list[float]] = {k: [] for k in trees}
+        for _ in range(args.repeats):
+            for name, tree in trees.items():  # alternate fresh processes of each
+                code = (f"import json, sys; sys.path.insert(0, {str(tree)!r}); "
+                        f"sys.path.insert(1, {str(ROOT / 'benchmarks')!r}); import bench_sim; "
+                        f"print(json.dumps(bench_sim._rates({args.world!r}, {args.iterations}, "
+                        f"3, {args.seed})))")
+                res = subprocess.run([sys.executable, "-c", code], cwd=tmp, capture_output=True,
+                                     text=True, env=dict(os.environ, PYTHONPATH=str(tree)))
+                if res.returncode:
+                    sys.exit(f"{name}: {res.stderr.strip().splitlines()[-1]}")
+                rates[name] += json.loads(res.stdout)
+    med = {k: statistics.median(v) for k, v in rates.items()}
+    for k, v in med.items():
+        print(f"{k:>14}: median {v:,.0f} control iterations/s ({len(rates[k])} runs of "
+              f"{args.iterations} in {args.repeats} processes, world {args.world})")
+    print(f"ratio this checkout / {rev}: {med['this checkout'] / med[rev]:.2f}x the rate")
+
+
+_FIRST_CALL = """
+import time
+t0 = time.perf_counter()
+import numpy, scipy.linalg, sitframe.world, sitframe.robot, sitframe.plugins.sonar
+t1 = time.perf_counter()
+from sitframe.kernels import load
+assert load() is not None
+t2 = time.perf_counter()
+print(t1 - t0, t2 - t1)
+"""
+
+
+def _first_call(repeats: int) -> None:
+    """Seconds a fresh process spends importing numba and loading (or compiling) the kernels."""
+    def once(env: dict[str, str]) -> tuple[float, float]:
+        res = subprocess.run([sys.executable, "-c", _FIRST_CALL], capture_output=True, text=True,
+                             env=env, check=True, cwd=ROOT)
+        base, load = (float(v) for v in res.stdout.split())
+        return base, load
+
+    env = dict(os.environ)
+    once(env)  # make sure numba's cache is filled
+    warm = [once(env) for _ in range(repeats)]
+    with tempfile.TemporaryDirectory() as cache:
+        cold = [once(dict(env, NUMBA_CACHE_DIR=str(Path(cache) / str(k))))
+                for k in range(max(1, repeats // 3))]
+    print(f"importing numpy, scipy and the simulator: median "
+          f"{statistics.median(b for b, _ in warm):.3f} s (for scale)")
+    print(f"importing numba and loading every kernel from its cache: median "
+          f"{statistics.median(w for _, w in warm):.3f} s per process ({repeats} processes)")
+    print(f"... with an empty cache (compiling them, once after an install): median "
+          f"{statistics.median(c for _, c in cold):.3f} s ({len(cold)} processes)")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--world", default="training")
@@ -86,8 +187,19 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--no-naive", action="store_true", help="skip the naive reference")
+    ap.add_argument("--against", metavar="REV",
+                    help="compare this checkout's rate with git revision REV's")
+    ap.add_argument("--first-call", action="store_true",
+                    help="measure the kernels' import, load and compile costs")
     args = ap.parse_args()
+    if args.against:
+        _against(args.against, args)
+        return
+    if args.first_call:
+        _first_call(args.repeats)
+        return
     world = load_world(args.world)
+    _load_kernels()
     run(world, step_robot, 200, args.seed)  # warm up caches
     times, coll = [], 0
     for k in range(args.repeats):

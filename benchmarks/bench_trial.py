@@ -38,8 +38,12 @@ PLUGINS = ("sonar", "fcm_interpreter", "fuzzy_q", "rewards", "arbiters")
 def _time_trials(iterations: int, repeats: int) -> list[float]:
     """Seconds per learning trial of ``obstacle-avoidance`` with this process's sitframe."""
     from sitframe.config import load_config, validate_config
-    from sitframe.experiment import Experiment
     from sitframe.pluginmanager import get_plugin_manager
+
+    try:
+        from sitframe.experiment import Experiment
+    except ImportError:  # a revision from before Experiment moved (--against)
+        from sitframe.scheduler import Experiment
 
     mods = [importlib.import_module(f"sitframe.plugins.{m}") for m in PLUGINS]
     cfg, source, _ = load_config("obstacle-avoidance")

@@ -190,6 +190,8 @@ class FuzzyQBehaviour:
         """(c,) absolute TD errors of the last ``learn``, summed over the learned outputs."""
         if not self.learners:
             return None
+        for lr in self.learners.values():
+            lr.track_td = True  # (kept from now on: only an evolving interpreter asks)
         errs = [lr.td_abs for lr in self.learners.values()]
         return errs[0] if len(errs) == 1 else np.sum(errs, axis=0)
 

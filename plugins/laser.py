@@ -23,8 +23,8 @@ step-by-step guide):
    the config loader adds the file and table) and lays the beams out once.
 2. ``bind(run)`` learns the robot's radius from the run, unless the config
    gave ``robot_radius``.
-3. ``read`` casts every beam in one vectorised :func:`sitframe.cast_rays`
-   call against the world's cached edges and draws from the given ``rng``
+3. ``read`` casts every beam in one :func:`sitframe.rim_ranges` call (ranges
+   from the rim) against the world's cached edges and draws from the given ``rng``
    only when ``noise_std`` or ``dropout`` is on, so runs stay reproducible.
 
 In a run config::
@@ -53,7 +53,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from sitframe import RunContext, World, cast_rays, hookimpl
+from sitframe import RunContext, World, hookimpl, rim_ranges
 from sitframe import params as P
 
 __all__ = ["LaserScanner", "sitframe_sensors"]
@@ -145,11 +145,12 @@ class LaserScanner:
             (beams,) ranges [m] from the rim, in [0, max_range], ordered as
             :attr:`angles_deg`.
         """
-        reach = self.max_range + self.robot_radius
-        dist = cast_rays(world.segment_set, pose[0], pose[1],
-                         self._angles_rad + float(pose[2]), reach)
-        # a beam that hit nothing reads exactly max_range (no rounding from - radius)
-        reading = np.where(dist >= reach, self.max_range, dist - self.robot_radius)
+        exact = self.noise_std == 0.0 and self.dropout == 0.0  # (then clipped in the same call)
+        reading = rim_ranges(world.segment_set, pose[0], pose[1],
+                             self._angles_rad + float(pose[2]), self.max_range, self.robot_radius,
+                             clip=exact)
+        if exact:
+            return reading
         if self.noise_std > 0.0:
             reading = reading + rng.normal(0.0, self.noise_std, self.beams)
         if self.dropout > 0.0:

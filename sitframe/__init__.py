@@ -44,7 +44,8 @@ _PUBLIC: dict[str, str] = {
     # worlds, robot and geometry
     "World": "world", "Goal": "world", "load_world": "world",
     "RobotParams": "robot", "Command": "robot", "StepOutcome": "robot",
-    "cast_rays": "geometry", "cast_rays_many": "geometry", "raycast": "geometry",
+    "cast_rays": "geometry", "cast_rays_many": "geometry", "rim_ranges": "geometry",
+    "raycast": "geometry",
     "point_segment_distance": "geometry", "min_distance": "geometry",
     # situations and learning building blocks
     "fcm": "fcm", "memberships": "fcm", "MembershipFunction": "fcm",

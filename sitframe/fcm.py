@@ -52,6 +52,8 @@ from typing import Literal, ParamSpec, TypeVar
 
 import numpy as np
 
+from sitframe.kernels import kernels
+
 __all__ = [
     "FCMResult",
     "MEASURE_DIRECTIONS",
@@ -462,6 +464,9 @@ def memberships(X: np.ndarray, centers: np.ndarray, m: float) -> np.ndarray:
     return u[0] if single else u
 
 
+_min, _sum = np.minimum.reduce, np.add.reduce
+
+
 class MembershipFunction:
     """Memberships of one reading at a time, for a controller's hot loop.
 
@@ -505,12 +510,23 @@ class MembershipFunction:
         For a caller that already has the distances (e.g. an interpreter whose
         centres change on-line): the same formula and floor as :meth:`__call__`.
         """
-        dmin = d2.min()
+        kern = kernels()
+        if kern is not None and d2.size <= kern.PAIRWISE_MAX:  # (same arithmetic, compiled)
+            w = np.empty(d2.size)
+            if kern.fcm_ratios(d2, self.floor, w) <= 0.0:
+                on = d2 <= 0.0
+                return on / on.sum()
+            w **= self.p
+            kern.normalize(w)
+            return w
+        dmin = _min(d2)  # (the ufuncs' own reduce: ndarray.min/sum add a Python layer)
         if dmin <= 0.0:
             on = d2 <= 0.0
             return on / on.sum()
-        w = np.maximum(dmin / d2, self.floor) ** self.p
-        return w / w.sum()
+        w = np.maximum(dmin / d2, self.floor)
+        w **= self.p
+        w /= _sum(w)
+        return w
 
 
 @_ignore_underflow

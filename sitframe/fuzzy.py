@@ -14,6 +14,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sitframe.kernels import kernels
+
+# The ufuncs' own reductions (``ndarray.sum``/``max`` add a Python layer; the
+# controller runs every iteration).
+_sum, _max = np.add.reduce, np.maximum.reduce
+
 
 def label_strengths(strengths: np.ndarray, rule_actions: np.ndarray, n_actions: int) -> np.ndarray:
     """Max-aggregate rule strengths per output label.
@@ -43,7 +49,7 @@ def centre_of_gravity(label_strength: np.ndarray, singletons: np.ndarray) -> flo
     Returns the mean of the singletons if every strength is 0 (cannot happen
     with memberships that sum to 1, but keeps the function total).
     """
-    total = float(label_strength.sum())
+    total = float(_sum(label_strength))
     if total <= 0.0:
         return float(singletons.mean())
     return float(label_strength @ singletons) / total
@@ -93,5 +99,12 @@ class SituationFCS:
     def output(self, memberships: np.ndarray) -> float:
         """Crisp output for the (c,) memberships of one reading."""
         # Max over the rules of each label: label_strengths, as one broadcast.
-        strength = (self._onehot * memberships[:, None]).max(axis=0)
-        return centre_of_gravity(strength, self.singletons)
+        kern = kernels()
+        if kern is None or self.singletons.size > kern.PAIRWISE_MAX:
+            strength = self._onehot * memberships[:, None]
+            return centre_of_gravity(_max(strength, axis=0), self.singletons)
+        strength = np.empty(self.singletons.size)  # (the same arithmetic, compiled)
+        total = kern.label_strengths(self._onehot, memberships, strength)
+        if total <= 0.0:
+            return float(self.singletons.mean())
+        return float(strength @ self.singletons) / total

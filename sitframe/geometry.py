@@ -27,6 +27,8 @@ import math
 
 import numpy as np
 
+from sitframe.kernels import kernels
+
 __all__ = [
     "SegmentSet",
     "as_segments",
@@ -40,6 +42,7 @@ __all__ = [
     "polygon_self_intersection",
     "polyline_segments",
     "raycast",
+    "rim_ranges",
     "segments_intersect",
 ]
 
@@ -98,26 +101,33 @@ class SegmentSet:
         (S,) edge vectors ``end - start``.
     inv_len2
         (S,) ``1 / |e|²``, 0 for zero-length segments.
+    packed
+        (5, S) read-only rows ``ax, ay, ex, ey, inv_len2`` in one array (the
+        five above are views of its rows), for :mod:`sitframe.kernels`.
     lo, hi
         (S, 2) lower-left and upper-right corners of each segment's bounding box.
     """
 
-    __slots__ = ("segments", "ax", "ay", "ex", "ey", "inv_len2", "lo", "hi", "n")
+    __slots__ = ("segments", "ax", "ay", "ex", "ey", "inv_len2", "packed", "lo", "hi", "n")
 
     def __init__(self, segments: np.ndarray):
         seg = as_segments(segments).copy()
         seg.setflags(write=False)
         self.segments = seg
         self.n = seg.shape[0]
-        self.ax = seg[:, 0].copy()
-        self.ay = seg[:, 1].copy()
-        self.ex = seg[:, 2] - seg[:, 0]
-        self.ey = seg[:, 3] - seg[:, 1]
-        len2 = self.ex * self.ex + self.ey * self.ey
+        packed = np.empty((5, self.n))
+        packed[0] = seg[:, 0]
+        packed[1] = seg[:, 1]
+        packed[2] = seg[:, 2] - seg[:, 0]
+        packed[3] = seg[:, 3] - seg[:, 1]
+        len2 = packed[2] * packed[2] + packed[3] * packed[3]
         # Below the smallest normal float 1/len2 would overflow: such a segment
         # (shorter than ~1e-154 m) is a point.
         ok = len2 >= np.finfo(np.float64).tiny
-        self.inv_len2 = np.where(ok, 1.0 / np.where(ok, len2, 1.0), 0.0)
+        packed[4] = np.where(ok, 1.0 / np.where(ok, len2, 1.0), 0.0)
+        packed.setflags(write=False)
+        self.packed = packed
+        self.ax, self.ay, self.ex, self.ey, self.inv_len2 = packed
         self.lo = np.minimum(seg[:, :2], seg[:, 2:])
         self.hi = np.maximum(seg[:, :2], seg[:, 2:])
 
@@ -278,8 +288,14 @@ def raycast(
     s = _segment_set(segments)
     if s.n == 0 or ang.shape[0] == 0:
         return np.full(ang.shape[0], float(max_range))
-    return _raycast(o[:, 0:1], o[:, 1:2], np.cos(ang)[:, None], np.sin(ang)[:, None], s,
-                    float(max_range))
+    k = kernels()
+    if k is None:
+        return _raycast(o[:, 0:1], o[:, 1:2], np.cos(ang)[:, None], np.sin(ang)[:, None], s,
+                        float(max_range))
+    out = np.empty(ang.shape[0])
+    k.cast_each(np.ascontiguousarray(o[:, 0]), np.ascontiguousarray(o[:, 1]), np.cos(ang),
+                np.sin(ang), s.packed, float(max_range), out)
+    return out
 
 
 def cast_rays(segments: SegmentSet, x: float, y: float, angles_rad: np.ndarray,
@@ -309,8 +325,66 @@ def cast_rays(segments: SegmentSet, x: float, y: float, angles_rad: np.ndarray,
     ang = np.asarray(angles_rad, dtype=np.float64)
     if segments.n == 0:
         return np.full(ang.shape[0], float(max_range))
-    return _raycast(np.array([[float(x)]]), np.array([[float(y)]]), np.cos(ang)[:, None],
-                    np.sin(ang)[:, None], segments, float(max_range))
+    k = kernels()
+    if k is None:
+        return _raycast(np.array([[float(x)]]), np.array([[float(y)]]), np.cos(ang)[:, None],
+                        np.sin(ang)[:, None], segments, float(max_range))
+    out = np.empty(ang.shape[0])
+    k.cast(float(x), float(y), np.cos(ang), np.sin(ang), segments.packed, float(max_range), out)
+    return out
+
+
+def rim_ranges(segments: SegmentSet, x: float, y: float, angles_rad: np.ndarray,
+               max_range: float, radius: float, group: int = 1, *,
+               clip: bool = False) -> np.ndarray:
+    """What a range finder on a disc reads: ranges from the rim, for sensors in the loop.
+
+    Rays of ``max_range + radius`` from the disc's centre ``(x, y)``; a ray
+    that hits nothing reads exactly ``max_range``, one that hits reads the
+    distance from the rim (``hit - radius``, negative when the disc overlaps
+    a segment). With ``group > 1`` each reading is the nearest of ``group``
+    consecutive rays (a beam's cone sampled by several rays).
+
+    Parameters
+    ----------
+    segments
+        The world's :class:`SegmentSet` (``world.segment_set``).
+    x, y
+        The disc's centre [m].
+    angles_rad
+        (n * group,) world-frame ray directions [rad], beam by beam.
+    max_range
+        Largest reading [m], > 0.
+    radius
+        Distance from the centre to the rim [m], >= 0.
+    group
+        Rays per reading.
+    clip
+        Clip the readings to ``[0, max_range]`` as well (a sensor without
+        noise: ``numpy.clip`` of the result, in the same call).
+
+    Returns
+    -------
+    numpy.ndarray
+        (n,) readings [m] in ``[-radius, max_range]`` (``[0, max_range]`` with ``clip``).
+    """
+    ang = np.asarray(angles_rad, dtype=np.float64)
+    n = ang.shape[0] // group if group >= 1 else 0
+    if n * group != ang.shape[0]:
+        raise ValueError(f"rim_ranges: {ang.shape[0]} rays do not make groups of {group!r}; "
+                         "expected a positive group size that divides the number of rays")
+    k = kernels()
+    if k is None:
+        reach = max_range + radius
+        dist = cast_rays(segments, x, y, ang, reach)
+        if group > 1:
+            dist = dist.reshape(n, group).min(axis=1)
+        out = np.where(dist >= reach, max_range, dist - radius)
+        return np.clip(out, 0.0, max_range) if clip else out
+    out = np.empty(n)
+    k.ranges(float(x), float(y), np.cos(ang), np.sin(ang), segments.packed, float(max_range),
+             float(radius), int(group), bool(clip), out)
+    return out
 
 
 def cast_rays_many(segments: SegmentSet, xy: np.ndarray, angles_rad: np.ndarray,

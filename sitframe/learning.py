@@ -228,8 +228,10 @@ class FuzzyQLearner:
         self.n_changes = 0
         self.updates = np.zeros(c, dtype=np.int64)
         self._rows = np.arange(c)
-        #: (c,) absolute TD error of each rule updated by the last :meth:`update` (0 elsewhere).
+        #: (c,) absolute TD error of each rule updated by the last :meth:`update` (0 elsewhere),
+        #: kept only once ``track_td`` is set (an evolving interpreter asks for them).
         self.td_abs = np.zeros(c)
+        self.track_td = False
         #: Rows merged away or pruned by :meth:`situations_changed` (left out of ``min_updates``).
         self.removed = np.zeros(c, dtype=bool)
         # Records: one row per rule-base change (snapshots) and per iteration.
@@ -279,46 +281,52 @@ class FuzzyQLearner:
         bool
             Whether the rule base was changed (so a controller must reload it).
         """
+        if self.converged_at is not None:
+            if self.track_td:
+                self._monitor(u_before, reward, u_after, collided)
+            return False
         prm = self.params
         q = self.q
-        active = np.flatnonzero(u_before >= prm.activation) if prm.activation > 0 else self._rows
-        if self.converged_at is not None:
-            self._monitor(active, u_before, reward, u_after, collided)
-            return False
-        if active.size:
+        # Scalar Python: usually one or two rules are active, and a handful of numpy
+        # calls on such tiny arrays would cost more than the arithmetic. The operations
+        # (and their order) are those of the array expressions they replaced.
+        u0 = u_before.tolist()
+        act = prm.activation
+        active = [i for i, w in enumerate(u0) if w >= act] if act > 0 else range(len(u0))
+        if self.track_td:
+            self.td_abs[:] = 0.0
+        if active:
             v_next = 0.0 if (collided and prm.terminal_on_collision) else \
-                float(u_after @ q.max(axis=1))
-            acts = self.rule_base[active]
-            w = u_before[active]
-            cur = q[active, acts]
-            if prm.update == "thesis":
-                delta = w * reward + prm.gamma * w * v_next - cur
-                q[active, acts] = cur + prm.alpha * delta
-            else:
-                delta = reward + prm.gamma * v_next - cur
-                q[active, acts] = cur + prm.alpha * w * delta
-            self.updates[active] += 1
-            self.td_abs[:] = 0.0
-            self.td_abs[active] = np.abs(delta)
-        else:
-            self.td_abs[:] = 0.0
+                float(u_after @ np.maximum.reduce(q, axis=1))
+            rules = self.rule_base.tolist()
+            alpha, gamma, thesis = prm.alpha, prm.gamma, prm.update == "thesis"
+            target = reward + gamma * v_next
+            for i in active:
+                w, a = u0[i], rules[i]
+                cur = q.item(i, a)
+                delta = (w * reward + gamma * w * v_next - cur) if thesis else target - cur
+                q[i, a] = cur + alpha * delta if thesis else cur + alpha * w * delta
+                self.updates[i] += 1
+                if self.track_td:
+                    self.td_abs[i] = abs(delta)
         self.since_change += 1
         if collided or self.since_change >= prm.b:
             self._change(iteration)
             return True
         return False
 
-    def _monitor(self, active: np.ndarray, u_before: np.ndarray, reward: float,
-                 u_after: np.ndarray, collided: bool) -> None:
+    def _monitor(self, u_before: np.ndarray, reward: float, u_after: np.ndarray,
+                 collided: bool) -> None:
         """After convergence: the TD errors the frozen rules would get (``td_abs``), no update.
 
         Learning has stopped, but an evolving interpreter still needs to know
         where the frozen rule base fits the task badly (it may split there).
         """
+        prm = self.params
         self.td_abs[:] = 0.0
+        active = np.flatnonzero(u_before >= prm.activation) if prm.activation > 0 else self._rows
         if active.size == 0:
             return
-        prm = self.params
         v_next = 0.0 if (collided and prm.terminal_on_collision) else \
             float(u_after @ self.q.max(axis=1))
         cur = self.q[active, self.rule_base[active]]

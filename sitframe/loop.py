@@ -13,6 +13,9 @@ One control iteration (1.5 s of robot time)::
 
 Every value crossing from plugin code is checked (:mod:`sitframe.contract`).
 A :class:`TrialSpec` is picklable, so worker processes run the same loop.
+:func:`simulate` creates the trial's components (:class:`_TrialParts`), runs
+the loop (:func:`_run_loop`) and hands every iteration to one
+:class:`Recorder`, which owns the per-iteration arrays.
 
 Seeds: the run seed ``S`` gives each stage and each trial its own
 :class:`numpy.random.SeedSequence` (``spawn_key`` = stage, trial), so trial
@@ -53,13 +56,14 @@ from sitframe.metrics import collisions_per_1000, coverage, path_length
 from sitframe.records import (
     Context,
     LearnedPolicy,
+    Proposal,
     StepRecord,
     Transition,
     TrialInfo,
     TrialResult,
 )
 from sitframe.resolve import Resolved
-from sitframe.robot import Command, RobotParams, step_robot
+from sitframe.robot import Command, RobotParams, StepOutcome, step_robot
 from sitframe.situations import SituationTracker
 from sitframe.world import Goal, World
 
@@ -211,131 +215,246 @@ def simulate(
     world = res.world(spec.world)
     goal = world.goal if spec.goal is None else Goal(np.asarray(spec.goal[:2], float),
                                                      float(spec.goal[2]))
-    k = spec.index
-    with _in_trial(k):  # each trial creates and binds its own components
-        sensor = res.sensor()
-        interp = res.interpreter()
-    og = res.origins  # the component origins, for messages
-    call(og["interpreter"], "load_state", interp.load_state, spec.interpreter_state, trial=k)
-    c = call(og["interpreter"], "n_situations", lambda: int(interp.n_situations), trial=k)
-    with _in_trial(k):
-        behaviours = res.behaviours()
-        arbiter = res.arbiter()
-        arb_reward = res.arbiter_reward() if spec.learn else None
-    L = spec.iterations
-    for label, (beh, _r) in behaviours.items():
-        o = og[f"behaviours.{label}"]
-        if label in spec.policies:
-            call(o, "load_policy", beh.load_policy, spec.policies[label], trial=k)
-        call(o, "reset", beh.reset, rng, c, L, trial=k)
-    if "arbiter" in spec.policies and hasattr(arbiter, "load_policy"):
-        call(og["arbiter"], "load_policy", arbiter.load_policy, spec.policies["arbiter"], trial=k)
-    if hasattr(arbiter, "reset"):
-        call(og["arbiter"], "reset", arbiter.reset, rng, c, L, trial=k)
-    learners = [(label, beh, rew, og[f"behaviours.{label}"], og[f"behaviours.{label}.reward"])
-                for label, (beh, rew) in behaviours.items() if rew is not None and spec.learn]
-    if arb_reward is not None:
-        learners.append(("arbiter", arbiter, arb_reward, og["arbiter"], og["arbiter.reward"]))
-    labels = list(behaviours)
-    components = [("sensor", sensor), ("interpreter", interp),
-                  *[(f"behaviours.{lb}", b) for lb, (b, _r) in behaviours.items()],
-                  *[(f"behaviours.{lb}.reward", r) for lb, (_b, r) in behaviours.items()
-                    if r is not None and spec.learn],  # (a frozen run uses no reward)
-                  ("arbiter", arbiter), ("arbiter.reward", arb_reward)]
-    components = [(key, comp) for key, comp in components if comp is not None]
-    tinfo = TrialInfo(k, "learn" if spec.learn else "evaluate", world, L, rng)
-    for key, comp in components:
-        if hasattr(comp, "trial_start"):
-            call(og[key], "trial_start", comp.trial_start, tinfo, trial=k)
+    parts = _TrialParts.create(res, spec, rng, world)
+    rec = Recorder(spec.iterations, res.run.sensor.dim, parts.c, list(parts.behaviours),
+                   [lb for lb, *_ in parts.learners])
+    start = np.array(world.start if spec.start is None else spec.start, dtype=float)
+    env = _Env(world, goal, rng, start)
+    env.chain = _training_episodes(res, spec, world)  # None unless the protocol trains so
+    if env.chain is not None:
+        env.start, env.goal = next(env.chain.pairs)
+    env.track = SituationTracker.start(parts.interp, spec.learn, parts.components, res.origins,
+                                       spec.index)  # None unless the situations evolve
+    n = _run_loop(res, spec, parts, rec, env, step_hook, protocol)
+    arrays = rec.arrays(n, res.origins, spec.index)
+    result = _trial_result(res, spec, world, parts, arrays, env)
+    for ev_spec in evaluation_specs(spec, result.policies, result.situations.get("state")):
+        attach_evaluation(result, ev_spec.world, simulate(res, ev_spec))
+    return result
+
+
+@dataclass
+class _TrialParts:
+    """One trial's components, created, loaded and reset (:meth:`create`).
+
+    ``learners`` are ``(label, component, reward, its origin, the reward's origin)``
+    of every behaviour (and the arbiter) that learns in this trial; ``components``
+    ``(config key, component)`` of all of them, for the lifecycle calls.
+    """
+
+    sensor: Any
+    interp: Any
+    c: int
+    behaviours: dict[str, tuple[Any, Any]]
+    arbiter: Any
+    learners: list[tuple[str, Any, Any, Origin, Origin]]
+    components: list[tuple[str, Any]]
+    tinfo: TrialInfo
+
+    @classmethod
+    def create(cls, res: Resolved, spec: TrialSpec, rng: np.random.Generator,
+               world: World) -> _TrialParts:
+        """Create the trial's components and call their ``load_*``, ``reset``, ``trial_start``."""
+        k, og = spec.index, res.origins
+        with _in_trial(k):  # each trial creates and binds its own components
+            sensor = res.sensor()
+            interp = res.interpreter()
+        call(og["interpreter"], "load_state", interp.load_state, spec.interpreter_state, trial=k)
+        c = call(og["interpreter"], "n_situations", lambda: int(interp.n_situations), trial=k)
+        with _in_trial(k):
+            behaviours = res.behaviours()
+            arbiter = res.arbiter()
+            arb_reward = res.arbiter_reward() if spec.learn else None
+        L = spec.iterations
+        for label, (beh, _r) in behaviours.items():
+            o = og[f"behaviours.{label}"]
+            if label in spec.policies:
+                call(o, "load_policy", beh.load_policy, spec.policies[label], trial=k)
+            call(o, "reset", beh.reset, rng, c, L, trial=k)
+        if "arbiter" in spec.policies and hasattr(arbiter, "load_policy"):
+            call(og["arbiter"], "load_policy", arbiter.load_policy, spec.policies["arbiter"],
+                 trial=k)
+        if hasattr(arbiter, "reset"):
+            call(og["arbiter"], "reset", arbiter.reset, rng, c, L, trial=k)
+        learners = [(lb, beh, rew, og[f"behaviours.{lb}"], og[f"behaviours.{lb}.reward"])
+                    for lb, (beh, rew) in behaviours.items() if rew is not None and spec.learn]
+        if arb_reward is not None:
+            learners.append(("arbiter", arbiter, arb_reward, og["arbiter"], og["arbiter.reward"]))
+        components = [("sensor", sensor), ("interpreter", interp),
+                      *[(f"behaviours.{lb}", b) for lb, (b, _r) in behaviours.items()],
+                      *[(f"behaviours.{lb}.reward", r) for lb, (_b, r) in behaviours.items()
+                        if r is not None and spec.learn],  # (a frozen run uses no reward)
+                      ("arbiter", arbiter), ("arbiter.reward", arb_reward)]
+        components = [(key, comp) for key, comp in components if comp is not None]
+        tinfo = TrialInfo(k, "learn" if spec.learn else "evaluate", world, L, rng)
+        for key, comp in components:
+            if hasattr(comp, "trial_start"):
+                call(og[key], "trial_start", comp.trial_start, tinfo, trial=k)
+        return cls(sensor, interp, c, behaviours, arbiter, learners, components, tinfo)
+
+
+class Recorder:
+    """The per-iteration arrays of one trial: allocated, filled and trimmed in one place.
+
+    Parameters
+    ----------
+    iterations
+        The trial's limit ``L`` (an episode may stop earlier).
+    dim
+        Length ``d`` of a sensor reading.
+    c
+        Number of situations.
+    labels
+        The behaviours' labels, in config order.
+    rewarded
+        The labels whose rewards are recorded (the learners').
+    """
+
+    def __init__(self, iterations: int, dim: int, c: int, labels: list[str],
+                 rewarded: list[str]) -> None:
+        L = iterations
+        self.labels = labels
+        self.pose = np.empty((L + 1, 3))
+        self.reading = np.empty((L, dim))
+        self.memberships = np.empty((L, c))
+        self.weights = np.empty((L, len(labels)))
+        # Scalars go to lists (an append is cheaper than writing into an array).
+        self._command: list[tuple[float, float]] = []
+        self._nearest: list[float] = []
+        self._contacts: list[tuple[int, np.ndarray]] = []
+        self._proposals: list[tuple[float, ...]] = []
+        self._rewards: list[tuple[float, ...]] = []
+        self.rewarded = rewarded
+        self._nan = float("nan")
+
+    def record(self, t: int, ctx: Context, cmd: Command, out: StepOutcome, weights: np.ndarray,
+               proposals: dict[str, Proposal], rewards: dict[str, float]) -> None:
+        """Record iteration ``t``: its context, command, outcome, weights, proposals, rewards."""
+        self.pose[t] = ctx.pose
+        self.reading[t] = ctx.reading
+        self.memberships[t] = ctx.memberships
+        self.weights[t] = weights
+        self._command.append((cmd.heading_change_deg, cmd.speed_m_s))
+        self._nearest.append(ctx.nearest)
+        if out.collided:
+            self._contacts.append((t, out.contact_xy))
+        nan = self._nan
+        row: list[float] = []
+        for p in proposals.values():
+            row += (p.heading_deg, nan if p.speed_m_s is None else p.speed_m_s)
+        self._proposals.append(tuple(row))
+        if rewards:
+            self._rewards.append(tuple(rewards.values()))
+
+    def arrays(self, n: int, origins: dict[str, Origin], trial: int) -> dict[str, np.ndarray]:
+        """The first ``n`` iterations' arrays (the final pose is the last of ``pose``).
+
+        Checks every reading, membership vector and weight first (vectorised,
+        :func:`_check_trial_values`).
+        """
+        _check_trial_values(self.reading[:n], self.memberships[:n], self.weights[:n], origins,
+                            trial)
+        coll = np.zeros(n, dtype=bool)
+        contact = np.full((n, 2), np.nan)
+        for t, xy in self._contacts:
+            coll[t] = True
+            contact[t] = xy
+        out = {"pose": self.pose[: n + 1], READING: self.reading[:n],
+               "memberships": self.memberships[:n],
+               "command": np.array(self._command, dtype=float).reshape(n, 2),
+               "collision": coll, "contact": contact,
+               "nearest": np.array(self._nearest, dtype=float), "weights": self.weights[:n]}
+        props = np.array(self._proposals, dtype=float).reshape(n, 2 * len(self.labels))
+        for i, lb in enumerate(self.labels):
+            out[f"proposals/{lb}"] = props[:, 2 * i: 2 * i + 2].copy()
+        rewards = np.array(self._rewards, dtype=float).reshape(n, len(self.rewarded))
+        for i, lb in enumerate(self.rewarded):
+            out[f"reward/{lb}"] = rewards[:, i].copy()
+        return out
+
+
+class _Env:
+    """Where a trial runs: world, goal, Generator and start pose; the chain of training
+    episodes (:class:`_TrainingEpisodes`) and the tracker of evolving situations, if any."""
+
+    __slots__ = ("world", "goal", "rng", "start", "chain", "track")
+
+    def __init__(self, world: World, goal: Goal | None, rng: np.random.Generator,
+                 start: np.ndarray) -> None:
+        self.world, self.goal, self.rng, self.start = world, goal, rng, start
+        self.chain: _TrainingEpisodes | None = None
+        self.track: SituationTracker | None = None
+
+
+def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder, env: _Env,
+              step_hook: Callable[[StepRecord], Any] | None, protocol: Any) -> int:
+    """The control loop (module docstring); returns the number of iterations run.
+
+    Every plugin call is preceded by setting ``step_at`` to where it is, so a
+    raise is reported at the right plugin and method (:func:`_loop_fault`).
+    """
+    og, k = res.origins, spec.index
+    sensor, interp, arbiter = parts.sensor, parts.interp, parts.arbiter
+    world, goal, rng = env.world, env.goal, env.rng
+    d, c, n_labels = res.run.sensor.dim, parts.c, len(parts.behaviours)
     default_speed = res.config.experiment.default_speed
     robot = res.robot
-    track = SituationTracker.start(interp, spec.learn, components, og, k)  # evolving situations
-
-    d = res.run.sensor.dim
-    pose_a = np.empty((L + 1, 3))
-    sonar_a = np.empty((L, d))
-    u_a = np.empty((L, c))
-    cmd_a = np.empty((L, 2))
-    coll_a = np.zeros(L, dtype=bool)
-    contact_a = np.full((L, 2), np.nan)
-    near_a = np.empty(L)
-    weights_a = np.empty((L, len(labels)))
-    prop_a = {lb: np.empty((L, 2)) for lb in labels}
-    rew_a = {lb: np.empty(L) for lb, *_ in learners}
-
+    track, chain = env.track, env.chain
     at_read, at_u = _Step(og["sensor"], "read"), _Step(og["interpreter"], "memberships")
     at_combine, at_core = _Step(og["arbiter"], "combine"), _Step(None, "step")
     at_step = _Step(None, "sitframe_step")
     at_propose = [(lb, beh, _Step(og[f"behaviours.{lb}"], "propose"))
-                  for lb, (beh, _r) in behaviours.items()]
+                  for lb, (beh, _r) in parts.behaviours.items()]
     at_learn = [(lb, beh, rew, _Step(ob, "learn"), _Step(orw, "__call__"))
-                for lb, beh, rew, ob, orw in learners]
+                for lb, beh, rew, ob, orw in parts.learners]
     at_end = None if protocol is None else _Step(
         og.get(protocol.table) or f"protocol '{protocol.name}'", "terminated")
     step_at = at_read
     t = 0
-    pose = np.array(world.start if spec.start is None else spec.start, dtype=float)
-    n_done = L
-    chain = _training_episodes(res, spec, world)  # None unless the protocol trains in episodes
-    if chain is not None:
-        pose, goal = next(chain.pairs)
+    pose = env.start
+    n_done = spec.iterations
     try:
         reading = sensor.read(world, pose, rng)
         check_reading(reading, d)
-        near = _nearest(reading)
         step_at = at_u
         u = interp.memberships(reading)
         check_memberships(u, c)
-        ctx = Context(0, pose, reading, u, near, world, goal)
-        for t in range(L):
+        ctx = Context(0, pose, reading, u, _nearest(reading), world, goal)
+        for t in range(spec.iterations):
             proposals = {}
             for lb, beh, step_at in at_propose:  # noqa: B007 - step_at names the caller on a fault
                 proposals[lb] = check_proposal(beh.propose(ctx))
             step_at = at_combine
-            prop, weights = check_combined(arbiter.combine(ctx, proposals), len(labels))
+            prop, weights = check_combined(arbiter.combine(ctx, proposals), n_labels)
             step_at = at_core
-            speed = prop.speed_m_s if prop.speed_m_s is not None else default_speed
-            cmd = Command(prop.heading_deg, speed)
+            cmd = Command(prop.heading_deg,
+                          default_speed if prop.speed_m_s is None else prop.speed_m_s)
             out = step_robot(world, pose, cmd, robot, rng)
             pose = out.pose
             step_at = at_read
             reading2 = sensor.read(world, pose, rng)
             check_reading(reading2, d)
-            near = _nearest(reading2)
             step_at = at_u
             u2 = interp.memberships(reading2)
             check_memberships(u2, c)
-            ctx2 = Context(t + 1, pose, reading2, u2, near, world, goal)
+            ctx2 = Context(t + 1, pose, reading2, u2, _nearest(reading2), world, goal)
             tr = Transition(ctx, cmd, out, ctx2)
             rewards = {}
             for lb, beh, rew, at_l, step_at in at_learn:
-                r = check_reward(rew(tr))
-                rewards[lb] = r
-                rew_a[lb][t] = r
+                rewards[lb] = r = check_reward(rew(tr))
                 step_at = at_l
                 beh.learn(tr, r)
             if track is not None:
                 track.step(t)
-            pose_a[t] = ctx.pose
-            sonar_a[t] = ctx.reading
-            u_a[t] = ctx.memberships
-            cmd_a[t] = (cmd.heading_change_deg, cmd.speed_m_s)
-            if out.collided:
-                coll_a[t] = True
-                contact_a[t] = out.contact_xy
-            near_a[t] = ctx.nearest
-            weights_a[t] = weights
-            for lb in labels:
-                p = proposals[lb]
-                prop_a[lb][t] = (p.heading_deg, np.nan if p.speed_m_s is None else p.speed_m_s)
+            rec.record(t, ctx, cmd, out, weights, proposals, rewards)
             if step_hook is not None:
                 step_at = at_step
-                step_hook(StepRecord(spec.index, tr, proposals, weights, rewards))
+                step_hook(StepRecord(k, tr, proposals, weights, rewards))
             ctx = ctx2
             if at_end is not None and (step_at := at_end) and protocol.terminated(ctx):
                 n_done = t + 1
                 break
-            if chain is not None and t + 1 < L and chain.over(ctx, t + 1):
+            if chain is not None and chain.over(ctx, t + 1, spec.iterations):
                 pose, goal = next(chain.pairs)  # the next training episode starts here
                 step_at = at_read
                 reading = sensor.read(world, pose, rng)
@@ -350,22 +469,18 @@ def simulate(
         if step_at.origin is None and step_at.method == "step":
             raise  # the core's own arithmetic: a bug here, not the plugin's
         raise _loop_fault(exc, step_at, k, t, res, locals()) from exc
-    pose_a[n_done] = pose
-    n = n_done
-    _check_trial_values(sonar_a[:n], u_a[:n], weights_a[:n], og, k)
-    arrays: dict[str, np.ndarray] = {
-        "pose": pose_a[: n + 1], READING: sonar_a[:n], "memberships": u_a[:n],
-        "command": cmd_a[:n], "collision": coll_a[:n], "contact": contact_a[:n],
-        "nearest": near_a[:n], "weights": weights_a[:n],
-    }
-    for lb in labels:
-        arrays[f"proposals/{lb}"] = prop_a[lb][:n]
-    for lb in rew_a:
-        arrays[f"reward/{lb}"] = rew_a[lb][:n]
+    rec.pose[n_done] = pose
+    return n_done
+
+
+def _trial_result(res: Resolved, spec: TrialSpec, world: World, parts: _TrialParts,
+                  arrays: dict[str, np.ndarray], env: _Env) -> TrialResult:
+    """The finished trial: behaviours' data and policies, summary, plugins' data."""
+    k, og, c = spec.index, res.origins, parts.c
     bdata, policies = {}, {}
-    learned = [(lb, b, og[f"behaviours.{lb}"]) for lb, (b, _r) in behaviours.items()]
-    if hasattr(arbiter, "policy"):
-        learned.append(("arbiter", arbiter, og["arbiter"]))
+    learned = [(lb, b, og[f"behaviours.{lb}"]) for lb, (b, _r) in parts.behaviours.items()]
+    if hasattr(parts.arbiter, "policy"):
+        learned.append(("arbiter", parts.arbiter, og["arbiter"]))
     for lb, b, o in learned:
         if hasattr(b, "trial_data"):
             bdata[lb] = _checked(o, "trial_data", check_data, b.trial_data, k, "trial data")
@@ -373,17 +488,15 @@ def simulate(
             pol = _checked(o, "policy", lambda p: check_policy(p, c), b.policy, k)
             if pol is not None:
                 policies[lb] = pol
-    summary = trial_summary(world, arrays, bdata, robot)
-    episodes = {} if chain is None else chain.record(arrays["pose"], summary)
+    summary = trial_summary(world, arrays, bdata, res.robot)
+    episodes = {} if env.chain is None else env.chain.record(arrays["pose"], summary)
     result = TrialResult(spec.index, spec.seed, world.name, arrays, bdata, summary, episodes,
                          policies=policies)
-    if track is not None:
-        result.situations = call(og["interpreter"], "state", track.finish, pose_a[: n + 1], d,
-                                 trial=k)
+    if env.track is not None:
+        result.situations = call(og["interpreter"], "state", env.track.finish, arrays["pose"],
+                                 res.run.sensor.dim, trial=k)
         summary["situations"] = result.situations["count"]
-    _collect_plugin_data(result, components, tinfo, og, res)
-    for ev_spec in evaluation_specs(spec, result.policies, result.situations.get("state")):
-        attach_evaluation(result, ev_spec.world, simulate(res, ev_spec))
+    _collect_plugin_data(result, parts.components, parts.tinfo, og, res)
     return result
 
 
@@ -416,8 +529,11 @@ class _TrainingEpisodes:
                 self.goals.append((np.nan, np.nan, np.nan) if g is None else tuple(g))
                 yield start.copy(), None if g is None else Goal(g[:2], float(g[2]))
 
-    def over(self, ctx: Context, t: int) -> bool:
-        """Whether the episode ends at ``ctx`` (iteration ``t``): terminated or timed out."""
+    def over(self, ctx: Context, t: int, limit: int) -> bool:
+        """Whether the episode ends at ``ctx`` (iteration ``t`` of a trial of ``limit``):
+        terminated or timed out (never at the trial's own end)."""
+        if t >= limit:
+            return False
         done = bool(self.proto.terminated(ctx))
         if done or t - self.first[-1] >= int(self.proto.iterations):
             self.reached.append(done)
@@ -517,6 +633,8 @@ def batch_scores(result: TrialResult) -> dict[str, Any]:
     return {k[len(prefix):]: v for k, v in result.summary.items() if k.startswith(prefix)}
 
 
+_min = np.minimum.reduce  # (``ndarray.min`` without its Python wrapper)
+
 #: Name of the per-iteration sensor readings in a trial's arrays and the log
 #: (sensor-neutral; logs before contract v2 call it ``sonar``, read back as both).
 READING = "reading"
@@ -524,7 +642,7 @@ READING = "reading"
 
 def _nearest(reading: np.ndarray) -> float:
     """The smallest range of a reading; NaN here is the sensor's fault, found at once."""
-    v = float(reading.min())
+    v = float(_min(reading))
     if v != v:  # NaN
         raise BoundaryError(sensor_spec_mismatch(reading, reading.size) or "returned NaN")
     return v

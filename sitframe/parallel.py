@@ -51,6 +51,7 @@ from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
+from sitframe import kernels
 from sitframe.errors import InputError, PluginFault, TaskCancelled
 from sitframe.interrupts import deferred_interrupt
 from sitframe.loop import TrialSpec, attach_evaluation, evaluation_specs
@@ -412,8 +413,9 @@ def start_method() -> str:
 
 def _mp_context(method: str) -> mp.context.BaseContext:
     ctx = mp.get_context(method)
-    if method == "forkserver":
-        ctx.set_forkserver_preload(["sitframe.parallel", "sitframe.experiment", "sitframe.loop"])
+    if method == "forkserver":  # (workers fork from it with the compiled kernels loaded)
+        ctx.set_forkserver_preload(["sitframe.parallel", "sitframe.experiment", "sitframe.loop",
+                                    *(["sitframe.kernels_numba"] if kernels.wanted() else [])])
     return ctx
 
 

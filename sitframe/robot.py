@@ -57,6 +57,7 @@ from typing import Any
 import numpy as np
 
 from sitframe import geometry as geo
+from sitframe.kernels import kernels
 from sitframe.params import choice, number
 from sitframe.world import World
 
@@ -149,6 +150,9 @@ class Command:
     speed_m_s: float = 0.15
 
     def __post_init__(self) -> None:
+        h, s = self.heading_change_deg, self.speed_m_s
+        if h.__class__ is float and s.__class__ is float and h - h == 0.0 and s - s == 0.0:
+            return  # two finite floats (the loop's case, made every iteration)
         for name in ("heading_change_deg", "speed_m_s"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | float | np.number):
@@ -229,12 +233,20 @@ def _plan(pose: np.ndarray, command: Command, params: RobotParams
 def _poses_at(t: np.ndarray, x0: float, y0: float, th0: float, v: float, omega: float,
               t_turn: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Closed-form arc-then-straight poses at times ``t`` (arrays x, y, theta)."""
+    th_end = th0 + omega * t_turn
+    kern = kernels()
+    if kern is not None:  # the same arithmetic around numpy's sin and cos (sitframe.kernels)
+        buf = np.empty((5, t.size))
+        kern.arc_angles(t, th0, omega, t_turn, buf[0], buf[1])
+        kern.arc_poses(t, np.array((x0, y0, th0, v, omega, t_turn, math.cos(th_end),
+                                    math.sin(th_end))),
+                       buf[0], np.sin(buf[0]), np.cos(buf[1]), np.sin(buf[1]), buf[2:])
+        return buf[2], buf[3], buf[4]
     tt = np.minimum(t, t_turn)
     half = (0.5 * omega) * tt
     # chord of the arc = v * tt * sin(half) / half, along th0 + half
     chord = (v * tt) * np.sinc(half * (1.0 / math.pi))
     ang = th0 + half
-    th_end = th0 + omega * t_turn
     ts = v * (t - tt)
     x = x0 + chord * np.cos(ang) + ts * math.cos(th_end)
     y = y0 + chord * np.sin(ang) + ts * math.sin(th_end)
@@ -312,41 +324,27 @@ def step_robot(
     StepOutcome
         Final pose, collision flag, contact point/pose, distance and turn.
     """
-    x0, y0, th0, v, omega, t_turn = _plan(pose, command, params)
+    plan = _plan(pose, command, params)
+    x0, y0, th0, v, omega, t_turn = plan
     T = params.control_period_s
     r = params.radius
     path = v * T
-    segs = world.segment_set
     pose_before = pose if isinstance(pose, np.ndarray) else np.asarray(pose, dtype=float)
 
     # --- 1. which segments can the swept disc (or the back-off) reach at all?
-    near = None
-    if segs.n:
-        reach = path + r + params.recovery_backoff_m + 1e-9
-        wx = x0 - segs.ax
-        wy = y0 - segs.ay
-        t = (wx * segs.ex + wy * segs.ey) * segs.inv_len2
-        np.clip(t, 0.0, 1.0, out=t)
-        dx = wx - t * segs.ex
-        dy = wy - t * segs.ey
-        d2 = dx * dx + dy * dy
-        idx = np.flatnonzero(d2 < reach * reach)
-        if idx.size:
-            near = _near_set(segs, idx)
-
+    near = _near(world.segment_set, x0, y0, path + r + params.recovery_backoff_m + 1e-9)
     if near is None:  # open space: nothing to hit, pure-Python closed form
-        x, y, th = _pose_at(T, x0, y0, th0, v, omega, t_turn)
+        x, y, th = _pose_at(T, *plan)
         final = np.array([x, y, _wrap(th)])
         return StepOutcome(pose_before, final, False, _NAN2, final, path,
                            math.degrees(th - th0))
 
     # --- 2. all substeps against the near segments at once
     times = _times(T, params.substep_s)
-    xs, ys, ths = _poses_at(times, x0, y0, th0, v, omega, t_turn)
+    xs, ys, ths = _poses_at(times, *plan)
     r2 = r * r
-    bad = (_dist2_cols(xs, ys, near) < r2).any(axis=1)
-    k = int(bad.argmax())
-    if not bad[k]:
+    k = _first_contact(xs, ys, near, r2)
+    if k < 0:
         final = np.array([xs[-1], ys[-1], _wrap(float(ths[-1]))])
         return StepOutcome(pose_before, final, False, _NAN2, final, path,
                            math.degrees(float(ths[-1]) - th0))
@@ -359,19 +357,18 @@ def step_robot(
         t_c, cx, cy, cth = float(times[j]), float(xs[j]), float(ys[j]), float(ths[j])
         hi = float(times[k])
         for _ in range(2):
-            ts = np.linspace(t_c, hi, _REFINE + 1)
-            fx, fy, fth = _poses_at(ts, x0, y0, th0, v, omega, t_turn)
-            fbad = (_dist2_cols(fx, fy, near) < r2).any(axis=1)
-            fbad[-1] = True  # the bad end of the interval
-            j = int(fbad.argmax())  # first bad sample; ts[0] is free
+            ts = _linspace(t_c, hi, _REFINE + 1)
+            fx, fy, fth = _poses_at(ts, *plan)
+            j = _first_contact(fx, fy, near, r2)  # first bad sample; ts[0] is free
+            if j < 0:
+                j = _REFINE  # the bad end of the interval
             if j == 0:  # cannot happen (ts[0] was free); keep the known free pose
                 break
             hi = float(ts[j])
             j -= 1  # the last free sample: the disc touches there
             t_c, cx, cy, cth = float(ts[j]), float(fx[j]), float(fy[j]), float(fth[j])
     contact_pose = np.array([cx, cy, _wrap(cth)])
-    _, seg_i, nearest = geo.nearest_on_segments(contact_pose[None, :2], near)
-    contact_xy = nearest[0]
+    contact_xy = _nearest_point(cx, cy, near)
     heading_change = math.degrees(cth - th0)
     distance = v * t_c
 
@@ -387,21 +384,9 @@ def step_robot(
     else:  # centre on the wall (only if it started there): back straight up
         nx, ny = -math.cos(cth), -math.sin(cth)
     backoff = 0.0
-    b = params.recovery_backoff_m
-    if b > 0.0:
-        s = np.linspace(0.0, b, _BACKOFF_SAMPLES)
-        bx, by = cx + s * nx, cy + s * ny
-        d2b = _dist2_cols(bx, by, near).min(axis=1)
-        if k == 0:
-            # started inside: accept any back-off that does not get closer to a wall
-            ok = d2b >= np.minimum(d2b[0], r2) - 1e-15
-        else:
-            ok = d2b >= r2
-        free = np.logical_and.accumulate(ok)
-        m = int(np.count_nonzero(free)) - 1
-        if m > 0:
-            backoff = float(s[m])
-            cx, cy = float(bx[m]), float(by[m])
+    if params.recovery_backoff_m > 0.0:
+        # started inside (k == 0): accept any back-off that does not get closer to a wall
+        backoff, cx, cy = _backoff(cx, cy, nx, ny, params.recovery_backoff_m, near, r2, k == 0)
 
     bearing = _wrap(math.atan2(float(contact_xy[1]) - cy, float(contact_xy[0]) - cx) - cth)
     turn_max = math.radians(params.recovery_turn_deg)
@@ -416,14 +401,78 @@ def step_robot(
                        heading_change, backoff, math.degrees(turn))
 
 
+# Each helper below runs the compiled kernel (sitframe.kernels) when there is one and
+# the numpy code otherwise; both give the same numbers.
+
+
+def _near(segs: geo.SegmentSet, x: float, y: float, reach: float) -> geo.SegmentSet | None:
+    """The segments closer than ``reach`` to ``(x, y)``, or None if there are none."""
+    if segs.n == 0:
+        return None
+    kern = kernels()
+    if kern is not None:
+        idx = np.empty(segs.n, dtype=np.intp)
+        idx = idx[: kern.near_segments(x, y, segs.packed, reach * reach, idx)]
+    else:
+        idx = np.flatnonzero(_dist2_cols(np.array([x]), np.array([y]), segs)[0] < reach * reach)
+    return _near_set(segs, idx) if idx.size else None
+
+
+def _first_contact(xs: np.ndarray, ys: np.ndarray, near: geo.SegmentSet, r2: float) -> int:
+    """The first of the (n,) points ``xs, ys`` where the disc (radius² ``r2``) touches, or -1."""
+    kern = kernels()
+    if kern is not None:
+        return int(kern.first_contact(xs, ys, near.packed, r2))
+    bad = (_dist2_cols(xs, ys, near) < r2).any(axis=1)
+    k = int(bad.argmax())
+    return k if bad[k] else -1
+
+
+def _linspace(start: float, stop: float, num: int) -> np.ndarray:
+    """``numpy.linspace(start, stop, num)``."""
+    kern = kernels()
+    if kern is None:
+        return np.linspace(start, stop, num)
+    out = np.empty(num)
+    kern.linspace(start, stop, out)
+    return out
+
+
+def _nearest_point(x: float, y: float, near: geo.SegmentSet) -> np.ndarray:
+    """(2,) the point of the segments nearest ``(x, y)`` (the contact point)."""
+    kern = kernels()
+    if kern is not None:
+        return np.array(kern.nearest_point(x, y, near.packed))
+    return geo.nearest_on_segments(np.array([[x, y]]), near)[2][0]
+
+
+def _backoff(cx: float, cy: float, nx: float, ny: float, length: float, near: geo.SegmentSet,
+             r2: float, inside: bool) -> tuple[float, float, float]:
+    """Back off up to ``length`` from ``(cx, cy)`` along ``(nx, ny)`` while the disc is free.
+
+    ``inside``: the disc started inside a wall; then any sample no closer to a wall
+    than the first is free. Returns (distance backed off, x, y).
+    """
+    kern = kernels()
+    if kern is not None:
+        s = np.empty(_BACKOFF_SAMPLES)
+        m, x, y = kern.backoff(cx, cy, nx, ny, length, near.packed, r2, inside, s)
+        return (float(s[m]), x, y) if m > 0 else (0.0, cx, cy)
+    s = np.linspace(0.0, length, _BACKOFF_SAMPLES)
+    bx, by = cx + s * nx, cy + s * ny
+    d2b = _dist2_cols(bx, by, near).min(axis=1)
+    ok = d2b >= (np.minimum(d2b[0], r2) - 1e-15 if inside else r2)
+    m = int(np.count_nonzero(np.logical_and.accumulate(ok))) - 1
+    return (float(s[m]), float(bx[m]), float(by[m])) if m > 0 else (0.0, cx, cy)
+
+
 def _near_set(segs: geo.SegmentSet, idx: np.ndarray) -> geo.SegmentSet:
     """Sub-set of ``segs`` without recomputing the derived arrays."""
     sub = geo.SegmentSet.__new__(geo.SegmentSet)
     sub.segments = segs.segments[idx]
     sub.n = idx.size
-    sub.ax, sub.ay = segs.ax[idx], segs.ay[idx]
-    sub.ex, sub.ey = segs.ex[idx], segs.ey[idx]
-    sub.inv_len2 = segs.inv_len2[idx]
+    sub.packed = segs.packed[:, idx]
+    sub.ax, sub.ay, sub.ex, sub.ey, sub.inv_len2 = sub.packed
     sub.lo, sub.hi = segs.lo[idx], segs.hi[idx]
     return sub
 

@@ -1,0 +1,167 @@
+"""The compiled kernels give bit-identical numbers to the numpy code they shadow.
+
+Each test runs the same inputs through both paths -- the numpy one forced by
+``numpy_path`` -- and compares with ``numpy.array_equal`` (exact, not close):
+a preset's logs must not depend on whether numba is installed.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sitframe import geometry as geo
+from sitframe import kernels
+from sitframe.fcm import MembershipFunction
+from sitframe.fuzzy import SituationFCS
+from sitframe.robot import Command, RobotParams, step_robot
+from sitframe.world import World, parse_world
+
+pytest.importorskip("numba")
+
+K = kernels.load()
+if K is None:  # (SITFRAME_NUMBA=0)
+    pytest.skip("compiled kernels switched off", allow_module_level=True)
+
+
+def both(monkeypatch: pytest.MonkeyPatch, fn):  # noqa: ANN001, ANN201 - any callable
+    """``(fn() with kernels, fn() with numpy)``."""
+    assert kernels.kernels() is K  # (loaded by kernels.load() above)
+    fast = fn()
+    with monkeypatch.context() as m:
+        m.setattr(kernels, "_LOADED", [None])
+        slow = fn()
+    return fast, slow
+
+
+exact = st.integers(-4, 4).map(float)  # hits segment ends, parallels, starts on segments
+coord = st.one_of(st.floats(-5.0, 5.0, allow_nan=False, width=64), exact)
+
+
+@st.composite
+def segment_sets(draw: st.DrawFn) -> np.ndarray:
+    rows = draw(st.lists(st.tuples(coord, coord, coord, coord), min_size=1, max_size=8))
+    if draw(st.booleans()):  # a point and an axis-parallel segment
+        x, y = draw(exact), draw(exact)
+        rows += [(x, y, x, y), (x, y, x + draw(exact), y)]
+    return np.array(rows, dtype=float)
+
+
+@settings(max_examples=80, deadline=None)
+@given(segs=segment_sets(), ox=coord, oy=coord,
+       angs=st.lists(st.one_of(st.floats(-math.pi, math.pi, width=64),
+                               st.sampled_from([0.0, math.pi / 4, math.pi / 2, math.pi])),
+                     min_size=1, max_size=6),
+       group=st.sampled_from([1, 2]))
+def test_ray_casting_is_bit_identical(segs: np.ndarray, ox: float, oy: float, angs: list,
+                                      group: int) -> None:
+    s = geo.SegmentSet(segs)
+    ang = np.array(angs * group)
+    ref = geo._raycast(np.array([[ox]]), np.array([[oy]]), np.cos(ang)[:, None],
+                       np.sin(ang)[:, None], s, 4.0)
+    assert np.array_equal(geo.cast_rays(s, ox, oy, ang, 4.0), ref)
+    origins = np.tile([ox, oy], (ang.size, 1))
+    assert np.array_equal(geo.raycast(origins, ang, s, 4.0), ref)
+    # the range finder's reading: nearest of each group, from a rim of 0.5, clipped or not
+    reach = 3.5 + 0.5
+    dist = ref.reshape(-1, group).min(axis=1) if group > 1 else ref
+    raw = np.where(dist >= reach, 3.5, dist - 0.5)
+    # (4.0 = reach: ref doubles as the cast of the range finder's rays)
+    assert np.array_equal(geo.rim_ranges(s, ox, oy, ang, 3.5, 0.5, group), raw)
+    assert np.array_equal(geo.rim_ranges(s, ox, oy, ang, 3.5, 0.5, group, clip=True),
+                          np.clip(raw, 0.0, 3.5))
+
+
+ROOM = """
+name = "room"
+[robot]
+start = [1, 1, 0.3]
+[[walls]]
+points = [[0, 0], [5, 0], [5, 4], [0, 4], [0, 0]]
+[[walls]]
+points = [[2.5, 1], [2.5, 3]]
+[[obstacles]]
+points = [[3.6, 2.6], [4.2, 2.6], [3.9, 3.2]]
+"""
+
+
+@pytest.fixture(scope="module")
+def room() -> World:
+    return parse_world(ROOM)
+
+
+def _wander(world: World, params: RobotParams, poses: list[np.ndarray]) -> list[tuple]:
+    """Every field of the outcomes of a fixed, collision-rich sequence of commands."""
+    rng = np.random.default_rng(3)
+    cmds = rng.uniform([-90.0, 0.1], [90.0, 0.3], (len(poses), 2))
+    out = []
+    for pose, (turn, speed) in zip(poses, cmds, strict=True):
+        o = step_robot(world, pose, Command(float(turn), float(speed)), params, rng)
+        out.append((o.pose.tobytes(), o.collided, o.contact_xy.tobytes(),
+                    o.contact_pose.tobytes(), o.distance_m, o.heading_change_deg, o.backoff_m,
+                    o.recovery_turn_deg))
+    return out
+
+
+@pytest.mark.parametrize("recovery", ["backoff-turn", "none"])
+def test_robot_step_is_bit_identical(room: World, recovery: str,
+                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    rng = np.random.default_rng(0)
+    # starts all over the room, some touching or inside a wall, headings at random
+    xy = rng.uniform([0.05, 0.05], [4.95, 3.95], (300, 2))
+    poses = [np.array([x, y, th]) for (x, y), th in zip(xy, rng.uniform(-4, 4, 300),
+                                                          strict=True)]
+    params = RobotParams(recovery=recovery)
+    fast, slow = both(monkeypatch, lambda: _wander(room, params, poses))
+    assert fast == slow
+    collided = sum(o[1] for o in fast)
+    assert 30 < collided < 300  # the contact and recovery paths ran too
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), c=st.sampled_from([2, 7, 8, 12, 16, 31]),
+       m=st.sampled_from([1.2, 2.0]), on_centre=st.booleans())
+def test_memberships_and_controller_are_bit_identical(seed: int, c: int, m: float,
+                                                      on_centre: bool) -> None:
+    rng = np.random.default_rng(seed)
+    centers = rng.uniform(0.0, 3.0, (c, 8))
+    x = centers[1].copy() if on_centre else rng.uniform(0.0, 3.0, 8)
+    f = MembershipFunction(centers, m)
+    u = f(x)
+    diff = centers - x
+    d2 = np.einsum("ij,ij->i", diff, diff)
+    if d2.min() > 0.0:  # the numpy expression of MembershipFunction
+        w = np.maximum(d2.min() / d2, f.floor) ** f.p
+        ref = w / w.sum()
+    else:
+        ref = (d2 <= 0.0) / (d2 <= 0.0).sum()
+    assert np.array_equal(u, ref)
+    singletons = np.array([90.0, 60.0, 30.0, 0.0, -30.0, -60.0, -90.0])
+    fcs = SituationFCS(singletons, rng.integers(0, 7, c))
+    strength = (fcs._onehot * u[:, None]).max(axis=0)
+    assert fcs.output(u) == float(strength @ singletons) / float(strength.sum())
+
+
+def test_pairwise_sum_follows_numpy() -> None:
+    rng = np.random.default_rng(1)
+    for n in range(1, K.PAIRWISE_MAX + 1):
+        a = rng.random(n) ** 9  # magnitudes far apart: the order shows
+        w = a.copy()
+        K.normalize(w)
+        assert np.array_equal(w, a / np.add.reduce(a)), n
+
+
+def test_linspace_follows_numpy() -> None:
+    out = np.empty(17)
+    for a, b in [(0.0, 1.5), (0.35, 0.4), (1e-310, 2e-310), (2.0, 2.0), (0.1, 0.0)]:
+        K.linspace(a, b, out)
+        assert np.array_equal(out, np.linspace(a, b, 17))
+
+
+def test_rim_ranges_rejects_ragged_groups(room: World) -> None:
+    with pytest.raises(ValueError, match="do not make groups of 3"):
+        geo.rim_ranges(room.segment_set, 1.0, 1.0, np.zeros(8), 3.0, 0.15, 3)
