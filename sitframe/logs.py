@@ -992,31 +992,41 @@ def _check_layout(f: h5py.File, path: str) -> None:
         if capacity is not None:
             shape = (int(capacity), shape[1])
     for name in _trial_names(f, path):
-        g = _trial_group(f, name, path)
-        if not isinstance(g, h5py.Group):
-            fail(f"trials/{name}", "expected a trial group, got a dataset")
-        if g.file != f and g.attrs.get("index") != int(name):
-            fail(f"trials/{name}", f"its file holds trial {g.attrs.get('index')!r}, expected "
-                 f"{int(name)}")
-        for ds, axis in (("memberships", 0), (READING, 1), ("sonar", 1)):
-            if shape is not None and isinstance(g.get(ds), h5py.Dataset) and \
-                    g[ds].shape[1:] != (shape[axis],):
-                fail(f"trials/{name}/{ds}", f"has shape {g[ds].shape}, which does not fit the "
-                     f"fitted centres' shape {shape}")
-        for label, bg in (g["behaviours"].items() if isinstance(g.get("behaviours"), h5py.Group)
-                          else ()):
-            policy = bg.get("policy")
-            singles = bg.get("actions", bg.get("singletons"))  # (named singletons before v2)
-            if not isinstance(policy, h5py.Group) or not isinstance(singles, h5py.Group):
+        _check_trial_layout(f, name, shape, path)
+
+
+def _check_trial_layout(f: h5py.File, name: str, shape: tuple[int, int] | None,
+                        path: str) -> None:
+    """One trial of :func:`_check_layout`: its group, the shapes of its readings and
+    memberships against the centres' ``shape``, and its policies' action indices."""
+    def fail(key: str, what: str) -> None:
+        raise InputError(what, file=path, key=key)
+
+    g = _trial_group(f, name, path)
+    if not isinstance(g, h5py.Group):
+        fail(f"trials/{name}", "expected a trial group, got a dataset")
+    if g.file != f and g.attrs.get("index") != int(name):
+        fail(f"trials/{name}", f"its file holds trial {g.attrs.get('index')!r}, expected "
+             f"{int(name)}")
+    for ds, axis in (("memberships", 0), (READING, 1), ("sonar", 1)):
+        if shape is not None and isinstance(g.get(ds), h5py.Dataset) and \
+                g[ds].shape[1:] != (shape[axis],):
+            fail(f"trials/{name}/{ds}", f"has shape {g[ds].shape}, which does not fit the "
+                 f"fitted centres' shape {shape}")
+    for label, bg in (g["behaviours"].items() if isinstance(g.get("behaviours"), h5py.Group)
+                      else ()):
+        policy = bg.get("policy")
+        singles = bg.get("actions", bg.get("singletons"))  # (named singletons before v2)
+        if not isinstance(policy, h5py.Group) or not isinstance(singles, h5py.Group):
+            continue
+        for out, ds in policy.items():
+            if out not in singles:
                 continue
-            for out, ds in policy.items():
-                if out not in singles:
-                    continue
-                idx, n = np.asarray(ds[()]), len(singles[out])
-                if idx.dtype.kind not in "iu" or (idx.size and not (0 <= idx.min() <= idx.max()
-                                                                     < n)):
-                    fail(f"trials/{name}/behaviours/{label}/policy/{out}", f"expected action "
-                         f"indices in 0..{n - 1}, got {idx.tolist()}")
+            idx, n = np.asarray(ds[()]), len(singles[out])
+            if idx.dtype.kind not in "iu" or (idx.size and not (0 <= idx.min() <= idx.max()
+                                                                 < n)):
+                fail(f"trials/{name}/behaviours/{label}/policy/{out}", f"expected action "
+                     f"indices in 0..{n - 1}, got {idx.tolist()}")
 
 
 def open_log(path: str | os.PathLike[str]) -> Log:

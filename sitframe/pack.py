@@ -24,7 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from sitframe.logs import LogWriter, lock_log, open_log, shard_folder
+    from sitframe.logs import LogWriter, lock_log, open_log, shard_folder  # h5py: start-up time
 
     log = open_log(args.log)
     lock_log(args.log, key="LOG")  # refused while a run writes it

@@ -249,9 +249,8 @@ def test_5_15_bad_world_geometry_is_refused(tmp_path, capsys, edit, key, what):
 def test_14_extreme_worlds_are_refused_naming_the_limit(tmp_path, capsys, walls, key, what):
     (tmp_path / "w.toml").write_text(ROOM.replace(
         "[[0, 0], [6, 0], [6, 4], [0, 4], [0, 0]]", walls))
-    t0 = time.perf_counter()
+    # (refused before any grid is built: benchmarks/bench_hostile.py times it, not this test)
     refused(capsys, ["world", "show", tmp_path / "w.toml"], f"w.toml: {key}:", what)
-    assert time.perf_counter() - t0 < 5
 
 
 def test_14_free_cells_of_many_obstacles_are_those_of_the_direct_test():

@@ -96,35 +96,10 @@ def replay(
     from sitframe.analysis.world_plot import plot_world  # matplotlib: start-up time
 
     out = Path(out)
-    suffix = out.suffix.lower()
-    if suffix not in (".gif", ".mp4"):
-        raise InputError(f"expected an output file ending in .gif or .mp4, got '{out}'",
-                         key="-o")
-    if suffix == ".mp4" and not shutil.which("ffmpeg"):
-        raise InputError("writing .mp4 needs ffmpeg on PATH, which was not found; install "
-                         "ffmpeg or write a .gif instead", key="-o")
-    if fps < 1:
-        raise InputError(f"must be at least 1, got {fps}", key="--fps")
+    suffix = _check_output(out, fps)
     lg = R.as_log(log)
-    tr = lg.trial(trial)
-    what = f"trial {trial}"
-    if evaluation is not None:
-        prefix = f"eval/{evaluation}/"
-        worlds = sorted({k.split("/")[1] for k in tr.episodes if k.startswith("eval/")})
-        if evaluation not in worlds:
-            raise InputError(f"trial {trial} has no evaluation in world '{evaluation}'; it has "
-                             f"{worlds or 'none'}", file=lg.path, key="--eval")
-        arrays = {k[len(prefix):]: v for k, v in tr.episodes.items() if k.startswith(prefix)}
-        if "reading" not in arrays and "sonar" in arrays:  # a log from before contract v2
-            arrays["reading"] = arrays["sonar"]
-        tr = dataclasses.replace(tr, world=evaluation, arrays=arrays)
-        what = f"trial {trial}, evaluation in {evaluation}"
-    need = [k for k in ("pose", "reading", "memberships", "command", "collision")
-            if k not in tr.arrays]
-    if need:
-        raise InputError(f"{what} lacks the arrays {need}" + (
-            " (an older log: its evaluations kept only pose and collision)" if evaluation
-            else ""), file=lg.path, key=f"trials/{trial:04d}")
+    tr = _replay_trial(lg, trial, evaluation)
+    what = f"trial {trial}" + ("" if evaluation is None else f", evaluation in {evaluation}")
     pose = np.asarray(tr.arrays["pose"], dtype=np.float64)
     sonar = np.asarray(tr.arrays["reading"], dtype=np.float64)
     u = np.asarray(tr.arrays["memberships"], dtype=np.float64)
@@ -306,3 +281,42 @@ def _write_mp4(out: Path, frames: Any, fps: int, canvas: Any) -> None:
         if proc.wait() != 0:
             raise InputError(f"ffmpeg failed: {err.strip().splitlines()[-1:] or err}",
                              file=str(out), key="-o")
+
+
+def _check_output(out: Path, fps: int) -> str:
+    """The output's suffix (.gif or .mp4, with ffmpeg for .mp4) and a positive ``fps``."""
+    suffix = out.suffix.lower()
+    if suffix not in (".gif", ".mp4"):
+        raise InputError(f"expected an output file ending in .gif or .mp4, got '{out}'",
+                         key="-o")
+    if suffix == ".mp4" and not shutil.which("ffmpeg"):
+        raise InputError("writing .mp4 needs ffmpeg on PATH, which was not found; install "
+                         "ffmpeg or write a .gif instead", key="-o")
+    if fps < 1:
+        raise InputError(f"must be at least 1, got {fps}", key="--fps")
+    return suffix
+
+
+def _replay_trial(lg: Any, trial: int, evaluation: str | None) -> Any:
+    """Trial ``trial``, or its evaluation in world ``evaluation`` as a trial, with the arrays
+    a replay needs (InputError naming what is missing)."""
+    tr = lg.trial(trial)
+    what = f"trial {trial}"
+    if evaluation is not None:
+        prefix = f"eval/{evaluation}/"
+        worlds = sorted({k.split("/")[1] for k in tr.episodes if k.startswith("eval/")})
+        if evaluation not in worlds:
+            raise InputError(f"trial {trial} has no evaluation in world '{evaluation}'; it has "
+                             f"{worlds or 'none'}", file=lg.path, key="--eval")
+        arrays = {k[len(prefix):]: v for k, v in tr.episodes.items() if k.startswith(prefix)}
+        if "reading" not in arrays and "sonar" in arrays:  # a log from before contract v2
+            arrays["reading"] = arrays["sonar"]
+        tr = dataclasses.replace(tr, world=evaluation, arrays=arrays)
+        what = f"trial {trial}, evaluation in {evaluation}"
+    need = [k for k in ("pose", "reading", "memberships", "command", "collision")
+            if k not in tr.arrays]
+    if need:
+        raise InputError(f"{what} lacks the arrays {need}" + (
+            " (an older log: its evaluations kept only pose and collision)" if evaluation
+            else ""), file=lg.path, key=f"trials/{trial:04d}")
+    return tr

@@ -251,44 +251,7 @@ def analyse(
         W = _Writer(rep, dpi)
         radius = R.robot_radius(lg)
 
-        # ------------------------------------------------------------- clustering
-        if lg.has("cluster"):
-            sec = "Situations (clustering)"
-            try:
-                ct = R.clustering_trials(lg)
-            except _EXPECTED as exc:
-                rep.skipped.append(f"clustering figures: {exc}")
-                ct = None
-            try:
-                spec = lg.sensor  # any beam layout: the sensor's own bearings and range
-            except InputError as exc:
-                rep.skipped.append(f"prototypes.png: {exc}")
-                spec = None
-            if spec is not None and lg.has("cluster/state/centers"):
-                W.figure(sec, "prototypes.png",
-                         f"Cluster prototypes (situations) as polar plots of the {spec.dim} "
-                         f"'{spec.name}' ranges (Fig. 5.2)",
-                         lambda: CP.plot_prototypes(
-                             np.asarray(lg.interpreter_state()["centers"]), spec.angles_deg,
-                             max_range=spec.max_range,
-                             labels=R.situation_labels(lg, numbered=False)))
-            # J_m is in the squared units of the clustered features (see the fcm plugin's transform)
-            transform = str(lg.stage("cluster").get("transform", "range")) \
-                if lg.has("cluster") else "range"
-            units = {"log": "(log m)", "inverse": "(1/m)"}.get(transform, "m")
-            if ct is not None:
-                W.figure(sec, "measures_by_trial.png",
-                         f"Validity measures of the {ct.n_trials} FCM trials, chosen trial "
-                         f"{ct.chosen} marked (Fig. 5.1)",
-                         lambda: CP.plot_measures_by_trial(ct, units=units))
-            sw = R.sweep_result(lg)
-            if sw is not None:
-                W.figure(sec, "measures_by_c.png",
-                         "Validity of the chosen partition against the number of clusters c "
-                         "(Fig. 4.5)", lambda: CP.plot_measures_by_c(sw, units=units))
-            else:
-                rep.skipped.append("measures_by_c.png: the log has no sweep over c "
-                                   "(set [interpreter] sweep = [2, 3, ...] to record one)")
+        _clustering_section(W, lg, rep, CP)
 
         # ------------------------------------------------------------- learning
         idx = lg.trial_indices()
@@ -300,45 +263,8 @@ def analyse(
             return loaded[k]
 
         if idx:
-            sec = "Learning (all trials)"
-            W.table(sec, "convergence", "Convergence and quality of every trial (Table 5.9)",
-                    lambda: R.convergence_table(lg))
-
-            W.table(sec, "rule_bases", "Learned action per situation in every trial, and the most "
-                    "frequent one (Tables A.2/A.3)",
-                    lambda: R.rule_bases_across_trials(lg, read=get))
-
-            def curves() -> Any:
-                rewards, conv = {}, {}
-                for k in idx:
-                    tr = get(k)
-                    lab = _reward_label(tr)
-                    rewards[k] = tr.arrays[f"reward/{lab}"]
-                    conv[k] = R.convergence_iteration(tr)
-                return LP.plot_learning_curves(rewards, conv, window,
-                                               title=f"Mean reward per {window} iterations, "
-                                               f"{len(idx)} trials")
-
-            W.figure(sec, "learning_curves.png", f"Mean reward per {window} iterations of every "
-                     "trial and their mean; dots = convergence", curves)
-
-            if trials is None:
-                rt = R.representative_trial(lg)
-                chosen = [rt] if rt is not None else []
-            elif trials == "all":
-                chosen = idx
-            else:
-                chosen = [int(k) for k in trials]  # type: ignore[union-attr]
-                bad = [k for k in chosen if k not in idx]
-                if bad:
-                    raise InputError(f"the log has no trial(s) {bad}; it has {_ranges(idx)}",
-                                     file=lg.path, key="--trial")
-            rep.trials = chosen
-            worlds = _worlds(lg)
-            if get(idx[0]).situations:
-                _situation_figures(W, lg, {k: get(k) for k in idx}, chosen, worlds, radius)
-            for k in chosen:
-                _trial_figures(W, lg, get(k), worlds, window, path_iterations, radius, LP)
+            _learning_section(W, lg, rep, trials, idx, get, window, path_iterations,
+                              radius, LP)
         rep.seconds = time.perf_counter() - t0
         write_report_html(rep, lg, {k: get(k) for k in idx}, W.tables)
         rep.seconds = time.perf_counter() - t0
@@ -356,6 +282,89 @@ def analyse(
         raise
     rep.out_dir = str(out)
     return rep
+
+
+def _clustering_section(W: _Writer, lg: Log, rep: AnalysisReport, CP: Any) -> None:
+    """The clustering figures a log supports (prototypes, validity by trial and by c)."""
+    if lg.has("cluster"):
+        sec = "Situations (clustering)"
+        try:
+            ct = R.clustering_trials(lg)
+        except _EXPECTED as exc:
+            rep.skipped.append(f"clustering figures: {exc}")
+            ct = None
+        try:
+            spec = lg.sensor  # any beam layout: the sensor's own bearings and range
+        except InputError as exc:
+            rep.skipped.append(f"prototypes.png: {exc}")
+            spec = None
+        if spec is not None and lg.has("cluster/state/centers"):
+            W.figure(sec, "prototypes.png",
+                     f"Cluster prototypes (situations) as polar plots of the {spec.dim} "
+                     f"'{spec.name}' ranges (Fig. 5.2)",
+                     lambda: CP.plot_prototypes(
+                         np.asarray(lg.interpreter_state()["centers"]), spec.angles_deg,
+                         max_range=spec.max_range,
+                         labels=R.situation_labels(lg, numbered=False)))
+        # J_m is in the squared units of the clustered features (see the fcm plugin's transform)
+        transform = str(lg.stage("cluster").get("transform", "range")) \
+            if lg.has("cluster") else "range"
+        units = {"log": "(log m)", "inverse": "(1/m)"}.get(transform, "m")
+        if ct is not None:
+            W.figure(sec, "measures_by_trial.png",
+                     f"Validity measures of the {ct.n_trials} FCM trials, chosen trial "
+                     f"{ct.chosen} marked (Fig. 5.1)",
+                     lambda: CP.plot_measures_by_trial(ct, units=units))
+        sw = R.sweep_result(lg)
+        if sw is not None:
+            W.figure(sec, "measures_by_c.png",
+                     "Validity of the chosen partition against the number of clusters c "
+                     "(Fig. 4.5)", lambda: CP.plot_measures_by_c(sw, units=units))
+        else:
+            rep.skipped.append("measures_by_c.png: the log has no sweep over c "
+                               "(set [interpreter] sweep = [2, 3, ...] to record one)")
+
+
+
+def _learning_section(W: _Writer, lg: Log, rep: AnalysisReport, trials: Any, idx: list[int],
+                      get: Any, window: int, path_iterations: int, radius: float,
+                      LP: Any) -> None:
+    """The tables and figures of all trials, then those of the chosen trials."""
+    sec = "Learning (all trials)"
+    W.table(sec, "convergence", "Convergence and quality of every trial (Table 5.9)",
+            lambda: R.convergence_table(lg))
+
+    W.table(sec, "rule_bases", "Learned action per situation in every trial, and the most "
+            "frequent one (Tables A.2/A.3)",
+            lambda: R.rule_bases_across_trials(lg, read=get))
+
+    def curves() -> Any:
+        rewards, conv = {}, {}
+        for k in idx:
+            tr = get(k)
+            lab = _reward_label(tr)
+            rewards[k] = tr.arrays[f"reward/{lab}"]
+            conv[k] = R.convergence_iteration(tr)
+        return LP.plot_learning_curves(rewards, conv, window,
+                                       title=f"Mean reward per {window} iterations, "
+                                       f"{len(idx)} trials")
+
+    W.figure(sec, "learning_curves.png", f"Mean reward per {window} iterations of every "
+             "trial and their mean; dots = convergence", curves)
+
+    if trials is None:
+        rt = R.representative_trial(lg)
+        chosen = [rt] if rt is not None else []
+    elif trials == "all":
+        chosen = idx
+    else:
+        chosen = [int(k) for k in trials]  # (checked against the log by analyse)
+    rep.trials = chosen
+    worlds = _worlds(lg)
+    if get(idx[0]).situations:
+        _situation_figures(W, lg, {k: get(k) for k in idx}, chosen, worlds, radius)
+    for k in chosen:
+        _trial_figures(W, lg, get(k), worlds, window, path_iterations, radius, LP)
 
 
 def _reward_label(tr: TrialLog) -> str:
