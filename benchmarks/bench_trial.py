@@ -6,7 +6,8 @@ the trial and without a log, and the logging overhead as a ratio measured in
 the same run. Target (issue 4): <= 2.5 s per trial, logging <= 10 %.
 
 ``--against REV`` instead times the learning trial of this checkout and of git
-revision ``REV`` (exported to a temporary folder) in one run, alternating
+revision ``REV`` (exported to a temporary folder; both with REV's obstacle-avoidance
+preset) in one run, alternating
 fresh processes of each so that load drifts on a shared machine hit both
 alike, and prints the medians and their ratio (issue 11: the checked plugin
 boundary must cost nothing measurable, within 5 % of the previous commit)::
@@ -35,8 +36,10 @@ ROOT = Path(__file__).resolve().parent.parent
 PLUGINS = ("sonar", "fcm_interpreter", "fuzzy_q", "rewards", "arbiters")
 
 
-def _time_trials(iterations: int, repeats: int) -> list[float]:
-    """Seconds per learning trial of ``obstacle-avoidance`` with this process's sitframe."""
+def _time_trials(iterations: int, repeats: int, config: str = "obstacle-avoidance"
+                 ) -> list[float]:
+    """Seconds per learning trial of ``config`` (a preset name or a .toml path) with this
+    process's sitframe."""
     from sitframe.config import load_config, validate_config
     from sitframe.pluginmanager import get_plugin_manager
 
@@ -46,7 +49,7 @@ def _time_trials(iterations: int, repeats: int) -> list[float]:
         from sitframe.scheduler import Experiment
 
     mods = [importlib.import_module(f"sitframe.plugins.{m}") for m in PLUGINS]
-    cfg, source, _ = load_config("obstacle-avoidance")
+    cfg, source, _ = load_config(config)
     cfg["experiment"].update(trials=1, iterations=iterations, stages=["collect", "cluster"])
     cfg = validate_config(cfg, file=source)
 
@@ -75,13 +78,18 @@ def _against(rev: str, iterations: int, repeats: int) -> None:
         with tarfile.open(tar) as tf:
             tf.extractall(old, filter="data")
         trees = {rev: old, "this checkout": ROOT}
+        # Both time the same config: the obstacle-avoidance preset as REV has it (a preset
+        # whose settings changed since would otherwise time another learning run).
+        config = Path(tmp) / "obstacle-avoidance.toml"
+        config.write_text((old / "sitframe/presets/obstacle-avoidance.toml").read_text())
         times: dict[str, list[float]] = {k: [] for k in trees}
         for _ in range(repeats):
             for name, tree in trees.items():  # alternate fresh processes of each
                 env = dict(os.environ, PYTHONPATH=str(tree), SITFRAME_DISABLE_PLUGIN_AUTOLOAD="1")
                 code = (f"import json, sys; sys.path.insert(0, {str(tree)!r}); "
                         f"sys.path.insert(1, {str(ROOT / 'benchmarks')!r}); import bench_trial; "
-                        f"print(json.dumps(bench_trial._time_trials({iterations}, 3)))")
+                        f"print(json.dumps(bench_trial._time_trials({iterations}, 3, "
+                        f"{str(config)!r})))")
                 res = subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp,
                                      capture_output=True, text=True)
                 if res.returncode:
