@@ -214,13 +214,7 @@ class CDBArbiter:
     def combine(self, context: Context, proposals: dict[str, Proposal]) -> tuple[Proposal, Any]:
         props = list(proposals.values())
         w = self.weights(context.nearest, list(proposals))
-        heading = float(sum(wk * p.heading_deg for wk, p in zip(w, props, strict=True)))
-        sw = sum(wk for wk, p in zip(w, props, strict=True) if p.speed_m_s is not None)
-        speed = None
-        if sw > 0:
-            speed = float(sum(wk * p.speed_m_s for wk, p in zip(w, props, strict=True)
-                              if p.speed_m_s is not None) / sw)
-        return Proposal(heading, speed), w
+        return Proposal.blend(props, w), w
 
 
 # ---------------------------------------------------------------------------

@@ -348,13 +348,7 @@ class FuzzyQArbiter:
         self._u = self._state(context, self._stalled())
         w = self._u @ self.W[self.rules]
         props = list(proposals.values())
-        heading = float(sum(wk * p.heading_deg for wk, p in zip(w, props, strict=True)))
-        sw = sum(wk for wk, p in zip(w, props, strict=True) if p.speed_m_s is not None)
-        speed = None
-        if sw > 0:
-            speed = float(sum(wk * p.speed_m_s for wk, p in zip(w, props, strict=True)
-                              if p.speed_m_s is not None) / sw)
-        return Proposal(heading, speed), w / w.sum()
+        return Proposal.blend(props, w), w / w.sum()
 
     def learn(self, transition: Transition, reward: float) -> None:
         if self.learner is None:

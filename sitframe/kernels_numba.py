@@ -118,8 +118,10 @@ def ranges(x: float, y: float, dx: np.ndarray, dy: np.ndarray, seg: np.ndarray, 
 
 
 @njit(**_JIT)
-def _dist2(px: float, py: float, seg: np.ndarray, j: int) -> float:  # pragma: no cover
-    """Squared distance of a point to segment ``j`` (twin of ``geometry._dist2``)."""
+def _foot(px: float, py: float, seg: np.ndarray,
+          j: int) -> tuple[float, float, float]:  # pragma: no cover
+    """Segment ``j``'s parameter ``t`` of the point's foot (clamped to [0, 1]) and the offset
+    ``(dx, dy)`` from that foot to the point (twin of ``geometry._dist2``'s steps)."""
     wx = px - seg[0, j]
     wy = py - seg[1, j]
     t = (wx * seg[2, j] + wy * seg[3, j]) * seg[4, j]
@@ -127,8 +129,13 @@ def _dist2(px: float, py: float, seg: np.ndarray, j: int) -> float:  # pragma: n
         t = 0.0
     elif t > 1.0:
         t = 1.0
-    dx = wx - t * seg[2, j]
-    dy = wy - t * seg[3, j]
+    return t, wx - t * seg[2, j], wy - t * seg[3, j]
+
+
+@njit(**_JIT)
+def _dist2(px: float, py: float, seg: np.ndarray, j: int) -> float:  # pragma: no cover
+    """Squared distance of a point to segment ``j`` (twin of ``geometry._dist2``)."""
+    _t, dx, dy = _foot(px, py, seg, j)
     return dx * dx + dy * dy
 
 
@@ -160,15 +167,7 @@ def nearest_point(x: float, y: float, seg: np.ndarray) -> tuple[float, float]:  
     """The point nearest ``(x, y)`` on the segments (twin of ``geometry.nearest_on_segments``)."""
     best, bx, by = np.inf, np.nan, np.nan
     for j in range(seg.shape[1]):
-        wx = x - seg[0, j]
-        wy = y - seg[1, j]
-        t = (wx * seg[2, j] + wy * seg[3, j]) * seg[4, j]
-        if t < 0.0:
-            t = 0.0
-        elif t > 1.0:
-            t = 1.0
-        dx = wx - t * seg[2, j]
-        dy = wy - t * seg[3, j]
+        t, dx, dy = _foot(x, y, seg, j)
         d2 = dx * dx + dy * dy
         if d2 < best or j == 0:  # (argmin: the first of equal minima)
             best, bx, by = d2, seg[0, j] + t * seg[2, j], seg[1, j] + t * seg[3, j]

@@ -39,6 +39,22 @@ class Proposal:
     speed_m_s: float | None = None
     activation: float | None = None
 
+    @staticmethod
+    def blend(proposals: list[Proposal], weights: Any) -> Proposal:
+        """The weighted fusion of ``proposals`` (CDB's, and any arbiter's that blends).
+
+        The heading is ``sum_k w_k heading_k``; the speed is the weighted mean over
+        the proposals that have one (``None`` if none has, or their weights are 0).
+        """
+        pairs = list(zip(weights, proposals, strict=True))
+        heading = float(sum(wk * p.heading_deg for wk, p in pairs))
+        sw = sum(wk for wk, p in pairs if p.speed_m_s is not None)
+        speed = None
+        if sw > 0:
+            speed = float(sum(wk * p.speed_m_s for wk, p in pairs if p.speed_m_s is not None)
+                          / sw)
+        return Proposal(heading, speed)
+
 
 @dataclass(frozen=True, slots=True)
 class Context:
