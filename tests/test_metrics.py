@@ -3,11 +3,20 @@ other path metrics, on a room whose free cells are known by hand."""
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from helpers import ROOM
 
-from sitframe.metrics import collisions_per_1000, coverage, heading_change_per_m, path_length, spl
+from sitframe.metrics import (
+    collisions_per_1000,
+    coverage,
+    frontal_between_prototypes,
+    heading_change_per_m,
+    path_length,
+    spl,
+)
 from sitframe.world import parse_world
 
 #: 6 m x 4 m: 12 x 8 cells of 0.5 m; the obstacle [4, 5] x [2.5, 3.2] grown by the robot
@@ -68,3 +77,65 @@ def test_path_metrics_on_logged_poses():
     assert path_length(poses) == 5.0
     assert np.isnan(heading_change_per_m(np.array([0.0, 1.0]), np.zeros((2, 2))))
     assert collisions_per_1000(np.array([0, 2, 0, 0], dtype=np.int8)) == 250.0
+
+
+def _rect(x0: float, y0: float, x1: float, y1: float) -> str:
+    return (f'name = "rect"\n[robot]\nstart = [{(x0 + x1) / 2}, {(y0 + y1) / 2}, 0.0]\n'
+            f"[[walls]]\npoints = [[{x0}, {y0}], [{x1}, {y0}], [{x1}, {y1}], [{x0}, {y1}], "
+            f"[{x0}, {y0}]]\n")
+
+
+def test_cells_are_anchored_at_the_worlds_own_corner():
+    """A room whose corner is not at the origin, nor on the 0.5 m lattice: 4 x 2 cells of
+    0.5 m from (0.2, 0.3); a visit just inside a cell's corner counts for that cell."""
+    world = parse_world(_rect(0.2, 0.3, 2.2, 1.3))
+    assert len(world.free_cells()) == 8
+    assert coverage(world, np.array([[0.21, 0.31], [0.69, 1.29]])) == pytest.approx(2 / 8)
+    assert coverage(world, np.array([[2.19, 0.31], [1.71, 0.79]])) == pytest.approx(1 / 8)
+
+
+def test_coverage_uses_the_robot_radius_it_is_given():
+    """A 0.3 m robot cannot centre on the border cells (0.25 m from the walls) nor on the
+    cells within 0.3 m of the obstacle: 60 interior cells less 10 near the obstacle."""
+    assert len(WORLD.free_cells(radius=0.3)) == 50
+    assert coverage(WORLD, np.array([[0.3, 0.3], [1.1, 1.1]]), radius=0.3) == \
+        pytest.approx(1 / 50)
+
+
+def test_coverage_of_a_world_with_one_or_no_free_cell():
+    tiny = parse_world(_rect(0.0, 0.0, 0.5, 0.5))
+    assert coverage(tiny, np.array([[0.25, 0.25]])) == 1.0
+    assert np.isnan(coverage(tiny, np.array([[0.25, 0.25]]), radius=0.3))
+
+
+def test_short_paths_and_single_episodes():
+    """Metrics of a half-metre path and of one episode are values, not NaN; an empty tail
+    is NaN without a numpy warning."""
+    xy = np.array([[0.0, 0.0], [0.3, 0.4]])
+    assert heading_change_per_m(np.array([0.0, np.pi / 4]), xy) == pytest.approx(45 / 0.5)
+    assert spl(np.array([True]), np.array([3.0]), np.array([4.0])) == pytest.approx(0.75)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert np.isnan(collisions_per_1000(np.zeros(3, bool), start=3))
+
+
+def test_frontal_collisions_between_prototypes():
+    """Hand-made iterations: contact bearing relative to the heading (wrapped to
+    [-180, 180)), within the cone, and no membership at or above ``top``."""
+    heading = np.radians([0.0, 0.0, 0.0, 0.0, 180.0, 170.0, 0.0, 0.0])
+    pose = np.zeros((9, 3))
+    pose[:8, 2] = heading
+    pose[8] = [9.0, 9.0, 0.0]  # the pose after the last iteration: not used
+    bearing = np.radians([0.0, 0.0, 45.0, 0.0, 180.0, -170.0, 20.0, -25.0])
+    contact = np.column_stack([np.cos(bearing), np.sin(bearing)])
+    contact[3] = np.nan  # no collision there
+    collision = np.array([1, 1, 1, 0, 1, 1, 1, 1], bool)
+    top = np.array([0.4, 0.6, 0.4, 0.4, 0.3, 0.45, 0.5, 0.49])
+    memberships = np.column_stack([np.minimum(top, 1 - top), top])  # the largest is top
+    got = frontal_between_prototypes(pose, collision, contact, memberships)
+    #          ahead, dominant, 45 deg, none, behind x2 (wrap), top = 0.5, -25 deg
+    assert got.tolist() == [True, False, False, False, True, True, False, True]
+    assert frontal_between_prototypes(pose, collision, contact, memberships,
+                                      cone_deg=20.0).tolist()[-2:] == [False, False]
+    assert frontal_between_prototypes(pose, collision, contact, memberships,
+                                      top=0.7)[1]

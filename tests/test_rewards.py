@@ -40,6 +40,7 @@ def test_speed_reward_alg6():
     assert r(tr(0.25, 0.20, speed=0.1)) == pytest.approx(-5.0)  # closing in below 30 cm
     assert r(tr(0.25, 0.28, speed=0.1)) == pytest.approx(30.0)  # moving away: bonus
     assert r(tr(0.40, 0.20, speed=0.3)) == pytest.approx(70.0)  # fixed 30 cm: no penalty
+    assert r(tr(0.40, 0.20, speed=0.5)) == pytest.approx(110.0)  # whatever the speed
     assert r(tr(0.5, 0.1, speed=0.3, collided=True)) == -30.0
 
 
@@ -66,3 +67,15 @@ def test_speed_reward_boundaries_and_parameters():
                      (ObstacleAvoidanceReward, "heading_cost")):
         with pytest.raises(ValueError, match=key):
             cls(**{key: -0.1})
+
+
+@pytest.mark.parametrize("cls, key", [
+    (ObstacleAvoidanceReward, "collision"), (ObstacleAvoidanceReward, "base"),
+    (ObstacleAvoidanceReward, "heading_cost"), (SpeedReward, "collision"), (SpeedReward, "near"),
+    (SpeedReward, "base"), (SpeedReward, "per_mm_s"), (SpeedReward, "near_time_s")])
+def test_a_bad_reward_parameter_is_named(cls, key):
+    """A non-number in a reward's table is refused with the key the user wrote."""
+    with pytest.raises(ValueError, match=rf"^{key}: expected a number"):
+        cls(**{key: "high"})
+    with pytest.raises(ValueError, match=rf"^{key}: "):
+        cls(**{key: float("nan")})

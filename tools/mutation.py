@@ -11,7 +11,7 @@ copies the package into a scratch folder laid out as it is installed (``sitframe
 Usage::
 
     nice -n 10 python tools/mutation.py [MODULE ...] [--tests FILE ...] [--workdir DIR]
-                                        [--fresh]
+                                        [--fresh] [--max-children N]
 
 MODULE is a dotted name as installed (``sitframe.fcm``, ``sitframe.plugins.rewards``);
 none = every module of ``[tool.mutmut] only_mutate``. ``--tests`` replaces the test
@@ -66,6 +66,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tests", nargs="+", default=[], metavar="FILE",
                     help="test files to run against the mutants (default: the configured ones)")
     ap.add_argument("--fresh", action="store_true", help="discard earlier results")
+    ap.add_argument("--max-children", type=int, default=None, metavar="N",
+                    help="mutants tested at once (default: mutmut's, one per core)")
     args = ap.parse_args(argv)
     build(args.workdir, args.fresh, args.tests, args.modules)
     mutmut = [sys.executable, "-m", "mutmut"] if shutil.which("mutmut") is None else ["mutmut"]
@@ -73,7 +75,8 @@ def main(argv: list[str] | None = None) -> int:
     # derandomized property-based tests (as in CI): a mutant's verdict must not depend on
     # which examples a run happens to draw
     env = {**os.environ, "CI": "1"}
-    code = subprocess.call([*mutmut, "run", *names], cwd=args.workdir, env=env)
+    children = [] if args.max_children is None else ["--max-children", str(args.max_children)]
+    code = subprocess.call([*mutmut, "run", *children, *names], cwd=args.workdir, env=env)
     subprocess.call([*mutmut, "results"], cwd=args.workdir, env=env)
     return code
 
