@@ -120,22 +120,28 @@ def test_short_paths_and_single_episodes():
 
 
 def test_frontal_collisions_between_prototypes():
-    """Hand-made iterations: contact bearing relative to the heading (wrapped to
-    [-180, 180)), within the cone, and no membership at or above ``top``."""
-    heading = np.radians([0.0, 0.0, 0.0, 0.0, 180.0, 170.0, 0.0, 0.0])
-    pose = np.zeros((9, 3))
-    pose[:8, 2] = heading
-    pose[8] = [9.0, 9.0, 0.0]  # the pose after the last iteration: not used
-    bearing = np.radians([0.0, 0.0, 45.0, 0.0, 180.0, -170.0, 20.0, -25.0])
-    contact = np.column_stack([np.cos(bearing), np.sin(bearing)])
+    """Hand-made iterations away from the origin: the contact's bearing relative to the
+    heading (wrapped to [-180, 180)) within the cone (bounds included), and no membership at
+    or above ``top``. Collision flags are flags whatever their integer type."""
+    #              ahead dominant  45  none behind wrap  29.5 30.5 -29.5 -30.5 top=.5  90/90
+    heading = np.array([0, 0, 0, 0, 180, 165, 0, 0, 0, 0, 0, 90], float)
+    absolute = np.array([0, 0, 45, 0, 180, -165.5, 29.5, 30.5, -29.5, -30.5, 20, 90], float)
+    top = np.array([.4, .6, .4, .4, .3, .45, .4, .4, .4, .4, .5, .49])
+    collision = np.array([2, 2, 1, 0, 1, 1, 1, 1, 1, 1, 1, 1], np.int8)
+    frontal = [1, 0, 0, 0, 1, 1, 1, 0, 1, 0, 0, 1]
+    L = heading.size
+    pose = np.zeros((L + 1, 3))
+    pose[:L] = np.column_stack([np.full(L, 2.0), np.full(L, -1.0), np.radians(heading)])
+    pose[L] = [9.0, 9.0, 0.0]  # the pose after the last iteration: not used
+    contact = pose[:L, :2] + np.column_stack([np.cos(np.radians(absolute)),
+                                              np.sin(np.radians(absolute))])
     contact[3] = np.nan  # no collision there
-    collision = np.array([1, 1, 1, 0, 1, 1, 1, 1], bool)
-    top = np.array([0.4, 0.6, 0.4, 0.4, 0.3, 0.45, 0.5, 0.49])
     memberships = np.column_stack([np.minimum(top, 1 - top), top])  # the largest is top
     got = frontal_between_prototypes(pose, collision, contact, memberships)
-    #          ahead, dominant, 45 deg, none, behind x2 (wrap), top = 0.5, -25 deg
-    assert got.tolist() == [True, False, False, False, True, True, False, True]
-    assert frontal_between_prototypes(pose, collision, contact, memberships,
-                                      cone_deg=20.0).tolist()[-2:] == [False, False]
-    assert frontal_between_prototypes(pose, collision, contact, memberships,
-                                      top=0.7)[1]
+    assert got.dtype == bool
+    assert got.tolist() == [bool(f) for f in frontal]
+    assert frontal_between_prototypes(pose, collision, contact, memberships, top=0.7)[1]
+    # a contact exactly on the cone's edge counts (45 deg is exact in floating point)
+    edge = pose[:1, :2] + [[1.0, 1.0]]
+    assert frontal_between_prototypes(pose[:1], collision[:1], edge, memberships[:1],
+                                      cone_deg=45.0).tolist() == [True]
