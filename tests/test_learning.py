@@ -203,3 +203,147 @@ def test_greedy_tie_break_first_or_centre():
     assert greedy_actions(even, "centre").tolist() == [1]
     with pytest.raises(ValueError, match="tie_break"):
         QLearningParams(tie_break="middle")
+
+
+def test_random_q_init_spreads_around_the_value_and_rules_start_uniform():
+    lr = FuzzyQLearner(400, 7, QLearningParams(q_init="random", q_init_value=10.0,
+                                               q_init_spread=2.0), np.random.default_rng(0), 5)
+    assert lr.q.shape == (400, 7)
+    assert 8.0 <= lr.q.min() < 8.1 and 11.9 < lr.q.max() <= 12.0
+    assert lr.q.mean() == pytest.approx(10.0, abs=0.05)
+    # thesis Alg. 3 step 5: the first rule base is drawn uniformly over every action
+    assert np.bincount(lr.rule_base, minlength=7).min() > 400 / 7 * 0.6
+    constant = FuzzyQLearner(3, 2, QLearningParams(q_init_value=-4.0), np.random.default_rng(0), 5)
+    assert constant.q.tolist() == [[-4.0, -4.0]] * 3
+
+
+@pytest.mark.parametrize("tie_break, action", [("first", 0), ("centre", 3)])
+def test_the_logged_greedy_rule_base_breaks_ties_as_configured(tie_break, action):
+    """Never-updated situations (all Q tied) get the tie-break's action in every record."""
+    lr = FuzzyQLearner(3, 7, QLearningParams(b=1, p=2, tie_break=tie_break),
+                       np.random.default_rng(0), 10)
+    none = np.zeros(3)
+    for t in range(2):
+        lr.update(none, 0.0, none, False, t)
+    data = lr.data(2)
+    assert data["snapshot_greedy"].tolist() == [[action] * 3] * 3
+    assert data["final_rule_base"].tolist() == [action] * 3
+    assert data["converged"] and data["convergence_iteration"] == 2
+
+
+def test_changes_come_every_b_iterations_and_stop_after_convergence():
+    lr = FuzzyQLearner(2, 3, QLearningParams(b=5, p=3), np.random.default_rng(0), 40)
+    lr.q[:] = [[5.0, 0.0, 0.0], [0.0, 0.0, 5.0]]
+    lr.greedy = lr.q.argmax(axis=1)
+    u = np.zeros(2)
+    changed = [t for t in range(25) if lr.update(u, 0.0, u, False, t)]
+    assert changed == [4, 9, 14]
+    assert lr.converged_at == 15
+    assert lr.data(25)["snapshot_iteration"].tolist() == [0, 5, 10, 15]
+
+
+def test_an_unconverged_learner_reports_the_greedy_not_the_explored_rule_base():
+    lr = FuzzyQLearner(2, 3, QLearningParams(b=100), np.random.default_rng(0), 10)
+    lr.q[:] = [[0.0, 5.0, 0.0], [0.0, 0.0, 5.0]]
+    lr.rule_base[:] = [0, 0]  # exploring
+    assert lr.final_rule_base().tolist() == [1, 2]
+    data = lr.data(0)
+    assert not data["converged"] and data["convergence_iteration"] == -1
+
+
+def test_the_rule_base_draws_use_the_annealed_temperature():
+    """After two changes the temperature is 0.01: every draw takes the best action (at the
+    initial temperature 1 each of the 6 others would be exp(-1) as likely)."""
+    lr = FuzzyQLearner(50, 7, QLearningParams(b=1, p=1000, temperature=1.0, temperature_decay=0.1,
+                                              temperature_min=0.01), np.random.default_rng(0), 10)
+    lr.q[:, 0] = 1.0
+    u = np.zeros(50)
+    for t in range(3):
+        lr.update(u, 0.0, u, False, t)
+    assert lr.rule_base.tolist() == [0] * 50
+
+
+def test_min_updates_of_one_waits_for_every_situation():
+    lr = FuzzyQLearner(2, 3, QLearningParams(b=1, p=2, min_updates=1, activation=0.5),
+                       np.random.default_rng(0), 20)
+    only_first = np.array([1.0, 0.0])
+    for t in range(6):
+        lr.update(only_first, 1.0, only_first, False, t)
+    assert lr.converged_at is None  # situation 1 never updated
+
+
+def test_logged_learner_arrays_have_the_log_layout():
+    """The arrays a log stores: names, dtypes and shapes are the log format."""
+    lr = FuzzyQLearner(4, 7, QLearningParams(b=2), np.random.default_rng(3), 50)
+    rng = np.random.default_rng(4)
+    for t in range(9):
+        u = rng.dirichlet(np.ones(4))
+        lr.record_rules(t)
+        lr.update(u, 1.0, rng.dirichlet(np.ones(4)), False, t)
+    data = lr.data(9)
+    assert set(data) == {"q", "q_snapshots", "snapshot_iteration", "snapshot_rule_base",
+                         "snapshot_greedy", "rule_base", "final_rule_base", "updates",
+                         "converged", "convergence_iteration"}
+    dtypes = {k: np.asarray(v).dtype for k, v in data.items()}
+    assert dtypes["snapshot_rule_base"] == dtypes["snapshot_greedy"] == np.int16
+    assert dtypes["final_rule_base"] == np.int16 and dtypes["rule_base"] == np.int8
+    assert dtypes["updates"] == dtypes["snapshot_iteration"] == np.int64
+    assert data["rule_base"].shape == (9, 4) and data["q_snapshots"].shape == (5, 4, 7)
+    assert data["snapshot_iteration"].tolist() == [0, 2, 4, 6, 8]
+    assert data["updates"].sum() > 0 and np.array_equal(data["q"], lr.q)
+
+
+def test_td_errors_are_tracked_only_for_the_rules_just_updated_and_after_convergence():
+    """An evolving interpreter reads ``td_abs``: this iteration's |TD error| of each
+    activated rule, 0 elsewhere; after convergence the errors the frozen rules would get."""
+    for activation in (0.3, 0.0):
+        lr = FuzzyQLearner(3, 2, QLearningParams(alpha=0.5, gamma=0.5, b=100,
+                                                 activation=activation),
+                           np.random.default_rng(0), 10)
+        lr.track_td = True
+        lr.q[:] = [[1.0, 2.0], [3.0, 4.0], [5.0, 6.0]]
+        lr.rule_base[:] = [0, 1, 0]
+        u0, u1 = np.array([0.8, 0.2, 0.0]), np.array([0.0, 0.0, 1.0])
+        lr.update(u0, 10.0, u1, False, 0)  # V(s') = 6
+        expect = [abs(0.8 * 10 + 0.5 * 0.8 * 6 - 1.0), abs(0.2 * 10 + 0.5 * 0.2 * 6 - 4.0), 5.0]
+        if activation:
+            expect[1:] = [0.0, 0.0]
+        np.testing.assert_allclose(lr.td_abs, expect)
+        lr.converged_at = 1
+        q = lr.q.copy()
+        assert lr.update(u0, 10.0, u1, False, 1) is False  # frozen: no reload
+        assert np.array_equal(lr.q, q)
+        expect = np.abs(u0 * 10 + 0.5 * u0 * 6 - q[[0, 1, 2], [0, 1, 0]])
+        if activation:
+            expect[1:] = 0.0
+        np.testing.assert_allclose(lr.td_abs, expect)
+
+
+def test_min_updates_counts_only_live_situations_of_an_evolving_interpreter():
+    """A pruned situation, or one created and not yet visited, does not block convergence;
+    a visited live one still needs its updates."""
+    from sitframe.situations import SituationEvent
+
+    def learner():
+        lr = FuzzyQLearner(4, 3, QLearningParams(b=1, p=2, min_updates=2, activation=0.5),
+                           np.random.default_rng(0), 20)
+        lr.q[:, 0] = 1.0
+        lr.greedy = lr.q.argmax(axis=1)
+        return lr
+
+    first_two = np.array([0.5, 0.5, 0.0, 0.0])
+    lr = learner()
+    lr.situations_changed(SituationEvent("create", 3, (), np.zeros(0)))
+    for t in range(4):
+        lr.update(first_two, 1.0, first_two, False, t)
+    assert lr.converged_at == 2  # rows 0, 1 updated twice; 2 and the new 3 never visited
+    lr = learner()
+    lr.situations_changed(SituationEvent("prune", 3, (), np.zeros(0), removed=(3,)))
+    lr.updates[2] = 1  # visited once: too few
+    for t in range(4):
+        lr.update(first_two, 1.0, first_two, False, t)
+    assert lr.converged_at is None
+    lr = learner()  # a fixed set of situations: every one must be updated
+    for t in range(4):
+        lr.update(first_two, 1.0, first_two, False, t)
+    assert lr.converged_at is None
