@@ -49,6 +49,34 @@ def test_params_validate_with_key():
         QLearningParams(update="standrd")
 
 
+@pytest.mark.parametrize("key, bad, good", [
+    ("alpha", [0.0, 1.001, "x"], [1.0, 1e-9]),
+    ("gamma", [1.0, -0.001], [0.0, 0.999]),
+    ("b", [0, 2.5], [1, 2.0]),
+    ("p", [0, 1.5], [1]),
+    ("temperature", [0.0, -1.0], [1e-9]),
+    ("temperature_mode", ["rel"], ["absolute"]),
+    ("temperature_decay", [0.0, 1.001], [1.0, 0.01]),
+    ("temperature_min", [-0.1], [0.0]),
+    ("q_init", ["zero"], ["random"]),
+    ("q_init_value", [float("nan"), "x"], [-5.0]),
+    ("q_init_spread", [-0.1], [0.0]),
+    ("update", ["q"], ["standard"]),
+    ("activation", [-0.1, 1.1], [0.0, 1.0]),
+    ("terminal_on_collision", [1, "yes"], [True]),
+    ("min_updates", [-1, 0.5], [0]),
+    ("tie_break", ["middle"], ["centre"]),
+])
+def test_every_learning_parameter_is_checked_at_its_bounds(key, bad, good):
+    """Table A.1's ranges: a value outside is refused naming the key; the bound itself (or
+    the nearest value inside an open bound) is accepted."""
+    for value in bad:
+        with pytest.raises(InputError, match=rf"^{key}: expected"):
+            QLearningParams(**{key: value})
+    for value in good:
+        assert getattr(QLearningParams(**{key: value}), key) == value
+
+
 def test_softmax_prefers_high_q_and_is_scale_free():
     rng = np.random.default_rng(0)
     q = np.array([[10.0, 0.0, 0.0]] * 2000)
