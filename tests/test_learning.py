@@ -375,3 +375,32 @@ def test_min_updates_counts_only_live_situations_of_an_evolving_interpreter():
     for t in range(4):
         lr.update(first_two, 1.0, first_two, False, t)
     assert lr.converged_at is None
+
+
+def test_softmax_draws_follow_the_boltzmann_probabilities():
+    """Frequencies of 6000 draws per row against ``exp(logits) / sum``, rows of different
+    scales and spreads in one call (each row uses its own max and min)."""
+    from sitframe.learning import greedy_actions
+
+    def freq(q_rows, params, temperature=None):
+        q = np.repeat(np.asarray(q_rows, float), 6000, axis=0)
+        picks = softmax_choice(q, params, np.random.default_rng(0), temperature)
+        return np.array([np.bincount(row, minlength=3) / 6000
+                         for row in picks.reshape(len(q_rows), 6000)])
+
+    e = np.exp([-2.0, -1.0, 0.0])
+    p = e / e.sum()
+    rel = QLearningParams(temperature=0.5)
+    got = freq([[0, 1, 2], [10, 10, 10], [-5, 5, 0], [0, 0.25, 0.5]], rel)
+    np.testing.assert_allclose(got, [p, [1 / 3] * 3, p[[0, 2, 1]], p], atol=0.02)
+    absolute = QLearningParams(temperature=100.0, temperature_mode="absolute")
+    got = freq([[0, 2, 4], [-4, 0, 0], [7, 7, 7]], absolute, temperature=2.0)
+    e2 = np.exp([-2.0, 0.0, 0.0])
+    np.testing.assert_allclose(got, [p, e2 / e2.sum(), [1 / 3] * 3], atol=0.02)
+    assert greedy_actions(np.array([[1.0, 3.0, 3.0]])).tolist() == [1]  # default: first
+
+
+def test_no_rule_strength_gives_the_mean_singleton():
+    assert centre_of_gravity(np.zeros(3), np.array([90.0, 0.0, -30.0])) == 20.0
+    fcs = SituationFCS(np.array([90.0, 0.0, -30.0]), np.array([0, 1]))
+    assert fcs.output(np.zeros(2)) == 20.0
