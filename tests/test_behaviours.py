@@ -265,3 +265,141 @@ def test_priority_bad_parameters_name_their_key(kwargs, key):
     with pytest.raises(InputError) as info:
         PriorityArbiter(**kwargs)
     assert info.value.key == key
+
+
+# ------------------------------------------------------- arbiter contracts, messages, bounds
+
+def _refused(make, message):
+    """``make()`` raises an InputError whose one line is exactly ``message``."""
+    with pytest.raises(InputError) as err:
+        make()
+    assert str(err.value) == message
+
+
+def test_trapezoid_shoulders_and_set_checks():
+    assert trapezoid(-1.0, (0.0, 0.0, 0.2, 0.6)) == 1.0  # left shoulder
+    assert trapezoid(9.0, (0.2, 0.6, 3.0, 3.0)) == 1.0  # right shoulder
+    assert CDBArbiter(sets={"t": [0.0, 0.3, 0.3, 0.6]}).sets["t"] == (0.0, 0.3, 0.3, 0.6)
+    for bad in ([0.0, 0.5, 0.2, 0.6], [0.0, 0.6, 0.5, 0.7]):
+        _refused(lambda b=bad: CDBArbiter(sets={"t": b}),
+                 f"sets.t: expected a trapezoid [a, b, c, d] with a <= b <= c <= d [m], "
+                 f"got {bad}")
+    _refused(lambda: CDBArbiter(sets={"t": [0.0, 0.1, 0.2]}),
+             "sets.t: expected a list of 4 numbers, got 3")
+
+
+@pytest.mark.parametrize("kw, message", [
+    ({"sets": {}}, "sets: expected a table of named trapezoids {name = [a, b, c, d]}"),
+    ({"sets": "close"}, "sets: expected a table of named trapezoids {name = [a, b, c, d]}"),
+    ({"rules": {"near": "avoid"}}, "rules.near: unknown context set 'near'; sets are: close, far"),
+    ({"rules": {"close": 3}}, "rules.close: expected a non-empty string, got 3"),
+    ({"rules": [{"behaviour": "a"}]},
+     'rules[0]: expected a table {behaviour = "label", set = NAME or [a, b, c, d]}'),
+    ({"rules": ["a"]},
+     'rules[0]: expected a table {behaviour = "label", set = NAME or [a, b, c, d]}'),
+    ({"rules": [{"behaviour": "a", "set": "near"}]},
+     "rules[0].set: unknown context set 'near'; sets are: close, far"),
+    ({"rules": [{"behaviour": "a", "set": [0, 1]}]},
+     "rules[0].set: expected a list of 4 numbers, got 2"),
+    ({"rules": [{"behaviour": "", "set": "far"}]},
+     "rules[0].behaviour: expected a non-empty string, got ''"),
+    ({"rules": 5}, 'rules: expected a table {set = "behaviour"} or a list of {behaviour, set} '
+                   'tables'),
+    ({"rules": "close"}, 'rules: expected a table {set = "behaviour"} or a list of '
+                         '{behaviour, set} tables'),
+    ({"rules": []}, "rules: expected at least one rule"),
+])
+def test_cdb_configuration_errors_name_the_key(kw, message):
+    _refused(lambda: CDBArbiter(**kw), message)
+
+
+def test_cdb_rules_are_checked_against_the_behaviours_at_bind():
+    from types import SimpleNamespace
+
+    _refused(lambda: CDBArbiter().bind(SimpleNamespace(labels=("avoid",))),
+             '2 context sets but only 1 behaviours (avoid); give rules = {set = "behaviour"}'
+             .join(["rules: ", ""]))
+    _refused(lambda: CDBArbiter(rules={"close": "dodge"}).bind(
+        SimpleNamespace(labels=("avoid", "goal"))),
+        "rules.close: the 'cdb' arbiter names behaviour 'dodge', but the run's behaviours "
+        "are: avoid, goal")
+    CDBArbiter(rules={"close": "goal"}).bind(SimpleNamespace(labels=("avoid", "goal")))
+
+
+def test_cdb_weights_follow_the_rules_not_the_order_of_the_sets():
+    """Rules name the behaviour: close drives ``goal`` here although it is second; in a gap
+    between sets the set whose core [b, c] is nearest fires alone."""
+    cdb = CDBArbiter(sets={"near": [0.0, 0.0, 0.2, 0.3], "away": [0.5, 0.6, 1.0, 1.0]},
+                     rules={"near": "goal", "away": "avoid"})
+    assert cdb.weights(0.1, ["avoid", "goal"]).tolist() == [0.0, 1.0]
+    assert cdb.weights(0.8, ["avoid", "goal"]).tolist() == [1.0, 0.0]
+    # 0.45 m: 0.25 above near's core, 0.15 below away's core (not 0.15 past near's foot)
+    assert cdb.weights(0.45, ["avoid", "goal"]).tolist() == [1.0, 0.0]
+    inline = CDBArbiter(rules=[{"behaviour": "goal", "set": [0.0, 0.0, 1.0, 2.0]}])
+    assert inline.weights(1.5, ["avoid", "goal"]).tolist() == [0.0, 1.0]
+
+
+@pytest.mark.parametrize("kw, message", [
+    ({"rules": "avoid"}, 'rules: expected a non-empty list of {behaviour = "label", '
+                         'nearest_below = x} tables'),
+    ({"rules": []}, 'rules: expected a non-empty list of {behaviour = "label", '
+                    'nearest_below = x} tables'),
+    ({"rules": [{"nearest_below": 0.3}]},
+     'rules[0]: expected a table {behaviour = "label"[, nearest_below = x | nearest_above = x]}'),
+    ({"rules": [{"behaviour": "a", "nearest_below": 0.3, "nearest_above": 1.0}]},
+     "rules[0]: expected at most one condition of nearest_below, nearest_above, "
+     "activation_above, got nearest_below, nearest_above"),
+    ({"rules": [{"behaviour": "a", "closer": 0.3}]},
+     "rules[0]: expected at most one condition of nearest_below, nearest_above, "
+     "activation_above, got closer"),
+    ({"rules": [{"behaviour": 1}]}, "rules[0].behaviour: expected a non-empty string, got 1"),
+    ({"rules": [{"behaviour": "a", "activation_above": 1.5}]},
+     "rules[0].activation_above: expected a number in [0.0, 1.0], got 1.5"),
+])
+def test_priority_configuration_errors_name_the_key(kw, message):
+    _refused(lambda: PriorityArbiter(**kw), message)
+
+
+def test_priority_conditions_at_their_bounds():
+    """Below/above are strict, an activation at the threshold holds; with no condition
+    holding the *last* rule wins; the default rules use the distance when a behaviour gives
+    no activation."""
+    from types import SimpleNamespace
+
+    labels = ["avoid", "wall", "goal"]
+    pr = PriorityArbiter(rules=[{"behaviour": "avoid", "nearest_below": 0.3},
+                                {"behaviour": "wall", "nearest_above": 2.0},
+                                {"behaviour": "goal", "activation_above": 0.6}])
+    assert pr.winner(0.3, labels, [0.9, 0.9, 0.6]) == 2  # 0.3 not below 0.3; 0.6 holds
+    assert pr.winner(0.29, labels, [None, None, None]) == 0
+    assert pr.winner(2.0, labels, [None, None, 0.59]) == 2  # none holds: the last rule
+    assert pr.winner(2.01, labels, [None, None, 0.9]) == 1
+    assert pr.winner(1.0, labels) == 2  # no activations given: the last rule
+    order = PriorityArbiter(rules=[{"behaviour": "goal", "activation_above": 0.6},
+                                   {"behaviour": "avoid", "nearest_below": 0.3},
+                                   {"behaviour": "wall", "nearest_below": 0.2}])
+    assert order.winner(1.0, labels, [0.9, 0.9, None]) == 1  # the last rule's: wall
+    default = PriorityArbiter(threshold=0.5, activation=0.7)
+    assert default.winner(0.5, ["avoid", "goal"]) == 1  # not below 0.5
+    assert default.winner(0.49, ["avoid", "goal"]) == 0
+    assert default.winner(3.0, ["avoid", "goal"], [0.7, None]) == 0  # activation says so
+    assert default.winner(0.1, ["avoid", "goal"], [0.69, None]) == 1
+    default.bind(SimpleNamespace(labels=("avoid", "goal")))
+    _refused(lambda: pr.bind(SimpleNamespace(labels=("avoid", "goal"))),
+             "rules[1].behaviour: the 'priority' arbiter names behaviour 'wall', but the run's "
+             "behaviours are: avoid, goal")
+    far = ctx()  # nothing within 3 m: the distance alone would pick goal
+    props = {"avoid": Proposal(30.0, None, activation=0.9), "goal": Proposal(-10.0, 0.2)}
+    fused, w = default.combine(far, props)
+    assert fused is props["avoid"] and w.tolist() == [1.0, 0.0]
+
+
+def test_single_arbiter_passes_one_proposal_and_refuses_several():
+    from sitframe.plugins.arbiters import SingleArbiter
+
+    p = Proposal(12.0, 0.2)
+    fused, w = SingleArbiter().combine(ctx(), {"avoid": p})
+    assert fused is p and w.tolist() == [1.0]
+    with pytest.raises(ValueError, match=r"^the 'single' arbiter needs exactly one behaviour, "
+                                         r"got 2 \(avoid, goal\); use 'cdb' or 'priority'$"):
+        SingleArbiter().combine(ctx(), {"avoid": p, "goal": p})
