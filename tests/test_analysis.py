@@ -239,3 +239,16 @@ def test_replay_gif_and_errors(tiny_log, tmp_path, capsys):
     if shutil.which("ffmpeg") is None:
         assert main(["replay", str(tiny_log), "-o", str(tmp_path / "t.mp4")]) == 2
         assert "ffmpeg" in capsys.readouterr().err
+
+
+def test_replay_refuses_a_window_outside_the_trial(tiny_log, tmp_path, capsys):
+    gif = str(tmp_path / "w.gif")
+    L = A.as_log(tiny_log).trial(0).arrays["collision"].size
+    assert main(["replay", str(tiny_log), "--from", str(L), "-o", gif]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"sitframe: error: --from: --from must be in [0, {L - 1}] (trial 0 has {L} "
+                   f"iterations), got {L}\n")
+    assert main(["replay", str(tiny_log), "--from", "5", "--to", "5", "-o", gif]) == 2
+    assert capsys.readouterr().err == \
+        "sitframe: error: --to: --to must be greater than --from (5), got 5\n"
+    assert not (tmp_path / "w.gif").exists()
