@@ -251,4 +251,6 @@ def test_replay_refuses_a_window_outside_the_trial(tiny_log, tmp_path, capsys):
     assert main(["replay", str(tiny_log), "--from", "5", "--to", "5", "-o", gif]) == 2
     assert capsys.readouterr().err == \
         "sitframe: error: --to: --to must be greater than --from (5), got 5\n"
+    assert main(["replay", str(tiny_log), "--fps", "0", "-o", gif]) == 2
+    assert capsys.readouterr().err == "sitframe: error: --fps: must be at least 1, got 0\n"
     assert not (tmp_path / "w.gif").exists()

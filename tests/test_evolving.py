@@ -165,6 +165,21 @@ def test_online_run_logs_history_and_evaluates_own_situations(tmp_path, capsys) 
                   "--iterations", "100", "--json")
     assert ev["iterations"] == 100
     assert ev["collisions"] == tl.summary["eval/novel-1/collisions"]
+    # the report of an online run has its evolving-situations section
+    from sitframe.analysis import analyse
+    from sitframe.cli import main
+
+    rep = analyse(out, tmp_path / "report", dpi=40)
+    evolving = {name for sec, name, _cap in rep.files if sec == "Evolving situations"}
+    assert {"situation_counts.png", "situation_events.png",
+            "final_prototypes_trial0.png"} <= evolving
+    assert all((tmp_path / "report" / name).stat().st_size > 0 for name in evolving)
+    gif = tmp_path / "online.gif"  # its replay counts the situations alive at each frame
+    assert main(["replay", str(out), "--from", "150", "--to", "153", "-o", str(gif)]) == 0
+    from PIL import Image
+
+    with Image.open(gif) as im:
+        assert im.n_frames == 3
 
 
 def test_auto_c_picks_the_crispest_partition_and_loads_any_c() -> None:
