@@ -60,7 +60,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from sitframe import RunContext, World, cast_rays_many, hookimpl, rim_ranges
+from sitframe import RunContext, World, hookimpl, rim_ranges, rim_ranges_many
 from sitframe import params as P
 
 __all__ = ["SonarRing", "sitframe_sensors"]
@@ -188,13 +188,14 @@ class SonarRing:
             (N, d) ranges [m] from the rim, in [0, max_range].
         """
         poses = np.asarray(poses, dtype=np.float64)
-        n = poses.shape[0]
-        reach = self.max_range + self.robot_radius
-        ang = self._ray_rel[None, :] + poses[:, 2:3]  # (N, rays), as read() adds them
-        dist = cast_rays_many(world.segment_set, poses[:, :2], ang, reach)
-        dist = dist.reshape(n, self._n, -1).min(axis=2)
-        readings = np.where(dist >= reach, self.max_range, dist - self.robot_radius)
-        for i in range(n) if self.noise_std > 0.0 or self.dropout > 0.0 else ():
+        exact = self.noise_std == 0.0 and self.dropout == 0.0  # (as read())
+        readings = rim_ranges_many(world.segment_set, poses[:, :2],
+                                   self._ray_rel[None, :] + poses[:, 2:3],  # as read() adds
+                                   self.max_range, self.robot_radius, self.rays_per_beam,
+                                   clip=exact)
+        if exact:
+            return readings
+        for i in range(poses.shape[0]):
             if self.noise_std > 0.0:
                 readings[i] = readings[i] + rngs[i].normal(0.0, self.noise_std, self._n)
             if self.dropout > 0.0:

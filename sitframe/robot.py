@@ -367,6 +367,17 @@ def step_robot(
             hi = float(ts[j])
             j -= 1  # the last free sample: the disc touches there
             t_c, cx, cy, cth = float(ts[j]), float(fx[j]), float(fy[j]), float(fth[j])
+    return _recover(pose_before, plan, near, k, t_c, cx, cy, cth, params, rng)
+
+
+def _recover(pose_before: np.ndarray, plan: tuple[float, ...], near: geo.SegmentSet, k: int,
+             t_c: float, cx: float, cy: float, cth: float, params: RobotParams,
+             rng: np.random.Generator) -> StepOutcome:
+    """Step 4 of :func:`step_robot`: the robot of ``plan`` touched one of the ``near``
+    segments at time ``t_c`` [s], pose ``(cx, cy, cth)`` (substep ``k``; 0 = it started
+    inside); find the contact point and recover."""
+    th0, v = plan[2], plan[3]
+    r2 = params.radius * params.radius
     contact_pose = np.array([cx, cy, _wrap(cth)])
     contact_xy = _nearest_point(cx, cy, near)
     heading_change = math.degrees(cth - th0)

@@ -78,9 +78,16 @@ def test_goal_reached_terminates() -> None:
     assert obs[-1] == pytest.approx(0.0, abs=1e-3)  # bearing: dead ahead
 
 
+@pytest.mark.parametrize("compiled", [True, False])
 @pytest.mark.parametrize(("config", "continuous"), [("obstacle-avoidance", False),
                                                     ("goal-finding", True)])
-def test_vector_env_equals_single_envs(config: str, continuous: bool) -> None:
+def test_vector_env_equals_single_envs(config: str, continuous: bool, compiled: bool,
+                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    from sitframe import kernels
+
+    if compiled and kernels.load() is None:
+        pytest.skip("compiled kernels switched off or numba missing")
+    monkeypatch.setattr(kernels, "_LOADED", [kernels.load() if compiled else None])
     n, seed = 3, 11
     venv = sg.SitframeVectorEnv(config, num_envs=n, max_steps=15, continuous=continuous)
     singles = [sg.SitframeEnv(task=venv.task, continuous=continuous) for _ in range(n)]

@@ -1,0 +1,186 @@
+"""N robots in one world stepped together: :func:`step_robots`.
+
+Row ``i`` of :func:`step_robots` is exactly ``step_robot(world, poses[i],
+commands[i], params, rngs[i])``, bit for bit (``tests/test_kernels.py``). The
+work that costs is done for all N robots at once by compiled kernels
+(:mod:`sitframe.kernels_numba`), phase by phase of ``step_robot``:
+
+1. which walls each robot's swept disc can reach, and the arguments of its
+   substeps' sines and cosines (:func:`~sitframe.kernels_numba.sweep_begin`);
+2. the substep poses of the robots near a wall and their first contact
+   (:func:`~sitframe.kernels_numba.sweep_end`);
+3. the two rounds that refine each contact
+   (:func:`~sitframe.kernels_numba.refine`).
+
+Between the phases numpy takes the sines and cosines of all robots in one call
+each (the kernels leave trigonometry to numpy, see :mod:`sitframe.kernels_numba`).
+What is left per robot is Python, as in ``step_robot``: the closed-form pose of
+a robot in open space (with :mod:`math`), the
+:class:`~sitframe.robot.StepOutcome`, and for a robot that touched a wall
+(about one step in eight under random actions) the contact point and the
+recovery (``step_robot``'s own code, which may draw from that robot's ``rng``).
+
+Without the compiled kernels (numba missing, ``SITFRAME_NUMBA=0``, or a
+process's first :data:`sitframe.kernels.WARMUP_CALLS` calls) each robot goes
+through :func:`~sitframe.robot.step_robot`: the same numbers either way.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+
+from sitframe.geometry import SegmentSet
+from sitframe.kernels import kernels
+from sitframe.robot import (
+    _NAN2,
+    _REFINE,
+    Command,
+    RobotParams,
+    StepOutcome,
+    _near_set,
+    _plan,
+    _pose_at,
+    _recover,
+    _times,
+    _wrap,
+    step_robot,
+)
+from sitframe.world import World
+
+__all__ = ["step_robots"]
+
+_ORIGIN = np.zeros(3)
+#: ``v, omega, t_turn`` of each command object seen (they do not depend on the pose; the
+#: vector env reuses one object per discrete action), per robot parameters object; an entry
+#: holds its object, so the id it is filed under cannot be reused while it is there. At most
+#: :data:`_MAX_MOTIONS` commands each (continuous actions are all new).
+_MOTIONS: dict[int, tuple[RobotParams, dict[int, tuple[Any, ...]]]] = {}
+_MAX_MOTIONS = 4096
+
+
+def step_robots(world: World, poses: Sequence[np.ndarray], commands: Sequence[Command],
+                params: RobotParams, rngs: Sequence[np.random.Generator]) -> list[StepOutcome]:
+    """Execute one command per robot, as :func:`sitframe.robot.step_robot` executes each.
+
+    Parameters
+    ----------
+    world
+        The world all robots are in (robots do not collide with each other).
+    poses
+        N start poses, each (3,) x [m], y [m], theta [rad].
+    commands
+        N commands.
+    params
+        Robot parameters, shared.
+    rngs
+        N generators; robot ``i``'s is used only to break the tie of a dead-ahead contact.
+
+    Returns
+    -------
+    list of StepOutcome
+        N outcomes; outcome ``i`` equals ``step_robot(world, poses[i], commands[i], params,
+        rngs[i])``.
+    """
+    n = len(poses)
+    if not (len(commands) == n == len(rngs)):
+        raise ValueError(f"step_robots: expected as many commands and rngs as poses ({n}), "
+                         f"got {len(commands)} and {len(rngs)}")
+    kern = kernels()
+    segs = world.segment_set
+    if kern is None or segs.n == 0 or n == 0:
+        return [step_robot(world, p, c, params, g)
+                for p, c, g in zip(poses, commands, rngs, strict=True)]
+    plans = _plans(poses, commands, params)
+    T = params.control_period_s
+    times = _times(T, params.substep_s)
+    # step 1 and 2 for all: the segments within reach, the substeps, the first contact
+    idx = np.empty((n, segs.n), dtype=np.intp)
+    count, slot, first, hits = np.empty((4, n), dtype=np.intp)
+    args = np.empty((2, n, times.size))
+    b = kern.sweep_begin(plans, times, T, np.array([params.radius, params.recovery_backoff_m,
+                                                    1e-9]), segs.packed, idx, count, slot,
+                         args[0], args[1])
+    rows = plans[:, :6].tolist()
+    for i in np.flatnonzero(count).tolist():  # math's cos and sin, as step_robot's _poses_at
+        th_end = rows[i][2] + rows[i][4] * rows[i][5]
+        plans[i, 6], plans[i, 7] = math.cos(th_end), math.sin(th_end)
+    xs = np.empty((b, 3, times.size))
+    state, active = np.empty((n, 5)), np.empty(n, dtype=np.bool_)
+    ref = np.empty((3, n, _REFINE + 1))  # refinement samples and their sine/cosine arguments
+    r2 = params.radius * params.radius
+    sa, aa = args[0, :b], args[1, :b]
+    h = kern.sweep_end(times, plans, slot, sa, np.sin(sa), np.cos(aa), np.sin(aa), segs.packed,
+                       idx, count, r2, xs, first, hits, state, active, *ref)
+    if h:  # step 3 for those that touched: two refinement rounds
+        _refine(kern, plans, hits, h, ref, segs, idx, count, r2, state, active)
+    outs = _free_outcomes(poses, rows, count.tolist(), slot.tolist(), first.tolist(), xs, T)
+    for q, i in enumerate(hits[:h].tolist()):  # step 4: contact point and recovery
+        t_c, cx, cy, cth = state[q, :4].tolist()
+        outs[i] = _recover(_array(poses[i]), tuple(rows[i]), _near_set(segs, idx[i, :count[i]]),
+                           int(first[i]), t_c, cx, cy, cth, params, rngs[i])
+    return outs  # type: ignore[return-value]
+
+
+def _array(pose: np.ndarray) -> np.ndarray:
+    """``step_robot``'s ``pose_before``: the pose itself when it is an array."""
+    return pose if isinstance(pose, np.ndarray) else np.asarray(pose, dtype=float)
+
+
+def _plans(poses: Sequence[np.ndarray], commands: Sequence[Command],
+           params: RobotParams) -> np.ndarray:
+    """(N, 8) rows ``x0, y0, th0, v, omega, t_turn`` of ``step_robot``'s ``_plan`` (and room
+    for the cosine and sine of the final heading)."""
+    plans = np.empty((len(poses), 8))
+    plans[:, :3] = np.array(poses)
+    if not math.isfinite(float(plans[:, :3].sum())) and not np.isfinite(plans[:, :3]).all():
+        bad = next(p for p in poses if not np.isfinite(np.asarray(p, dtype=float)).all())
+        raise ValueError(f"pose must be 3 finite numbers (x, y, theta_rad), got {bad!r}")
+    seen = _MOTIONS.get(id(params))
+    if seen is None or seen[0] is not params or len(seen[1]) > _MAX_MOTIONS:
+        if len(_MOTIONS) > 64:
+            _MOTIONS.clear()
+        seen = _MOTIONS[id(params)] = (params, {})
+    motions = []
+    for c in commands:  # (keyed by the command's id, which the entry keeps alive)
+        m = seen[1].get(id(c))
+        if m is None or m[0] is not c:
+            m = seen[1][id(c)] = (c, *_plan(_ORIGIN, c, params)[3:])
+        motions.append(m[1:])
+    plans[:, 3:6] = motions
+    return plans
+
+
+def _refine(kern: ModuleType, plans: np.ndarray, hits: np.ndarray, h: int, ref: np.ndarray,
+            segs: SegmentSet, idx: np.ndarray, count: np.ndarray, r2: float, state: np.ndarray,
+            active: np.ndarray) -> None:
+    """``step_robot``'s two refinement rounds for the ``h`` robots ``hits`` that touched."""
+    fposes = np.empty((h, 3, _REFINE + 1))
+    ts, sa, aa = ref[0], ref[1], ref[2]
+    for more in (True, False):
+        s0, c1, s1 = np.sin(sa[:h]), np.cos(aa[:h]), np.sin(aa[:h])
+        kern.refine(plans, hits, h, ts, sa, aa, s0, c1, s1, segs.packed, idx, count, r2, state,
+                    active, fposes, more)
+
+
+def _free_outcomes(poses: Sequence[np.ndarray], rows: list[list[float]], count: list[int],
+                   slot: list[int], first: list[int], xs: np.ndarray,
+                   T: float) -> list[StepOutcome | None]:
+    """The outcomes of the robots that touched nothing (None for the others), as
+    ``step_robot`` writes them: its closed form in open space, the last substep else."""
+    outs: list[StepOutcome | None] = [None] * len(rows)
+    for i, row in enumerate(rows):
+        if first[i] >= 0:
+            continue
+        if count[i] == 0:  # open space: step_robot's pure-Python closed form
+            x, y, th = _pose_at(T, *row)
+        else:
+            x, y, th = xs[slot[i], :, -1].tolist()
+        final = np.array([x, y, _wrap(th)])
+        outs[i] = StepOutcome(_array(poses[i]), final, False, _NAN2, final, row[3] * T,
+                              math.degrees(th - row[2]))
+    return outs
