@@ -37,16 +37,17 @@ import numpy as np
 from sitframe.geometry import SegmentSet
 from sitframe.kernels import kernels
 from sitframe.robot import (
+    _BACKOFF_SAMPLES,
     _NAN2,
     _REFINE,
     Command,
     RobotParams,
     StepOutcome,
-    _near_set,
+    _normal,
     _plan,
     _pose_at,
-    _recover,
     _times,
+    _turn_away,
     _wrap,
     step_robot,
 )
@@ -116,13 +117,10 @@ def step_robots(world: World, poses: Sequence[np.ndarray], commands: Sequence[Co
     sa, aa = args[0, :b], args[1, :b]
     h = kern.sweep_end(times, plans, slot, sa, np.sin(sa), np.cos(aa), np.sin(aa), segs.packed,
                        idx, count, r2, xs, first, hits, state, active, *ref)
-    if h:  # step 3 for those that touched: two refinement rounds
-        _refine(kern, plans, hits, h, ref, segs, idx, count, r2, state, active)
     outs = _free_outcomes(poses, rows, count.tolist(), slot.tolist(), first.tolist(), xs, T)
-    for q, i in enumerate(hits[:h].tolist()):  # step 4: contact point and recovery
-        t_c, cx, cy, cth = state[q, :4].tolist()
-        outs[i] = _recover(_array(poses[i]), tuple(rows[i]), _near_set(segs, idx[i, :count[i]]),
-                           int(first[i]), t_c, cx, cy, cth, params, rngs[i])
+    if h:  # steps 3 and 4 for those that touched a wall
+        _refine(kern, plans, hits, h, ref, segs, idx, count, r2, state, active)
+        _recover(kern, outs, poses, rows, hits, h, state, first, segs, idx, count, params, rngs)
     return outs  # type: ignore[return-value]
 
 
@@ -165,6 +163,31 @@ def _refine(kern: ModuleType, plans: np.ndarray, hits: np.ndarray, h: int, ref: 
         s0, c1, s1 = np.sin(sa[:h]), np.cos(aa[:h]), np.sin(aa[:h])
         kern.refine(plans, hits, h, ts, sa, aa, s0, c1, s1, segs.packed, idx, count, r2, state,
                     active, fposes, more)
+
+
+def _recover(kern: ModuleType, outs: list[StepOutcome | None], poses: Sequence[np.ndarray],
+             rows: list[list[float]], hits: np.ndarray, h: int, state: np.ndarray,
+             first: np.ndarray, segs: SegmentSet, idx: np.ndarray, count: np.ndarray,
+             params: RobotParams, rngs: Sequence[np.random.Generator]) -> None:
+    """``step_robot``'s contact point and recovery for the ``h`` robots ``hits`` that touched,
+    into ``outs``: the points and the back-offs in one compiled call each, the contact normal
+    and the turn (:mod:`math`, and the robot's ``rng`` for a dead-ahead tie) per robot."""
+    contact = np.empty((h, 2))
+    kern.contact_points(hits, h, state, segs.packed, idx, count, contact)
+    st = state[:h, :4].tolist()  # t_c, cx, cy, cth
+    backed = [(0.0, s[1], s[2]) for s in st]
+    if params.recovery != "none" and params.recovery_backoff_m > 0.0:
+        normals = np.array([_normal(s[1], s[2], s[3], c)
+                            for s, c in zip(st, contact.tolist(), strict=True)])
+        out = np.empty((h, 3))
+        kern.backoffs(hits, h, state, normals, params.recovery_backoff_m, segs.packed, idx,
+                      count, params.radius * params.radius, first, np.empty(_BACKOFF_SAMPLES),
+                      out)
+        backed = out.tolist()
+    for q, i in enumerate(hits[:h].tolist()):
+        t_c, cx, cy, cth = st[q]
+        outs[i] = _turn_away(_array(poses[i]), rows[i], t_c, (cx, cy, cth), contact[q],
+                             backed[q], params, rngs[i])
 
 
 def _free_outcomes(poses: Sequence[np.ndarray], rows: list[list[float]], count: list[int],

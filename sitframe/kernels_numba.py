@@ -32,9 +32,10 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["arc_angles", "arc_poses", "backoff", "cast", "cast_each", "fcm_ratios",
-           "first_contact", "label_strengths", "linspace", "near_segments", "nearest_point",
-           "normalize", "ranges", "ranges_many", "refine", "sweep_begin", "sweep_end"]
+__all__ = ["arc_angles", "arc_poses", "backoff", "backoffs", "cast", "cast_each",
+           "contact_points", "fcm_ratios", "first_contact", "label_strengths", "linspace",
+           "near_segments", "nearest_point", "normalize", "ranges", "ranges_many", "refine",
+           "sweep_begin", "sweep_end"]
 
 _EPS = 1e-12  # the hit tolerance of sitframe.geometry._raycast
 _INV_PI = 1.0 / math.pi
@@ -385,6 +386,46 @@ def backoff(cx: float, cy: float, nx: float, ny: float, length: float, seg: np.n
     return m, x, y
 
 
+@njit(**_JIT)
+def _gather(seg: np.ndarray, idx: np.ndarray, count: int) -> np.ndarray:  # pragma: no cover
+    """The packed segments ``idx[:count]`` of ``seg``, (5, count) (``seg[:, idx[:count]]``)."""
+    sub = np.empty((5, count))
+    for jj in range(count):
+        for r in range(5):
+            sub[r, jj] = seg[r, idx[jj]]
+    return sub
+
+
+@njit(**_JIT)
+def contact_points(hits: np.ndarray, h: int, state: np.ndarray, seg: np.ndarray,
+                   idx: np.ndarray, count: np.ndarray,
+                   out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """:func:`nearest_point` of each contact pose ``state[q, 1:3]`` of the robots ``hits[:h]``
+    (:func:`refine`) on its near segments, into ``out`` (h, 2)."""
+    for q in range(h):
+        i = hits[q]
+        out[q, 0], out[q, 1] = nearest_point(state[q, 1], state[q, 2],
+                                             _gather(seg, idx[i], count[i]))
+
+
+@njit(**_JIT)
+def backoffs(hits: np.ndarray, h: int, state: np.ndarray, normals: np.ndarray, length: float,
+             seg: np.ndarray, idx: np.ndarray, count: np.ndarray, r2: float, first: np.ndarray,
+             s: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """:func:`backoff` of the robots ``hits[:h]`` from their contact poses along ``normals``
+    (h, 2) into ``out`` (h, 3): distance backed off, x, y (``robot._backoff``'s result; a
+    robot that started inside, ``first[i] == 0``, may back off from inside)."""
+    for q in range(h):
+        i = hits[q]
+        cx, cy = state[q, 1], state[q, 2]
+        m, x, y = backoff(cx, cy, normals[q, 0], normals[q, 1], length,
+                          _gather(seg, idx[i], count[i]), r2, first[i] == 0, s)
+        if m > 0:
+            out[q, 0], out[q, 1], out[q, 2] = s[m], x, y
+        else:
+            out[q, 0], out[q, 1], out[q, 2] = 0.0, cx, cy
+
+
 #: Longest array :func:`_pairwise_sum` sums (numpy's block; longer ones it splits
 #: recursively, which the callers leave to numpy).
 PAIRWISE_MAX = 128
@@ -480,6 +521,8 @@ def _warm() -> None:
               ints[2], ints[3], state, act, two, two, two)
     refine(np.ones((2, 8)), ints[3], 0, two, two, two, two, two, two, seg, idx2, ints[0], 0.01,
            state, act, p3, True)
+    contact_points(ints[3], 0, state, seg, idx2, ints[0], two)
+    backoffs(ints[3], 0, state, two, 0.05, seg, idx2, ints[0], 0.01, ints[2], out, p3[0])
     near_segments(0.0, 0.0, seg, 1.0, idx)
     first_contact(one, one, seg, 0.01)
     nearest_point(0.0, 0.0, seg)
