@@ -118,14 +118,30 @@ def ranges(x: float, y: float, dx: np.ndarray, dy: np.ndarray, seg: np.ndarray, 
         out[g] = v
 
 
+#: :func:`ranges_many` leaves out the segments farther than this many times the rays' reach.
+CULL = 1.01
+
+
 @njit(**_JIT)
 def ranges_many(xy: np.ndarray, dx: np.ndarray, dy: np.ndarray, seg: np.ndarray,
                 max_range: float, radius: float, group: int, clip: bool,
                 out: np.ndarray) -> None:  # pragma: no cover - compiled
     """:func:`ranges` for N disc centres ``xy`` (N, 2) with their own (N, rays) directions
-    ``dx, dy``: row ``i`` of ``out`` (N, readings) is ``ranges`` of row ``i``."""
+    ``dx, dy``: row ``i`` of ``out`` (N, readings) is ``ranges`` of row ``i``.
+
+    Each centre's rays meet only the segments within :data:`CULL` times their reach
+    (``max_range + radius``): a segment farther away is hit, if at all, beyond the reach,
+    which :func:`ranges` ignores (the nearest hit is a minimum, in any order). Rounding
+    could only bring such a hit inside the reach for a ray within some 1e-13 rad of a
+    segment whose line passes within some 1e-13 m of the centre.
+    """
+    reach = max_range + radius
+    cull2 = (CULL * reach) * (CULL * reach)
+    idx = np.empty(seg.shape[1], dtype=np.intp)
     for i in range(out.shape[0]):
-        ranges(xy[i, 0], xy[i, 1], dx[i], dy[i], seg, max_range, radius, group, clip, out[i])
+        c = near_segments(xy[i, 0], xy[i, 1], seg, cull2, idx)
+        ranges(xy[i, 0], xy[i, 1], dx[i], dy[i], _gather(seg, idx, c), max_range, radius, group,
+               clip, out[i])
 
 
 @njit(**_JIT)
