@@ -196,13 +196,14 @@ def _free_outcomes(poses: Sequence[np.ndarray], rows: list[list[float]], count: 
     """The outcomes of the robots that touched nothing (None for the others), as
     ``step_robot`` writes them: its closed form in open space, the last substep else."""
     outs: list[StepOutcome | None] = [None] * len(rows)
+    last = xs[:, :, -1].tolist()  # the last substep's pose of each robot near a wall
     for i, row in enumerate(rows):
         if first[i] >= 0:
             continue
         if count[i] == 0:  # open space: step_robot's pure-Python closed form
             x, y, th = _pose_at(T, *row)
         else:
-            x, y, th = xs[slot[i], :, -1].tolist()
+            x, y, th = last[slot[i]]
         final = np.array([x, y, _wrap(th)])
         outs[i] = StepOutcome(_array(poses[i]), final, False, _NAN2, final, row[3] * T,
                               math.degrees(th - row[2]))

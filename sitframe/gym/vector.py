@@ -77,6 +77,7 @@ class SitframeVectorEnv(VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self._done = np.zeros(num_envs, dtype=bool)
+        self._all = list(range(num_envs))
         self._ctx: list[Any] = [None] * num_envs  # each robot's last context
         self._many = getattr(self.envs[0].sensor, "read_many", None)
 
@@ -100,18 +101,17 @@ class SitframeVectorEnv(VectorEnv):
             raise ValueError(f"actions: expected {n} actions (one per robot), got shape "
                              f"{acts.shape}")
         obs = np.empty((n, *self.single_observation_space.shape), dtype=np.float32)
-        rew = np.zeros(n)
-        term = np.zeros(n, dtype=bool)
-        trunc = np.zeros(n, dtype=bool)
-        collided = np.zeros(n, dtype=bool)
-        for i in np.flatnonzero(self._done).tolist():  # NEXT_STEP autoreset
-            obs[i] = envs[i].reset()[0]
-            self._ctx[i] = None
-        live = np.flatnonzero(~self._done).tolist()
+        rew, term, trunc, collided = [0.0] * n, [False] * n, [False] * n, [False] * n
+        live = self._all
+        if self._done.any():
+            for i in np.flatnonzero(self._done).tolist():  # NEXT_STEP autoreset
+                obs[i] = envs[i].reset()[0]
+                self._ctx[i] = None
+            live = np.flatnonzero(~self._done).tolist()
         if live:
             robots = [envs[i] for i in live]
-            acts_live = acts[live].tolist()
-            cmds = [task.command(a, self.continuous) for a in acts_live]
+            cmds = [task.command(a, self.continuous)
+                    for a in (acts if live is self._all else acts[live]).tolist()]
             befores = [self._ctx[i] or task.context(e.t, e.pose, e._reading, e.goal)
                        for i, e in zip(live, robots, strict=True)]
             rngs = [e.np_random for e in robots]
@@ -119,19 +119,20 @@ class SitframeVectorEnv(VectorEnv):
             poses = [o.pose for o in outs]
             readings = self._read(robots, poses, rngs)
             nearest = readings.min(axis=1).tolist()
-            for j, i in enumerate(live):
+            for j, i in enumerate(live):  # what stays per robot: contexts and the reward
                 env, out = robots[j], outs[j]
                 env.pose, env._reading = out.pose, readings[j]
                 env.t += 1
                 self._ctx[i] = after = task.context(env.t, out.pose, readings[j], env.goal,
                                                     nearest[j])
-                rew[i] = env.reward_fn(Transition(befores[j], cmds[j], out, after))
+                rew[i] = float(env.reward_fn(Transition(befores[j], cmds[j], out, after)))
                 term[i] = task.terminated(after, out.collided)
                 trunc[i] = not term[i] and env.t >= task.max_steps
                 collided[i] = out.collided
             obs[live] = task.observe_many(readings, poses, [e.goal for e in robots])
-        self._done = term | trunc
-        return obs, rew, term, trunc, self._infos(collided)
+        terminated, truncated = np.array(term), np.array(trunc)
+        self._done = terminated | truncated
+        return obs, np.array(rew), terminated, truncated, self._infos(np.array(collided))
 
     def _read(self, robots: list[SitframeEnv], poses: list[np.ndarray],
               rngs: list[np.random.Generator]) -> np.ndarray:
