@@ -147,9 +147,9 @@ def _plans(poses: Sequence[np.ndarray], commands: Sequence[Command],
     for c in commands:  # (keyed by the command's id, which the entry keeps alive)
         m = seen[1].get(id(c))
         if m is None or m[0] is not c:
-            m = seen[1][id(c)] = (c, *_plan(_ORIGIN, c, params)[3:])
-        motions.append(m[1:])
-    plans[:, 3:6] = motions
+            m = seen[1][id(c)] = (c, _plan(_ORIGIN, c, params)[3:])
+        motions.append(m[1])
+    plans[:, 3:6] = np.array(motions)
     return plans
 
 
@@ -195,16 +195,13 @@ def _free_outcomes(poses: Sequence[np.ndarray], rows: list[list[float]], count: 
                    T: float) -> list[StepOutcome | None]:
     """The outcomes of the robots that touched nothing (None for the others), as
     ``step_robot`` writes them: its closed form in open space, the last substep else."""
-    outs: list[StepOutcome | None] = [None] * len(rows)
     last = xs[:, :, -1].tolist()  # the last substep's pose of each robot near a wall
-    for i, row in enumerate(rows):
-        if first[i] >= 0:
-            continue
-        if count[i] == 0:  # open space: step_robot's pure-Python closed form
-            x, y, th = _pose_at(T, *row)
-        else:
-            x, y, th = last[slot[i]]
-        final = np.array([x, y, _wrap(th)])
+    free = [i for i in range(len(rows)) if first[i] < 0]
+    ends = [_pose_at(T, *rows[i]) if count[i] == 0 else last[slot[i]] for i in free]
+    finals = np.array([(x, y, _wrap(th)) for x, y, th in ends])  # (one array; a row each)
+    outs: list[StepOutcome | None] = [None] * len(rows)
+    for q, i in enumerate(free):
+        final, row = finals[q], rows[i]
         outs[i] = StepOutcome(_array(poses[i]), final, False, _NAN2, final, row[3] * T,
-                              math.degrees(th - row[2]))
+                              math.degrees(ends[q][2] - row[2]))
     return outs
