@@ -202,6 +202,7 @@ def _free_outcomes(poses: Sequence[np.ndarray], rows: list[list[float]], count: 
     outs: list[StepOutcome | None] = [None] * len(rows)
     for q, i in enumerate(free):
         final, row = finals[q], rows[i]
-        outs[i] = StepOutcome(_array(poses[i]), final, False, _NAN2, final, row[3] * T,
-                              math.degrees(ends[q][2] - row[2]))
+        pose = poses[i]
+        outs[i] = StepOutcome(pose if pose.__class__ is np.ndarray else _array(pose), final,
+                              False, _NAN2, final, row[3] * T, math.degrees(ends[q][2] - row[2]))
     return outs

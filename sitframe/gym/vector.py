@@ -35,8 +35,8 @@ from gymnasium.vector.utils import batch_space
 
 from sitframe.fleet import step_robots
 from sitframe.gym.env import SitframeEnv
-from sitframe.gym.task import Task
-from sitframe.records import Transition
+from sitframe.gym.task import _NO_U, Task
+from sitframe.records import Context, Transition
 
 __all__ = ["SitframeVectorEnv"]
 
@@ -119,15 +119,18 @@ class SitframeVectorEnv(VectorEnv):
             poses = [o.pose for o in outs]
             readings = self._read(robots, poses, rngs)
             nearest = readings.min(axis=1).tolist()
-            for j, i in enumerate(live):  # what stays per robot: contexts and the reward
-                env, out = robots[j], outs[j]
-                env.pose, env._reading = out.pose, readings[j]
+            world, limit = task.world, task.max_steps
+            ends = task.protocol is not None or task.terminate_on_collision
+            for j, (i, env, out, reading) in enumerate(zip(live, robots, outs, readings,
+                                                           strict=True)):
+                # what stays per robot: the contexts and the reward (as SitframeEnv.step)
+                env.pose, env._reading = out.pose, reading
                 env.t += 1
-                self._ctx[i] = after = task.context(env.t, out.pose, readings[j], env.goal,
-                                                    nearest[j])
+                self._ctx[i] = after = Context(env.t, out.pose, reading, _NO_U, nearest[j],
+                                               world, env.goal)
                 rew[i] = float(env.reward_fn(Transition(befores[j], cmds[j], out, after)))
-                term[i] = task.terminated(after, out.collided)
-                trunc[i] = not term[i] and env.t >= task.max_steps
+                term[i] = ends and task.terminated(after, out.collided)
+                trunc[i] = not term[i] and env.t >= limit
                 collided[i] = out.collided
             obs[live] = task.observe_many(readings, poses, [e.goal for e in robots])
         terminated, truncated = np.array(term), np.array(trunc)
