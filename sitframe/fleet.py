@@ -60,7 +60,7 @@ _ORIGIN = np.zeros(3)
 #: vector env reuses one object per discrete action), per robot parameters object; an entry
 #: holds its object, so the id it is filed under cannot be reused while it is there. At most
 #: :data:`_MAX_MOTIONS` commands each (continuous actions are all new).
-_MOTIONS: dict[int, tuple[RobotParams, dict[int, tuple[Any, ...]]]] = {}
+_MOTIONS: dict[int, tuple[RobotParams, dict[int, tuple[Any, ...]], np.ndarray]] = {}
 _MAX_MOTIONS = 4096
 
 
@@ -96,20 +96,24 @@ def step_robots(world: World, poses: Sequence[np.ndarray], commands: Sequence[Co
     if kern is None or segs.n == 0 or n == 0:
         return [step_robot(world, p, c, params, g)
                 for p, c, g in zip(poses, commands, rngs, strict=True)]
-    plans = _plans(poses, commands, params)
+    plans, margin = _plans(poses, commands, params)
     T = params.control_period_s
     times = _times(T, params.substep_s)
     # step 1 and 2 for all: the segments within reach, the substeps, the first contact
     idx = np.empty((n, segs.n), dtype=np.intp)
-    count, slot, first, hits = np.empty((4, n), dtype=np.intp)
+    ints = np.empty((4, n), dtype=np.intp)
+    count, slot, first, hits = ints
     args = np.empty((2, n, times.size))
-    b = kern.sweep_begin(plans, times, T, np.array([params.radius, params.recovery_backoff_m,
-                                                    1e-9]), segs.packed, idx, count, slot,
-                         args[0], args[1])
+    b = kern.sweep_begin(plans, times, T, margin, segs.packed, idx, count, slot, args[0],
+                         args[1])
+    if b < 0:
+        bad = next(p for p in poses if not np.isfinite(np.asarray(p, dtype=float)).all())
+        raise ValueError(f"pose must be 3 finite numbers (x, y, theta_rad), got {bad!r}")
     rows = plans[:, :6].tolist()
-    for i in np.flatnonzero(count).tolist():  # math's cos and sin, as step_robot's _poses_at
-        th_end = rows[i][2] + rows[i][4] * rows[i][5]
-        plans[i, 6], plans[i, 7] = math.cos(th_end), math.sin(th_end)
+    for i, c in enumerate(count.tolist()):  # math's cos and sin, as step_robot's _poses_at
+        if c:
+            th_end = rows[i][2] + rows[i][4] * rows[i][5]
+            plans[i, 6], plans[i, 7] = math.cos(th_end), math.sin(th_end)
     xs = np.empty((b, 3, times.size))
     state, active = np.empty((n, 5)), np.empty(n, dtype=np.bool_)
     ref = np.empty((3, n, _REFINE + 1))  # refinement samples and their sine/cosine arguments
@@ -117,7 +121,7 @@ def step_robots(world: World, poses: Sequence[np.ndarray], commands: Sequence[Co
     sa, aa = args[0, :b], args[1, :b]
     h = kern.sweep_end(times, plans, slot, sa, np.sin(sa), np.cos(aa), np.sin(aa), segs.packed,
                        idx, count, r2, xs, first, hits, state, active, *ref)
-    outs = _free_outcomes(poses, rows, count.tolist(), slot.tolist(), first.tolist(), xs, T)
+    outs = _free_outcomes(poses, rows, *ints.tolist()[:3], xs, T)
     if h:  # steps 3 and 4 for those that touched a wall
         _refine(kern, plans, hits, h, ref, segs, idx, count, r2, state, active)
         _recover(kern, outs, poses, rows, hits, h, state, first, segs, idx, count, params, rngs)
@@ -130,19 +134,18 @@ def _array(pose: np.ndarray) -> np.ndarray:
 
 
 def _plans(poses: Sequence[np.ndarray], commands: Sequence[Command],
-           params: RobotParams) -> np.ndarray:
+           params: RobotParams) -> tuple[np.ndarray, np.ndarray]:
     """(N, 8) rows ``x0, y0, th0, v, omega, t_turn`` of ``step_robot``'s ``_plan`` (and room
-    for the cosine and sine of the final heading)."""
+    for the cosine and sine of the final heading), and the (3,) margins of the swept disc's
+    reach beyond ``v * period``: the radius, the back-off and a hair."""
     plans = np.empty((len(poses), 8))
     plans[:, :3] = np.array(poses)
-    if not math.isfinite(float(plans[:, :3].sum())) and not np.isfinite(plans[:, :3]).all():
-        bad = next(p for p in poses if not np.isfinite(np.asarray(p, dtype=float)).all())
-        raise ValueError(f"pose must be 3 finite numbers (x, y, theta_rad), got {bad!r}")
     seen = _MOTIONS.get(id(params))
     if seen is None or seen[0] is not params or len(seen[1]) > _MAX_MOTIONS:
         if len(_MOTIONS) > 64:
             _MOTIONS.clear()
-        seen = _MOTIONS[id(params)] = (params, {})
+        seen = _MOTIONS[id(params)] = (params, {}, np.array([params.radius,
+                                                              params.recovery_backoff_m, 1e-9]))
     motions = []
     for c in commands:  # (keyed by the command's id, which the entry keeps alive)
         m = seen[1].get(id(c))
@@ -150,7 +153,7 @@ def _plans(poses: Sequence[np.ndarray], commands: Sequence[Command],
             m = seen[1][id(c)] = (c, _plan(_ORIGIN, c, params)[3:])
         motions.append(m[1])
     plans[:, 3:6] = np.array(motions)
-    return plans
+    return plans, seen[2]
 
 
 def _refine(kern: ModuleType, plans: np.ndarray, hits: np.ndarray, h: int, ref: np.ndarray,

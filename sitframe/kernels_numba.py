@@ -273,8 +273,12 @@ def sweep_begin(plans: np.ndarray, times: np.ndarray, period: float, margin: np.
     ``idx[i, :count[i]]`` (:func:`near_segments`); a robot with any gets the next free row
     ``slot[i]`` of ``sinc_arg, ang`` (B, n), where the arguments of its substeps' sines and
     cosines at ``times`` go (:func:`arc_angles`); one in open space gets ``slot[i] = -1``.
-    Returns B, the number of robots near a wall.
+    Returns B, the number of robots near a wall, or -1 if a pose is not finite.
     """
+    for i in range(plans.shape[0]):
+        for j in range(3):
+            if not math.isfinite(plans[i, j]):
+                return -1
     b = 0
     for i in range(plans.shape[0]):
         reach = plans[i, 3] * period + margin[0] + margin[1] + margin[2]
@@ -528,7 +532,7 @@ def _warm() -> None:
     cast_each(one, one, one, one, seg, 3.0, out)
     ranges(0.0, 0.0, one, one, seg, 3.0, 0.1, 1, True, out)
     two = np.ones((2, 2))
-    ranges_many(two, two, two, seg, 3.0, 0.1, 1, True, np.empty((2, 2)))
+    ranges_many(np.ones((2, 3))[:, :2], two, two, seg, 3.0, 0.1, 1, True, np.empty((2, 2)))
     ints = [np.zeros(2, dtype=np.intp) for _ in range(4)]
     idx2, act = np.zeros((2, 1), dtype=np.intp), np.zeros(2, dtype=np.bool_)
     state, p3 = np.zeros((2, 5)), np.empty((2, 3, 2))

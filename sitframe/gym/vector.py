@@ -78,6 +78,7 @@ class SitframeVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, num_envs)
         self._done = np.zeros(num_envs, dtype=bool)
         self._all = list(range(num_envs))
+        self._table: list[Any] | None = None  # the command of each discrete action
         self._ctx: list[Any] = [None] * num_envs  # each robot's last context
         self._many = getattr(self.envs[0].sensor, "read_many", None)
 
@@ -100,18 +101,18 @@ class SitframeVectorEnv(VectorEnv):
         if acts.shape[:1] != (n,):
             raise ValueError(f"actions: expected {n} actions (one per robot), got shape "
                              f"{acts.shape}")
-        obs = np.empty((n, *self.single_observation_space.shape), dtype=np.float32)
+        obs = None
         rew, term, trunc, collided = [0.0] * n, [False] * n, [False] * n, [False] * n
         live = self._all
         if self._done.any():
+            obs = np.empty((n, *self.single_observation_space.shape), dtype=np.float32)
             for i in np.flatnonzero(self._done).tolist():  # NEXT_STEP autoreset
                 obs[i] = envs[i].reset()[0]
                 self._ctx[i] = None
             live = np.flatnonzero(~self._done).tolist()
         if live:
             robots = [envs[i] for i in live]
-            cmds = [task.command(a, self.continuous)
-                    for a in (acts if live is self._all else acts[live]).tolist()]
+            cmds = self._commands((acts if live is self._all else acts[live]).tolist())
             befores = [self._ctx[i] or task.context(e.t, e.pose, e._reading, e.goal)
                        for i, e in zip(live, robots, strict=True)]
             rngs = [e.np_random for e in robots]
@@ -132,10 +133,26 @@ class SitframeVectorEnv(VectorEnv):
                 term[i] = ends and task.terminated(after, out.collided)
                 trunc[i] = not term[i] and env.t >= limit
                 collided[i] = out.collided
-            obs[live] = task.observe_many(readings, poses, [e.goal for e in robots])
-        terminated, truncated = np.array(term), np.array(trunc)
+            seen = task.observe_many(readings, poses, [e.goal for e in robots])
+            if obs is None:  # (all robots live)
+                obs = seen
+            else:
+                obs[live] = seen
+        terminated, truncated, hit = np.array([term, trunc, collided])
         self._done = terminated | truncated
-        return obs, np.array(rew), terminated, truncated, self._infos(np.array(collided))
+        return obs, np.array(rew), terminated, truncated, self._infos(hit)
+
+    def _commands(self, acts: list[Any]) -> list[Any]:
+        """The commands of the live robots' actions (discrete ones looked up, as
+        :meth:`Task.command` maps them, after one range check of them all)."""
+        task = self.task
+        if self.continuous or not all(a.__class__ is int for a in acts) or \
+                min(acts) < 0 or max(acts) >= task.n_actions:
+            return [task.command(a, self.continuous) for a in acts]  # (its own checks)
+        table = self._table
+        if table is None:
+            table = self._table = [task.command(a, False) for a in range(task.n_actions)]
+        return [table[a] for a in acts]
 
     def _read(self, robots: list[SitframeEnv], poses: list[np.ndarray],
               rngs: list[np.random.Generator]) -> np.ndarray:
