@@ -10,15 +10,19 @@ work that costs is done for all N robots at once by compiled kernels
 2. the substep poses of the robots near a wall and their first contact
    (:func:`~sitframe.kernels_numba.sweep_end`);
 3. the two rounds that refine each contact
-   (:func:`~sitframe.kernels_numba.refine`).
+   (:func:`~sitframe.kernels_numba.refine`);
+4. the contact points and the back-offs of the robots that touched
+   (:func:`~sitframe.kernels_numba.contact_points`,
+   :func:`~sitframe.kernels_numba.backoffs`).
 
 Between the phases numpy takes the sines and cosines of all robots in one call
 each (the kernels leave trigonometry to numpy, see :mod:`sitframe.kernels_numba`).
 What is left per robot is Python, as in ``step_robot``: the closed-form pose of
-a robot in open space (with :mod:`math`), the
-:class:`~sitframe.robot.StepOutcome`, and for a robot that touched a wall
-(about one step in eight under random actions) the contact point and the
-recovery (``step_robot``'s own code, which may draw from that robot's ``rng``).
+a robot in open space and the cosine and sine of each final heading (with
+:mod:`math`), the :class:`~sitframe.robot.StepOutcome`, and for a robot that
+touched a wall (about one step in eight under random actions) the contact
+normal and the turn away (``step_robot``'s own ``_normal`` and ``_turn_away``,
+which may draw from that robot's ``rng``).
 
 Without the compiled kernels (numba missing, ``SITFRAME_NUMBA=0``, or a
 process's first :data:`sitframe.kernels.WARMUP_CALLS` calls) each robot goes

@@ -203,9 +203,10 @@ def test_rim_ranges_many_rows_are_rim_ranges(room: World,
     rng = np.random.default_rng(2)
     xy = rng.uniform([0.05, 0.05], [4.95, 3.95], (12, 2))
     ang = rng.uniform(-4, 4, (12, 10))
+    poses = np.c_[xy, ang[:, 0]]  # (the vector env passes its poses' x, y columns)
     for group, clip in [(1, False), (5, True)]:
         fast, slow = both(monkeypatch, lambda g=group, c=clip: geo.rim_ranges_many(
-            room.segment_set, xy, ang, 3.0, 0.15, g, clip=c))
+            room.segment_set, poses[:, :2], ang, 3.0, 0.15, g, clip=c))
         rows = [geo.rim_ranges(room.segment_set, x, y, a, 3.0, 0.15, group, clip=clip)
                 for (x, y), a in zip(xy, ang, strict=True)]
         assert np.array_equal(fast, np.stack(rows)) and np.array_equal(slow, fast)

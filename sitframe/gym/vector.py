@@ -7,9 +7,9 @@ copies): same start poses, goals, readings and rewards for the same actions
 kernels). What is shared is the simulator's work:
 
 - the robots move in one :func:`sitframe.fleet.step_robots` call (with the
-  compiled kernels, two compiled calls for all N robots: which walls each can
-  reach, its substeps, its first contact; the rare contact is then refined
-  and recovered from per robot by ``step_robot``'s own code);
+  compiled kernels, a few compiled calls for all N robots: which walls each
+  can reach, its substeps and first contact, the refinement of the contacts,
+  the contact points and back-offs);
 - sensors with a ``read_many(world, poses, rngs)`` method (the Pioneer sonar
   ring has one: :func:`sitframe.rim_ranges_many`, one compiled call) read all
   N robots at once; others are read one by one;
