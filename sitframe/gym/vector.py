@@ -101,7 +101,7 @@ class SitframeVectorEnv(VectorEnv):
         if acts.shape[:1] != (n,):
             raise ValueError(f"actions: expected {n} actions (one per robot), got shape "
                              f"{acts.shape}")
-        obs = None
+        obs, at = None, None
         rew, term, trunc, collided = [0.0] * n, [False] * n, [False] * n, [False] * n
         live = self._all
         if self._done.any():
@@ -118,7 +118,8 @@ class SitframeVectorEnv(VectorEnv):
             rngs = [e.np_random for e in robots]
             outs = step_robots(task.world, [e.pose for e in robots], cmds, task.res.robot, rngs)
             poses = [o.pose for o in outs]
-            readings = self._read(robots, poses, rngs)
+            at = np.array(poses)  # (M, 3)
+            readings = self._read(robots, poses, at, rngs)
             nearest = readings.min(axis=1).tolist()
             world, limit = task.world, task.max_steps
             ends = task.protocol is not None or task.terminate_on_collision
@@ -140,7 +141,8 @@ class SitframeVectorEnv(VectorEnv):
                 obs[live] = seen
         terminated, truncated, hit = np.array([term, trunc, collided])
         self._done = terminated | truncated
-        return obs, np.array(rew), terminated, truncated, self._infos(hit)
+        return obs, np.array(rew), terminated, truncated, \
+            self._infos(hit, at if live is self._all else None)
 
     def _commands(self, acts: list[Any]) -> list[Any]:
         """The commands of the live robots' actions (discrete ones looked up, as
@@ -154,17 +156,21 @@ class SitframeVectorEnv(VectorEnv):
             table = self._table = [task.command(a, False) for a in range(task.n_actions)]
         return [table[a] for a in acts]
 
-    def _read(self, robots: list[SitframeEnv], poses: list[np.ndarray],
+    def _read(self, robots: list[SitframeEnv], poses: list[np.ndarray], at: np.ndarray,
               rngs: list[np.random.Generator]) -> np.ndarray:
-        """The sensor readings (M, d) of ``robots`` at ``poses`` (batched if the sensor can)."""
+        """The sensor readings (M, d) of ``robots`` at ``poses`` (``at``: the same, (M, 3)),
+        batched if the sensor can."""
         if self._many is not None:
-            return self._many(self.task.world, np.array(poses), rngs)
+            return self._many(self.task.world, at, rngs)
         return np.stack([e.sensor.read(e.world, p, g)
                          for e, p, g in zip(robots, poses, rngs, strict=True)])
 
-    def _infos(self, collided: np.ndarray) -> dict[str, Any]:
+    def _infos(self, collided: np.ndarray, poses: np.ndarray | None = None) -> dict[str, Any]:
+        """``pose`` (N, 3) (``poses``, if given, are every robot's) and ``collided`` (N,)."""
         mask = np.ones(self.num_envs, dtype=bool)
-        return {"pose": np.array([e.pose for e in self.envs]), "_pose": mask,
+        if poses is None:
+            poses = np.array([e.pose for e in self.envs])
+        return {"pose": poses, "_pose": mask,
                 "collided": collided, "_collided": mask}
 
 
