@@ -113,8 +113,6 @@ class SitframeVectorEnv(VectorEnv):
         if live:
             robots = [envs[i] for i in live]
             cmds = self._commands((acts if live is self._all else acts[live]).tolist())
-            befores = [self._ctx[i] or task.context(e.t, e.pose, e._reading, e.goal)
-                       for i, e in zip(live, robots, strict=True)]
             rngs = [e.np_random for e in robots]
             outs = step_robots(task.world, [e.pose for e in robots], cmds, task.res.robot, rngs)
             poses = [o.pose for o in outs]
@@ -122,15 +120,16 @@ class SitframeVectorEnv(VectorEnv):
             readings = self._read(robots, poses, at, rngs)
             nearest = readings.min(axis=1).tolist()
             world, limit = task.world, task.max_steps
-            ends = task.protocol is not None or task.terminate_on_collision
+            ends, ctx = task.protocol is not None or task.terminate_on_collision, self._ctx
             for j, (i, env, out, reading) in enumerate(zip(live, robots, outs, readings,
                                                            strict=True)):
                 # what stays per robot: the contexts and the reward (as SitframeEnv.step)
+                before = ctx[i] or task.context(env.t, env.pose, env._reading, env.goal)
                 env.pose, env._reading = out.pose, reading
                 env.t += 1
-                self._ctx[i] = after = Context(env.t, out.pose, reading, _NO_U, nearest[j],
-                                               world, env.goal)
-                rew[i] = float(env.reward_fn(Transition(befores[j], cmds[j], out, after)))
+                ctx[i] = after = Context(env.t, out.pose, reading, _NO_U, nearest[j], world,
+                                         env.goal)
+                rew[i] = float(env.reward_fn(Transition(before, cmds[j], out, after)))
                 term[i] = ends and task.terminated(after, out.collided)
                 trunc[i] = not term[i] and env.t >= limit
                 collided[i] = out.collided
