@@ -117,6 +117,7 @@ import numpy as np
 
 from sitframe.errors import InputError
 from sitframe.interrupts import deferred_interrupt
+from sitframe.pluginmanager import Registry, get_plugin_manager
 from sitframe.records import LearnedPolicy, PolicyOutput, RunInfo, SensorSpec, TrialResult
 
 #: Per-iteration sensor readings (``sonar`` in logs from before contract v2).
@@ -789,9 +790,6 @@ class Log:
                              key="sensor") from None
 
     def _sensor_from_config(self) -> dict[str, Any]:
-        # imported here: the plugin registry is needed only for logs older than the spec
-        from sitframe.pluginmanager import Registry, get_plugin_manager
-
         table = dict(self.config.get("sensor", {}))
         name = str(table.pop("component", "pioneer-sonar"))
         registry = Registry.collect(get_plugin_manager())
