@@ -32,9 +32,11 @@ BAD = 10.0  # collisions per 1000 iterations that make an evaluation "bad"
 GOAL = ("success_rate", "collision_free_rate", "spl", "mean_time_s")
 
 
-def _miq(x: np.ndarray, digits: int = 0) -> str:
-    q25, q50, q75 = np.percentile(x, [25, 50, 75])
-    return f"{q50:.{digits}f} [{q25:.{digits}f}, {q75:.{digits}f}]"
+def _miq(x: np.ndarray, whole: bool = False) -> str:
+    """Median [IQR]; whole numbers, or one decimal where a quartile falls between two."""
+    q = np.percentile(x, [25, 50, 75])
+    f = [f"{v:.0f}" if whole or float(v).is_integer() else f"{v:.1f}" for v in q]
+    return f"{f[1]} [{f[0]}, {f[2]}]"
 
 
 def _scorers(cfg: dict[str, Any]) -> list[Any]:
@@ -77,7 +79,7 @@ def report(p: dict[str, Any]) -> None:
     if conv.size:
         ok = conv[np.isfinite(conv)]
         print(f"converged {ok.size}/{conv.size}; iterations to convergence "
-              f"{_miq(ok) if ok.size else '-'}")
+              f"{_miq(ok, whole=True) if ok.size else '-'}")
     bad = []
     for world, m in p["per"].items():
         parts = []
