@@ -11,7 +11,7 @@ per 1000 iterations, median [IQR] (worst), the share of the evaluations above
 behaviour's reward scores its own quality (a ``metrics(arrays)`` method, e.g.
 the wall-following reward's ``wall_band_fraction``), that score is computed
 from each logged frozen evaluation's readings and pooled the same way (worst
-= lowest). Goal episodes (``eval.<world>.success_rate`` ...) are pooled over
+= lowest; bad = in the band less than half the time). Goal episodes (``eval.<world>.success_rate`` ...) are pooled over
 the runs: the mean over runs (each run scores the same number of episodes,
 so this is the rate over all episodes) and the range over runs.
 """
@@ -29,6 +29,7 @@ from sitframe.pluginmanager import Registry, get_plugin_manager
 from sitframe.resolve import Resolved
 
 BAD = 10.0  # collisions per 1000 iterations that make an evaluation "bad"
+BAND_BAD = 0.5  # a wall-following evaluation in the band less than half the time
 GOAL = ("success_rate", "collision_free_rate", "spl", "mean_time_s")
 
 
@@ -90,7 +91,8 @@ def report(p: dict[str, Any]) -> None:
                          f"{np.mean(c > BAD):.1%}, coverage {np.median(m['coverage']):.2f}")
         if "wall_band_fraction" in m:
             b = np.array(m["wall_band_fraction"])
-            parts.append(f"in band {_miq(100 * b)} % (lowest {100 * b.min():.0f} %)")
+            parts.append(f"in band {_miq(100 * b)} % (lowest {100 * b.min():.0f} %), "
+                         f"below {100 * BAND_BAD:.0f} %: {np.mean(b < BAND_BAD):.1%}")
         for name in GOAL:
             if name in m:
                 v = np.array(m[name])
