@@ -63,7 +63,11 @@ import numpy as np
 from sitframe import RunContext, World, cast_rays_many, hookimpl, rim_ranges
 from sitframe import params as P
 
-__all__ = ["SonarRing", "sitframe_sensors"]
+__all__ = ["PIONEER_ANGLES_DEG", "SonarRing", "sitframe_sensors"]
+
+#: Bearings of the Pioneer 2DX's 8 front sonars, degrees, positive = left (the
+#: project's one definition; everything else asks the run's sensor).
+PIONEER_ANGLES_DEG: tuple[float, ...] = (90.0, 50.0, 30.0, 10.0, -10.0, -30.0, -50.0, -90.0)
 
 
 #: More rays than this per sonar cone only costs time (a 25 deg cone is sampled
@@ -98,7 +102,7 @@ class SonarRing:
     def __init__(
         self,
         *,
-        angles_deg: Sequence[float] = (90, 50, 30, 10, -10, -30, -50, -90),
+        angles_deg: Sequence[float] = PIONEER_ANGLES_DEG,
         max_range: float = 3.0,
         robot_radius: float | None = None,
         beam_width_deg: float = 0.0,

@@ -18,7 +18,7 @@ from sitframe.logs import open_log
 from sitframe.loop import STAGE_BATCH, STAGE_EVAL, TrialSpec, batch_scores, simulate, stage_seed
 from sitframe.pluginmanager import Registry, get_plugin_manager
 from sitframe.prepare import BEST_TRIAL_RULE, best_of, check_state, logged_policy
-from sitframe.records import LearnedPolicy
+from sitframe.records import LearnedPolicy, summary_key
 from sitframe.resolve import Resolved
 
 
@@ -171,12 +171,12 @@ def rule_base_table(result: Any) -> Any:
 
     trials = result.trials
     world = Config.of(result.info.config).experiment.world
-    key = f"eval/{world}/collisions_per_1000"
+    key = summary_key("eval", world, "collisions_per_1000")
     ranked = [t for t in trials if key in t.summary]
     best = trials[0]
     if ranked:
         k = best_of([t.index for t in ranked], [t.summary[key] for t in ranked],
-                     [t.summary.get(f"eval/{world}/coverage", 0.0) for t in ranked],
+                     [t.summary.get(summary_key("eval", world, "coverage"), 0.0) for t in ranked],
                      [t.summary["collisions_per_1000_after_convergence"] for t in ranked])
         best = next(t for t in ranked if t.index == k)
     why = (f"best trial {best.index}: {BEST_TRIAL_RULE} when evaluated in '{world}'"

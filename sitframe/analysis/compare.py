@@ -49,6 +49,7 @@ from scipy import stats
 
 from sitframe.analysis.results import Table, _summary, as_log
 from sitframe.errors import InputError
+from sitframe.records import summary_key
 
 __all__ = ["Comparison", "MetricResult", "compare_logs", "compare_sweep", "trial_metrics"]
 
@@ -194,14 +195,14 @@ def trial_metrics(summary: np.ndarray) -> dict[str, tuple[str, str, np.ndarray]]
     worlds = list(dict.fromkeys(m.group(1) for n in names
                                 if (m := re.fullmatch(r"eval\.(.+)\.[^.]+", n))))
     for w in worlds:
-        if f"eval.{w}.collisions_per_1000" in names:
-            out[f"eval.{w}.collisions_per_1000"] = (f"{w}: collisions /1000 (evaluation)",
-                                                    "median", col(f"eval.{w}.collisions_per_1000"))
-            out[f"eval.{w}.coverage"] = (f"{w}: coverage (evaluation)", "median",
-                                         col(f"eval.{w}.coverage"))
+        coll, cov = (summary_key("eval", w, k, sep=".") for k in ("collisions_per_1000",
+                                                                     "coverage"))
+        if coll in names:
+            out[coll] = (f"{w}: collisions /1000 (evaluation)", "median", col(coll))
+            out[cov] = (f"{w}: coverage (evaluation)", "median", col(cov))
         for k, lab in _GOAL.items():
-            if f"eval.{w}.{k}" in names:
-                out[f"eval.{w}.{k}"] = (f"{w}: goal {lab}", "median", col(f"eval.{w}.{k}"))
+            if (key := summary_key("eval", w, k, sep=".")) in names:
+                out[key] = (f"{w}: goal {lab}", "median", col(key))
     return out
 
 
