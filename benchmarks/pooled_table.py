@@ -11,9 +11,10 @@ per 1000 iterations, median [IQR] (worst), the share of the evaluations above
 behaviour's reward scores its own quality (a ``metrics(arrays)`` method, e.g.
 the wall-following reward's ``wall_band_fraction``), that score is computed
 from each logged frozen evaluation's readings and pooled the same way (worst
-= lowest; bad = in the band less than half the time). Goal episodes (``eval.<world>.success_rate`` ...) are pooled over
-the runs: the mean over runs (each run scores the same number of episodes,
-so this is the rate over all episodes) and the range over runs.
+= lowest; bad = in the band less than half the time). Goal episodes
+(``eval.<world>.success_rate`` ...) are pooled over the runs: the mean over
+runs (each run scores the same number of episodes, so this is the rate over
+all episodes) and the range over runs.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from sitframe.analysis.compare import _compare, _holm, compare_logs
+from sitframe.analysis.compare import _compare, _holm, compare_logs, compare_sweeps
 from sitframe.analysis.replay_data import replay_payload
 from sitframe.cli import main
 from sitframe.logs import open_log
@@ -148,14 +148,13 @@ def test_compare_two_sweep_folders(two_runs, tmp_path, capsys):
     a, b = two_runs
     one = _sweep_folder(tmp_path / "one", [a, a])
     two = _sweep_folder(tmp_path / "two", [b, b, a])
-    assert main(["compare", str(one), str(two), "-o", str(tmp_path / "c"), "--json"]) == 0
-    data = json.loads(capsys.readouterr().out)
-    assert data["runs"] == ["one", "two"] and data["unit"] == "run"
-    assert data["metrics"][0]["n"] == [4, 6]
-    assert (tmp_path / "c" / "index.html").exists()
+    cmp = compare_sweeps([one, two])
+    assert cmp.names == ["one", "two"] and cmp.unit == "run"
+    assert [v.size for v in cmp.metrics[0].values] == [4, 6]
     assert main(["compare", str(one), str(a)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "cannot be mixed" in err
+
 
 def test_same_log_twice_is_not_different(two_runs):
     a, _b = two_runs
