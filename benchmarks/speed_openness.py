@@ -13,9 +13,10 @@ situations came from (the speed preset's ``clusters_from``). Prints:
    -- the mean over beams of ``log(r + offset)``, the space the situations
    were clustered in (``offset`` from the ``[interpreter]`` table) -- its
    label and the mean over trials of each trial's greedy speed (the converged
-   rule base, or the greedy one of its final Q). Spearman's rank correlation
-   of that speed with the openness (with a 95 % bootstrap interval over
-   trials), the mean range, the nearest range and the range ahead (the
+   rule base, or the greedy one of its final Q), the median number of updates
+   of the situation (learning stops at convergence) and the mean final Q.
+   Spearman's rank correlation of that speed with the openness (with a
+   95 % bootstrap interval over trials), the mean range, the nearest range and the range ahead (the
    nearest beam within 22.5 deg of the heading). Eight points, whose middle
    six lie within 0.1 of each other in openness, and greedy speeds frozen
    after a few dozen updates of each situation: a coarse measure.
@@ -48,10 +49,11 @@ AHEAD_DEG = SECTORS_DEG[0]
 DECILES = 10
 
 
-def _pooled(folder: str, behaviour: str) -> tuple[np.ndarray, np.ndarray, list, list]:
-    """Convergence iterations (inf = none), greedy speeds (trials, c), and the
-    evaluations' commanded speeds and readings (one array per evaluation)."""
-    conv, speeds, cmd, reading = [], [], [], []
+def _pooled(folder: str, behaviour: str) -> tuple[np.ndarray, dict[str, np.ndarray], list, list]:
+    """Convergence iterations (inf = none); greedy speeds, updates of each situation
+    and final Q (``speed`` (trials, c), ``updates`` (trials, c), ``q`` (trials, c, 3));
+    the evaluations' commanded speeds and readings (one array per evaluation)."""
+    conv, speeds, updates, qs, cmd, reading = [], [], [], [], [], []
     for f in sorted(Path(folder).glob("*.h5")):
         lg = open_log(f)
         for k in lg.trial_indices():
@@ -60,11 +62,14 @@ def _pooled(folder: str, behaviour: str) -> tuple[np.ndarray, np.ndarray, list, 
             conv.append(np.inf if it is None or it < 0 else float(it))
             out = tr.policies[behaviour].outputs["speed"]
             speeds.append(np.asarray(out.actions)[np.asarray(out.rules)])
+            updates.append(np.asarray(tr.behaviours[behaviour]["speed/updates"]))
+            qs.append(np.asarray(tr.behaviours[behaviour]["speed/q"]))
             for key, v in tr.episodes.items():
                 if key.startswith("eval/") and key.endswith("/command"):
                     cmd.append(np.asarray(v)[:, 1])
                     reading.append(np.asarray(tr.episodes[key[:-len("command")] + "reading"]))
-    return np.array(conv), np.array(speeds), cmd, reading
+    learned = {"speed": np.array(speeds), "updates": np.array(updates), "q": np.array(qs)}
+    return np.array(conv), learned, cmd, reading
 
 
 def _clearances(r: np.ndarray, offset: float, angles: np.ndarray) -> dict[str, np.ndarray]:
@@ -78,17 +83,20 @@ def _rho(x: np.ndarray, y: np.ndarray) -> float:
     return float(spearmanr(x, y).statistic)
 
 
-def per_situation(S: np.ndarray, centers: np.ndarray, labels: list[str], offset: float,
-                  angles: np.ndarray) -> None:
-    """Print the per-situation table and correlations (``S``: trials x situations)."""
+def per_situation(learned: dict[str, np.ndarray], centers: np.ndarray, labels: list[str],
+                  offset: float, angles: np.ndarray) -> None:
+    """Print the per-situation table and correlations (``learned`` from :func:`_pooled`)."""
     cl = _clearances(centers, offset, angles)
+    S = learned["speed"]
     mean_speed = S.mean(axis=0)
     print("| situation | openness (mean log range) | mean range | nearest range | "
-          "learned speed, mean over trials |")
-    print("|---|---|---|---|---|")
+          "learned speed, mean over trials | updates, median | mean Q of each speed |")
+    print("|---|---|---|---|---|---|---|")
     for i in np.argsort(cl["openness"]):
+        q = " / ".join(f"{v:.0f}" for v in learned["q"][:, i].mean(axis=0))
         print(f"| {labels[i]} | {cl['openness'][i]:.2f} | {centers[i].mean():.2f} m | "
-              f"{centers[i].min():.2f} m | {mean_speed[i]:.3f} m/s |")
+              f"{centers[i].min():.2f} m | {mean_speed[i]:.3f} m/s | "
+              f"{np.median(learned['updates'][:, i]):.0f} | {q} |")
     rng = np.random.default_rng(0)
     boot = [_rho(S[rng.integers(0, len(S), len(S))].mean(axis=0), cl["openness"])
             for _ in range(2000)]
@@ -127,11 +135,11 @@ def main() -> None:
     centers = np.asarray(src.interpreter_state()["centers"], dtype=np.float64)
     offset = float(src.config["interpreter"].get("offset", 0.1))
     angles = (np.asarray(src.sensor.angles_deg) + 180.0) % 360.0 - 180.0
-    conv, S, cmd, reading = _pooled(args.folder, args.behaviour)
+    conv, learned, cmd, reading = _pooled(args.folder, args.behaviour)
     q25, med, q75 = np.percentile(conv, [25, 50, 75], method="lower")
     print(f"{len(conv)} trials, {np.isfinite(conv).sum()} converged; iterations to "
           f"convergence median {med:.0f} [IQR {q25:.0f}, {q75:.0f}]")
-    per_situation(S, centers, situation_labels(src), offset, angles)
+    per_situation(learned, centers, situation_labels(src), offset, angles)
     per_iteration(cmd, reading, offset, angles)
 
 
