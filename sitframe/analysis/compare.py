@@ -375,6 +375,29 @@ def compare_logs(paths: list[str | os.PathLike[str]], *, seed: int = 0) -> Compa
 SEED_KEY = "experiment.seed"
 
 
+def compare_sweeps(folders: list[str | os.PathLike[str]], *, seed: int = 0) -> Comparison:
+    """Compare two or more sweep folders, each one run pooled over all its points.
+
+    The use: the same preset swept over the same seeds with two settings that
+    no grid can pair (e.g. a Q start *and* a temperature changed together),
+    one sweep file each. Each folder's points are its runs (the cluster
+    bootstrap and the run-median rank test of :func:`_compare`).
+
+    Raises
+    ------
+    InputError
+        Fewer than two folders, or a folder that is not a sweep output.
+    """
+    if len(folders) < 2:
+        raise InputError(f"compare needs at least two sweep folders, got {len(folders)}",
+                         key="LOG")
+    tables = [[_summary(as_log(p["log"])) for p in read_sweep(f)[1]] for f in folders]
+    src = [os.fspath(f) for f in folders]
+    names = _run_names(src)
+    sources = [f"{len(t)} point(s) of {s}, pooled" for t, s in zip(tables, src, strict=True)]
+    return _compare(names, sources, tables, seed)
+
+
 def read_sweep(folder: str | os.PathLike[str]) -> tuple[list[str], list[dict[str, Any]]]:
     """The grid keys and the points (``point``, key values, ``log`` path) of a sweep folder.
 
