@@ -16,8 +16,9 @@ Times are CPU seconds of this process (``time.process_time``): on a machine
 shared with other jobs, wall time mostly measures the others.
 
 Prints the rates and the ratios single / plain (target >= 0.5) and vector /
-single (target >= 3 at N = 16), and whether ``check_env`` passes for every
-registered id.
+single (target >= 3 at N = 16) -- of the medians, and the median of each
+repeat's own ratio (its loops ran back to back, under the same load) -- and
+whether ``check_env`` passes for every registered id.
 
 Run::
 
@@ -92,12 +93,18 @@ def main() -> None:
         t["single"].append(steps / single(env, steps, k))
         t["vector"].append(steps / vector(venv, steps, k))
     m = {key: statistics.median(v) for key, v in t.items()}
+    # each repeat times the three loops back to back: its ratios share the machine's load
+    paired = {key: statistics.median(x / y for x, y in zip(t[num], t[den], strict=True))
+              for key, num, den in (("single/plain", "single", "plain"),
+                                    ("vector/single", "vector", "single"))}
     print(f"steps={steps} repeats={a.repeats} (medians)")
     print(f"plain simulator:   {m['plain']:10,.0f} iterations/s")
     print(f"single env:        {m['single']:10,.0f} steps/s   single/plain = "
           f"{m['single'] / m['plain']:.2f}  (target >= 0.5; >= 10,000 steps/s)")
     print(f"vector env N={a.num_envs:<3}: {m['vector']:10,.0f} robot-steps/s   vector/single = "
           f"{m['vector'] / m['single']:.2f}  (target >= 3)")
+    print("median of the per-repeat ratios: " + ", ".join(f"{k} = {v:.2f}"
+                                                          for k, v in paired.items()))
 
 
 if __name__ == "__main__":

@@ -25,10 +25,18 @@ Config::
     headings = [90, 60, 30, 0, -30, -60, -90]
     speeds = []                             # as in the env's config
     normalize = true
+
+The policy is the model file: a run records the file's SHA-256 in each trial's
+behaviour data (``params/sha256``, under ``/trials/NNNN/behaviours/<label>/``),
+and ``sitframe evaluate`` re-creates the behaviour with it (``sha256 = ...``),
+so a log is re-scored with the very policy that ran, or refused in one line
+when the file is missing or has changed since. A config may pin ``sha256``
+itself.
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
 from pathlib import Path
 from typing import Any
@@ -49,7 +57,7 @@ class SB3PolicyBehaviour:
     def __init__(self, *, model: str, algorithm: str = "dqn",
                  headings: list[float] = (90, 60, 30, 0, -30, -60, -90),  # type: ignore[assignment]
                  speeds: list[float] = (),  # type: ignore[assignment]
-                 normalize: bool = True, diagonal: float = 0.0) -> None:
+                 normalize: bool = True, diagonal: float = 0.0, sha256: str = "") -> None:
         P.choice("algorithm", algorithm, ALGORITHMS)
         self.headings = np.asarray(P.number_list("headings", list(headings), lo=-90, hi=90))
         self.speeds = np.asarray(P.number_list("speeds", list(speeds), lo=0.0)) if len(speeds) \
@@ -59,6 +67,11 @@ class SB3PolicyBehaviour:
         if not Path(model).is_file():
             raise ValueError(f"model: file not found: {model!r} (expected a model saved by "
                              "Stable-Baselines3, e.g. model.save('avoid.zip'))")
+        self.sha256 = hashlib.sha256(Path(model).read_bytes()).hexdigest()
+        if sha256 and sha256 != self.sha256:
+            raise ValueError(f"model: {model!r} has changed since the run (its SHA-256 is "
+                             f"{self.sha256[:16]}..., the run's was {str(sha256)[:16]}...); "
+                             "expected the model file the run used")
         try:
             import stable_baselines3 as sb3
         except ImportError:
@@ -126,7 +139,8 @@ class SB3PolicyBehaviour:
         pass  # frozen
 
     def trial_data(self) -> dict[str, Any]:
-        return {}
+        """The model file's SHA-256, a parameter ``sitframe evaluate`` re-creates it with."""
+        return {"params/sha256": self.sha256}
 
 
 @hookimpl

@@ -58,9 +58,6 @@ import numpy as np
 from sitframe import RunContext, Transition, hookimpl
 from sitframe import params as P
 
-#: Geometry assumed when the reward is used outside a run (no ``bind``).
-PIONEER_ANGLES = (90.0, 50.0, 30.0, 10.0, -10.0, -30.0, -50.0, -90.0)
-
 
 class WallFollowingReward:
     """Thesis Algorithm 7 with the wall distance defined in the module docstring.
@@ -79,9 +76,11 @@ class WallFollowingReward:
     side_min_angle
         Beams with ``|angle| >= side_min_angle`` [deg] measure the wall distance.
     robot_radius
-        Robot disc radius [m] (ranges are from the rim; default: the run's).
+        Robot disc radius [m] (ranges are from the rim; default: the run's, 0.15
+        when used outside a run).
     max_range
-        Readings at or beyond this [m] saw nothing (default: the sensor's).
+        Readings at or beyond this [m] saw nothing (default: the sensor's, 3.0 when
+        used outside a run).
     approach_min
         The nearest range must shrink by more than this [m] to count as approaching.
     """
@@ -123,10 +122,10 @@ class WallFollowingReward:
         self.band_centre = 0.5 * (self.near + self.far)
         self._given = {"angles_deg": angles_deg, "robot_radius": robot_radius,
                        "max_range": max_range}
-        self._set_geometry(
-            PIONEER_ANGLES if angles_deg is None else angles_deg,
-            0.15 if robot_radius is None else robot_radius,
-            3.0 if max_range is None else max_range)
+        self.angles_deg: np.ndarray | None = None
+        if angles_deg is not None:  # else the run's sensor gives them at bind
+            self._set_geometry(angles_deg, 0.15 if robot_radius is None else robot_radius,
+                               3.0 if max_range is None else max_range)
 
     def _set_geometry(self, angles_deg: Sequence[float], robot_radius: float,
                       max_range: float) -> None:
@@ -157,6 +156,9 @@ class WallFollowingReward:
     def wall_distances(self, readings: np.ndarray) -> np.ndarray:
         """Distance to the nearer wall [m] of each row of ``readings`` (n, d); inf = no wall."""
         r = np.atleast_2d(np.asarray(readings, dtype=float))
+        if self.angles_deg is None:
+            raise ValueError("the wall-following reward knows no beam angles: give angles_deg "
+                             "or bind it to a run (the run's sensor gives them)")
         if r.shape[1] != self.angles_deg.size:
             raise ValueError(f"a reading has {r.shape[1]} ranges but angles_deg has "
                              f"{self.angles_deg.size}; set reward_params.angles_deg")

@@ -45,6 +45,7 @@ _PUBLIC: dict[str, str] = {
     "World": "world", "Goal": "world", "load_world": "world",
     "RobotParams": "robot", "Command": "robot", "StepOutcome": "robot",
     "cast_rays": "geometry", "cast_rays_many": "geometry", "rim_ranges": "geometry",
+    "rim_ranges_many": "geometry",
     "raycast": "geometry",
     "point_segment_distance": "geometry", "min_distance": "geometry",
     # situations and learning building blocks

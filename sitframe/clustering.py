@@ -7,7 +7,7 @@ Typical use::
 
     trials = cluster_trials(X, 8, n_trials=50, seed=1)
     prototypes = trials.chosen_centers          # (8, 8) situations
-    [describe_prototype(v, SONAR_ANGLES_DEG) for v in prototypes]
+    [describe_prototype(v, angles_deg) for v in prototypes]  # the sensor's bearings
 
 Trial selection rule (:func:`select_trial`)
 -------------------------------------------
@@ -54,7 +54,6 @@ from sitframe.fcm import (
 __all__ = [
     "RANKED_MEASURES",
     "SELECTION_RULE",
-    "SONAR_ANGLES_DEG",
     "ClusteringTrials",
     "SweepResult",
     "canonical_order",
@@ -67,9 +66,6 @@ __all__ = [
     "select_trial",
     "sweep_c",
 ]
-
-#: Bearings of the 8 front sonars of the Pioneer 2DX, degrees, positive = left.
-SONAR_ANGLES_DEG: tuple[float, ...] = (90.0, 50.0, 30.0, 10.0, -10.0, -30.0, -50.0, -90.0)
 
 #: The measures that are ranked when selecting a trial (every "max"/"min" one).
 RANKED_MEASURES: tuple[str, ...] = tuple(
@@ -538,7 +534,7 @@ SIDE_WALL_REACH = 1.5
 
 def describe_prototype(
     center: np.ndarray,
-    angles_deg: np.ndarray = SONAR_ANGLES_DEG,
+    angles_deg: np.ndarray,
     *,
     near: float = 0.5,
     far: float = 0.9,
@@ -667,7 +663,7 @@ def _ahead(v: np.ndarray, a: np.ndarray, is_ahead: np.ndarray, left: float,
 
 def canonical_order(
     centers: np.ndarray,
-    angles_deg: np.ndarray = SONAR_ANGLES_DEG,
+    angles_deg: np.ndarray,
     *,
     max_range: float = 3.0,
 ) -> np.ndarray:

@@ -170,6 +170,9 @@ class Behaviour(Protocol):
 
         Scalars named ``converged`` (bool) and ``convergence_iteration`` (int,
         -1 if not converged) are used by the summary table and ``run --json``.
+        Scalars named ``params/<key>`` are parameters the behaviour ran with beyond
+        its config table (a frozen policy's model-file hash): ``sitframe evaluate``
+        re-creates it with them.
         Written under ``/trials/NNNN/behaviours/<label>/``.
         """
         ...

@@ -18,7 +18,7 @@ from sitframe.logs import open_log
 from sitframe.loop import STAGE_BATCH, STAGE_EVAL, TrialSpec, batch_scores, simulate, stage_seed
 from sitframe.pluginmanager import Registry, get_plugin_manager
 from sitframe.prepare import BEST_TRIAL_RULE, best_of, check_state, logged_policy
-from sitframe.records import LearnedPolicy
+from sitframe.records import LearnedPolicy, summary_key
 from sitframe.resolve import Resolved
 
 
@@ -44,6 +44,12 @@ def evaluate_log(
     wall-following reward adds ``wall_band_fraction`` and
     ``wall_distance_rmse_m``). ``arbiter`` replaces the log's arbiter.
 
+    A behaviour that learned nothing but logged ``params/<key>`` trial data (a
+    frozen deep-RL policy, ``plugins/sb3_policy.py``: its model file's hash) is
+    re-created with those parameters added to its table, so the log is scored
+    with the policy that ran; a run with neither a learned policy nor such a
+    behaviour cannot be evaluated.
+
     With ``goal_episodes = N``: N episodes of the run's evaluation protocol
     (one batch, :func:`sitframe.loop.run_batch`; its table's
     ``episodes`` set to N), e.g. random goal episodes
@@ -51,7 +57,7 @@ def evaluate_log(
     protocol (a goal run) it is used; otherwise the behaviours, arbiter and ``[goal]`` table
     come from the ``fusion`` config (a preset name or a TOML path; default the
     ``goal-finding`` preset), whose behaviour with a ``policy_from`` is
-    replaced by the log's learned behaviour (its table and its policy), with
+    replaced by the log's learned (else frozen) behaviour (its table and its policy), with
     the log's situations. ``arbiter`` names another arbiter (its own
     parameters are kept if the fusion config configures that arbiter, else
     its defaults). Returns ``episodes``, ``success_rate``,
@@ -64,9 +70,12 @@ def evaluate_log(
     tl = log.trial(trial)
     policies = {label: p for label in tl.behaviours
                 if (p := logged_policy(tl, label, log_path)) is not None}
-    if not policies:
+    pinned = _pinned(tl.behaviours, cfg)
+    if not policies and not pinned:
         raise InputError(f"trial {trial} has no learned policy to evaluate", file=log_path,
                          key="trials")
+    for label, params in pinned.items():  # e.g. the model file's hash of a frozen policy
+        cfg["behaviours"][label] = {**cfg["behaviours"][label], **params}
     clusters_from = Config.of(cfg).experiment.clusters_from
     if tl.situations:  # situations that evolved in the trial: its own final ones
         state = tl.situations_part("state")
@@ -82,7 +91,8 @@ def evaluate_log(
     if goal_episodes:
         res0 = Resolved.build(cfg, registry, log_path)
         if res0.protocol_name() is None:
-            cfg, policies, source = _fusion_config(cfg, policies, fusion, log_path)
+            cfg, policies, source = _fusion_config(cfg, policies, list(pinned), fusion,
+                                                   log_path)
     if arbiter is not None:
         params = cfg["arbiter"] if cfg["arbiter"].get("component") == arbiter else {}
         cfg["arbiter"] = {**params, "component": arbiter}
@@ -122,10 +132,23 @@ def evaluate_log(
     return out
 
 
+def _pinned(behaviours: dict[str, dict[str, Any]], cfg: dict[str, Any]
+            ) -> dict[str, dict[str, Any]]:
+    """Each behaviour's ``params/<key>`` trial data: parameters it ran with beyond its table
+    (a frozen policy's model hash), which re-create the same behaviour."""
+    out = {}
+    for label, data in behaviours.items():
+        params = {k.split("/", 1)[1]: v for k, v in data.items() if k.startswith("params/")}
+        if params and label in cfg["behaviours"]:
+            out[label] = params
+    return out
+
+
 def _fusion_config(log_cfg: dict[str, Any], policies: dict[str, LearnedPolicy],
-                   fusion: str, log_path: str
+                   frozen: list[str], fusion: str, log_path: str
                    ) -> tuple[dict[str, Any], dict[str, LearnedPolicy], str]:
-    """The fusion config with the log's learned behaviour in its ``policy_from`` slot."""
+    """The fusion config with the log's learned behaviour (or, without one, its ``frozen``
+    behaviour, e.g. a deep-RL policy) in its ``policy_from`` slot."""
     fcfg, fsource, _base = load_config(fusion)
     slots = [lb for lb, t in fcfg["behaviours"].items() if t.get("policy_from")]
     if not slots:
@@ -133,7 +156,8 @@ def _fusion_config(log_cfg: dict[str, Any], policies: dict[str, LearnedPolicy],
                          "behaviour", file=fsource, key="behaviours")
     slot = slots[0]
     want = fcfg["behaviours"][slot]["policy_from"].get("behaviour", slot)
-    src = want if want in policies else next(iter(policies))
+    sources = [*policies, *(lb for lb in frozen if lb not in policies)]
+    src = want if want in sources else sources[0]
     table = {k: v for k, v in log_cfg["behaviours"][src].items()
              if k == "component" or k not in META_KEYS}
     behaviours = {}
@@ -144,7 +168,8 @@ def _fusion_config(log_cfg: dict[str, Any], policies: dict[str, LearnedPolicy],
     for section in ("sensor", "interpreter", "robot"):
         fcfg[section] = log_cfg[section]
     fcfg["experiment"]["clusters_from"] = ""
-    return validate_config(fcfg, file=fsource), {slot: policies[src]}, fsource
+    return (validate_config(fcfg, file=fsource),
+            {slot: policies[src]} if src in policies else {}, fsource)
 
 
 def format_action(value: float, unit: str) -> str:
@@ -171,12 +196,12 @@ def rule_base_table(result: Any) -> Any:
 
     trials = result.trials
     world = Config.of(result.info.config).experiment.world
-    key = f"eval/{world}/collisions_per_1000"
+    key = summary_key("eval", world, "collisions_per_1000")
     ranked = [t for t in trials if key in t.summary]
     best = trials[0]
     if ranked:
         k = best_of([t.index for t in ranked], [t.summary[key] for t in ranked],
-                     [t.summary.get(f"eval/{world}/coverage", 0.0) for t in ranked],
+                     [t.summary.get(summary_key("eval", world, "coverage"), 0.0) for t in ranked],
                      [t.summary["collisions_per_1000_after_convergence"] for t in ranked])
         best = next(t for t in ranked if t.index == k)
     why = (f"best trial {best.index}: {BEST_TRIAL_RULE} when evaluated in '{world}'"

@@ -43,6 +43,7 @@ __all__ = [
     "polyline_segments",
     "raycast",
     "rim_ranges",
+    "rim_ranges_many",
     "segments_intersect",
 ]
 
@@ -428,6 +429,52 @@ def cast_rays_many(segments: SegmentSet, xy: np.ndarray, angles_rad: np.ndarray,
     sub.ex, sub.ey = segments.ex[idx][..., None], segments.ey[idx][..., None]
     return _raycast(xy[:, 0].reshape(n, 1, 1), xy[:, 1].reshape(n, 1, 1),
                     np.cos(ang)[:, None, :], np.sin(ang)[:, None, :], sub, float(max_range))
+
+
+
+def rim_ranges_many(segments: SegmentSet, xy: np.ndarray, angles_rad: np.ndarray,
+                    max_range: float, radius: float, group: int = 1, *,
+                    clip: bool = False) -> np.ndarray:
+    """:func:`rim_ranges` for N discs at once (N robots' range finders in one call).
+
+    Row ``i`` is bit-identical to ``rim_ranges(segments, *xy[i], angles_rad[i], max_range,
+    radius, group, clip=clip)``: one compiled call for all N when the kernels are there
+    (:mod:`sitframe.kernels`), else :func:`cast_rays_many`.
+
+    Parameters
+    ----------
+    segments
+        The world's :class:`SegmentSet`.
+    xy
+        (N, 2) disc centres [m].
+    angles_rad
+        (N, n * group) world-frame ray directions [rad], one row per disc, beam by beam.
+    max_range, radius, group, clip
+        As :func:`rim_ranges`.
+
+    Returns
+    -------
+    numpy.ndarray
+        (N, n) readings [m] in ``[-radius, max_range]`` (``[0, max_range]`` with ``clip``).
+    """
+    ang = np.asarray(angles_rad, dtype=np.float64)
+    xy = np.asarray(xy, dtype=np.float64)
+    n = ang.shape[1] // group if group >= 1 else 0
+    if ang.ndim != 2 or n * group != ang.shape[1] or xy.shape != (ang.shape[0], 2):
+        raise ValueError(f"rim_ranges_many: expected (N, 2) centres and (N, n * {group!r}) "
+                         f"angles, got {xy.shape} and {ang.shape}")
+    k = kernels()
+    if k is None:
+        reach = max_range + radius
+        dist = cast_rays_many(segments, xy, ang, reach)
+        if group > 1:
+            dist = dist.reshape(xy.shape[0], n, group).min(axis=2)
+        out = np.where(dist >= reach, max_range, dist - radius)
+        return np.clip(out, 0.0, max_range) if clip else out
+    out = np.empty((xy.shape[0], n))
+    k.ranges_many(xy, np.cos(ang), np.sin(ang), segments.packed, float(max_range),
+                  float(radius), int(group), bool(clip), out)
+    return out
 
 
 _EPS = 1e-12

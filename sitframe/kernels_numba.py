@@ -32,9 +32,10 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["arc_angles", "arc_poses", "backoff", "cast", "cast_each", "fcm_ratios",
-           "first_contact", "label_strengths", "linspace", "near_segments", "nearest_point",
-           "normalize", "ranges"]
+__all__ = ["arc_angles", "arc_poses", "backoff", "backoffs", "cast", "cast_each",
+           "contact_points", "fcm_ratios", "first_contact", "label_strengths", "linspace",
+           "near_segments", "nearest_point", "normalize", "ranges", "ranges_many", "refine",
+           "sweep_begin", "sweep_end"]
 
 _EPS = 1e-12  # the hit tolerance of sitframe.geometry._raycast
 _INV_PI = 1.0 / math.pi
@@ -115,6 +116,32 @@ def ranges(x: float, y: float, dx: np.ndarray, dy: np.ndarray, seg: np.ndarray, 
             v = v if (v > 0.0 or v != v) else 0.0
             v = v if (v < max_range or v != v) else max_range
         out[g] = v
+
+
+#: :func:`ranges_many` leaves out the segments farther than this many times the rays' reach.
+CULL = 1.01
+
+
+@njit(**_JIT)
+def ranges_many(xy: np.ndarray, dx: np.ndarray, dy: np.ndarray, seg: np.ndarray,
+                max_range: float, radius: float, group: int, clip: bool,
+                out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """:func:`ranges` for N disc centres ``xy`` (N, 2) with their own (N, rays) directions
+    ``dx, dy``: row ``i`` of ``out`` (N, readings) is ``ranges`` of row ``i``.
+
+    Each centre's rays meet only the segments within :data:`CULL` times their reach
+    (``max_range + radius``): a segment farther away is hit, if at all, beyond the reach,
+    which :func:`ranges` ignores (the nearest hit is a minimum, in any order). Rounding
+    could only bring such a hit inside the reach for a ray within some 1e-13 rad of a
+    segment whose line passes within some 1e-13 m of the centre.
+    """
+    reach = max_range + radius
+    cull2 = (CULL * reach) * (CULL * reach)
+    idx = np.empty(seg.shape[1], dtype=np.intp)
+    for i in range(out.shape[0]):
+        c = near_segments(xy[i, 0], xy[i, 1], seg, cull2, idx)
+        ranges(xy[i, 0], xy[i, 1], dx[i], dy[i], _gather(seg, idx, c), max_range, radius, group,
+               clip, out[i])
 
 
 @njit(**_JIT)
@@ -224,6 +251,135 @@ def arc_poses(t: np.ndarray, plan: np.ndarray, sinc_arg: np.ndarray, sin_sinc: n
 
 
 @njit(**_JIT)
+def _first_touch(xs: np.ndarray, ys: np.ndarray, seg: np.ndarray, idx: np.ndarray, count: int,
+                 r2: float) -> int:  # pragma: no cover - compiled
+    """:func:`first_contact` against the segments ``idx[:count]`` of ``seg``."""
+    for k in range(xs.size):
+        for jj in range(count):
+            if _dist2(xs[k], ys[k], seg, idx[jj]) < r2:
+                return k
+    return -1
+
+
+@njit(**_JIT)
+def sweep_begin(plans: np.ndarray, times: np.ndarray, period: float, margin: np.ndarray,
+                seg: np.ndarray, idx: np.ndarray, count: np.ndarray, slot: np.ndarray,
+                sinc_arg: np.ndarray, ang: np.ndarray) -> int:  # pragma: no cover - compiled
+    """Step 1 of ``robot.step_robot`` for N robots, and step 2 up to its sines and cosines.
+
+    ``plans`` (N, >= 6) rows start ``x0, y0, th0, v, omega, t_turn``; a robot's swept disc
+    reaches ``v * period + margin[0] + margin[1] + margin[2]`` (the radius, the back-off and
+    a hair, added one by one as there). Writes each robot's near segments to
+    ``idx[i, :count[i]]`` (:func:`near_segments`); a robot with any gets the next free row
+    ``slot[i]`` of ``sinc_arg, ang`` (B, n), where the arguments of its substeps' sines and
+    cosines at ``times`` go (:func:`arc_angles`); one in open space gets ``slot[i] = -1``.
+    Returns B, the number of robots near a wall, or -1 if a pose is not finite.
+    """
+    for i in range(plans.shape[0]):
+        for j in range(3):
+            if not math.isfinite(plans[i, j]):
+                return -1
+    b = 0
+    for i in range(plans.shape[0]):
+        reach = plans[i, 3] * period + margin[0] + margin[1] + margin[2]
+        count[i] = near_segments(plans[i, 0], plans[i, 1], seg, reach * reach, idx[i])
+        slot[i] = -1
+        if count[i] > 0:
+            slot[i] = b
+            arc_angles(times, plans[i, 2], plans[i, 4], plans[i, 5], sinc_arg[b], ang[b])
+            b += 1
+    return b
+
+
+@njit(**_JIT)
+def _refine_angles(plan: np.ndarray, state: np.ndarray, ts: np.ndarray, sinc_arg: np.ndarray,
+                   ang: np.ndarray) -> None:  # pragma: no cover - compiled
+    """One refinement round's samples ``ts`` between ``state``'s free time and bad time, and
+    the arguments of their sines and cosines (``robot.step_robot``, step 3)."""
+    linspace(state[0], state[4], ts)
+    arc_angles(ts, plan[2], plan[4], plan[5], sinc_arg, ang)
+
+
+@njit(**_JIT)
+def sweep_end(times: np.ndarray, plans: np.ndarray, slot: np.ndarray, sinc_arg: np.ndarray,
+              sin_sinc: np.ndarray, cos_ang: np.ndarray, sin_ang: np.ndarray, seg: np.ndarray,
+              idx: np.ndarray, count: np.ndarray, r2: float, poses: np.ndarray,
+              first: np.ndarray, hits: np.ndarray, state: np.ndarray, active: np.ndarray,
+              ts: np.ndarray, ref_arg: np.ndarray,
+              ref_ang: np.ndarray) -> int:  # pragma: no cover - compiled
+    """The rest of step 2 of ``robot.step_robot`` for the robots of :func:`sweep_begin`, and the
+    start of step 3 for those that touch a wall.
+
+    ``plans`` (N, 8) are :func:`arc_poses`' plans; the sines and cosines (B, n) are numpy's
+    of :func:`sweep_begin`'s arguments. Robot ``i`` near a wall gets its substep poses (3, n)
+    in ``poses[slot[i]]`` and the first substep that touches a wall in ``first[i]`` (-1 if
+    none, and for a robot in open space). The H robots that touch go to ``hits[:H]``, with
+    ``state[q]`` = ``t_c, cx, cy, cth, hi`` (the last free substep's time and pose, the first
+    bad one's time; ``t_c = 0`` at the start pose when it started inside, ``active[q]`` False:
+    nothing to refine) and the first refinement round's samples and arguments in ``ts[q],
+    ref_arg[q], ref_ang[q]`` (:func:`_refine_angles`). Returns H.
+    """
+    h = 0
+    for i in range(plans.shape[0]):
+        first[i] = -1
+        b = slot[i]
+        if b < 0:
+            continue
+        arc_poses(times, plans[i], sinc_arg[b], sin_sinc[b], cos_ang[b], sin_ang[b], poses[b])
+        k = _first_touch(poses[b, 0], poses[b, 1], seg, idx[i], count[i], r2)
+        first[i] = k
+        if k < 0:
+            continue
+        hits[h] = i
+        active[h] = k > 0
+        if k == 0:  # started inside: no forward motion
+            state[h, 0], state[h, 1], state[h, 2], state[h, 3] = 0.0, plans[i, 0], plans[i, 1], \
+                plans[i, 2]
+            state[h, 4] = 0.0
+            ref_arg[h, :] = 0.0
+            ref_ang[h, :] = 0.0
+        else:
+            j = k - 1
+            state[h, 0], state[h, 4] = times[j], times[k]
+            state[h, 1], state[h, 2], state[h, 3] = poses[b, 0, j], poses[b, 1, j], poses[b, 2, j]
+            _refine_angles(plans[i], state[h], ts[h], ref_arg[h], ref_ang[h])
+        h += 1
+    return h
+
+
+@njit(**_JIT)
+def refine(plans: np.ndarray, hits: np.ndarray, h: int, ts: np.ndarray, sinc_arg: np.ndarray,
+           ang: np.ndarray, sin_sinc: np.ndarray, cos_ang: np.ndarray, sin_ang: np.ndarray,
+           seg: np.ndarray, idx: np.ndarray, count: np.ndarray, r2: float, state: np.ndarray,
+           active: np.ndarray, poses: np.ndarray, more: bool) -> None:  # pragma: no cover
+    """One refinement round of ``robot.step_robot`` (step 3) for the robots ``hits[:h]`` of
+    :func:`sweep_end`: the poses (3, R) at the samples ``ts[q]`` (the sines and cosines are
+    numpy's of the arguments ``sinc_arg[q], ang[q]`` of the previous call), the first that
+    touches, and the narrowed ``state[q]``; with ``more``, the next round's samples and
+    arguments (overwriting ``ts, sinc_arg, ang``). A robot whose first sample touches (which
+    cannot happen) keeps its state and stops (``active[q]`` False), as there.
+    """
+    last = ts.shape[1] - 1
+    for q in range(h):
+        if not active[q]:
+            continue
+        i = hits[q]
+        arc_poses(ts[q], plans[i], sinc_arg[q], sin_sinc[q], cos_ang[q], sin_ang[q], poses[q])
+        j = _first_touch(poses[q, 0], poses[q, 1], seg, idx[i], count[i], r2)
+        if j < 0:
+            j = last  # the bad end of the interval
+        if j == 0:
+            active[q] = False
+            continue
+        state[q, 4] = ts[q, j]
+        j -= 1  # the last free sample: the disc touches there
+        state[q, 0], state[q, 1], state[q, 2], state[q, 3] = ts[q, j], poses[q, 0, j], \
+            poses[q, 1, j], poses[q, 2, j]
+        if more:
+            _refine_angles(plans[i], state[q], ts[q], sinc_arg[q], ang[q])
+
+
+@njit(**_JIT)
 def backoff(cx: float, cy: float, nx: float, ny: float, length: float, seg: np.ndarray,
             r2: float, inside: bool, s: np.ndarray) -> tuple[int, float, float]:  # pragma: no cover
     """The back-off of ``robot.step_robot`` (step 4) along ``(nx, ny)``, ``s.size`` samples.
@@ -248,6 +404,46 @@ def backoff(cx: float, cy: float, nx: float, ny: float, length: float, seg: np.n
             break
         m, x, y = i, bx, by
     return m, x, y
+
+
+@njit(**_JIT)
+def _gather(seg: np.ndarray, idx: np.ndarray, count: int) -> np.ndarray:  # pragma: no cover
+    """The packed segments ``idx[:count]`` of ``seg``, (5, count) (``seg[:, idx[:count]]``)."""
+    sub = np.empty((5, count))
+    for jj in range(count):
+        for r in range(5):
+            sub[r, jj] = seg[r, idx[jj]]
+    return sub
+
+
+@njit(**_JIT)
+def contact_points(hits: np.ndarray, h: int, state: np.ndarray, seg: np.ndarray,
+                   idx: np.ndarray, count: np.ndarray,
+                   out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """:func:`nearest_point` of each contact pose ``state[q, 1:3]`` of the robots ``hits[:h]``
+    (:func:`refine`) on its near segments, into ``out`` (h, 2)."""
+    for q in range(h):
+        i = hits[q]
+        out[q, 0], out[q, 1] = nearest_point(state[q, 1], state[q, 2],
+                                             _gather(seg, idx[i], count[i]))
+
+
+@njit(**_JIT)
+def backoffs(hits: np.ndarray, h: int, state: np.ndarray, normals: np.ndarray, length: float,
+             seg: np.ndarray, idx: np.ndarray, count: np.ndarray, r2: float, first: np.ndarray,
+             s: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """:func:`backoff` of the robots ``hits[:h]`` from their contact poses along ``normals``
+    (h, 2) into ``out`` (h, 3): distance backed off, x, y (``robot._backoff``'s result; a
+    robot that started inside, ``first[i] == 0``, may back off from inside)."""
+    for q in range(h):
+        i = hits[q]
+        cx, cy = state[q, 1], state[q, 2]
+        m, x, y = backoff(cx, cy, normals[q, 0], normals[q, 1], length,
+                          _gather(seg, idx[i], count[i]), r2, first[i] == 0, s)
+        if m > 0:
+            out[q, 0], out[q, 1], out[q, 2] = s[m], x, y
+        else:
+            out[q, 0], out[q, 1], out[q, 2] = 0.0, cx, cy
 
 
 #: Longest array :func:`_pairwise_sum` sums (numpy's block; longer ones it splits
@@ -335,6 +531,18 @@ def _warm() -> None:
     cast(0.0, 0.0, one, one, seg, 3.0, out)
     cast_each(one, one, one, one, seg, 3.0, out)
     ranges(0.0, 0.0, one, one, seg, 3.0, 0.1, 1, True, out)
+    two = np.ones((2, 2))
+    ranges_many(np.ones((2, 3))[:, :2], two, two, seg, 3.0, 0.1, 1, True, np.empty((2, 2)))
+    ints = [np.zeros(2, dtype=np.intp) for _ in range(4)]
+    idx2, act = np.zeros((2, 1), dtype=np.intp), np.zeros(2, dtype=np.bool_)
+    state, p3 = np.zeros((2, 5)), np.empty((2, 3, 2))
+    sweep_begin(np.ones((2, 8)), one, 1.5, np.ones(3), seg, idx2, ints[0], ints[1], two, two)
+    sweep_end(one, np.ones((2, 8)), ints[1], two, two, two, two, seg, idx2, ints[0], 0.01, p3,
+              ints[2], ints[3], state, act, two, two, two)
+    refine(np.ones((2, 8)), ints[3], 0, two, two, two, two, two, two, seg, idx2, ints[0], 0.01,
+           state, act, p3, True)
+    contact_points(ints[3], 0, state, seg, idx2, ints[0], two)
+    backoffs(ints[3], 0, state, two, 0.05, seg, idx2, ints[0], 0.01, ints[2], out, p3[0])
     near_segments(0.0, 0.0, seg, 1.0, idx)
     first_contact(one, one, seg, 0.01)
     nearest_point(0.0, 0.0, seg)

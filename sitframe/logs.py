@@ -115,9 +115,9 @@ from typing import Any
 import h5py
 import numpy as np
 
-from sitframe.clustering import SONAR_ANGLES_DEG
 from sitframe.errors import InputError
 from sitframe.interrupts import deferred_interrupt
+from sitframe.pluginmanager import Registry, get_plugin_manager
 from sitframe.records import LearnedPolicy, PolicyOutput, RunInfo, SensorSpec, TrialResult
 
 #: Per-iteration sensor readings (``sonar`` in logs from before contract v2).
@@ -778,21 +778,24 @@ class Log:
     def sensor(self) -> SensorSpec:
         """The run sensor's geometry (name, beam angles, max range).
 
-        Logs written before the spec was logged: the ``[sensor]`` table's
-        ``angles_deg`` and ``max_range``, else the Pioneer ring's defaults.
+        Logs written before the spec was logged: the spec of the sensor plugin
+        the ``[sensor]`` table names, created with the table's parameters.
         """
-        d = self._json_attr("sensor", "{}", dict)
-        if not d:
-            table = self.config.get("sensor", {})
-            d = {"name": table.get("component", "pioneer-sonar"),
-                 "angles_deg": table.get("angles_deg", SONAR_ANGLES_DEG),
-                 "max_range": table.get("max_range", 3.0)}
+        d = self._json_attr("sensor", "{}", dict) or self._sensor_from_config()
         try:
             return SensorSpec(str(d["name"]), np.asarray(d["angles_deg"], dtype=np.float64),
                               float(d["max_range"]), str(d.get("unit", "m")))
         except (KeyError, TypeError, ValueError) as exc:
             raise InputError(f"root attribute is not a sensor spec: {exc}", file=self.path,
                              key="sensor") from None
+
+    def _sensor_from_config(self) -> dict[str, Any]:
+        table = dict(self.config.get("sensor", {}))
+        name = str(table.pop("component", "pioneer-sonar"))
+        registry = Registry.collect(get_plugin_manager())
+        sensor = registry.create("sensor", name, table, file=self.path, key="sensor")
+        return {"name": name, "angles_deg": np.asarray(sensor.angles_deg).tolist(),
+                "max_range": sensor.max_range}
 
     @contextmanager
     def _file(self) -> Iterator[h5py.File]:

@@ -61,6 +61,7 @@ from sitframe.records import (
     Transition,
     TrialInfo,
     TrialResult,
+    summary_key,
 )
 from sitframe.resolve import Resolved
 from sitframe.robot import Command, RobotParams, StepOutcome, step_robot
@@ -787,11 +788,6 @@ def attach_evaluation(result: TrialResult, wname: str, ev: TrialResult) -> None:
     for plugin, data in ev.plugin_data.items():
         box = result.plugin_data.setdefault(plugin, {})
         box.update({f"eval/{wname}/{k}": v for k, v in data.items()})
-
-
-def summary_key(*parts: str) -> str:
-    """The one spelling of a summary key: ``eval/<world>/<metric>`` (``.`` in the log's table)."""
-    return "/".join(parts)
 
 
 def trial_summary(world: World, arrays: dict[str, np.ndarray], bdata: dict[str, dict[str, Any]],

@@ -32,7 +32,7 @@ from sitframe.config import config_hash, load_config, to_toml, validate_config
 from sitframe.errors import InputError
 from sitframe.experiment import Experiment
 from sitframe.logs import Log, lock_log, open_log, unlock_log
-from sitframe.records import LearnedPolicy
+from sitframe.records import LearnedPolicy, summary_key
 from sitframe.resolve import Resolved
 
 
@@ -337,7 +337,7 @@ def best_trial(log: Log) -> int:
     """
     table = log.summary()
     world = log.config.get("experiment", {}).get("world", "training")
-    column = f"eval.{world}.collisions_per_1000"
+    column = summary_key("eval", world, "collisions_per_1000", sep=".")
     names = table.dtype.names or ()
     if table.size == 0 or column not in names:
         raise InputError(f"cannot pick the best trial: the log has no evaluation in its learning "
@@ -345,7 +345,8 @@ def best_trial(log: Log) -> int:
                          file=log.path, key="summary")
     after = table["collisions_per_1000_after_convergence"] if \
         "collisions_per_1000_after_convergence" in names else np.zeros(table.size)
-    coverage = table[f"eval.{world}.coverage"] if f"eval.{world}.coverage" in names \
+    cov_key = summary_key("eval", world, "coverage", sep=".")
+    coverage = table[cov_key] if cov_key in names \
         else np.zeros(table.size)
     return best_of(table["trial"], table[column], coverage, after)
 

@@ -384,3 +384,14 @@ class LearnedPolicy:
     def rules(self) -> dict[str, np.ndarray]:
         """Output -> (c,) action indices (the form ``policy_from`` loads)."""
         return {k: o.rules for k, o in self.outputs.items()}
+
+
+def summary_key(*parts: str, sep: str = "/") -> str:
+    """The one spelling of a summary key, e.g. ``summary_key("eval", "novel-1", "coverage")``.
+
+    The parts are joined by ``sep``: ``"/"`` in a trial's summary
+    (:attr:`TrialResult.summary`, ``run --json``), ``"."`` in the log's summary
+    table and ``Log.summary()`` (an HDF5 name cannot hold ``/``), ``"_"`` in a
+    sweep's CSV columns (headers that spreadsheets read unquoted).
+    """
+    return sep.join(parts)

@@ -367,28 +367,44 @@ def step_robot(
             hi = float(ts[j])
             j -= 1  # the last free sample: the disc touches there
             t_c, cx, cy, cth = float(ts[j]), float(fx[j]), float(fy[j]), float(fth[j])
-    contact_pose = np.array([cx, cy, _wrap(cth)])
     contact_xy = _nearest_point(cx, cy, near)
-    heading_change = math.degrees(cth - th0)
-    distance = v * t_c
+    backoff, bx, by = 0.0, cx, cy
+    if params.recovery != "none" and params.recovery_backoff_m > 0.0:
+        # --- 4. recovery: back off along the contact normal, then turn away (_turn_away);
+        # started inside (k == 0): accept any back-off that does not get closer to a wall
+        nx, ny = _normal(cx, cy, cth, contact_xy)
+        backoff, bx, by = _backoff(cx, cy, nx, ny, params.recovery_backoff_m, near, r2, k == 0)
+    return _turn_away(pose_before, plan, t_c, (cx, cy, cth), contact_xy, (backoff, bx, by),
+                      params, rng)
 
-    if params.recovery == "none":
-        return StepOutcome(pose_before, contact_pose, True, contact_xy, contact_pose,
-                           distance, heading_change)
 
-    # --- 4. recovery: back off along the contact normal, then turn away
+def _normal(cx: float, cy: float, cth: float, contact_xy: np.ndarray) -> tuple[float, float]:
+    """The unit contact normal, from the contact point through the disc centre ``(cx, cy)``."""
     nx, ny = cx - float(contact_xy[0]), cy - float(contact_xy[1])
     norm = math.hypot(nx, ny)
     if norm > 0.0:
-        nx, ny = nx / norm, ny / norm
-    else:  # centre on the wall (only if it started there): back straight up
-        nx, ny = -math.cos(cth), -math.sin(cth)
-    backoff = 0.0
-    if params.recovery_backoff_m > 0.0:
-        # started inside (k == 0): accept any back-off that does not get closer to a wall
-        backoff, cx, cy = _backoff(cx, cy, nx, ny, params.recovery_backoff_m, near, r2, k == 0)
+        return nx / norm, ny / norm
+    # centre on the wall (only if it started there): back straight up
+    return -math.cos(cth), -math.sin(cth)
 
-    bearing = _wrap(math.atan2(float(contact_xy[1]) - cy, float(contact_xy[0]) - cx) - cth)
+
+def _turn_away(pose_before: np.ndarray, plan: tuple[float, ...], t_c: float,
+               contact: tuple[float, float, float], contact_xy: np.ndarray,
+               backed: tuple[float, float, float], params: RobotParams,
+               rng: np.random.Generator) -> StepOutcome:
+    """The end of :func:`step_robot` for a robot that touched a wall at time ``t_c`` [s] at
+    pose ``contact`` (x, y, theta), at the point ``contact_xy``, and backed off
+    ``backed`` = (distance [m], x, y): turn away from the contact (a dead-ahead contact picks
+    the side with ``rng``)."""
+    cx, cy, cth = contact
+    backoff, bx, by = backed
+    contact_pose = np.array([cx, cy, _wrap(cth)])
+    heading_change = math.degrees(cth - plan[2])
+    distance = plan[3] * t_c
+    if params.recovery == "none":
+        return StepOutcome(pose_before, contact_pose, True, contact_xy, contact_pose,
+                           distance, heading_change)
+    bearing = _wrap(math.atan2(float(contact_xy[1]) - by, float(contact_xy[0]) - bx) - cth)
     turn_max = math.radians(params.recovery_turn_deg)
     room = math.pi - abs(bearing)  # turning more would face the contact again
     turn = min(turn_max, room)
@@ -396,7 +412,7 @@ def step_robot(
         turn = -turn
     elif bearing == 0.0 and rng.random() < 0.5:
         turn = -turn
-    final = np.array([cx, cy, _wrap(cth + turn)])
+    final = np.array([bx, by, _wrap(cth + turn)])
     return StepOutcome(pose_before, final, True, contact_xy, contact_pose, distance,
                        heading_change, backoff, math.degrees(turn))
 

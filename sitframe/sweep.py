@@ -74,6 +74,7 @@ import numpy as np
 
 from sitframe.config import META_KEYS
 from sitframe.errors import InputError, did_you_mean, note
+from sitframe.records import summary_key
 
 # start-up time: this module is imported whenever the command line builds its parser
 # (``sitframe --help`` and every command), so what only one command needs is imported
@@ -485,13 +486,14 @@ def summarise_tables(tables: list[np.ndarray]) -> dict[str, Any]:
             if m and m.group(1) not in worlds:
                 worlds.append(m.group(1))
     for w in worlds:
-        c = col(f"eval.{w}.collisions_per_1000")
+        c = col(summary_key("eval", w, "collisions_per_1000", sep="."))
+        k = summary_key("eval", w, "coll", sep="_")
         fin = c[np.isfinite(c)]
-        (row[f"eval_{w}_coll_median"], row[f"eval_{w}_coll_q25"],
-         row[f"eval_{w}_coll_q75"]) = _median_iqr(c)
-        row[f"eval_{w}_coll_max"] = float(fin.max()) if fin.size else math.nan
-        row[f"eval_{w}_coll_over10"] = float(np.mean(fin > 10)) if fin.size else math.nan
-        row[f"eval_{w}_coverage_median"] = _median_iqr(col(f"eval.{w}.coverage"))[0]
+        row[f"{k}_median"], row[f"{k}_q25"], row[f"{k}_q75"] = _median_iqr(c)
+        row[f"{k}_max"] = float(fin.max()) if fin.size else math.nan
+        row[f"{k}_over10"] = float(np.mean(fin > 10)) if fin.size else math.nan
+        row[summary_key("eval", w, "coverage_median", sep="_")] = \
+            _median_iqr(col(summary_key("eval", w, "coverage", sep=".")))[0]
     row["eval_worlds"] = worlds
     return row
 
@@ -569,8 +571,8 @@ def write_tables(result: dict[str, Any], out: Path) -> tuple[Path, Path]:
             "conv_iter_q25", "conv_iter_q75", "post_coll_median", "post_coll_q25",
             "post_coll_q75"]
     for w in worlds:
-        cols += [f"eval_{w}_coll_median", f"eval_{w}_coll_q25", f"eval_{w}_coll_q75",
-                 f"eval_{w}_coll_max", f"eval_{w}_coll_over10", f"eval_{w}_coverage_median"]
+        cols += [summary_key("eval", w, s, sep="_") for s in (
+            "coll_median", "coll_q25", "coll_q75", "coll_max", "coll_over10", "coverage_median")]
     out.mkdir(parents=True, exist_ok=True)
     csv_path, md_path = out / "summary.csv", out / "summary.md"
     _write_csv(csv_path, rows, [*cols, "log"])
@@ -618,11 +620,12 @@ def markdown_table(result: dict[str, Any], *, pooled: bool = False) -> str:
         cells.append(_med_iqr(r, "conv_iter", 0))
         cells.append(_med_iqr(r, "post_coll", 1))
         for w in worlds:
-            cells.append(f"{_med_iqr(r, f'eval_{w}_coll', 1)} "
-                         f"({_num(r.get(f'eval_{w}_coll_max', math.nan), 0)})")
-            over = r.get(f"eval_{w}_coll_over10", math.nan)
+            k = summary_key("eval", w, "coll", sep="_")
+            cells.append(f"{_med_iqr(r, k, 1)} ({_num(r.get(f'{k}_max', math.nan), 0)})")
+            over = r.get(f"{k}_over10", math.nan)
             cells.append(f"{over:.0%}" if math.isfinite(over) else "–")
-            cells.append(_num(r.get(f"eval_{w}_coverage_median", math.nan), 2))
+            cov = summary_key("eval", w, "coverage_median", sep="_")
+            cells.append(_num(r.get(cov, math.nan), 2))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 

@@ -14,6 +14,7 @@ from matplotlib.figure import Figure
 from sitframe import analysis as A
 from sitframe.cli import main
 from sitframe.errors import InputError
+from sitframe.plugins.sonar import PIONEER_ANGLES_DEG as PIONEER
 from sitframe.world import parse_world
 
 TINY = small_config(name="tiny", seed=5, sweep=(3, 6))
@@ -133,7 +134,7 @@ def test_figures_are_figures(log, trial):
     conv = A.convergence_iteration(trial)
     world = parse_world(log.worlds[trial.world])
     figs = [
-        A.plot_prototypes(log.interpreter_state()["centers"]),
+        A.plot_prototypes(log.interpreter_state()["centers"], PIONEER),
         A.plot_measures_by_trial(A.clustering_trials(log)),
         A.plot_measures_by_c(A.sweep_result(log)),
         A.plot_exploration(A.exploration_counts(trial), A.situation_labels(log),

@@ -10,6 +10,7 @@ import pytest
 from sitframe.errors import InputError
 from sitframe.plugins.arbiters import CDBArbiter, PriorityArbiter, trapezoid
 from sitframe.plugins.goal import GoalBehaviour, goal_bearing_deg
+from sitframe.plugins.sonar import PIONEER_ANGLES_DEG as PIONEER
 from sitframe.plugins.wall_following import WallFollowingReward
 from sitframe.records import Context, Proposal, Transition
 from sitframe.robot import Command, StepOutcome
@@ -45,7 +46,7 @@ def transition(before, after, *, heading=0.0, collided=False) -> Transition:
 
 @pytest.fixture()
 def wf() -> WallFollowingReward:
-    return WallFollowingReward()
+    return WallFollowingReward(angles_deg=PIONEER)
 
 
 def test_wall_distance_definition(wf):
@@ -75,13 +76,15 @@ def test_reward_cases(wf):
 
 
 def test_reward_params_and_metrics():
-    r = WallFollowingReward(near=0.2, far=0.5, inside=10.0)
+    r = WallFollowingReward(near=0.2, far=0.5, inside=10.0, angles_deg=PIONEER)
     assert r(transition(side(right=0.45), side(right=0.45))) == 10
     sonar = np.stack([side(right=0.25), side(right=0.10), np.full(8, FAR), side(left=0.30)])
-    m = WallFollowingReward().metrics({"sonar": sonar})
+    m = WallFollowingReward(angles_deg=PIONEER).metrics({"sonar": sonar})
     assert m["wall_band_fraction"] == pytest.approx(0.5)
     assert m["wall_lost_fraction"] == pytest.approx(0.25)
     assert m["wall_band_rmse_m"] == pytest.approx(math.sqrt((0.05 ** 2 + 2.65 ** 2) / 4))
+    with pytest.raises(ValueError, match="knows no beam angles"):  # unbound, no angles
+        WallFollowingReward().wall_distance(side(right=0.25))
     with pytest.raises(InputError, match="near"):
         WallFollowingReward(near=-1)
     with pytest.raises(ValueError, match="greater than near"):

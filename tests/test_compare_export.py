@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from sitframe.analysis.compare import _compare, _holm, compare_logs
+from sitframe.analysis.compare import _compare, _holm, compare_logs, compare_sweeps
 from sitframe.analysis.replay_data import replay_payload
 from sitframe.cli import main
 from sitframe.logs import open_log
@@ -127,6 +127,33 @@ def test_compare_sweep_folder(two_runs, tmp_path, capsys):
     assert data["metrics"][0]["n"] == [4, 2] and data["unit"] == "trial"  # p=9 has one seed
     assert (folder / "report" / "axis_p.png").exists()
     assert (folder / "report" / "index.html").exists()
+
+
+
+def _sweep_folder(folder, logs):
+    """A sweep output folder with one point per (seed, log)."""
+    folder.mkdir()
+    with open(folder / "summary.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["point", "experiment.seed", "trials", "status", "log"])
+        for seed, log in enumerate(logs):
+            (folder / f"seed={seed}.h5").write_bytes(log.read_bytes())
+            w.writerow([f"seed={seed}", seed, 2, "complete", f"seed={seed}.h5"])
+    return folder
+
+
+def test_compare_two_sweep_folders(two_runs, tmp_path, capsys):
+    """Two sweeps of one preset (settings no grid can pair) compared as one run each,
+    pooled over their seeds: the run is the unit; a log and a folder do not mix."""
+    a, b = two_runs
+    one = _sweep_folder(tmp_path / "one", [a, a])
+    two = _sweep_folder(tmp_path / "two", [b, b, a])
+    cmp = compare_sweeps([one, two])
+    assert cmp.names == ["one", "two"] and cmp.unit == "run"
+    assert [v.size for v in cmp.metrics[0].values] == [4, 6]
+    assert main(["compare", str(one), str(a)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cannot be mixed" in err
 
 
 def test_same_log_twice_is_not_different(two_runs):

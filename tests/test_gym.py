@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import sys
 
 import numpy as np
@@ -78,9 +79,16 @@ def test_goal_reached_terminates() -> None:
     assert obs[-1] == pytest.approx(0.0, abs=1e-3)  # bearing: dead ahead
 
 
+@pytest.mark.parametrize("compiled", [True, False])
 @pytest.mark.parametrize(("config", "continuous"), [("obstacle-avoidance", False),
                                                     ("goal-finding", True)])
-def test_vector_env_equals_single_envs(config: str, continuous: bool) -> None:
+def test_vector_env_equals_single_envs(config: str, continuous: bool, compiled: bool,
+                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    from sitframe import kernels
+
+    if compiled and kernels.load() is None:
+        pytest.skip("compiled kernels switched off or numba missing")
+    monkeypatch.setattr(kernels, "_LOADED", [kernels.load() if compiled else None])
     n, seed = 3, 11
     venv = sg.SitframeVectorEnv(config, num_envs=n, max_steps=15, continuous=continuous)
     singles = [sg.SitframeEnv(task=venv.task, continuous=continuous) for _ in range(n)]
@@ -149,21 +157,29 @@ def test_sb3_behaviour_without_sb3_names_the_extra(tmp_path, monkeypatch) -> Non
     assert "sitframe[baselines]" in msg and "sb3-policy" in msg and "\n" not in msg
 
 
-def test_sb3_policy_behaviour_acts_as_in_the_env(tmp_path) -> None:
+@pytest.fixture(scope="module")
+def sb3_model(tmp_path_factory) -> tuple:
+    """``(model, path)``: a DQN smoke-trained 300 steps on the obstacle-avoidance env, saved."""
     sb3 = pytest.importorskip("stable_baselines3", reason="the baselines extra is not installed")
     import torch
 
+    torch.set_num_threads(1)
+    model = sb3.DQN("MlpPolicy", sg.make_env("obstacle-avoidance"), learning_starts=100, seed=0,
+                    device="cpu", policy_kwargs={"net_arch": [16]})
+    model.learn(300)  # a smoke run: the policy need not be good
+    path = tmp_path_factory.mktemp("sb3") / "avoid.zip"
+    model.save(path)
+    return model, path
+
+
+def test_sb3_policy_behaviour_acts_as_in_the_env(sb3_model) -> None:
     from sitframe.config import load_config
     from sitframe.pluginmanager import Registry, get_plugin_manager
     from sitframe.records import Context
     from sitframe.resolve import Resolved
 
-    torch.set_num_threads(1)
+    model, path = sb3_model
     env = sg.make_env("obstacle-avoidance")
-    model = sb3.DQN("MlpPolicy", env, learning_starts=100, seed=0, device="cpu")
-    model.learn(300)  # a smoke run: the policy need not be good
-    path = tmp_path / "avoid.zip"
-    model.save(path)
     # CDB fuses it with goal finding: the goal-finding preset with this behaviour as 'avoid'
     cfg, _s, _b = load_config("goal-finding")
     cfg["behaviours"]["avoid"] = _sb3_table(str(path))
@@ -176,3 +192,34 @@ def test_sb3_policy_behaviour_acts_as_in_the_env(tmp_path) -> None:
                       env.world, None)
         assert beh.propose(ctx).heading_deg == env.task.headings[int(act)]
         obs, *_ = env.step(a)
+
+
+def test_evaluate_rescores_an_sb3_run_with_its_own_model(sb3_model, tmp_path, capsys) -> None:
+    import shutil
+
+    from helpers import run_config, run_json, small_config
+
+    from sitframe.cli import main
+
+    model = tmp_path / "avoid.zip"
+    shutil.copy(sb3_model[1], model)
+    cfg = small_config(name="sb3", trials=1, iterations=60, c=4, fcm_trials=2,
+                       eval_iterations=60).replace(
+        'component = "fuzzy-q"\nreward = "obstacle-avoidance"\np = 5',
+        f'component = "sb3-policy"\nmodel = "{model.as_posix()}"\nalgorithm = "dqn"')
+    _cfg, log = run_config(tmp_path, cfg, "sb3.h5")
+    run = json.loads(capsys.readouterr().out)["trials"][0]["evaluation"]
+    got = run_json(capsys, "evaluate", str(log), "--world", "novel-1", "--iterations", "60",
+                   "--json")
+    # the frozen evaluation of the run, re-scored from the log: the same policy, the same numbers
+    assert {f"novel-1/{k}": got[k] for k in ("collisions", "distance_m", "coverage")} == \
+        {k: run[k] for k in ("novel-1/collisions", "novel-1/distance_m", "novel-1/coverage")}
+    fused = run_json(capsys, "evaluate", str(log), "--world", "novel-1", "--goal-episodes", "2",
+                     "--json")
+    assert fused["episodes"] == 2 and fused["arbiter"] == "cdb"  # CDB with goal finding
+    model.write_bytes(model.read_bytes() + b"x")  # another model under the run's file name
+    for broken in ("has changed since the run", "file not found"):
+        assert main(["evaluate", str(log), "--world", "novel-1", "--json"]) == 2
+        err = capsys.readouterr().err
+        assert broken in err and "sb3.h5" in err and err.count("\n") == 1
+        model.unlink(missing_ok=True)  # then: no model at all

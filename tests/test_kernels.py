@@ -165,3 +165,48 @@ def test_linspace_follows_numpy() -> None:
 def test_rim_ranges_rejects_ragged_groups(room: World) -> None:
     with pytest.raises(ValueError, match="do not make groups of 3"):
         geo.rim_ranges(room.segment_set, 1.0, 1.0, np.zeros(8), 3.0, 0.15, 3)
+
+
+def _fields(o) -> tuple:  # noqa: ANN001 - a StepOutcome
+    return (o.pose_before.tobytes(), o.pose.tobytes(), o.collided, o.contact_xy.tobytes(),
+            o.contact_pose.tobytes(), o.distance_m, o.heading_change_deg, o.backoff_m,
+            o.recovery_turn_deg)
+
+
+@pytest.mark.parametrize("recovery", ["backoff-turn", "none"])
+def test_fleet_steps_as_step_robot(room: World, recovery: str) -> None:
+    from sitframe.fleet import step_robots
+
+    rng = np.random.default_rng(5)
+    xy = rng.uniform([0.05, 0.05], [4.95, 3.95], (240, 2))  # some touching or inside a wall
+    poses = [np.array([x, y, th]) for (x, y), th in zip(xy, rng.uniform(-4, 4, 240),
+                                                          strict=True)]
+    cmds = [Command(float(h), float(v)) for h, v in rng.uniform([-90, 0.1], [90, 0.3], (240, 2))]
+    cmds[:8] = [Command(0.0, 0.3)] * 8  # the dead-ahead tie is the robot's generator's
+    poses[:8] = [np.array([2.5 - 0.2, 2.0, 0.0])] * 8
+    params = RobotParams(recovery=recovery)
+    ref = [_fields(step_robot(room, p, c, params, np.random.default_rng(i)))
+           for i, (p, c) in enumerate(zip(poses, cmds, strict=True))]
+    got = []
+    for b in range(0, 240, 16):  # a fleet of 16 at a time
+        got += [_fields(o) for o in step_robots(room, poses[b:b + 16], cmds[b:b + 16], params,
+                                                [np.random.default_rng(i)
+                                                 for i in range(b, b + 16)])]
+    assert got == ref
+    assert 30 < sum(f[2] for f in ref) < 240  # contacts, recoveries and open space all ran
+    turns = {f[-1] for f in ref[:8]}
+    assert recovery == "none" or turns == {45.0, -45.0}  # both sides of the tie were drawn
+
+
+def test_rim_ranges_many_rows_are_rim_ranges(room: World,
+                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    rng = np.random.default_rng(2)
+    xy = rng.uniform([0.05, 0.05], [4.95, 3.95], (12, 2))
+    ang = rng.uniform(-4, 4, (12, 10))
+    poses = np.c_[xy, ang[:, 0]]  # (the vector env passes its poses' x, y columns)
+    for group, clip in [(1, False), (5, True)]:
+        fast, slow = both(monkeypatch, lambda g=group, c=clip: geo.rim_ranges_many(
+            room.segment_set, poses[:, :2], ang, 3.0, 0.15, g, clip=c))
+        rows = [geo.rim_ranges(room.segment_set, x, y, a, 3.0, 0.15, group, clip=clip)
+                for (x, y), a in zip(xy, ang, strict=True)]
+        assert np.array_equal(fast, np.stack(rows)) and np.array_equal(slow, fast)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import h5py
 import numpy as np
 import pytest
 from helpers import run_config, small_config
@@ -9,9 +10,10 @@ from helpers import run_config, small_config
 from sitframe import InputError
 from sitframe import analysis as A
 from sitframe.cli import main
-from sitframe.clustering import SONAR_ANGLES_DEG, describe_prototype
+from sitframe.clustering import describe_prototype
 from sitframe.geometry import _raycast_reference
 from sitframe.plugins.laser import LaserScanner, sitframe_sensors
+from sitframe.plugins.sonar import PIONEER_ANGLES_DEG as PIONEER
 from sitframe.world import load_world, parse_world
 
 # A 6 x 1.4 m corridor, closed at both ends.
@@ -129,14 +131,14 @@ def test_bad_param_in_a_config_is_one_line(tmp_path, capsys) -> None:
 
 def test_pioneer_labels_do_not_depend_on_beam_order_or_turns() -> None:
     rng = np.random.default_rng(0)
-    a = np.array(SONAR_ANGLES_DEG)
+    a = np.array(PIONEER)
     for _ in range(300):
         v = rng.uniform(0.2, 3.0, 8)
-        label = describe_prototype(v)
+        label = describe_prototype(v, PIONEER)
         assert describe_prototype(v[::-1], a[::-1]) == label
         assert describe_prototype(v, a + 360) == label
-    assert describe_prototype([0.7, 1.0, 1.5, 3.0, 3.0, 1.5, 1.0, 0.7]) == "corridor"
-    assert describe_prototype([0.5, 0.6, 0.7, 0.6, 0.6, 0.7, 0.6, 0.5]) == "dead end"
+    assert describe_prototype([0.7, 1.0, 1.5, 3.0, 3.0, 1.5, 1.0, 0.7], PIONEER) == "corridor"
+    assert describe_prototype([0.5, 0.6, 0.7, 0.6, 0.6, 0.7, 0.6, 0.5], PIONEER) == "dead end"
 
 
 @pytest.mark.parametrize(("pose", "ring", "laser"), [
@@ -193,6 +195,12 @@ def test_cli_run_and_analyse_with_the_laser(tmp_path, capsys, sensor, layout) ->
     assert np.asarray(log.stage("collect")["samples"]).shape[1] == 16
     labels = A.situation_labels(log, numbered=False)
     assert len(labels) == 6 and all(labels)
+    # a log written before the spec was logged: the [sensor] table's plugin gives it
+    with h5py.File(out, "r+") as f:
+        del f.attrs["sensor"]
+    old = A.as_log(out).sensor
+    assert old.name == "laser" and old.max_range == 4.0
+    assert old.angles_deg.tolist() == spec.angles_deg.tolist()
     rep = tmp_path / "rep"
     assert main(["analyse", str(out), "-o", str(rep), "--dpi", "50"]) == 0
     assert capsys.readouterr().err == ""

@@ -9,7 +9,13 @@ from situation_set import labelled_readings
 
 from sitframe.clustering import describe_prototype
 from sitframe.plugins.laser import LaserScanner
+from sitframe.plugins.sonar import PIONEER_ANGLES_DEG as PIONEER
 from sitframe.plugins.sonar import SonarRing
+
+
+def sonar_label(ranges, **kw):
+    """The label of a Pioneer sonar reading."""
+    return describe_prototype(ranges, PIONEER, **kw)
 
 SENSORS = {
     "sonar-cones": SonarRing(beam_width_deg=25, rays_per_beam=5),  # the presets' sonar
@@ -44,5 +50,5 @@ def test_labels_are_right_on_the_labelled_set(sensor: str) -> None:
 def test_a_corridor_is_not_a_dead_end() -> None:
     # a prototype of the shipped obstacle-avoidance run: walls on both sides, the way
     # ahead open (the +-30 deg cones read the side walls through their outer rays)
-    assert describe_prototype([0.38, 0.44, 0.64, 1.24, 1.34, 0.7, 0.46, 0.39]) == "corridor"
-    assert describe_prototype([0.4, 0.45, 0.6, 0.7, 0.7, 0.6, 0.45, 0.4]) == "dead end"
+    assert sonar_label([0.38, 0.44, 0.64, 1.24, 1.34, 0.7, 0.46, 0.39]) == "corridor"
+    assert describe_prototype([0.4, 0.45, 0.6, 0.7, 0.7, 0.6, 0.45, 0.4], PIONEER) == "dead end"

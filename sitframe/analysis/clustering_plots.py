@@ -14,7 +14,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from sitframe.clustering import SONAR_ANGLES_DEG, ClusteringTrials, SweepResult, describe_prototype
+from sitframe.clustering import ClusteringTrials, SweepResult, describe_prototype
 from sitframe.fcm import MEASURE_DIRECTIONS
 
 __all__ = ["OKABE_ITO", "plot_measures_by_c", "plot_measures_by_trial", "plot_prototypes"]
@@ -62,7 +62,7 @@ def _panel_title(key: str) -> str:
 
 def plot_prototypes(
     centers: np.ndarray,
-    angles_deg: np.ndarray = SONAR_ANGLES_DEG,
+    angles_deg: np.ndarray,
     *,
     max_range: float = 3.0,
     labels: list[str] | None = None,

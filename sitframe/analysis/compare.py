@@ -49,6 +49,7 @@ from scipy import stats
 
 from sitframe.analysis.results import Table, _summary, as_log
 from sitframe.errors import InputError
+from sitframe.records import summary_key
 
 __all__ = ["Comparison", "MetricResult", "compare_logs", "compare_sweep", "trial_metrics"]
 
@@ -194,14 +195,14 @@ def trial_metrics(summary: np.ndarray) -> dict[str, tuple[str, str, np.ndarray]]
     worlds = list(dict.fromkeys(m.group(1) for n in names
                                 if (m := re.fullmatch(r"eval\.(.+)\.[^.]+", n))))
     for w in worlds:
-        if f"eval.{w}.collisions_per_1000" in names:
-            out[f"eval.{w}.collisions_per_1000"] = (f"{w}: collisions /1000 (evaluation)",
-                                                    "median", col(f"eval.{w}.collisions_per_1000"))
-            out[f"eval.{w}.coverage"] = (f"{w}: coverage (evaluation)", "median",
-                                         col(f"eval.{w}.coverage"))
+        coll, cov = (summary_key("eval", w, k, sep=".") for k in ("collisions_per_1000",
+                                                                     "coverage"))
+        if coll in names:
+            out[coll] = (f"{w}: collisions /1000 (evaluation)", "median", col(coll))
+            out[cov] = (f"{w}: coverage (evaluation)", "median", col(cov))
         for k, lab in _GOAL.items():
-            if f"eval.{w}.{k}" in names:
-                out[f"eval.{w}.{k}"] = (f"{w}: goal {lab}", "median", col(f"eval.{w}.{k}"))
+            if (key := summary_key("eval", w, k, sep=".")) in names:
+                out[key] = (f"{w}: goal {lab}", "median", col(key))
     return out
 
 
@@ -372,6 +373,29 @@ def compare_logs(paths: list[str | os.PathLike[str]], *, seed: int = 0) -> Compa
 
 
 SEED_KEY = "experiment.seed"
+
+
+def compare_sweeps(folders: list[str | os.PathLike[str]], *, seed: int = 0) -> Comparison:
+    """Compare two or more sweep folders, each one run pooled over all its points.
+
+    The use: the same preset swept over the same seeds with two settings that
+    no grid can pair (e.g. a Q start *and* a temperature changed together),
+    one sweep file each. Each folder's points are its runs (the cluster
+    bootstrap and the run-median rank test of :func:`_compare`).
+
+    Raises
+    ------
+    InputError
+        Fewer than two folders, or a folder that is not a sweep output.
+    """
+    if len(folders) < 2:
+        raise InputError(f"compare needs at least two sweep folders, got {len(folders)}",
+                         key="LOG")
+    tables = [[_summary(as_log(p["log"])) for p in read_sweep(f)[1]] for f in folders]
+    src = [os.fspath(f) for f in folders]
+    names = _run_names(src)
+    sources = [f"{len(t)} point(s) of {s}, pooled" for t, s in zip(tables, src, strict=True)]
+    return _compare(names, sources, tables, seed)
 
 
 def read_sweep(folder: str | os.PathLike[str]) -> tuple[list[str], list[dict[str, Any]]]:

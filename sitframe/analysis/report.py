@@ -38,6 +38,7 @@ from sitframe.analysis import results as R
 from sitframe.analysis.report_html import write_report_html
 from sitframe.errors import InputError
 from sitframe.logs import Log, TrialLog
+from sitframe.records import summary_key
 from sitframe.world import parse_world
 
 __all__ = ["AnalysisReport", "analyse", "log_problems"]
@@ -431,7 +432,7 @@ def _trial_figures(W: _Writer, lg: Log, tr: TrialLog, worlds: dict[str, Any], wi
         W.r.skipped.append(f"trajectory_trial{k}.png: world '{tr.world}' not in the log")
     eps = R.evaluation_episodes(tr)
     if eps:
-        cov = {w: float(tr.summary.get(f"eval/{w}/coverage", np.nan)) for w in eps}
+        cov = {w: float(tr.summary.get(summary_key("eval", w, "coverage"), np.nan)) for w in eps}
         missing = [w for w in eps if w not in worlds]
         if missing:
             W.r.skipped.append(f"evaluation_trial{k}.png: worlds {missing} not in the log")

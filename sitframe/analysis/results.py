@@ -44,6 +44,7 @@ from sitframe.clustering import (
 from sitframe.errors import InputError
 from sitframe.fcm import MEASURE_DIRECTIONS
 from sitframe.logs import Log, TrialLog, open_log
+from sitframe.records import summary_key
 
 __all__ = [
     "CollisionIntervals",
@@ -679,8 +680,9 @@ def convergence_table(log: LogLike) -> Table:
         ("Coverage", _col(s, "coverage")),
     ]
     for w in worlds:
-        series.append((f"{w} collisions [/1000 it.]", _col(s, f"eval.{w}.collisions_per_1000")))
-        series.append((f"{w} coverage", _col(s, f"eval.{w}.coverage")))
+        series.append((f"{w} collisions [/1000 it.]",
+                       _col(s, summary_key("eval", w, "collisions_per_1000", sep="."))))
+        series.append((f"{w} coverage", _col(s, summary_key("eval", w, "coverage", sep="."))))
     rows: list[list[Any]] = []
     for j in range(s.size):
         row: list[Any] = [int(s["trial"][j]), bool(conv[j])]
@@ -746,8 +748,8 @@ def compare_runs(a: LogLike, b: LogLike, names: tuple[str, str] | None = None) -
         rew = [n for n in (s.dtype.names or ()) if n.startswith("mean_reward_")]
         out.append(ms(_col(s, rew[0]), 2) if rew else "–")
         for w in worlds:
-            out.append(ms(_col(s, f"eval.{w}.collisions_per_1000")))
-            out.append(ms(_col(s, f"eval.{w}.coverage"), 2))
+            out.append(ms(_col(s, summary_key("eval", w, "collisions_per_1000", sep="."))))
+            out.append(ms(_col(s, summary_key("eval", w, "coverage", sep=".")), 2))
         return out
 
     labels = ["Finished trials", "Converged trials", "Convergence iteration",

@@ -211,9 +211,10 @@ class Task:
         """The observation of ``reading`` at ``pose`` (float32, in :meth:`observation_bounds`)."""
         return self.observe_many(reading[None, :], pose[None, :], [goal])[0]
 
-    def observe_many(self, readings: np.ndarray, poses: np.ndarray,
+    def observe_many(self, readings: np.ndarray, poses: np.ndarray | list[np.ndarray],
                      goals: list[Goal | None]) -> np.ndarray:
-        """Observations (N, d[+2]) of N robots' readings (N, d) at poses (N, 3)."""
+        """Observations (N, d[+2]) of N robots' readings (N, d) at poses (N, 3) (or N (3,)
+        arrays)."""
         obs = readings / self.max_range if self.normalize else readings
         if self.protocol is not None:
             extra = np.array([goal_features(p, g) for p, g in zip(poses, goals, strict=True)])
