@@ -95,6 +95,7 @@ CONFIGS: dict[str, Config] = {
     "dqn-g0.99": ("dqn", {**_DQN, "gamma": 0.99}, 30_000, _DQN_T),
     "ppo-base": ("ppo", _PPO, 60_000, _PPO_T),
     "ppo-lr1e-3": ("ppo", {**_PPO, "learning_rate": 1e-3}, 60_000, _PPO_T),
+    "ppo-g0.99": ("ppo", {**_PPO, "gamma": 0.99}, 60_000, _PPO_T),
 }
 FUZZY_CHECKPOINTS = (500, 1000, 2000, 5000)  # learning iterations
 
@@ -318,6 +319,7 @@ def tune_figure(runs: dict[str, list[dict[str, Any]]], path: Path) -> None:
                     _band(ax, curves(rs, "steps")[0], curves(rs, key)[1],
                           f"{name} ({len(rs)} seeds)")
             _axes_style(ax, "steps", key, tc, tv)
+            ax.set_xlabel("environment steps")
             ax.set_ylabel(f"{label}, training room")
         row[0].legend(fontsize=7, ncol=2)
     fig.suptitle("Tuning: frozen policies scored in the training room (median and IQR over "
