@@ -53,6 +53,7 @@ def plot_event_map(world: Any, events: dict[int, dict[str, np.ndarray]], title: 
                        label=f"{kind} ({len(xy)})", zorder=5)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), framealpha=0.85)
     ax.set_title(title)
+    fig.tight_layout()  # (again: room for the legend beside the map)
     return fig
 
 
