@@ -146,6 +146,14 @@ def test_memberships_and_controller_are_bit_identical(seed: int, c: int, m: floa
     assert fcs.output(u) == float(strength @ singletons) / float(strength.sum())
 
 
+def test_controller_without_rule_strength_gives_the_mean_singleton(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    fcs = SituationFCS(np.array([90.0, 0.0, -30.0]), np.array([0, 1, 1]))
+    assert both(monkeypatch, lambda: fcs.output(np.zeros(3))) == (20.0, 20.0)
+    u = np.array([0.5, 0.25, 0.25])  # labels 0.5 and 0.25: (45 + 0) / 0.75
+    assert both(monkeypatch, lambda: fcs.output(u)) == (60.0, 60.0)
+
+
 def test_pairwise_sum_follows_numpy() -> None:
     rng = np.random.default_rng(1)
     for n in range(1, K.PAIRWISE_MAX + 1):

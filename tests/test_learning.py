@@ -39,6 +39,25 @@ def test_output_is_within_singleton_range(u, data):
 def test_fcs_rejects_bad_rules():
     with pytest.raises(ValueError, match="rule_actions must index the 7 singletons"):
         SituationFCS(HEADINGS, np.array([0, 7]))
+    with pytest.raises(ValueError, match=r"non-empty 1-D array, got shape \(0,\)"):
+        SituationFCS(HEADINGS, np.array([], dtype=int))
+    fcs = SituationFCS(HEADINGS, np.array([1, 2]))
+    with pytest.raises(ValueError, match=r"non-empty 1-D array, got shape \(2, 2\)"):
+        fcs.set_rules(np.array([[0, 1], [2, 3]]))
+    assert fcs.rule_actions.tolist() == [1, 2]  # a refused rule base leaves the old one
+
+
+def test_fcs_rule_base_forms():
+    # One situation, one rule: its action whatever the membership.
+    assert SituationFCS(HEADINGS, np.array([2])).output(np.array([1.0])) == 30.0
+    # Whole numbers as floats (a TOML list, a rule base read back as float) index the singletons.
+    fcs = SituationFCS(HEADINGS, [0.0, 3.0])
+    assert fcs.rule_actions.dtype.kind == "i"
+    assert fcs.output(np.array([0.25, 0.75])) == 22.5
+    # set_rules replaces the rule base the controller reports and uses.
+    fcs.set_rules([6, 6])
+    assert fcs.rule_actions.tolist() == [6, 6]
+    assert fcs.output(np.array([0.25, 0.75])) == -90.0
 
 
 def test_params_validate_with_key():
