@@ -13,6 +13,7 @@ from sitframe import (
     SituationEvent,
     Transition,
 )
+from sitframe.errors import InputError
 from sitframe.plugins.fuzzy_q import CrispQBehaviour, FuzzyQBehaviour
 from sitframe.robot import Command, StepOutcome
 
@@ -61,15 +62,23 @@ def test_bad_configuration_names_the_key():
         FuzzyQBehaviour(learn=["speed"])
     with pytest.raises(ValueError, match=r"learn\[1\].*expected one of 'heading', 'speed'"):
         FuzzyQBehaviour(learn=["heading", "sped"])
-    with pytest.raises(ValueError, match="headings"):
-        FuzzyQBehaviour(headings=[120, 0])
-    with pytest.raises(ValueError, match="speeds"):
-        FuzzyQBehaviour(speeds=[-0.1, 0.2])
-    with pytest.raises(ValueError, match="new_row_optimism"):
-        FuzzyQBehaviour(new_row_optimism=1.5)
+    for kw, key in [({"headings": [-90.5, 0]}, "headings[0]"),
+                    ({"headings": [0, 90.5]}, "headings[1]"),
+                    ({"speeds": [0.2, -0.1]}, "speeds[1]"),
+                    ({"new_row_optimism": 1.5}, "new_row_optimism"),
+                    ({"new_row_optimism": -0.1}, "new_row_optimism")]:
+        with pytest.raises(InputError) as e:
+            FuzzyQBehaviour(**kw)
+        assert e.value.key == key, kw
+    # the bounds themselves are valid: headings within +-90 deg, optimism within [0, 1]
+    assert FuzzyQBehaviour(headings=[-90, 90]).singletons["heading"].tolist() == [-90, 90]
+    assert FuzzyQBehaviour(new_row_optimism=0.0).new_row_optimism == 0.0
+    assert FuzzyQBehaviour(new_row_optimism=1.0).new_row_optimism == 1.0
     b = FuzzyQBehaviour(speeds=[0.1, 0.3], learn="speed")  # a lone name is a list of one
     assert b.learn_outputs == ["speed"]
-    with pytest.raises(ValueError, match="output 'heading' is neither learned"):
+    with pytest.raises(ValueError, match=r"output 'heading' is neither learned \(learn = "
+                                         r"\[\.\.\.\]\) nor given by a learned policy "
+                                         r"\(policy_from\)$"):
         b.reset(np.random.default_rng(0), 2, 10)
 
 
@@ -92,6 +101,7 @@ def test_propose_blends_the_learned_rules_and_records_them():
     assert p.speed_m_s == pytest.approx(blend([0.1, 0.3], sp.rule_base, u))
     assert hd.rules_per_iteration[7].tolist() == hd.rule_base.tolist()
     assert sp.rules_per_iteration[7].tolist() == sp.rule_base.tolist()
+    assert not np.delete(hd.rules_per_iteration, 7, axis=0).any()  # that iteration's row only
     assert (hd.rule_base > 0).any()  # (a record that differs from no record)
     h = FuzzyQBehaviour(headings=H3)
     h.reset(np.random.default_rng(0), 2, 10)
@@ -128,7 +138,9 @@ def test_a_loaded_policy_fixes_its_outputs():
     b = FuzzyQBehaviour(headings=H3, speeds=[0.1, 0.3], learn=["heading", "speed"])
     other = LearnedPolicy({"heading": PolicyOutput(np.array([90.0, -90.0]), np.array([0, 1]))})
     with pytest.raises(ValueError, match=r"the policy's heading actions \[90.0, -90.0\] differ "
-                                         r"from this behaviour's headings \[90.0, 0.0, -90.0\]"):
+                                         r"from this behaviour's headings \[90.0, 0.0, -90.0\]; "
+                                         r"configure the same singletons as the run that "
+                                         r"learned it$"):
         b.load_policy(other)
     same_size = LearnedPolicy({"heading": PolicyOutput(np.array([90.0, 10.0, -90.0]),
                                                        np.array([0, 1]))})
@@ -149,7 +161,7 @@ def test_a_loaded_policy_fixes_its_outputs():
                                          "interpreter has 3 situations"):
         b.reset(np.random.default_rng(0), 3, 10)
     h = FuzzyQBehaviour(headings=H3)
-    h.load_policy(policy(heading=[0, 1], speed=[0, 1]))  # outputs it lacks are ignored
+    h.load_policy(policy(speed=[0, 1], heading=[0, 1]))  # outputs it lacks are ignored
     assert list(h.fixed) == ["heading"]
 
 
@@ -162,7 +174,8 @@ def test_trial_data_and_policy_of_learned_outputs():
     assert d["heading/rule_base"].shape == (10, 2)
     assert d["converged"] is False and d["convergence_iteration"] == -1
     hd.converged_at = 12
-    assert b.trial_data()["converged"] is False  # speed has not converged
+    d = b.trial_data()
+    assert d["converged"] is False and d["convergence_iteration"] == -1  # speed has not
     sp.converged_at = 30
     d = b.trial_data()
     assert d["converged"] is True and d["convergence_iteration"] == 30  # the later output
@@ -181,6 +194,11 @@ def test_situation_errors_and_changes_follow_the_learners():
     fixed.load_policy(policy(heading=[0, 1]))
     fixed.reset(np.random.default_rng(0), 2, 10)
     assert fixed.situation_errors() is None
+    one = FuzzyQBehaviour(headings=H3, b=100)
+    one.reset(np.random.default_rng(0), 2, 10)
+    one.situation_errors()
+    one.learn(transition(0, [0.0, 1.0], [0.0, 1.0]), -1.5)
+    assert one.situation_errors().tolist() == [0.0, 1.5]
     b = FuzzyQBehaviour(headings=H3, speeds=[0.1, 0.3], learn=["heading", "speed"], b=100,
                         new_row_optimism=0.25)
     b.reset(np.random.default_rng(0), 3, 10)
@@ -212,6 +230,7 @@ def test_crisp_q_acts_and_learns_on_the_dominant_situation():
     r0, r1 = lr.rule_base.tolist()
     c.propose(ctx(4, [0.9, 0.1]))
     assert lr.rules_per_iteration[4].tolist() == [r0, r1] and (r0, r1) != (0, 0)
+    assert not np.delete(lr.rules_per_iteration, 4, axis=0).any()
     c.learn(transition(0, [0.4, 0.6], [0.5, 0.5]), 1.0)  # only the dominant rule, strength 1
     assert lr.q[1, r1] == pytest.approx(0.3) and not lr.q[0].any()
     # V(s') of the dominant next situation (row 1: 0.3), not the blend 0.8 * 0.3
