@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 import shutil
 
 import h5py
@@ -255,3 +256,59 @@ def test_replay_refuses_a_window_outside_the_trial(tiny_log, tmp_path, capsys):
     assert main(["replay", str(tiny_log), "--fps", "0", "-o", gif]) == 2
     assert capsys.readouterr().err == "sitframe: error: --fps: must be at least 1, got 0\n"
     assert not (tmp_path / "w.gif").exists()
+
+
+FAKE_FFMPEG = """#!/bin/sh
+# stands in for ffmpeg: keeps its arguments and the raw frames it is sent, or fails as an
+# ffmpeg built without libx264 does
+for last; do :; done
+printf '%s\\n' "$@" > "$(dirname "$0")/args"
+if [ -n "$FAIL" ]; then cat > /dev/null; echo "Unknown encoder 'libx264'" >&2; exit 1; fi
+cat > "$last"
+"""
+
+
+def test_replay_mp4_pipes_every_frame_to_ffmpeg(tiny_log, tmp_path, capsys, monkeypatch):
+    bindir = tmp_path / "bin"
+    bindir.mkdir()
+    (bindir / "ffmpeg").write_text(FAKE_FFMPEG)
+    (bindir / "ffmpeg").chmod(0o755)
+    monkeypatch.setenv("PATH", f"{bindir}:{os.environ['PATH']}")
+    mp4 = tmp_path / "t.mp4"
+    assert main(["replay", str(tiny_log), "--from", "3", "--to", "7", "--fps", "5",
+                 "-o", str(mp4)]) == 0
+    args = (bindir / "args").read_text().split("\n")
+    w, h = map(int, args[args.index("-s") + 1].split("x"))
+    assert args[args.index("-r") + 1] == "5" and "libx264" in args
+    # 4 frames of w x h RGB, renamed into place from the scratch file ffmpeg wrote
+    assert mp4.stat().st_size == 4 * w * h * 3
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bin", "t.mp4"]
+    capsys.readouterr()
+    monkeypatch.setenv("FAIL", "1")
+    bad = tmp_path / "bad.mp4"
+    assert main(["replay", str(tiny_log), "--to", "3", "-o", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("sitframe: error: ") and err.count("\n") == 1
+    assert "-o: ffmpeg failed" in err
+    assert "Unknown encoder 'libx264'" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bin", "t.mp4"]  # no half file
+
+
+def test_replay_refuses_an_unwritable_output_and_an_incomplete_log(tiny_log, tmp_path, capsys):
+    (tmp_path / "afile").write_text("")
+    assert main(["replay", str(tiny_log), "--to", "3", "-o",
+                 str(tmp_path / "afile" / "r.gif")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("sitframe: error: ") and "r.gif: -o: cannot write the animation" in err
+    broken = tmp_path / "broken.h5"
+    shutil.copy(tiny_log, broken)
+    with h5py.File(broken, "r+") as f:
+        del f["trials/0000/memberships"]
+        f["trials/0001"].attrs["world"] = "atlantis"
+    assert main(["replay", str(broken), "--trial", "0", "-o", str(tmp_path / "r.gif")]) == 2
+    assert capsys.readouterr().err == (
+        f"sitframe: error: {broken}: trials/0000: trial 0 lacks the arrays ['memberships']\n")
+    assert main(["replay", str(broken), "--trial", "1", "-o", str(tmp_path / "r.gif")]) == 2
+    assert capsys.readouterr().err == (
+        f"sitframe: error: {broken}: worlds: the log does not hold the world 'atlantis'\n")
+    assert not (tmp_path / "r.gif").exists()
