@@ -202,3 +202,40 @@ def test_resume_refuses_a_log_whose_config_changed(reference, tmp_path, capsys, 
     assert err.count("\n") == 1 and f"{out}: {key}:" in err
     assert "resuming would mix two configurations" in err
     assert out.read_bytes() == before
+
+
+def test_resume_refuses_a_log_whose_plugins_changed(reference, tmp_path, capsys):
+    """Trials of two plugin versions, or of a plugin no longer there, never share a log."""
+    import json
+
+    import h5py
+
+    _cfg, ref = reference
+    out = tmp_path / "plugins.h5"
+    _unfinished_copy(ref, out)
+    with h5py.File(out, "r") as f:
+        logged = json.loads(f.attrs["plugins"])
+    fq = next(d for d in logged if d["name"] == "fuzzy-q")
+    cases = [
+        ({**fq, "version": "0.0.1"},
+         f"plugin 'fuzzy-q' is {fq['version']} now, 0.0.1 when the run started; resuming "
+         "would mix results of two versions"),
+        ({**fq, "distribution": "sitframe-fork"},
+         f"plugin 'fuzzy-q' is {fq['version']} now, {fq['version']} when the run started"),
+        ({"name": "ghost", "origin": "entry point", "distribution": "ghost-plugins",
+          "version": "1.0"}, "plugin 'ghost' (ghost-plugins) that the run used is not "
+                             "installed now"),
+        ({"name": "ghost", "origin": "module"},
+         "plugin 'ghost' (module) that the run used is not installed now"),
+    ]
+    for entry, message in cases:
+        plugins = [d for d in logged if d["name"] != entry["name"]] + [entry]
+        with h5py.File(out, "a") as f:
+            f.attrs["plugins"] = json.dumps(plugins)
+        before = out.read_bytes()
+        capsys.readouterr()
+        assert main(["run", "--resume", str(out), "--json"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"sitframe: error: {out}: plugins: {message}"), entry
+        assert err.count("\n") == 1
+        assert out.read_bytes() == before
