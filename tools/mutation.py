@@ -31,6 +31,25 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
+#: Appended to the scratch copy of ``tests/conftest.py``. mutmut tests each mutant in a
+#: process forked from one that already ran the tests, so multiprocessing's forkserver
+#: record names a process that is not this one's child: the first worker pool of a
+#: mutant's test run (resume, ``--workers``) then fails with ``ChildProcessError`` and
+#: every mutant would count as killed. Forgetting that record starts a forkserver of its own.
+FORK_RESET = """
+
+def pytest_sessionstart(session):  # (added by tools/mutation.py)
+    import multiprocessing.forkserver as mpf
+
+    fs = mpf._forkserver
+    if fs._forkserver_pid is not None:
+        try:
+            os.waitpid(fs._forkserver_pid, os.WNOHANG)
+        except ChildProcessError:
+            fs._forkserver_pid = fs._forkserver_address = fs._forkserver_alive_fd = None
+"""
+
+
 def build(workdir: Path, fresh: bool, tests: list[str], modules: list[str]) -> None:
     """Copy the sources into ``workdir`` with the installed package layout."""
     if fresh and workdir.exists():
@@ -43,6 +62,8 @@ def build(workdir: Path, fresh: bool, tests: list[str], modules: list[str]) -> N
         if dst.exists():
             shutil.rmtree(dst)
         shutil.copytree(src, dst, ignore=ignore)
+    with open(workdir / "tests" / "conftest.py", "a", encoding="utf-8") as f:
+        f.write(FORK_RESET)
     text = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
     if tests:
         start = text.index("pytest_add_cli_args_test_selection = [")
