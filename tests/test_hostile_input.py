@@ -180,7 +180,8 @@ def test_3_resume_refuses_a_changed_world(tmp_path, capsys):
     before = log.read_bytes()
     (tmp_path / "room.toml").write_text(ROOM.replace("[4, 2.5], [5, 2.5]", "[3, 2.5], [5, 2.5]"))
     refused(capsys, ["run", "--resume", log, "--workers", "1"], "r.h5: worlds:",
-            "world 'room.toml' changed")
+            "world 'room.toml' changed since the run started (its file differs from the "
+            "copy in the log); resuming would run trials in two different rooms")
     assert log.read_bytes() == before
 
 
@@ -197,7 +198,8 @@ def test_3_resume_refuses_a_rewritten_policy_source(base, tmp_path, capsys):
     # the source log is rewritten: same situations, other policies
     _run(tmp_path, SMALL, "src.h5", capsys, "--seed", "9", "--clusters-from", str(situations))
     refused(capsys, ["run", "--resume", log, "--workers", "1"], "p.h5: inputs.policy_from/avoid:",
-            "changed since it started")
+            "what the run read for policy_from/avoid changed since it started (another log was "
+            "rewritten); resuming would mix two inputs")
     assert log.read_bytes() == before
 
 

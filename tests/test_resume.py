@@ -3,6 +3,7 @@ Ctrl-C marks the log aborted and exits 130."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -239,3 +240,39 @@ def test_resume_refuses_a_log_whose_plugins_changed(reference, tmp_path, capsys)
         assert err.startswith(f"sitframe: error: {out}: plugins: {message}"), entry
         assert err.count("\n") == 1
         assert out.read_bytes() == before
+
+
+def test_resume_api_and_the_records_a_log_may_lack_or_add(reference, tmp_path, capsys):
+    import h5py
+
+    from sitframe.resume import prepare_resume
+
+    _cfg, ref = reference
+    out = tmp_path / "api.h5"
+    _unfinished_copy(ref, out)
+    exp, kwargs, missing = prepare_resume(out)
+    assert missing == [5, 6, 7] and kwargs["skip"] == frozenset(range(5))
+    assert exp.info.extra["progress"] is False and exp.info.extra["resume"] is True
+    # a log from before inputs were recorded resumes; one recording an input this
+    # config does not read is refused
+    with h5py.File(out, "a") as f:
+        del f.attrs["inputs"]
+    assert prepare_resume(out)[2] == [5, 6, 7]
+    with h5py.File(out, "a") as f:
+        f.attrs["inputs"] = '{"clusters_from": "0123"}'
+    with pytest.raises(InputError, match="what the run read for clusters_from changed"):
+        prepare_resume(out)
+    # a plugin the run loaded from a folder is checked through config.plugins.dirs, not
+    # as an installed one
+    with h5py.File(out, "a") as f:
+        f.attrs["inputs"] = "{}"
+        plugins = json.loads(f.attrs["plugins"])
+        f.attrs["plugins"] = json.dumps(plugins + [{"name": "mine", "origin": "plugins-dir"}])
+    assert prepare_resume(out)[2] == [5, 6, 7]
+    # a logged config this sitframe refuses names the key inside the log's config
+    with h5py.File(out, "a") as f:
+        f.attrs["config"] = f.attrs["config"].replace("iterations = 300", "iterations = -3")
+    with pytest.raises(InputError) as e:
+        prepare_resume(out)
+    assert e.value.file == str(out) and e.value.key == "config.experiment.iterations"
+    assert e.value.message.startswith("the log's config is no longer valid: ")
