@@ -341,7 +341,8 @@ def test_7_resume_does_not_load_plugin_folders_named_by_the_log(base, tmp_path, 
         f.attrs["config"] = f.attrs["config"].replace("dirs = []", 'dirs = ["evil"]')
         f.attrs["source"] = str(tmp_path / "anything.toml")
     refused(capsys, ["run", "--resume", log, "--workers", "1"],
-            "crafted.h5: config.plugins.dirs:", "--plugins-dir")
+            "crafted.h5: config.plugins.dirs:", "resuming never runs code that only a log "
+            "names: pass --plugins-dir DIR for each folder you trust")
     assert not marker.exists()
 
 
