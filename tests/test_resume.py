@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -201,7 +202,9 @@ def test_resume_refuses_a_log_whose_config_changed(reference, tmp_path, capsys, 
     assert main(["run", "--resume", str(out), "--json"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"{out}: {key}:" in err
-    assert "resuming would mix two configurations" in err
+    assert re.search(r": this sitframe resolves the logged config differently \(config hash "
+                     r"[0-9a-f]{12} != logged [0-9a-f]{12}: defaults changed since the run\); "
+                     r"resuming would mix two configurations$", err.strip()), err
     assert out.read_bytes() == before
 
 
@@ -253,6 +256,10 @@ def test_resume_api_and_the_records_a_log_may_lack_or_add(reference, tmp_path, c
     exp, kwargs, missing = prepare_resume(out)
     assert missing == [5, 6, 7] and kwargs["skip"] == frozenset(range(5))
     assert exp.info.extra["progress"] is False and exp.info.extra["resume"] is True
+    assert exp.info.extra["code_changed"] is False  # the same code
+    with h5py.File(out, "a") as f:  # a log from before the code hash was recorded
+        del f.attrs["code_hash"]
+    assert prepare_resume(out)[0].info.extra["code_changed"] is False
     # a log from before inputs were recorded resumes; one recording an input this
     # config does not read is refused
     with h5py.File(out, "a") as f:
