@@ -82,7 +82,11 @@ class SituationFCS:
 
     def set_rules(self, rule_actions: np.ndarray) -> None:
         """Replace the rule base (an action index per situation)."""
-        actions = np.asarray(rule_actions, dtype=np.intp)
+        given = np.asarray(rule_actions)
+        if given.dtype.kind not in "iub" and not (given.dtype.kind == "f" and
+                                                 np.array_equal(given, np.floor(given))):
+            raise ValueError(f"rule_actions must be whole action indices, got {given.tolist()}")
+        actions = given.astype(np.intp)
         if actions.ndim != 1 or actions.size == 0:
             raise ValueError(
                 f"rule_actions must be a non-empty 1-D array, got shape {actions.shape}")

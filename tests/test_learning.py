@@ -45,6 +45,11 @@ def test_fcs_rejects_bad_rules():
     with pytest.raises(ValueError, match=r"non-empty 1-D array, got shape \(2, 2\)"):
         fcs.set_rules(np.array([[0, 1], [2, 3]]))
     assert fcs.rule_actions.tolist() == [1, 2]  # a refused rule base leaves the old one
+    # a fractional or NaN action is no index: refused, not truncated to the one below
+    for bad in ([0.5, 1.0], [float("nan"), 1.0], ["a", "b"]):
+        with pytest.raises(ValueError, match="whole action indices"):
+            fcs.set_rules(bad)
+    assert fcs.rule_actions.tolist() == [1, 2]
 
 
 def test_fcs_rule_base_forms():

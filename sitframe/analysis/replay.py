@@ -230,7 +230,7 @@ def replay(
         if suffix == ".gif":
             _write_gif(tmp, frames, fps)
         else:
-            _write_mp4(tmp, frames, fps, canvas)
+            _write_mp4(tmp, frames, fps, canvas, shown=out)
         os.replace(tmp, out)
     except BaseException as exc:
         tmp.unlink(missing_ok=True)
@@ -261,7 +261,8 @@ def _write_gif(out: Path, frames: Any, fps: int) -> None:
     pal[0].save(out, save_all=True, append_images=pal[1:], duration=round(1000 / fps), loop=0)
 
 
-def _write_mp4(out: Path, frames: Any, fps: int, canvas: Any) -> None:
+def _write_mp4(out: Path, frames: Any, fps: int, canvas: Any, shown: Path | None = None) -> None:
+    """Pipe ``frames`` to ffmpeg writing ``out``; errors name ``shown`` (the user's path)."""
     import subprocess
 
     w, h = canvas.get_width_height()
@@ -279,8 +280,8 @@ def _write_mp4(out: Path, frames: Any, fps: int, canvas: Any) -> None:
         proc.stdin.close()
         err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
         if proc.wait() != 0:
-            raise InputError(f"ffmpeg failed: {err.strip().splitlines()[-1:] or err}",
-                             file=str(out), key="-o")
+            last = (err.strip().splitlines() or [f"exit status {proc.returncode}"])[-1]
+            raise InputError(f"ffmpeg failed: {last}", file=str(shown or out), key="-o")
 
 
 def _check_output(out: Path, fps: int) -> str:
