@@ -53,9 +53,12 @@ from typing import Any
 
 import numpy as np
 
-from sitframe.errors import InputError
-from sitframe.logs import LogWriter, open_log, shard_folder
-from sitframe.parallel import compare_logs
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_parallel import kill_config  # noqa: E402
+
+from sitframe.errors import InputError  # noqa: E402
+from sitframe.logs import LogWriter, open_log, shard_folder  # noqa: E402
+from sitframe.parallel import compare_logs  # noqa: E402
 
 SITFRAME = [sys.executable, "-m", "sitframe.cli"]
 REPO = Path(__file__).resolve().parent.parent
@@ -186,30 +189,7 @@ def write_cost(n: int, old_rev: str | None, n_old: int, tmp: Path) -> int:
     return 0 if ok and ratio <= 1.2 else 1
 
 
-KILL_CONFIG = """
-[experiment]
-name = "kill"
-trials = 30
-iterations = 150
-seed = 21
-
-[collect]
-worlds = ["collect-1", "collect-2"]
-
-[interpreter]
-component = "fcm"
-c = 6
-trials = 2
-
-[behaviours.avoid]
-component = "fuzzy-q"
-reward = "obstacle-avoidance"
-p = 5
-
-[evaluate]
-worlds = ["novel-1"]
-iterations = 30
-"""
+KILL_CONFIG = kill_config(trials=30, iterations=150, fcm_trials=2, eval_iterations=30)
 
 
 def _run(args: list[str]) -> None:

@@ -94,11 +94,14 @@ def bench_workers(experiment: str, trials: int, workers: int, repeats: int, tmp:
     print(f"load average during the benchmark: {os.getloadavg()}")
 
 
-KILL_CONFIG = """
+def kill_config(trials: int = 10, iterations: int = 3000, fcm_trials: int = 4,
+                eval_iterations: int = 100) -> str:
+    """The kill/interrupt config: ``trials`` short obstacle-avoidance trials, 6 situations."""
+    return f"""
 [experiment]
 name = "kill"
-trials = 10
-iterations = 3000
+trials = {trials}
+iterations = {iterations}
 seed = 21
 
 [collect]
@@ -107,7 +110,7 @@ worlds = ["collect-1", "collect-2"]
 [interpreter]
 component = "fcm"
 c = 6
-trials = 4
+trials = {fcm_trials}
 
 [behaviours.avoid]
 component = "fuzzy-q"
@@ -116,8 +119,11 @@ p = 5
 
 [evaluate]
 worlds = ["novel-1"]
-iterations = 100
+iterations = {eval_iterations}
 """
+
+
+KILL_CONFIG = kill_config()
 
 
 def reference_run(tmp: Path) -> tuple[Path, Path, float]:
