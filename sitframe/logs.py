@@ -774,7 +774,7 @@ class Log:
         v = self.attrs.get("failure")
         return str(v) if v else None
 
-    @property
+    @cached_property  # (read once: an old log's asks the plugin registry)
     def sensor(self) -> SensorSpec:
         """The run sensor's geometry (name, beam angles, max range).
 
