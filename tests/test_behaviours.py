@@ -406,3 +406,34 @@ def test_single_arbiter_passes_one_proposal_and_refuses_several():
     with pytest.raises(ValueError, match=r"^the 'single' arbiter needs exactly one behaviour, "
                                          r"got 2 \(avoid, goal\); use 'cdb' or 'priority'$"):
         SingleArbiter().combine(ctx(), {"avoid": p, "goal": p})
+
+
+def test_cdb_defaults_are_the_thesis_close_and_far_shoulders():
+    """Defaults (thesis Fig. 6.4): close = [0, 0, 0.2, 0.6], far = [0.2, 0.6, 3, 3] [m]."""
+    labels = ["avoid", "goal"]
+    cdb = CDBArbiter()
+    for d, want in [(0.2, [1.0, 0.0]), (0.3, [0.75, 0.25]), (0.5, [0.25, 0.75]),
+                    (0.6, [0.0, 1.0]), (5.0, [0.0, 1.0])]:
+        assert cdb.weights(d, labels) == pytest.approx(want), d
+
+
+def test_cdb_gap_is_measured_to_the_cores_and_errors_list_every_behaviour():
+    from types import SimpleNamespace
+
+    # 0.5 m: 0.4 past near's core [0, 0.1] (but only 0.05 past its foot), 0.2 below away's
+    cdb = CDBArbiter(sets={"near": [0.0, 0.0, 0.1, 0.45], "away": [0.52, 0.7, 3.0, 3.0]},
+                     rules={"near": "avoid", "away": "goal"})
+    assert cdb.weights(0.5, ["avoid", "goal"]).tolist() == [0.0, 1.0]
+    three = CDBArbiter(sets={"a": [0, 0, 1, 1], "b": [1, 2, 2, 3], "c": [2, 3, 9, 9]})
+    _refused(lambda: three.bind(SimpleNamespace(labels=("avoid", "goal"))),
+             'rules: 3 context sets but only 2 behaviours (avoid, goal); give rules = '
+             '{set = "behaviour"}')
+
+
+def test_priority_activation_rule_wins_before_later_rules():
+    pr = PriorityArbiter(rules=[{"behaviour": "avoid", "activation_above": 0.6},
+                                {"behaviour": "goal"}])
+    labels = ["avoid", "goal"]
+    assert pr.winner(3.0, labels, [0.6, None]) == 0  # at the threshold: holds
+    assert pr.winner(0.1, labels, [0.59, None]) == 1
+    assert pr.winner(0.1, labels, [None, None]) == 1  # no activation given: does not hold

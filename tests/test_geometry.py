@@ -135,3 +135,64 @@ def test_point_in_polygon_with_a_nearly_flat_edge_is_quiet():
         warnings.simplefilter("error")
         inside = g.point_in_polygon(np.array([[1.0, 1.0], [3.0, 1.0], [1.0, 1e300]]), square)
     assert inside.tolist() == [True, False, False]
+
+
+# a room 6 x 4 m, an inner wall, a triangle and a point post: with max_range 2.5 some rays
+# hit nothing, and the origins see different numbers of segments within range
+SENSOR_ROOM = np.concatenate([
+    g.polygon_edges(np.array([[0.0, 0.0], [6.0, 0.0], [6.0, 4.0], [0.0, 4.0]])),
+    np.array([[3.0, 1.0, 3.0, 3.0], [5.2, 0.7, 5.2, 0.7]]),
+    g.polygon_edges(np.array([[4.2, 2.6], [4.8, 2.6], [4.5, 3.2]])),
+])
+
+
+def _rim_reference(xy: np.ndarray, ang: np.ndarray, max_range: float, radius: float,
+                   group: int, clip: bool) -> np.ndarray:
+    """What a range finder on a disc reads, from the brute-force ray cast."""
+    reach = max_range + radius
+    dist = g._raycast_reference(xy, ang, SENSOR_ROOM, reach).reshape(-1, group).min(axis=1)
+    out = np.where(dist >= reach, max_range, dist - radius)
+    return np.clip(out, 0.0, max_range) if clip else out
+
+
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "numpy"])
+def test_sensor_casts_match_the_reference_with_and_without_compiled_kernels(
+        compiled: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The sensors' unchecked fast paths (one origin, N origins, readings from a disc's rim)
+    read what the brute-force cast reads, whether numba is there or not (SITFRAME_NUMBA=0)."""
+    from sitframe import kernels
+
+    if not compiled:
+        monkeypatch.setattr(kernels, "_LOADED", [None])
+    elif kernels.load() is None:
+        pytest.skip("compiled kernels switched off")
+    rng = np.random.default_rng(5)
+    s = g.SegmentSet(SENSOR_ROOM)
+    xy = np.array([[0.5, 0.5], [2.9, 2.0], [5.5, 3.5], [1.0, 3.9], [4.5, 1.0]])
+    ang = rng.uniform(-4.0, 4.0, (5, 12))
+    pairs = list(zip(xy, ang, strict=True))
+    ref = np.stack([g._raycast_reference(p, a, SENSOR_ROOM, 2.5) for p, a in pairs])
+    assert (ref == 2.5).any() and (ref < 2.5).any()
+    many = g.cast_rays_many(s, xy, ang, 2.5)
+    np.testing.assert_allclose(many, ref, rtol=0, atol=1e-9)
+    for i, ((x, y), a) in enumerate(pairs):
+        one = g.cast_rays(s, x, y, a, 2.5)
+        np.testing.assert_allclose(one, ref[i], rtol=0, atol=1e-9)
+        assert np.array_equal(one, many[i])  # row i of the many-origin cast is the one cast
+    for group, clip in [(1, False), (3, True), (4, False)]:
+        want = np.stack([_rim_reference(p, a, 2.5, 0.3, group, clip) for p, a in pairs])
+        got = g.rim_ranges_many(s, xy, ang, 2.5, 0.3, group, clip=clip)
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+        for i, ((x, y), a) in enumerate(pairs):
+            assert np.array_equal(g.rim_ranges(s, x, y, a, 2.5, 0.3, group, clip=clip), got[i])
+    # defaults: one ray per reading, not clipped (the disc at (1.0, 3.9) overlaps the wall)
+    unclipped = g.rim_ranges_many(s, xy, ang, 2.5, 0.3)
+    np.testing.assert_allclose(unclipped, np.stack(
+        [_rim_reference(p, a, 2.5, 0.3, 1, False) for p, a in pairs]), rtol=0, atol=1e-9)
+    assert unclipped.min() < 0
+    # no segments at all: every ray reads the maximum range
+    empty = g.SegmentSet(np.zeros((0, 4)))
+    assert g.cast_rays(empty, 1.0, 1.0, ang[0], 2.5).tolist() == [2.5] * 12
+    assert g.cast_rays_many(empty, xy, ang, 2.5).tolist() == [[2.5] * 12] * 5
+    assert g.rim_ranges(empty, 1.0, 1.0, ang[0], 2.5, 0.3, 3).tolist() == [2.5] * 4
+    assert g.raycast(np.ones((12, 2)), ang[0], empty, 2.5).tolist() == [2.5] * 12
