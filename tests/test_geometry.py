@@ -196,3 +196,64 @@ def test_sensor_casts_match_the_reference_with_and_without_compiled_kernels(
     assert g.cast_rays_many(empty, xy, ang, 2.5).tolist() == [[2.5] * 12] * 5
     assert g.rim_ranges(empty, 1.0, 1.0, ang[0], 2.5, 0.3, 3).tolist() == [2.5] * 4
     assert g.raycast(np.ones((12, 2)), ang[0], empty, 2.5).tolist() == [2.5] * 12
+
+
+def _touch_reference(s: tuple, t: tuple) -> bool:
+    """Whether two closed segments share a point, in exact rational arithmetic (parametric
+    form; a zero-length segment is a point)."""
+    from fractions import Fraction as F
+
+    px, py, qx, qy = (F(v) for v in s)
+    ax, ay, bx, by = (F(v) for v in t)
+    rx, ry, ux, uy = qx - px, qy - py, bx - ax, by - ay
+    wx, wy = ax - px, ay - py
+
+    def on(ox, oy, dx, dy, x, y):  # (x, y) on the segment from (ox, oy) along (dx, dy)
+        if dx == dy == 0:
+            return (x, y) == (ox, oy)
+        if dx * (y - oy) - dy * (x - ox) != 0:
+            return False
+        k = ((x - ox) * dx + (y - oy) * dy) / (dx * dx + dy * dy)
+        return 0 <= k <= 1
+
+    den = rx * uy - ry * ux
+    if den != 0:
+        return 0 <= (wx * uy - wy * ux) / den <= 1 and 0 <= (wx * ry - wy * rx) / den <= 1
+    # parallel, collinear or points: they meet iff an end of one lies on the other
+    return (on(px, py, rx, ry, ax, ay) or on(px, py, rx, ry, bx, by)
+            or on(ax, ay, ux, uy, px, py) or on(ax, ay, ux, uy, qx, qy))
+
+
+quarter = st.integers(-8, 8).map(lambda k: k / 4)  # exact in binary: orientations are exact
+seg = st.tuples(quarter, quarter, quarter, quarter)
+
+
+@settings(max_examples=150, deadline=None)
+@given(a=st.lists(seg, min_size=1, max_size=4), b=st.lists(seg, min_size=1, max_size=4))
+@example(a=[(0, 0, 1, 0)], b=[(1, 0, 2, 0)])  # collinear, sharing an end
+@example(a=[(0, 0, 1, 0)], b=[(1.25, 0, 2, 0)])  # collinear, apart
+@example(a=[(0, 0, 1, 0.5)], b=[(0.5, 0.5, 1.5, 0.75)])  # orientations in (0, 1)
+def test_segments_intersect_matches_exact_arithmetic(a: list, b: list) -> None:
+    got = g.segments_intersect(np.array(a), np.array(b))
+    assert got.shape == (len(a), len(b))
+    assert got.tolist() == [[_touch_reference(s, t) for t in b] for s in a]
+
+
+def test_polygon_area_sign_and_subsets():
+    tri = np.array([[1.0, 1.0], [4.0, 1.0], [1.0, 5.0]])
+    assert g.polygon_area(tri) == 6.0 and g.polygon_area(tri[::-1]) == -6.0
+    segs = np.arange(12.0).reshape(3, 4)
+    s = g.SegmentSet(segs)
+    assert s.subset([0, 2]).segments.tolist() == segs[[0, 2]].tolist()
+    assert s.subset(np.array([False, True, False])).segments.tolist() == [segs[1].tolist()]
+    with pytest.raises(ValueError, match=r"^polygon must have shape \(k, 2\)"):
+        g.point_in_polygon(np.zeros((1, 2)), np.zeros((4, 3)))
+
+
+def test_point_in_polygon_with_a_tiny_vertical_edge_is_quiet():
+    """A vertical edge of subnormal height: (py - y0) / dy overflows and meets a zero run."""
+    poly = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 5e-324], [2.0, 2.0], [0.0, 2.0]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        inside = g.point_in_polygon(np.array([[1.0, 1.0], [3.0, 1.0], [1.0, 3.0]]), poly)
+    assert inside.tolist() == [True, False, False]

@@ -12,12 +12,15 @@ Usage::
 
     nice -n 10 python tools/mutation.py [MODULE ...] [--tests FILE ...] [--workdir DIR]
                                         [--fresh] [--max-children N] [--functions NAME ...]
+                                        [--mutants NAME ...]
 
 MODULE is a dotted name as installed (``sitframe.fcm``, ``sitframe.plugins.rewards``);
 none = every module of ``[tool.mutmut] only_mutate``. ``--tests`` replaces the test
 files of ``pytest_add_cli_args_test_selection`` (a fast subset for the modules asked for).
 ``--functions`` tests only the mutants of the module-level functions named (e.g.
 ``compare_logs log_contents`` of ``sitframe.parallel``, whose other code is not in the scope).
+``--mutants`` re-tests the mutants named (mutmut's names or patterns), e.g. the survivors of an
+earlier run once tests were added (``mutmut`` keeps the other verdicts).
 """
 
 from __future__ import annotations
@@ -93,10 +96,13 @@ def main(argv: list[str] | None = None) -> int:
                     help="mutants tested at once (default: mutmut's, one per core)")
     ap.add_argument("--functions", nargs="+", default=[], metavar="NAME",
                     help="only the mutants of these module-level functions of the modules")
+    ap.add_argument("--mutants", nargs="+", default=[], metavar="NAME",
+                    help="re-test only these mutants (names as mutmut prints them)")
     args = ap.parse_args(argv)
     build(args.workdir, args.fresh, args.tests, args.modules)
     mutmut = [sys.executable, "-m", "mutmut"] if shutil.which("mutmut") is None else ["mutmut"]
-    names = ([f"{m}.x_{fn}__mutmut_*" for m in args.modules for fn in args.functions]
+    names = (args.mutants
+             or [f"{m}.x_{fn}__mutmut_*" for m in args.modules for fn in args.functions]
              or [f"{m}.*" for m in args.modules])
     # derandomized property-based tests (as in CI): a mutant's verdict must not depend on
     # which examples a run happens to draw
