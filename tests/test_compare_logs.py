@@ -127,3 +127,12 @@ def test_missing_dataset_attribute_and_group_are_found(pair):
         del f["trials/0000"]
     assert "trials/0000/" in compare_logs(a, b)
     assert set(compare_logs(a, b)) >= set(DATASETS)
+
+
+def test_files_without_trials_compare_too(tmp_path):
+    """(e.g. a log cut down to its stages): groups, datasets and attributes as usual."""
+    a, b = tmp_path / "a.h5", tmp_path / "b.h5"
+    for p, v in ((a, 1.0), (b, 2.0)):
+        with h5py.File(p, "w") as f:
+            f["cluster/centers"] = np.full((2, 2), v)
+    assert compare_logs(a, a) == [] and compare_logs(a, b) == ["cluster/centers"]

@@ -13,6 +13,8 @@ import errno
 import fcntl
 import json
 import os
+import re
+import stat
 
 import h5py
 import numpy as np
@@ -193,6 +195,8 @@ def test_an_empty_run_reads_as_empty(tmp_path):
     w.release()
     log = open_log(path)
     log.check()
+    assert (log.attrs["source"], log.attrs["inputs"], log.plugins) == ("", "{}", [])
+    assert "sensor" not in log.attrs and "code_hash" not in log.attrs
     assert (log.status, log.complete) == ("aborted", False)
     assert log.failure == "the avoid behaviour raised ValueError"
     assert log.trial_indices() == [] and log.summary().dtype.names == ("trial",)
@@ -493,3 +497,141 @@ def test_a_sensor_read_from_an_old_logs_config_names_what_is_wrong(written, tmp_
     with pytest.raises(InputError, match="max_range") as e:
         _ = open_log(old).sensor
     assert e.value.file == str(old) and e.value.key.startswith("sensor")
+
+
+def test_the_next_writer_removes_what_a_killed_writer_left_and_nothing_else(tmp_path):
+    path = tmp_path / "run.h5"
+    _unpacked(path).release()
+    folder = L.shard_folder(path)
+    dead = LogWriter(path)  # a writer killed inside its transactions leaves scratch files
+    left = [dead._scratch(), dead._scratch(folder)]
+    dead.release()
+    assert re.fullmatch(r"run\.h5\.[a-z0-9_]{8}\.part", left[0].name) and left[0].parent == tmp_path
+    assert re.fullmatch(r"\.[a-z0-9_]{8}\.part", left[1].name) and left[1].parent == folder
+    (tmp_path / "run.h5.part").write_text("")  # (the name older versions used)
+    (folder / "0007.h5").write_text("")  # written, never linked
+    keep = ["run.h5.notes.part", "other.h5.part", "run.h5.bak", "notes.h5"]
+    for name in keep:
+        (tmp_path / name).write_text("")
+    (folder / "readme.txt").write_text("")
+    w = LogWriter(path)
+    w.start(_info(path), resume=True)
+    assert open_log(path).status == "running"
+    assert sorted(p.name for p in folder.iterdir()) == ["0000.h5", "0001.h5", "readme.txt"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        ["run.h5", "run.h5.trials", "run.h5.lock", *keep])
+    w.release()
+
+
+def test_a_log_in_a_new_folder_and_its_lock_file(tmp_path):
+    path = tmp_path / "a" / "b" / "run.h5"
+    w = LogWriter(path)
+    w.start(_info(path))
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(os.stat(str(path) + ".lock").st_mode) == 0o644 & ~umask
+    other = LogWriter(tmp_path / "other.h5")
+    other.start(_info(tmp_path / "other.h5"))
+    w.release()  # releases this log only
+    with pytest.raises(InputError, match="another sitframe process"):
+        _second_writer(tmp_path / "other.h5")
+    os.remove(str(tmp_path / "other.h5") + ".lock")  # removed by hand: release still works
+    other.release()
+    LogWriter(tmp_path / "never.h5").release()  # a writer that never wrote
+
+
+def _second_writer(path) -> None:
+    """Start a writer of ``path`` in another process (a lock held here refuses it there)."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from sitframe.logs import lock_log\n"
+            "try:\n    lock_log(sys.argv[1])\nexcept Exception as e:\n    print(e); sys.exit(2)")
+    r = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True)
+    if r.returncode:
+        raise InputError(r.stdout.strip())
+
+
+def test_a_lock_file_that_cannot_be_made_is_one_clear_refusal(tmp_path):
+    (tmp_path / "file").write_text("")
+    bad = tmp_path / "file" / "run.h5"
+    with pytest.raises(InputError) as e:
+        LogWriter(bad).start(_info(bad))
+    assert str(e.value) == (f"{bad}: --out: cannot create the log: File exists (its lock "
+                            "file 'run.h5.lock')")
+    target = tmp_path / "target"
+    target.write_text("precious")
+    os.symlink(target, tmp_path / "run.h5.lock")  # planted: never opened through
+    with pytest.raises(InputError, match=r"cannot create the log: .*'run\.h5\.lock'"):
+        LogWriter(tmp_path / "run.h5").start(_info(tmp_path / "run.h5"))
+    assert target.read_text() == "precious" and not (tmp_path / "run.h5").exists()
+
+
+@pytest.mark.parametrize(("change", "words"), [
+    (lambda f: f.__setitem__("trials/0001", h5py.ExternalLink("run.h5.trials/0001.h5", "/x")),
+     "links to 'run.h5.trials/0001.h5:/x'; expected the trial's own file "
+     "<log>.trials/0001.h5 beside the log"),
+    (None, "trial 1 is in 'run.h5.trials/0001.h5', which is missing: a log still being written "
+           "(or killed) is its .h5 file and the folder 'run.h5.trials' beside it; move them "
+           "together, or pack the log into one file first (sitframe pack LOG)"),
+    ("symlink", "'run.h5.trials/0001.h5' is not a regular file (expected the trial's own HDF5 "
+                "file)"),
+])
+def test_a_trial_file_that_is_not_the_trials_own_is_named(tmp_path, change, words):
+    path = tmp_path / "run.h5"
+    _unpacked(path).release()
+    shard = L.shard_folder(path) / "0001.h5"
+    if change == "symlink":
+        shard.rename(tmp_path / "elsewhere.h5")
+        os.symlink(tmp_path / "elsewhere.h5", shard)
+    elif change is None:
+        shard.unlink()
+    else:
+        with h5py.File(path, "a") as f:
+            del f["trials/0001"]
+            change(f)
+    with pytest.raises(InputError) as e:
+        open_log(path).trial(1)
+    assert str(e.value) == f"{path}: trials/0001: {words}"
+
+
+def test_the_summary_kept_by_appending_is_the_table_rebuilt_from_every_trial(tmp_path):
+    """Trials in order, a batch out of order, a trial written again, and one with a new
+    summary key: one row per trial, in trial order, as rebuilt from the trials."""
+    path = tmp_path / "run.h5"
+    w = _unpacked(path, (0,))
+    extra = _trial(5)
+    extra.summary["late"] = 1.5
+    for batch in ([_trial(1)], [_trial(3), _trial(2)], [_trial(3)], [_trial(4)], [extra]):
+        w.trials(batch)
+        with h5py.File(path, "a") as f:
+            kept = f["summary"][()]
+            L._write_summary(f)
+            rebuilt = f["summary"][()]
+        assert kept.dtype == rebuilt.dtype and kept.tobytes() == rebuilt.tobytes()
+    assert kept["trial"].tolist() == [0, 1, 2, 3, 4, 5]
+    assert np.isnan(kept["late"][:5]).all() and kept["late"][5] == 1.5
+    w.release()
+
+
+def test_the_writer_refuses_a_folder_as_log_and_a_symlinked_trial_folder(tmp_path):
+    (tmp_path / "dir.h5").mkdir()
+    bad = LogWriter(tmp_path / "dir.h5")
+    with pytest.raises(InputError) as e:
+        bad.start(_info(tmp_path / "dir.h5"))
+    assert str(e.value) == f"{tmp_path / 'dir.h5'}: --out: cannot create the log: Is a directory"
+    bad.release()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dir.h5"]  # no scratch file left
+    path = tmp_path / "run.h5"
+    (tmp_path / "elsewhere").mkdir()
+    os.symlink(tmp_path / "elsewhere", L.shard_folder(path))
+    w = LogWriter(path)
+    w.start(_info(path))
+    with pytest.raises(InputError) as e:
+        w.trial(_trial(0))
+    assert str(e.value) == (f"{path}: --out: 'run.h5.trials' beside the log is a symlink; "
+                            "refusing to write the log's trials through it")
+    assert list((tmp_path / "elsewhere").iterdir()) == []
+    w.release()
+    a = open_log(path).attrs
+    assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d[+-]\d{4}", a["created"]), a["created"]
