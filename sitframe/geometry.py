@@ -459,7 +459,7 @@ def rim_ranges_many(segments: SegmentSet, xy: np.ndarray, angles_rad: np.ndarray
     """
     ang = np.asarray(angles_rad, dtype=np.float64)
     xy = np.asarray(xy, dtype=np.float64)
-    n = ang.shape[1] // group if group >= 1 else 0
+    n = ang.shape[1] // group if ang.ndim == 2 and group >= 1 else 0
     if ang.ndim != 2 or n * group != ang.shape[1] or xy.shape != (ang.shape[0], 2):
         raise ValueError(f"rim_ranges_many: expected (N, 2) centres and (N, n * {group!r}) "
                          f"angles, got {xy.shape} and {ang.shape}")

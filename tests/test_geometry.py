@@ -168,8 +168,10 @@ def test_sensor_casts_match_the_reference_with_and_without_compiled_kernels(
         pytest.skip("compiled kernels switched off")
     rng = np.random.default_rng(5)
     s = g.SegmentSet(SENSOR_ROOM)
-    xy = np.array([[0.5, 0.5], [2.9, 2.0], [5.5, 3.5], [1.0, 3.9], [4.5, 1.0]])
-    ang = rng.uniform(-4.0, 4.0, (5, 12))
+    # (0.6, 2.0): the inner wall is 2.4 m away, within range of the rays near 0 rad only
+    xy = np.array([[0.5, 0.5], [2.9, 2.0], [5.5, 3.5], [1.0, 3.9], [4.5, 1.0], [0.6, 2.0]])
+    ang = rng.uniform(-4.0, 4.0, (6, 12))
+    ang[5, :3] = [0.0, 0.1, -0.1]
     pairs = list(zip(xy, ang, strict=True))
     ref = np.stack([g._raycast_reference(p, a, SENSOR_ROOM, 2.5) for p, a in pairs])
     assert (ref == 2.5).any() and (ref < 2.5).any()
@@ -179,7 +181,7 @@ def test_sensor_casts_match_the_reference_with_and_without_compiled_kernels(
         one = g.cast_rays(s, x, y, a, 2.5)
         np.testing.assert_allclose(one, ref[i], rtol=0, atol=1e-9)
         assert np.array_equal(one, many[i])  # row i of the many-origin cast is the one cast
-    for group, clip in [(1, False), (3, True), (4, False)]:
+    for group, clip in [(1, False), (2, True), (3, True), (4, False)]:
         want = np.stack([_rim_reference(p, a, 2.5, 0.3, group, clip) for p, a in pairs])
         got = g.rim_ranges_many(s, xy, ang, 2.5, 0.3, group, clip=clip)
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
@@ -190,10 +192,30 @@ def test_sensor_casts_match_the_reference_with_and_without_compiled_kernels(
     np.testing.assert_allclose(unclipped, np.stack(
         [_rim_reference(p, a, 2.5, 0.3, 1, False) for p, a in pairs]), rtol=0, atol=1e-9)
     assert unclipped.min() < 0
+    for (x, y), a, row in zip(xy, ang, unclipped, strict=True):
+        assert np.array_equal(g.rim_ranges(s, x, y, a, 2.5, 0.3), row)
+    # a ray that hits nothing reads exactly max_range (here (1.2 + 0.13) - 0.13 != 1.2)
+    assert g.rim_ranges(s, 1.5, 2.0, ang[0], 1.2, 0.13).tolist() == [1.2] * 12
+    assert g.rim_ranges_many(s, np.array([[1.5, 2.0]]), ang[:1], 1.2, 0.13, 3,
+                             clip=True).tolist() == [[1.2] * 4]
+    # bad groups and shapes are refused naming what was expected
+    for group in (0, 5):
+        with pytest.raises(ValueError, match=rf"^rim_ranges: 12 rays do not make groups of "
+                                             rf"{group}; expected a positive group size that "
+                                             r"divides the number of rays$"):
+            g.rim_ranges(s, 1.0, 1.0, ang[0], 2.5, 0.3, group)
+    for bad_xy, bad_ang, group in [(xy[:, :1], ang, 1), (xy, ang, 0), (xy, ang, 5),
+                                   (xy[:1], ang[0], 1)]:
+        with pytest.raises(ValueError, match=r"^rim_ranges_many: expected \(N, 2\) centres "
+                                             rf"and \(N, n \* {group}\) angles, got "):
+            g.rim_ranges_many(s, bad_xy, bad_ang, 2.5, 0.3, group)
+    with pytest.raises(ValueError, match="^nearest_on_segments needs at least one segment, "
+                                         "got 0$"):
+        g.nearest_on_segments(np.zeros((1, 2)), np.zeros((0, 4)))
     # no segments at all: every ray reads the maximum range
     empty = g.SegmentSet(np.zeros((0, 4)))
     assert g.cast_rays(empty, 1.0, 1.0, ang[0], 2.5).tolist() == [2.5] * 12
-    assert g.cast_rays_many(empty, xy, ang, 2.5).tolist() == [[2.5] * 12] * 5
+    assert g.cast_rays_many(empty, xy, ang, 2.5).tolist() == [[2.5] * 12] * 6
     assert g.rim_ranges(empty, 1.0, 1.0, ang[0], 2.5, 0.3, 3).tolist() == [2.5] * 4
     assert g.raycast(np.ones((12, 2)), ang[0], empty, 2.5).tolist() == [2.5] * 12
 
@@ -257,3 +279,15 @@ def test_point_in_polygon_with_a_tiny_vertical_edge_is_quiet():
         warnings.simplefilter("error")
         inside = g.point_in_polygon(np.array([[1.0, 1.0], [3.0, 1.0], [1.0, 3.0]]), poly)
     assert inside.tolist() == [True, False, False]
+
+
+def test_polygon_self_intersection_open_closed_folds_and_edge_lengths():
+    z = np.array([[0.0, 0.0], [2.0, 0.0], [0.0, 2.0], [2.0, 2.0]])
+    assert g.polygon_self_intersection(z, closed=False) is None  # an open Z is simple ...
+    assert g.polygon_self_intersection(z) == (1, 3)  # ... its closing edge crosses it
+    for simple in ([[0, -2], [2, 0], [0, 2], [-2, 0]], [[0, -1], [2, -1], [2, 1], [0, 1]],
+                   [[0, 0], [1, -1], [2, 0], [1, 1]],
+                   [[0, 0], [0.5, 0], [1, 0], [1, 1], [0, 1]]):  # collinear, same direction
+        assert g.polygon_self_intersection(np.array(simple, dtype=float)) is None, simple
+    for fold in ([[0, 0], [2, 0], [1, 0], [1, 1]], [[0, 0], [2, 2], [1, 1], [3, 0]]):
+        assert g.polygon_self_intersection(np.array(fold, dtype=float)) == (0, 1), fold
