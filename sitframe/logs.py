@@ -1009,7 +1009,7 @@ def _check_trial_layout(f: h5py.File, name: str, shape: tuple[int, int] | None,
     if not isinstance(g, h5py.Group):
         fail(f"trials/{name}", "expected a trial group, got a dataset")
     if g.file != f and g.attrs.get("index") != int(name):
-        fail(f"trials/{name}", f"its file holds trial {g.attrs.get('index')!r}, expected "
+        fail(f"trials/{name}", f"its file holds trial {_attr(g.attrs.get('index'))!r}, expected "
              f"{int(name)}")
     for ds, axis in (("memberships", 0), (READING, 1), ("sonar", 1)):
         if shape is not None and isinstance(g.get(ds), h5py.Dataset) and \

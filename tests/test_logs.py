@@ -635,3 +635,72 @@ def test_the_writer_refuses_a_folder_as_log_and_a_symlinked_trial_folder(tmp_pat
     w.release()
     a = open_log(path).attrs
     assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d[+-]\d{4}", a["created"]), a["created"]
+
+
+@pytest.mark.parametrize(("edit", "key", "words"), [
+    (lambda f: f["cluster/state/centers"].attrs.create("x", 0) or f.__delitem__(
+        "cluster/state/centers") or f.__setitem__("cluster/state/centers", np.full((2, 3), np.nan)),
+     "cluster/state/centers", "expected a finite (c, d) array of centres, got shape (2, 3), "
+                              "dtype float64"),
+    (lambda f: f.__delitem__("cluster/state/centers") or f.__setitem__(
+        "cluster/state/centers", np.ones(3)),
+     "cluster/state/centers", "expected a finite (c, d) array of centres, got shape (3,)"),
+    (lambda f: f.__delitem__("cluster/state/centers") or f.__setitem__(
+        "cluster/state/centers", np.array([["a", "b", "c"]] * 2, dtype=h5py.string_dtype())),
+     "cluster/state/centers", "expected a finite (c, d) array of centres"),
+    (lambda f: f.__delitem__("cluster/state/centers") or f.__setitem__(
+        "cluster/state/centers", np.ones((3, 3))),
+     "trials/0000/memberships", "has shape (4, 2), which does not fit the fitted centres' "
+                                "shape (3, 3)"),
+    (lambda f: f.__delitem__("cluster/state/centers") or f.__setitem__(
+        "cluster/state/centers", np.ones((2, 4))),
+     "trials/0000/reading", "has shape (4, 3), which does not fit the fitted centres' shape "
+                            "(2, 4)"),
+    (lambda f: f["cluster/state"].attrs.create("capacity", 5),
+     "trials/0000/memberships", "which does not fit the fitted centres' shape (5, 3)"),
+    (lambda f: f["trials/0001"].move("reading", "sonar") or f.__delitem__(
+        "cluster/state/centers") or f.__setitem__("cluster/state/centers", np.ones((2, 5))),
+     "trials/0000/reading", "(2, 5)"),
+    (lambda f: f.__delitem__("trials/0001") or f.__setitem__("trials/0001", np.ones(2)),
+     "trials/0001", "expected a trial group, got a dataset"),
+    (lambda f: f.__delitem__("trials") or f.__setitem__("trials", np.ones(2)),
+     "trials", "expected a group of trial groups, got a dataset"),
+    (lambda f: f["trials/0000/behaviours/avoid/policy/turn"].__setitem__(
+        (), np.array([0, 2], np.int16)) or None,
+     "trials/0000/behaviours/avoid/policy/turn", "expected action indices in 0..1, got [0, 2]"),
+    (lambda f: f["trials/0000/behaviours/avoid/policy"].__delitem__("turn") or f[
+        "trials/0000/behaviours/avoid/policy"].__setitem__("turn", np.array([-1, 0])),
+     "trials/0000/behaviours/avoid/policy/turn", "got [-1, 0]"),
+    (lambda f: f["trials/0000/behaviours/avoid/policy"].__delitem__("turn") or f[
+        "trials/0000/behaviours/avoid/policy"].__setitem__("turn", np.array([0.0, 1.0])),
+     "trials/0000/behaviours/avoid/policy/turn", "got [0.0, 1.0]"),
+])
+def test_a_damaged_layout_is_named_by_check(written, tmp_path, edit, key, words):
+    """What readers index with: trial groups, finite (c, d) centres that fit the trials'
+    memberships (c) and readings (d), policies that index existing actions."""
+    bad = tmp_path / "bad.h5"
+    bad.write_bytes(written.read_bytes())
+    with h5py.File(bad, "a") as f:
+        edit(f)
+    with pytest.raises(InputError) as e:
+        open_log(bad).check()
+    assert e.value.file == str(bad) and e.value.key == key and words in e.value.message, \
+        str(e.value)
+
+
+def test_an_intact_log_and_its_edge_cases_pass_check(written, tmp_path):
+    ok = tmp_path / "ok.h5"
+    ok.write_bytes(written.read_bytes())
+    with h5py.File(ok, "a") as f:
+        f["cluster/state"].attrs["capacity"] = 2  # evolving situations: as many id slots
+        del f["trials/0000/behaviours/avoid/actions/turn"]  # an output without actions
+        del f["trials/0001/behaviours/avoid/policy"]
+        f["trials/0001/behaviours/avoid/policy"] = np.zeros(0, np.int16)  # not a group
+    open_log(ok).check()
+    path = tmp_path / "run.h5"
+    _unpacked(path, (0, 1)).release()
+    open_log(path).check()  # the trials in their own files are read as well
+    with h5py.File(L.shard_folder(path) / "0001.h5", "a") as f:
+        f.attrs["index"] = 0
+    with pytest.raises(InputError, match="its file holds trial 0, expected 1"):
+        open_log(path).check()
