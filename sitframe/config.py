@@ -34,7 +34,8 @@ thesis's Table A.1):
     ``component`` (default ``"single"``) and its parameters.
 ``[evaluate]``
     ``worlds`` (default: the shipped novel rooms and the learning world),
-    ``iterations``.
+    ``iterations``: the parameters of the ``frozen`` evaluation protocol
+    (``plugins/frozen_evaluation.py``), the evaluate stage's default.
 ``[goal]``
     ``episodes``, ``timeout``, ``min_distance``, ``worlds``, ``pairs``
     (``"random"`` or ``"world"``), ``radius``, ``margin``, optionally ``train``
@@ -114,6 +115,9 @@ DEFAULTS: dict[str, dict[str, Any]] = {
              "pairs": "random", "radius": 0.3, "margin": 0.1},
     "plugins": {"dirs": []},
 }
+#: The evaluation protocol of a run whose components name none (``evaluation_protocol``):
+#: one run from each ``[evaluate]`` world's start (plugins/frozen_evaluation.py).
+DEFAULT_PROTOCOL = "frozen"
 #: Optional sections without defaults (absent from a config that does not use them, so the
 #: config's text, and so its hash, stays what it was before they existed).
 OPTIONAL_SECTIONS = ("prerequisites",)

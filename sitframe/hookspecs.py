@@ -148,8 +148,9 @@ def sitframe_protocols() -> list[Any]:
     :class:`sitframe.components.EvaluationProtocol`. A run uses the protocol
     that one of its components names in a class attribute
     ``evaluation_protocol`` (the built-in ``goal`` behaviour names
-    ``"goal-episodes"``); without one, each learning trial's frozen policy is
-    evaluated in the ``[evaluate] worlds``.
+    ``"goal-episodes"``); without one, the built-in ``frozen`` protocol
+    evaluates each learning trial's frozen policy with one run from the start
+    of each ``[evaluate] worlds`` world.
 
     :return: A list of factories with unique ``name`` attributes and a class
         attribute ``table``: the config table whose keys (except ``worlds``,
@@ -202,8 +203,8 @@ def sitframe_step(record: StepRecord) -> None:
     worker process when trials run in parallel), after the behaviours learned
     from the iteration, once per iteration (each is 1.5 s of robot time),
     only if at least one plugin implements it. Not called in the evaluations
-    of a learning trial (frozen runs or batches of an evaluation protocol's
-    episodes); called in the episodes of a batch that is a trial of its own.
+    of a learning trial (batches of an evaluation protocol's episodes);
+    called in the episodes of a batch that is a trial of its own.
 
     :param record: An immutable :class:`sitframe.records.StepRecord` holding
         references (not copies) to this iteration's arrays. Do not keep it
@@ -217,16 +218,17 @@ def sitframe_step(record: StepRecord) -> None:
 def sitframe_trial_data(trial: TrialResult) -> dict[str, Any] | None:
     """Hand per-trial data for the log.
 
-    Called once per learning trial and once per frozen evaluation, in the
-    process that simulated it (like :func:`sitframe_step`), right after the
-    loop and before the trial is sent to the main process.
+    Called once per learning trial and once per episode of an evaluation, in
+    the process that simulated it (like :func:`sitframe_step`), right after
+    the loop and before the trial is sent to the main process.
 
     :param trial: The finished :class:`sitframe.records.TrialResult` (its
         per-iteration arrays, behaviour data and summary).
     :return: ``None``, or a dict of string keys (``/`` makes subgroups) to
         numpy arrays or scalars. The logger writes it under
         ``/trials/NNNN/plugins/<plugin>/`` in the same crash-safe transaction
-        as the trial (an evaluation's under ``.../eval/<world>/``), and
+        as the trial (an evaluation's under ``.../eval/<world>/``, an episode
+        of an episodic protocol's batch under ``NNNN/`` in it), and
         :meth:`sitframe.logs.Log.trial` returns it as ``TrialLog.plugins``.
 
     Every implementation is called; each result is kept under its own plugin's

@@ -91,5 +91,5 @@ def test_a_protocol_breaking_the_contract_is_a_plugin_fault(monkeypatch):
 
 
 def test_an_unknown_protocol_lists_the_available_ones():
-    with pytest.raises(InputError, match="unknown protocol 'nope'.*available: goal-episodes, laps"):
+    with pytest.raises(InputError, match="unknown protocol 'nope'.*available: frozen, goal-episodes, laps"):
         experiment().res.protocol("nope")
