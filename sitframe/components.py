@@ -238,18 +238,16 @@ class EvaluationProtocol(Protocol):
     """How the evaluate stage runs and scores episodes of the frozen behaviours.
 
     A run uses the protocol a component names in its class attribute
-    ``evaluation_protocol``, else ``frozen`` (one run from each world's
-    start, ``plugins/frozen_evaluation.py``). The protocol is created from the
-    config table :attr:`table` (its keys but ``worlds``); the evaluate stage
-    runs one *batch* of episodes in each world of that table's ``worlds``: a
-    trial of its own in a run that does not learn, else an evaluation of each
-    learning trial with that trial's learned policies. The core runs every
-    episode through the one simulation loop, without learning; a batch is
-    logged as one trial (episodes concatenated, ``first_iteration`` gives each
-    one's first row) with the per-episode figures under ``episodes/``, and
-    scored with the figures the core measures of every run
-    (:data:`sitframe.loop.EVAL_KEYS`: collisions, coverage, ...) and the
-    protocol's aggregates, as ``eval/<world>/<key>`` summary scalars.
+    ``evaluation_protocol``, else ``frozen`` (``plugins/frozen_evaluation.py``).
+    The protocol is created from the config table :attr:`table` (its keys but
+    ``worlds``); the evaluate stage runs one *batch* of episodes in each world
+    of that table's ``worlds``: a trial of its own in a run that does not
+    learn, else an evaluation of each learning trial with that trial's learned
+    policies. The core runs every episode through the one simulation loop,
+    without learning; a batch is logged as one trial (episodes concatenated,
+    ``first_iteration`` gives each one's first row) with the per-episode
+    figures under ``episodes/``, the core's figures (:data:`sitframe.loop.EVAL_KEYS`)
+    and the aggregates as ``eval/<world>/<key>`` summary scalars.
 
     Attributes
     ----------
@@ -263,12 +261,8 @@ class EvaluationProtocol(Protocol):
     An optional ``check_world(world)`` raises :class:`sitframe.errors.InputError`
     for a world the protocol cannot use, before anything runs. A parameter
     ``episodes`` (episodes per batch) is what ``sitframe evaluate LOG
-    --goal-episodes N`` sets. :meth:`score_episode` and :meth:`aggregate` are
-    optional: without them a batch has only the core's figures.
-
-    A protocol with a false class attribute ``episodic`` is *continuing*: its
-    batch is one run (``episode_starts`` gives one start), on the batch's own
-    seed, logged without per-episode records (the ``frozen`` protocol).
+    --goal-episodes N`` sets. :meth:`score_episode`, :meth:`aggregate` are optional;
+    ``episodic = False`` (*continuing*): a batch is one run on its own seed, not logged per episode.
     """
 
     name: ClassVar[str]

@@ -34,8 +34,7 @@ thesis's Table A.1):
     ``component`` (default ``"single"``) and its parameters.
 ``[evaluate]``
     ``worlds`` (default: the shipped novel rooms and the learning world),
-    ``iterations``: the parameters of the ``frozen`` evaluation protocol
-    (``plugins/frozen_evaluation.py``), the evaluate stage's default.
+    ``iterations``: the default ``frozen`` evaluation protocol's.
 ``[goal]``
     ``episodes``, ``timeout``, ``min_distance``, ``worlds``, ``pairs``
     (``"random"`` or ``"world"``), ``radius``, ``margin``, optionally ``train``
@@ -115,9 +114,7 @@ DEFAULTS: dict[str, dict[str, Any]] = {
              "pairs": "random", "radius": 0.3, "margin": 0.1},
     "plugins": {"dirs": []},
 }
-#: The evaluation protocol of a run whose components name none (``evaluation_protocol``):
-#: one run from each ``[evaluate]`` world's start (plugins/frozen_evaluation.py).
-DEFAULT_PROTOCOL = "frozen"
+DEFAULT_PROTOCOL = "frozen"  # the evaluation protocol of a run whose components name none
 #: Optional sections without defaults (absent from a config that does not use them, so the
 #: config's text, and so its hash, stays what it was before they existed).
 OPTIONAL_SECTIONS = ("prerequisites",)
@@ -189,10 +186,9 @@ class CollectSection:
 
 @dataclass(frozen=True)
 class EvaluateSection:
-    """``[evaluate]``: the worlds and length of each trial's frozen-policy evaluation."""
+    """``[evaluate]``: the worlds of the default evaluation (``iterations``: the protocol's)."""
 
     worlds: tuple[str, ...]
-    iterations: int
 
 
 @dataclass(frozen=True)
@@ -230,7 +226,7 @@ class Config:
             Component.of(cfg["interpreter"]),
             {label: Component.of(t) for label, t in cfg["behaviours"].items()},
             Component.of(cfg["arbiter"]),
-            EvaluateSection(tuple(v["worlds"]), int(v["iterations"])),
+            EvaluateSection(tuple(v["worlds"])),
             tuple(cfg["plugins"]["dirs"]), dict(cfg.get("prerequisites", {})),
             {k: t for k, t in cfg.items() if isinstance(t, dict)})
 

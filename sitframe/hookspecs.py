@@ -148,9 +148,8 @@ def sitframe_protocols() -> list[Any]:
     :class:`sitframe.components.EvaluationProtocol`. A run uses the protocol
     that one of its components names in a class attribute
     ``evaluation_protocol`` (the built-in ``goal`` behaviour names
-    ``"goal-episodes"``); without one, the built-in ``frozen`` protocol
-    evaluates each learning trial's frozen policy with one run from the start
-    of each ``[evaluate] worlds`` world.
+    ``"goal-episodes"``); without one, the built-in ``frozen``: one run from
+    the start of each ``[evaluate] worlds`` world.
 
     :return: A list of factories with unique ``name`` attributes and a class
         attribute ``table``: the config table whose keys (except ``worlds``,
@@ -218,17 +217,16 @@ def sitframe_step(record: StepRecord) -> None:
 def sitframe_trial_data(trial: TrialResult) -> dict[str, Any] | None:
     """Hand per-trial data for the log.
 
-    Called once per learning trial and once per episode of an evaluation, in
-    the process that simulated it (like :func:`sitframe_step`), right after
-    the loop and before the trial is sent to the main process.
+    Called once per learning trial and once per evaluation episode (logged for
+    a continuing protocol's, e.g. ``frozen``), in the process that simulated
+    it (like :func:`sitframe_step`), right after the loop.
 
     :param trial: The finished :class:`sitframe.records.TrialResult` (its
         per-iteration arrays, behaviour data and summary).
     :return: ``None``, or a dict of string keys (``/`` makes subgroups) to
         numpy arrays or scalars. The logger writes it under
         ``/trials/NNNN/plugins/<plugin>/`` in the same crash-safe transaction
-        as the trial (an evaluation's under ``.../eval/<world>/``, an episode
-        of an episodic protocol's batch under ``NNNN/`` in it), and
+        as the trial (an evaluation's under ``.../eval/<world>/``), and
         :meth:`sitframe.logs.Log.trial` returns it as ``TrialLog.plugins``.
 
     Every implementation is called; each result is kept under its own plugin's

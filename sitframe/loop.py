@@ -71,8 +71,7 @@ from sitframe.world import Goal, World
 #: Seed stages (:func:`stage_seed`); ``STAGE_BATCH``: the episode batches of a run that
 #: does not learn (one per world of its evaluation protocol).
 STAGE_COLLECT, STAGE_CLUSTER, STAGE_TRIALS, STAGE_EVAL, STAGE_BATCH = 0, 1, 2, 3, 4
-#: Figures the core measures of every evaluation, whatever its protocol (``eval/<world>/...``;
-#: the ``frozen`` protocol's scores, ``evaluate --json``).
+#: Figures the core measures of every evaluation (``eval/<world>/...``, ``evaluate --json``).
 EVAL_KEYS = ("iterations", "collisions", "collisions_per_1000", "distance_m", "mean_speed_m_s",
              "coverage")
 
@@ -567,16 +566,14 @@ def run_batch(res: Resolved, spec: TrialSpec, *,
     Start poses (and goals) come from the protocol, given a Generator seeded
     by ``spec.seed``; episode ``e`` runs with its own seed spawned from it, so
     a batch is reproducible and episode ``e`` does not depend on the others
-    (a continuing protocol, ``episodic = False``, has one start and runs it
-    on ``spec.seed`` itself). Each episode is :func:`simulate` from its start,
-    with its goal, until the protocol's ``terminated`` or its ``iterations``.
-    The trial holds the episodes' arrays concatenated (``pose`` has one extra
-    row per episode), the summary (:func:`trial_summary` over all episodes)
-    with the protocol's aggregates as ``eval/<world>/<key>``, and the
-    episodes' plugin data (``NNNN/...`` per episode of an episodic batch).
-    An episodic batch also records ``episodes["first_iteration"]`` (each
-    episode's first row), its starts (and goals) and per-episode figures (one
-    array per key, and one ``NNNN`` group per episode).
+    (a continuing protocol, ``episodic = False``: one run on ``spec.seed``).
+    Each episode is :func:`simulate` from its start, with its goal, until the
+    protocol's ``terminated`` or its ``iterations``. The trial holds the
+    episodes' arrays concatenated (``pose`` has one extra row per episode),
+    the summary (:func:`trial_summary`) with the protocol's aggregates as
+    ``eval/<world>/<key>`` and, if episodic, ``episodes``: starts, goals,
+    ``first_iteration`` (each one's first row) and the per-episode figures
+    (one array per key, one ``NNNN`` group per episode); else the run's plugin data.
     """
     k = spec.index
     with _in_trial(k):
@@ -606,46 +603,31 @@ def run_batch(res: Resolved, spec: TrialSpec, *,
         ep = dataclasses.replace(spec, seed=int(seeds[e]), iterations=int(proto.iterations),
                                  evaluate=(), start=tuple(float(v) for v in starts[e]),
                                  goal=goal, protocol=None)
-        r = simulate(res, ep, step_hook=step_hook, protocol=proto)
-        parts.append(r)
-        if score is not None:
-            figures.append(_checked(o, "score_episode", check_data, lambda r=r, e=e: (
-                score(r.arrays, starts[e], None if goals is None else goals[e], res.robot)),
-                k, "per-episode figures"))
-    per_ep = {key: np.asarray([f[key] for f in figures]) for key in figures[0]} if figures else {}
+        parts.append(r := simulate(res, ep, step_hook=step_hook, protocol=proto))
+        figures.append({} if score is None else _checked(
+            o, "score_episode", check_data, lambda r=r, e=e: score(
+                r.arrays, starts[e], None if goals is None else goals[e], res.robot), k,
+            "per-episode figures"))
+    per_ep = {key: np.asarray([f[key] for f in figures]) for key in figures[0]}
     scores = _checked(o, "aggregate", check_data, lambda: proto.aggregate(per_ep), k,
                       "the batch's scores") if hasattr(proto, "aggregate") else {}
     arrays = {key: np.concatenate([p.arrays[key] for p in parts]) for key in parts[0].arrays}
+    episodes: dict[str, Any] = {}
+    if episodic:
+        first = np.cumsum([0] + [int(p.arrays["collision"].size) for p in parts[:-1]])
+        episodes = {**per_ep, "start": starts, **({} if goals is None else {"goal": goals}),
+                    "first_iteration": first.astype(np.int64)}
+        for e, f in enumerate(figures):
+            episodes[f"{e:04d}"] = {**f, "start": starts[e],
+                                    **({} if goals is None else {"goal": goals[e]})}
     summary = trial_summary(world, arrays, {}, res.robot)  # (nothing converges here)
     summary["distance_m"] = float(np.asarray(  # (not across the jumps between episodes)
         [path_length(p.arrays["pose"][:, :2]) for p in parts]).sum())
     for key, v in scores.items():
         summary[summary_key("eval", world.name, key)] = v
-    result = TrialResult(k, spec.seed, world.name, arrays, parts[0].behaviours, summary,
-                         policies=parts[0].policies, plugin_data=parts[0].plugin_data)
-    if episodic:
-        result.episodes = _episode_records(parts, figures, per_ep, starts, goals)
-        result.plugin_data = {plugin: {f"{e:04d}/{key}": v for e, p in enumerate(parts)
-                                       for key, v in p.plugin_data.get(plugin, {}).items()}
-                              for plugin in {pl for p in parts for pl in p.plugin_data}}
-    return result
-
-
-def _episode_records(parts: list[TrialResult], figures: list[dict[str, Any]],
-                     per_ep: dict[str, np.ndarray], starts: np.ndarray,
-                     goals: np.ndarray | None) -> dict[str, Any]:
-    """An episodic batch's ``episodes``: per-episode figures, starts, goals, first rows."""
-    first = np.cumsum([0] + [int(p.arrays["collision"].size) for p in parts[:-1]])
-    episodes: dict[str, Any] = {**per_ep, "start": starts}
-    if goals is not None:
-        episodes["goal"] = goals
-    episodes["first_iteration"] = first.astype(np.int64)
-    for e in range(len(parts)):
-        f = figures[e] if figures else {}
-        episodes[f"{e:04d}"] = row = {**f, "start": starts[e]}
-        if goals is not None:
-            row["goal"] = goals[e]
-    return episodes
+    return TrialResult(k, spec.seed, world.name, arrays, parts[0].behaviours, summary,
+                       episodes, policies=parts[0].policies,
+                       plugin_data={} if episodic else parts[0].plugin_data)
 
 
 def batch_scores(result: TrialResult) -> dict[str, Any]:

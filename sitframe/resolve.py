@@ -189,8 +189,7 @@ class Resolved:
 
         A component asks for the protocol its behaviour is judged by with a
         class attribute, e.g. ``evaluation_protocol = "goal-episodes"``; two
-        components naming different protocols are an input error. Without
-        one: ``default`` (the ``frozen`` protocol, ``plugins/frozen_evaluation.py``).
+        components naming different protocols are an input error; none: ``default``.
         """
         comps = [b for b, _r in self.behaviours().values()] + [self.arbiter()]
         names = sorted({n for c in comps if (n := getattr(c, "evaluation_protocol", None))})

@@ -146,8 +146,7 @@ class Task:
             if hasattr(proto, "check_world"):
                 proto.check_world(res.world(wname, key="world"))
         if max_steps is None:
-            max_steps = proto.iterations if proto is not None else \
-                int(cfg.get("evaluate", {}).get("iterations", 1000))
+            max_steps = int((proto or res.protocol(res.protocol_name())).iterations)
         if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
             raise ValueError(f"max_steps: expected a positive integer, got {max_steps!r}")
         if not (isinstance(start_margin, int | float) and start_margin >= 0):
