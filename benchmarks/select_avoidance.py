@@ -58,6 +58,9 @@ def main() -> None:
     ap.add_argument("log")
     ap.add_argument("--short", type=int, default=20, help="pairs of the short training run")
     ap.add_argument("--test", type=int, default=100, help="pairs per test room")
+    ap.add_argument("--short-world", default=None,
+                    help="room of the short run (default: the log's training room)")
+    ap.add_argument("--worlds", nargs="+", default=list(TEST_WORLDS), help="test rooms")
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
     from sitframe.logs import open_log
@@ -65,23 +68,24 @@ def main() -> None:
 
     lg = open_log(args.log)
     trials = lg.trial_indices()
-    train_world = lg.config["experiment"]["world"]
+    train_world = args.short_world or lg.config["experiment"]["world"]
+    worlds = tuple(args.worlds)
     tasks = [(args.log, k, train_world, 1000, args.short) for k in trials]
-    tasks += [(args.log, k, w, 0, args.test) for w in TEST_WORLDS for k in trials]
+    tasks += [(args.log, k, w, 0, args.test) for w in worlds for k in trials]
     with ProcessPoolExecutor(args.workers) as pool:
         rows = list(pool.map(_cf, tasks))
     short = {r["trial"]: r["cf"] for r in rows if r["world"] == train_world}
-    test = {w: {r["trial"]: r["cf"] for r in rows if r["world"] == w} for w in TEST_WORLDS}
+    test = {w: {r["trial"]: r["cf"] for r in rows if r["world"] == w} for w in worlds}
     rs = rank_sums(args.log)
     print(f"| trial | rank sum (training) | short goal run CF ({train_world}) | "
-          + " | ".join(f"CF {w}" for w in TEST_WORLDS) + " |")
-    print("|---|---|---|" + "---|" * len(TEST_WORLDS))
+          + " | ".join(f"CF {w}" for w in worlds) + " |")
+    print("|---|---|---|" + "---|" * len(worlds))
     for k in trials:
         print(f"| {k} | {rs[k]:.1f} | {short[k]:.2f} | "
-              + " | ".join(f"{test[w][k]:.2f}" for w in TEST_WORLDS) + " |")
+              + " | ".join(f"{test[w][k]:.2f}" for w in worlds) + " |")
     print()
     best_rs, best_short = best_trial(lg), max(trials, key=lambda k: (short[k], -k))
-    for w in TEST_WORLDS:
+    for w in worlds:
         y = [test[w][k] for k in trials]
         a = spearmanr([rs[k] for k in trials], y).statistic
         b = spearmanr([short[k] for k in trials], y).statistic

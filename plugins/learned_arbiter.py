@@ -30,6 +30,16 @@ W[a_i]`` where ``a_i`` is the action of situation ``i``'s rule in the current
 context: ``heading = sum_k w_k heading_k``, speed the same average over the
 behaviours that propose one.
 
+**Safety hand-over** (``safety = [near, far]`` [m], ``safety_behaviour``,
+default the first behaviour; off by default). Close to an obstacle one
+behaviour takes over as in CDB: with ``h`` = 1 below ``near``, 0 beyond
+``far``, linear between (on the nearest range), the weights are ``h e_s +
+(1 - h) w`` (``e_s`` the safety behaviour alone, ``w`` the learned
+weighting), and each rule learns with its strength scaled by ``1 - h``: the
+arbiter is credited only for what it decided. The arbitration learned is
+then *where the robot is free to choose*: which behaviour leads, when to
+follow a wall.
+
 **Learning.** :class:`sitframe.QLearningParams` (same keys and meaning as
 ``fuzzy-q``; defaults here: ``update = "standard"``, ``terminal_on_collision
 = true``, relative temperature 0.25, ``b = 5``, ``p = 50``). Convergence is the
@@ -185,7 +195,12 @@ class FuzzyQArbiter:
         robot counts as stalled (0: no stall context).
     stall_margin
         How much closer [m] than the best so far counts as a new approach.
-    alpha, gamma, b, p, temperature, ...
+    proximity
+        ``[near, far]`` [m]: split every goal context into ``close`` and
+        ``far`` by the nearest range (doubles the rules); ``[]`` off.
+    safety, safety_behaviour
+        The safety hand-over (module docstring); ``[]`` off.
+    alpha, gamma, b, p, temperature, alpha_visits, ...
         :class:`sitframe.QLearningParams`.
     """
 
@@ -199,6 +214,8 @@ class FuzzyQArbiter:
         stall_iterations: int = 20,
         stall_margin: float = 0.1,
         proximity: Sequence[float] = (),
+        safety: Sequence[float] = (),
+        safety_behaviour: str | None = None,
         alpha: float = 0.3,
         gamma: float = 0.9,
         b: int = 5,
@@ -212,6 +229,7 @@ class FuzzyQArbiter:
         activation: float = 0.3,
         terminal_on_collision: bool = True,
         min_updates: int = 0,
+        alpha_visits: float = 0.0,
     ) -> None:
         self.sectors = int(P.number("sectors", sectors, lo=1, integer=True))
         if self.sectors not in SECTOR_NAMES:
@@ -225,12 +243,21 @@ class FuzzyQArbiter:
             raise InputError(f"expected [near, far] with near < far [m], or [] (no proximity "
                              f"context), got {prox}", key="proximity")
         self.proximity = tuple(prox)
+        safe = P.number_list("safety", list(safety), lo=0.0) if len(safety) else []
+        if safe and (len(safe) != 2 or safe[0] >= safe[1]):
+            raise InputError(f"expected [near, far] with near < far [m], or [] (no safety "
+                             f"hand-over), got {safe}", key="safety")
+        self.safety = tuple(safe)
+        self.safety_behaviour = None if safety_behaviour is None else \
+            P.string("safety_behaviour", safety_behaviour)
+        self._safe_k = 0
+        self._close = 0.0
         self.qparams = QLearningParams(
             alpha=alpha, gamma=gamma, b=b, p=p, temperature=temperature,
             temperature_mode=temperature_mode, temperature_decay=temperature_decay,
             temperature_min=temperature_min, q_init_value=q_init_value, update=update,
             activation=activation, terminal_on_collision=terminal_on_collision,
-            min_updates=min_updates)
+            min_updates=min_updates, alpha_visits=alpha_visits)
         self._actions_cfg = None if actions is None else self._check_actions(actions)
         names = list(SECTOR_NAMES[self.sectors])
         if self.stall_iterations:
@@ -276,6 +303,12 @@ class FuzzyQArbiter:
                 W[i, list(labels).index(lb)] = w
         self.W = W / W.sum(axis=1, keepdims=True)
         self._labels = tuple(labels)
+        if self.safety_behaviour is not None:
+            if self.safety_behaviour not in labels:
+                raise InputError(f"the 'fuzzy-q-arbiter' arbiter names behaviour "
+                                 f"'{self.safety_behaviour}', but the run's behaviours are: "
+                                 f"{', '.join(labels)}", key="safety_behaviour")
+            self._safe_k = list(labels).index(self.safety_behaviour)
 
     def bind(self, run: RunContext) -> None:
         """Build the (A, k) weighting matrix over the run's behaviour labels."""
@@ -334,6 +367,13 @@ class FuzzyQArbiter:
         u[(2 * j + 1) * self.c:(2 * j + 2) * self.c] = (1.0 - close) * ctx.memberships
         return u
 
+    def _closeness(self, ctx: Context) -> float:
+        """How much the safety hand-over holds: 1 below ``safety[0]``, 0 beyond ``safety[1]``."""
+        if not self.safety:
+            return 0.0
+        a, b = self.safety
+        return min(1.0, max(0.0, (b - ctx.nearest) / (b - a)))
+
     def _stalled(self) -> bool:
         return bool(self.stall_iterations) and self._track.since >= self.stall_iterations
 
@@ -347,6 +387,10 @@ class FuzzyQArbiter:
         self._track.observe(context)
         self._u = self._state(context, self._stalled())
         w = self._u @ self.W[self.rules]
+        if self.safety:
+            self._close = close = self._closeness(context)
+            w = (1.0 - close) * w
+            w[self._safe_k] += close
         props = list(proposals.values())
         return Proposal.blend(props, w), w / w.sum()
 
@@ -358,7 +402,8 @@ class FuzzyQArbiter:
         stalled = bool(self.stall_iterations) and self._track.since + 1 >= \
             self.stall_iterations and _goal_distance(after) >= self._track.best - self.stall_margin
         u1 = self._state(after, stalled)
-        self.learner.update(self._u, reward, u1, transition.outcome.collided,
+        u0 = self._u * (1.0 - self._close) if self.safety else self._u
+        self.learner.update(u0, reward, u1, transition.outcome.collided,
                             transition.before.iteration)
         self.rules = self.learner.rule_base
 

@@ -28,8 +28,14 @@ import numpy as np
 
 from sitframe.clustering import average_ranks
 from sitframe.collect import trajectory_poses
-from sitframe.config import config_hash, load_config, to_toml, validate_config
-from sitframe.errors import InputError
+from sitframe.config import (
+    SELECTION_DEFAULTS,
+    config_hash,
+    load_config,
+    to_toml,
+    validate_config,
+)
+from sitframe.errors import InputError, note
 from sitframe.experiment import Experiment
 from sitframe.logs import Log, lock_log, open_log, unlock_log
 from sitframe.records import LearnedPolicy, summary_key
@@ -115,7 +121,13 @@ def prepare_experiment(
         path = _resolve_path(pf["log"], base_dir)
         log = source_log(path, f"behaviours.{label}.policy_from")
         which = pf.get("trial", 0)
-        trial = log.trial(best_trial(log) if which == "best" else int(which))
+        if isinstance(which, dict):
+            k = select_trial(path, which, plugins_dirs=dirs)
+            note(f"behaviours.{label}.policy_from: trial {k} of {pf['log']} "
+                 f"({selection_rule(which)})")
+            trial = log.trial(k)
+        else:
+            trial = log.trial(best_trial(log) if which == "best" else int(which))
         src_label = pf.get("behaviour", label)
         if src_label not in trial.behaviours:
             raise InputError(f"trial {trial.index} has no behaviour '{src_label}' (it has "
@@ -349,6 +361,54 @@ def best_trial(log: Log) -> int:
     coverage = table[cov_key] if cov_key in names \
         else np.zeros(table.size)
     return best_of(table["trial"], table[column], coverage, after)
+
+
+def selection_rule(selection: dict[str, Any]) -> str:
+    """:func:`select_trial`'s rule for ``selection``, in words."""
+    sel = {**SELECTION_DEFAULTS, **selection}
+    return (f"highest {sel['score']} in {sel['episodes']} episodes in '{sel['world']}', "
+            f"seed {sel['seed']}")
+
+
+def select_trial(path: str, selection: dict[str, Any], *,
+                 plugins_dirs: tuple[str, ...] = ()) -> int:
+    """The trial of log ``path`` whose frozen policies score highest in a short episode run.
+
+    ``policy_from.trial = {world, episodes, score, seed}``. Every trial runs
+    the same ``episodes`` episodes (same start/goal pairs: ``seed``) of the
+    evaluation protocol in ``world``, exactly as ``sitframe evaluate PATH
+    --world W --trial K --goal-episodes N --seed S`` does (a log of a run
+    without a protocol, e.g. obstacle avoidance, is fused with goal seeking
+    by the ``goal-finding`` preset's CDB); the trial with the highest
+    ``score`` (a key of that command's output, default
+    ``collision_free_rate``) wins, ties to the lowest index. Choose ``world``
+    among the rooms the robot *learns* in, never a test room: a short
+    goal-episode run in ``goal-training`` predicts the collision-free rate in
+    unseen rooms far better than :func:`best_trial`'s rank sum (README,
+    "Choosing the avoidance rule base").
+
+    Raises
+    ------
+    InputError
+        ``score`` is not a key the protocol reports, or is NaN for a trial.
+    """
+    from sitframe.evaluation import evaluate_log
+
+    sel = {**SELECTION_DEFAULTS, **selection}
+    best, best_score = -1, -math.inf
+    for k in open_log(path).trial_indices():
+        out = evaluate_log(path, world=str(sel["world"]), trial=k, seed=int(sel["seed"]),
+                           goal_episodes=int(sel["episodes"]), plugins_dirs=plugins_dirs)
+        v = out.get(str(sel["score"]))
+        if not isinstance(v, (int, float)) or math.isnan(v):
+            raise InputError(f"cannot select a trial by '{sel['score']}': the episodes report "
+                             f"{'NaN' if isinstance(v, float) else 'no such score'} for trial "
+                             f"{k}; expected one of "
+                             f"{', '.join(x for x, y in out.items() if isinstance(y, float))}",
+                             file=path, key="policy_from.trial.score")
+        if v > best_score:
+            best, best_score = int(k), float(v)
+    return best
 
 
 #: How :func:`best_trial` chooses, in one line (shown by ``sitframe run``).

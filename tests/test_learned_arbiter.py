@@ -90,6 +90,29 @@ def test_weights_follow_the_rules_and_policy_round_trips():
         FuzzyQArbiter(stall_iterations=5).load_policy(pol)
 
 
+def test_safety_hands_over_to_one_behaviour_by_the_nearest_range():
+    """``safety = [a, b]``: the safety behaviour's weight is 1 below ``a`` m, falls linearly
+    to 0 at ``b``, and the learned weighting fills the rest; rules learn only by their share."""
+    arb = FuzzyQArbiter(actions=[{"avoid": 1}, {"goal": 1}], stall_iterations=0,
+                        safety=[0.3, 0.8], safety_behaviour="avoid")
+    arb._bind(["avoid", "goal"])
+    arb.reset(np.random.default_rng(0), 2, 10)
+    arb.rules = np.ones(8, dtype=np.intp)  # every rule: goal alone
+    arb.learner = None
+    props = {"avoid": Proposal(60.0, None), "goal": Proposal(-20.0, None)}
+    for nearest, w_avoid in ((0.1, 1.0), (0.3, 1.0), (0.55, 0.5), (0.8, 0.0), (2.0, 0.0)):
+        p, w = arb.combine(ctx(0, 0, goal=(5, 0), nearest=nearest), props)
+        np.testing.assert_allclose(w, [w_avoid, 1 - w_avoid])
+        assert p.heading_deg == pytest.approx(w_avoid * 60 - (1 - w_avoid) * 20)
+    reg = Registry.collect(get_plugin_manager())
+    with pytest.raises(InputError, match="near < far") as info:
+        Resolved.build(goal_run(safety=[0.8, 0.3]), reg)
+    assert "arbiter.safety" in str(info.value)
+    with pytest.raises(InputError, match="names behaviour 'avoyd'") as info:
+        Resolved.build(goal_run(safety=[0.3, 0.8], safety_behaviour="avoyd"), reg).arbiter()
+    assert "safety_behaviour" in str(info.value)
+
+
 def test_bad_arbiter_config_names_the_key():
     reg = Registry.collect(get_plugin_manager())
     with pytest.raises(InputError, match="names behaviour 'folow'") as info:
