@@ -119,5 +119,6 @@ def test_a_continuing_protocol_with_several_starts_is_a_plugin_fault(monkeypatch
 
 
 def test_an_unknown_protocol_lists_the_available_ones():
-    with pytest.raises(InputError, match="unknown protocol 'nope'.*available: frozen, goal-episodes, laps"):
+    with pytest.raises(InputError,
+                       match="unknown protocol 'nope'.*available: frozen, goal-episodes, laps"):
         experiment().res.protocol("nope")
