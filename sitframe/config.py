@@ -37,7 +37,7 @@ thesis's Table A.1):
     ``component`` (default ``"single"``) and its parameters.
 ``[evaluate]``
     ``worlds`` (default: the shipped novel rooms and the learning world),
-    ``iterations``.
+    ``iterations``: the default ``frozen`` evaluation protocol's.
 ``[goal]``
     ``episodes``, ``timeout``, ``min_distance``, ``worlds``, ``pairs``
     (``"random"`` or ``"world"``), ``radius``, ``margin``, optionally ``train``
@@ -117,6 +117,7 @@ DEFAULTS: dict[str, dict[str, Any]] = {
              "pairs": "random", "radius": 0.3, "margin": 0.1},
     "plugins": {"dirs": []},
 }
+DEFAULT_PROTOCOL = "frozen"  # the evaluation protocol of a run whose components name none
 #: Optional sections without defaults (absent from a config that does not use them, so the
 #: config's text, and so its hash, stays what it was before they existed).
 OPTIONAL_SECTIONS = ("prerequisites",)
@@ -188,10 +189,9 @@ class CollectSection:
 
 @dataclass(frozen=True)
 class EvaluateSection:
-    """``[evaluate]``: the worlds and length of each trial's frozen-policy evaluation."""
+    """``[evaluate]``: the worlds of the default evaluation (``iterations``: the protocol's)."""
 
     worlds: tuple[str, ...]
-    iterations: int
 
 
 @dataclass(frozen=True)
@@ -229,7 +229,7 @@ class Config:
             Component.of(cfg["interpreter"]),
             {label: Component.of(t) for label, t in cfg["behaviours"].items()},
             Component.of(cfg["arbiter"]),
-            EvaluateSection(tuple(v["worlds"]), int(v["iterations"])),
+            EvaluateSection(tuple(v["worlds"])),
             tuple(cfg["plugins"]["dirs"]), dict(cfg.get("prerequisites", {})),
             {k: t for k, t in cfg.items() if isinstance(t, dict)})
 

@@ -1,7 +1,7 @@
 """Evaluate a log's learned policies in any world, and print its rule bases.
 
-``evaluate_log`` runs one trial's frozen policies (or a batch of an evaluation
-protocol's episodes) in a world file of the user's choice; ``rule_base_table``
+``evaluate_log`` runs one trial's frozen policies in a world file of the user's
+choice (one run, or a batch of the run's evaluation protocol's episodes); ``rule_base_table``
 is the table ``sitframe run`` prints.
 """
 
@@ -12,10 +12,18 @@ from typing import Any
 import numpy as np
 
 from sitframe.clustering import describe_prototype
-from sitframe.config import META_KEYS, Config, load_config, validate_config
+from sitframe.config import DEFAULT_PROTOCOL, META_KEYS, Config, load_config, validate_config
 from sitframe.errors import InputError
 from sitframe.logs import open_log
-from sitframe.loop import STAGE_BATCH, STAGE_EVAL, TrialSpec, batch_scores, simulate, stage_seed
+from sitframe.loop import (
+    EVAL_KEYS,
+    STAGE_BATCH,
+    STAGE_EVAL,
+    TrialSpec,
+    batch_scores,
+    simulate,
+    stage_seed,
+)
 from sitframe.pluginmanager import Registry, get_plugin_manager
 from sitframe.prepare import BEST_TRIAL_RULE, best_of, check_state, logged_policy
 from sitframe.records import LearnedPolicy, summary_key
@@ -90,7 +98,7 @@ def evaluate_log(
     source = log_path
     if goal_episodes:
         res0 = Resolved.build(cfg, registry, log_path)
-        if res0.protocol_name() is None:
+        if res0.protocol_name(default=None) is None:
             cfg, policies, source = _fusion_config(cfg, policies, list(pinned), fusion,
                                                    log_path)
     if arbiter is not None:
@@ -99,32 +107,24 @@ def evaluate_log(
     res = Resolved.build(cfg, registry, source)
     res.world(world, key="--world")
     check_state(res, state, log_path)
+    # the run's protocol with the episodes asked for, or one frozen run of ``iterations``
+    name = res.protocol_name(default=None) if goal_episodes else DEFAULT_PROTOCOL
+    if name is None:
+        raise InputError("no component names an evaluation_protocol to run episodes of; "
+                         "expected a behaviour such as 'goal'", file=source, key="behaviours")
+    table = res.protocol(name).table
+    cfg[table] = {**cfg[table], **({"episodes": goal_episodes} if goal_episodes
+                                   else {"iterations": iterations})}
+    res = Resolved.build(cfg, registry, source)
+    stage = (STAGE_BATCH, 0) if goal_episodes else (STAGE_EVAL, trial)
+    result = simulate(res, TrialSpec(index=trial, seed=stage_seed(seed, *stage), world=world,
+                                     iterations=int(res.protocol(name).iterations),
+                                     learn=False, interpreter_state=state, policies=policies,
+                                     protocol=name))
+    out = {"log": log_path, "world": world, "trial": trial}
     if goal_episodes:
-        name = res.protocol_name()
-        if name is None:
-            raise InputError("no component names an evaluation_protocol to run episodes of; "
-                             "expected a behaviour such as 'goal'", file=source,
-                             key="behaviours")
-        table = res.protocol(name).table
-        cfg[table] = {**cfg[table], "episodes": goal_episodes}
-        res = Resolved.build(cfg, registry, source)  # (with the episodes asked for)
-        spec = TrialSpec(index=trial, seed=stage_seed(seed, STAGE_BATCH, 0), world=world,
-                         iterations=int(res.protocol(name).iterations), learn=False,
-                         interpreter_state=state, policies=policies, protocol=name)
-        result = simulate(res, spec)
-        return {"log": log_path, "world": world, "trial": trial,
-                "arbiter": res.config.arbiter.name, **batch_scores(result)}
-    spec = TrialSpec(index=trial, seed=stage_seed(seed, STAGE_EVAL, trial), world=world,
-                     iterations=iterations, learn=False, interpreter_state=state,
-                     policies=policies)
-    result = simulate(res, spec)
-    s = result.summary
-    out = {
-        "log": log_path, "world": world, "trial": trial,
-        "iterations": s["iterations"], "collisions": s["collisions"],
-        "collisions_per_1000": s["collisions_per_1000"], "distance_m": s["distance_m"],
-        "mean_speed_m_s": s["mean_speed_m_s"], "coverage": s["coverage"],
-    }
+        return {**out, "arbiter": res.config.arbiter.name, **batch_scores(result)}
+    out.update({key: result.summary[key] for key in EVAL_KEYS})
     for _label, (_beh, reward) in res.behaviours().items():
         metrics = getattr(reward, "metrics", None)
         if metrics is not None:
