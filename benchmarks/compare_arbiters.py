@@ -40,9 +40,9 @@ def _load(log: str, trial: int, arbiter: str | None) -> Any:
     key = (log, trial, arbiter)
     if key not in _LOADED:
         from sitframe.config import validate_config
+        from sitframe.logged import logged_policy as _logged_policy
         from sitframe.logs import open_log
         from sitframe.pluginmanager import Registry, get_plugin_manager
-        from sitframe.prepare import logged_policy as _logged_policy
 
         lg = open_log(log)
         cfg = validate_config(lg.config, file=log)

@@ -28,10 +28,10 @@ thesis's Table A.1):
     behaviour = "LABEL"}`` to start from a learned policy (``trial = "best"``
     picks the trial whose frozen rule base ranked best on collisions and
     coverage when evaluated in the log's own learning world; see
-    :func:`sitframe.prepare.best_trial`; a table ``trial = {world = "W",
+    :func:`sitframe.logged.best_trial`; a table ``trial = {world = "W",
     episodes = 100, score = "collision_free_rate", seed = 0}`` picks the
     trial that scores highest in that many episodes of the evaluation
-    protocol in world W, see :func:`sitframe.prepare.select_trial`), then the
+    protocol in world W, see :func:`sitframe.evaluation.select_trial`), then the
     behaviour's own parameters.
 ``[arbiter]``
     ``component`` (default ``"single"``) and its parameters.
@@ -423,7 +423,7 @@ def _validate_behaviours(value: dict[str, Any], file: str | None) -> dict[str, A
 
 
 #: Keys of a ``policy_from.trial`` selection table and their defaults
-#: (:func:`sitframe.prepare.select_trial`).
+#: (:func:`sitframe.evaluation.select_trial`).
 SELECTION_DEFAULTS: dict[str, Any] = {"world": "", "episodes": 100,
                                       "score": "collision_free_rate", "seed": 0}
 

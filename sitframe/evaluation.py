@@ -7,13 +7,22 @@ is the table ``sitframe run`` prints.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
 from sitframe.clustering import describe_prototype
-from sitframe.config import DEFAULT_PROTOCOL, META_KEYS, Config, load_config, validate_config
+from sitframe.config import (
+    DEFAULT_PROTOCOL,
+    META_KEYS,
+    SELECTION_DEFAULTS,
+    Config,
+    load_config,
+    validate_config,
+)
 from sitframe.errors import InputError
+from sitframe.logged import BEST_TRIAL_RULE, best_of, check_state, logged_policy
 from sitframe.logs import open_log
 from sitframe.loop import (
     EVAL_KEYS,
@@ -25,7 +34,6 @@ from sitframe.loop import (
     stage_seed,
 )
 from sitframe.pluginmanager import Registry, get_plugin_manager
-from sitframe.prepare import BEST_TRIAL_RULE, best_of, check_state, logged_policy
 from sitframe.records import LearnedPolicy, summary_key
 from sitframe.resolve import Resolved
 
@@ -130,6 +138,52 @@ def evaluate_log(
         if metrics is not None:
             out.update(metrics(result.arrays))
     return out
+
+
+def selection_rule(selection: dict[str, Any]) -> str:
+    """:func:`select_trial`'s rule for ``selection``, in words."""
+    sel = {**SELECTION_DEFAULTS, **selection}
+    return (f"highest {sel['score']} in {sel['episodes']} episodes in '{sel['world']}', "
+            f"seed {sel['seed']}")
+
+
+def select_trial(path: str, selection: dict[str, Any], *,
+                 plugins_dirs: tuple[str, ...] = ()) -> int:
+    """The trial of log ``path`` whose frozen policies score highest in a short episode run.
+
+    ``policy_from.trial = {world, episodes, score, seed}``. Every trial runs
+    the same ``episodes`` episodes (same start/goal pairs: ``seed``) of the
+    evaluation protocol in ``world``, exactly as ``sitframe evaluate PATH
+    --world W --trial K --goal-episodes N --seed S`` does (a log of a run
+    without a protocol, e.g. obstacle avoidance, is fused with goal seeking
+    by the ``goal-finding`` preset's CDB); the trial with the highest
+    ``score`` (a key of that command's output, default
+    ``collision_free_rate``) wins, ties to the lowest index. Choose ``world``
+    among the rooms the robot *learns* in, never a test room: a short
+    goal-episode run in ``goal-training`` predicts the collision-free rate in
+    unseen rooms far better than :func:`best_trial`'s rank sum (README,
+    "Choosing the avoidance rule base").
+
+    Raises
+    ------
+    InputError
+        ``score`` is not a key the protocol reports, or is NaN for a trial.
+    """
+    sel = {**SELECTION_DEFAULTS, **selection}
+    best, best_score = -1, -math.inf
+    for k in open_log(path).trial_indices():
+        out = evaluate_log(path, world=str(sel["world"]), trial=k, seed=int(sel["seed"]),
+                           goal_episodes=int(sel["episodes"]), plugins_dirs=plugins_dirs)
+        v = out.get(str(sel["score"]))
+        if not isinstance(v, (int, float)) or math.isnan(v):
+            raise InputError(f"cannot select a trial by '{sel['score']}': the episodes report "
+                             f"{'NaN' if isinstance(v, float) else 'no such score'} for trial "
+                             f"{k}; expected one of "
+                             f"{', '.join(x for x, y in out.items() if isinstance(y, float))}",
+                             file=path, key="policy_from.trial.score")
+        if v > best_score:
+            best, best_score = int(k), float(v)
+    return best
 
 
 def _pinned(behaviours: dict[str, dict[str, Any]], cfg: dict[str, Any]

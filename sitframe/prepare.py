@@ -3,7 +3,7 @@
 ``prepare_experiment`` checks everything that can be wrong with the input before a
 byte is written, opens the logs a config builds on (``clusters_from``,
 ``policy_from``; intact logs only) and fingerprints what it reads from them;
-``best_trial`` is the rule ``policy_from.trial = "best"`` applies::
+which trial of such a log (:mod:`sitframe.logged`) is reused::
 
     from sitframe.config import load_config
     from sitframe.prepare import prepare_experiment
@@ -26,20 +26,14 @@ from typing import Any
 import h5py
 import numpy as np
 
-from sitframe.clustering import average_ranks
 from sitframe.collect import trajectory_poses
-from sitframe.config import (
-    SELECTION_DEFAULTS,
-    config_hash,
-    load_config,
-    to_toml,
-    validate_config,
-)
+from sitframe.config import config_hash, load_config, to_toml, validate_config
 from sitframe.errors import InputError, note
+from sitframe.evaluation import select_trial, selection_rule
 from sitframe.experiment import Experiment
+from sitframe.logged import best_trial, check_state, logged_policy
 from sitframe.logs import Log, lock_log, open_log, unlock_log
-from sitframe.records import LearnedPolicy, summary_key
-from sitframe.resolve import Resolved
+from sitframe.records import LearnedPolicy
 
 
 def _resolve_path(path: str, base_dir: str) -> str:
@@ -316,118 +310,3 @@ def _check_collect(exp: Experiment, source: str | None) -> None:
                          f"situations to fit; expected at least {k}: collect more "
                          "(collect.worlds, collect.rate_hz, collect.mode) or lower c",
                          file=source, key="interpreter.c")
-
-
-def check_state(res: Resolved, state: dict[str, Any], path: str) -> None:
-    """Load a logged interpreter state into a fresh interpreter (InputError if it does not fit)."""
-    try:
-        res.interpreter().load_state(state)
-    except (ValueError, KeyError, TypeError) as exc:
-        why = f"missing {exc}" if isinstance(exc, KeyError) else exc
-        raise InputError(f"its situations do not fit this config's interpreter: {why}",
-                         file=path, key="cluster/state") from None
-
-
-def best_trial(log: Log) -> int:
-    """The trial whose frozen rule base did best in the log's learning world.
-
-    Quality is judged, as the project judges it everywhere, by collisions
-    *and* coverage: each trial is ranked by ``eval/<learning world>/
-    collisions_per_1000`` (fewest first) and by ``eval/<learning
-    world>/coverage`` (most first), ties sharing their average rank, and the
-    trial with the smallest sum of the two ranks is chosen; ties go to fewer
-    collisions per 1000 iterations after convergence, then to the lowest
-    index. Collisions alone would favour a rule base that loops in one corner
-    of the room (few collisions because it hardly goes anywhere). Only the
-    learning world is used, never the other evaluation rooms, so choosing a
-    trial this way does not peek at rooms the robot is later tested in.
-
-    Raises
-    ------
-    InputError
-        The log has no trials, or no evaluation in its learning world.
-    """
-    table = log.summary()
-    world = log.config.get("experiment", {}).get("world", "training")
-    column = summary_key("eval", world, "collisions_per_1000", sep=".")
-    names = table.dtype.names or ()
-    if table.size == 0 or column not in names:
-        raise InputError(f"cannot pick the best trial: the log has no evaluation in its learning "
-                         f"world '{world}' (include 'evaluate' and '{world}' in the run)",
-                         file=log.path, key="summary")
-    after = table["collisions_per_1000_after_convergence"] if \
-        "collisions_per_1000_after_convergence" in names else np.zeros(table.size)
-    cov_key = summary_key("eval", world, "coverage", sep=".")
-    coverage = table[cov_key] if cov_key in names \
-        else np.zeros(table.size)
-    return best_of(table["trial"], table[column], coverage, after)
-
-
-def selection_rule(selection: dict[str, Any]) -> str:
-    """:func:`select_trial`'s rule for ``selection``, in words."""
-    sel = {**SELECTION_DEFAULTS, **selection}
-    return (f"highest {sel['score']} in {sel['episodes']} episodes in '{sel['world']}', "
-            f"seed {sel['seed']}")
-
-
-def select_trial(path: str, selection: dict[str, Any], *,
-                 plugins_dirs: tuple[str, ...] = ()) -> int:
-    """The trial of log ``path`` whose frozen policies score highest in a short episode run.
-
-    ``policy_from.trial = {world, episodes, score, seed}``. Every trial runs
-    the same ``episodes`` episodes (same start/goal pairs: ``seed``) of the
-    evaluation protocol in ``world``, exactly as ``sitframe evaluate PATH
-    --world W --trial K --goal-episodes N --seed S`` does (a log of a run
-    without a protocol, e.g. obstacle avoidance, is fused with goal seeking
-    by the ``goal-finding`` preset's CDB); the trial with the highest
-    ``score`` (a key of that command's output, default
-    ``collision_free_rate``) wins, ties to the lowest index. Choose ``world``
-    among the rooms the robot *learns* in, never a test room: a short
-    goal-episode run in ``goal-training`` predicts the collision-free rate in
-    unseen rooms far better than :func:`best_trial`'s rank sum (README,
-    "Choosing the avoidance rule base").
-
-    Raises
-    ------
-    InputError
-        ``score`` is not a key the protocol reports, or is NaN for a trial.
-    """
-    from sitframe.evaluation import evaluate_log
-
-    sel = {**SELECTION_DEFAULTS, **selection}
-    best, best_score = -1, -math.inf
-    for k in open_log(path).trial_indices():
-        out = evaluate_log(path, world=str(sel["world"]), trial=k, seed=int(sel["seed"]),
-                           goal_episodes=int(sel["episodes"]), plugins_dirs=plugins_dirs)
-        v = out.get(str(sel["score"]))
-        if not isinstance(v, (int, float)) or math.isnan(v):
-            raise InputError(f"cannot select a trial by '{sel['score']}': the episodes report "
-                             f"{'NaN' if isinstance(v, float) else 'no such score'} for trial "
-                             f"{k}; expected one of "
-                             f"{', '.join(x for x, y in out.items() if isinstance(y, float))}",
-                             file=path, key="policy_from.trial.score")
-        if v > best_score:
-            best, best_score = int(k), float(v)
-    return best
-
-
-#: How :func:`best_trial` chooses, in one line (shown by ``sitframe run``).
-BEST_TRIAL_RULE = "smallest rank sum of (fewest collisions, most coverage)"
-
-
-def best_of(index: Any, eval_collisions: Any, coverage: Any, after_collisions: Any) -> int:
-    """The rule of :func:`best_trial` on parallel sequences (NaN ranks worst)."""
-    coll = np.nan_to_num(np.asarray(eval_collisions, float), nan=np.inf)
-    cov = np.nan_to_num(np.asarray(coverage, float), nan=-np.inf)
-    score = average_ranks(coll) + average_ranks(-cov)
-    order = np.lexsort((np.asarray(index),
-                        np.nan_to_num(np.asarray(after_collisions, float), nan=np.inf), score))
-    return int(np.asarray(index)[order[0]])
-
-
-def logged_policy(trial: Any, label: str, path: str) -> LearnedPolicy | None:
-    """A trial's learned policy of ``label``, located at the log on error."""
-    try:
-        return trial.learned_policy(label)
-    except InputError as exc:
-        raise exc.at(file=path) from None

@@ -14,12 +14,12 @@ import pytest
 from sitframe.cli import main
 from sitframe.config import load_config, preset_text, validate_config
 from sitframe.errors import InputError
-from sitframe.evaluation import evaluate_log
+from sitframe.evaluation import evaluate_log, select_trial
 from sitframe.logs import open_log
 from sitframe.loop import TrialSpec, batch_scores, simulate
 from sitframe.pluginmanager import Registry, get_plugin_manager
 from sitframe.plugins.goal_episodes import AGGREGATE_KEYS, GoalEpisodes, goal_pairs, world_pairs
-from sitframe.prepare import prepare_experiment, select_trial
+from sitframe.prepare import prepare_experiment
 from sitframe.resolve import Resolved
 from sitframe.world import load_world, parse_world
 
