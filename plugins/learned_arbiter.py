@@ -59,7 +59,13 @@ far in the episode:
 3. otherwise ``progress * max(0, d_best - d) + time``: +``progress``
    (100) per metre of *new* approach to the goal, and ``time`` (-1) each
    iteration. Moving away costs only time, so a detour around a trap is
-   not punished beyond its length, and dithering earns nothing.
+   not punished beyond its length, and dithering earns nothing. With
+   ``signed = true`` the progress term is ``progress * (d_before - d)``
+   instead (potential-based shaping: every step says whether it went
+   towards the goal or away, at the price of punishing the first half of a
+   detour);
+4. minus ``near_cost * max(0, near - nearest range)`` (both 0 by default):
+   a cost of passing close to obstacles.
 
 A new episode (the goal moved) starts a new ``d_best``.
 """
@@ -146,8 +152,9 @@ class GoalProgressReward:
 
     def __init__(self, *, progress: float = 100.0, time: float = -1.0,
                  collision: float = -50.0, goal: float = 50.0, near: float = 0.0,
-                 near_cost: float = 0.0) -> None:
+                 near_cost: float = 0.0, signed: bool = False) -> None:
         self.progress = P.number("progress", progress, lo=0.0)
+        self.signed = P.boolean("signed", signed)
         self.near = P.number("near", near, lo=0.0)
         self.near_cost = P.number("near_cost", near_cost, lo=0.0)
         self.time = P.number("time", time)
@@ -170,7 +177,8 @@ class GoalProgressReward:
         if d <= tr.after.goal.radius:
             return self.goal
         close = self.near_cost * max(0.0, self.near - tr.after.nearest)
-        return self.progress * max(0.0, best - d) + self.time - close
+        gain = _goal_distance(tr.before) - d if self.signed else max(0.0, best - d)
+        return self.progress * gain + self.time - close
 
 
 def default_actions(labels: Sequence[str]) -> list[dict[str, float]]:

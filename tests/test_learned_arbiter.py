@@ -65,6 +65,21 @@ def test_reward_pays_new_approach_only_and_punishes_collision():
     assert r(tr(ctx(4.9, 5), ctx(4.9, 5, goal=(0, 0)))) == -1
 
 
+def test_signed_reward_pays_every_step_towards_the_goal_and_charges_every_step_away():
+    r = GoalProgressReward(progress=100, time=-1, signed=True, near=0.5, near_cost=10)
+    ok = SimpleNamespace(collided=False)
+
+    def tr(a, b):
+        return Transition(a, None, ok, b)  # type: ignore[arg-type]
+
+    assert r(tr(ctx(0, 5, it=0), ctx(1, 5))) == pytest.approx(100 * 1 - 1)
+    assert r(tr(ctx(1, 5), ctx(0.5, 5))) == pytest.approx(-100 * 0.5 - 1)  # away: charged
+    assert r(tr(ctx(0.5, 5), ctx(0.8, 5))) == pytest.approx(100 * 0.3 - 1)  # back: paid again
+    assert r(tr(ctx(0.8, 5), ctx(1.0, 5, nearest=0.2))) == pytest.approx(100 * 0.2 - 1 - 3)
+    with pytest.raises(InputError, match="signed"):
+        GoalProgressReward(signed="yes")
+
+
 def test_weights_follow_the_rules_and_policy_round_trips():
     arb = FuzzyQArbiter(actions=[{"avoid": 1}, {"goal": 1}, {"avoid": 1, "goal": 3}],
                         stall_iterations=0)
