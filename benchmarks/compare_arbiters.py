@@ -148,7 +148,8 @@ def draw_paths(runs: list[tuple[str, str, int, str | None]], world: str, seed: i
             ax.legend(loc="lower right", fontsize=8)
         ax.plot(*xy[0], "o", color="tab:green", ms=7)
         ax.set_title(f"{name}: {'reached' if p['success'][e] else 'not reached'} in "
-                     f"{p['time'][e]:.0f} s, SPL {p['spl'][e]:.2f}, {len(hits)} collisions",
+                     f"{p['time'][e]:.0f} s, SPL {p['spl'][e]:.2f}, {len(hits)} collision"
+                     f"{'' if len(hits) == 1 else 's'}",
                      fontsize=9)
     fig.suptitle(f"Goal episode {e} of seed {seed} in '{world}' (start: green dot, goal: star)")
     fig.tight_layout()
