@@ -8,6 +8,7 @@ is the table ``sitframe run`` prints.
 from __future__ import annotations
 
 import math
+import os
 from typing import Any
 
 import numpy as np
@@ -162,7 +163,9 @@ def select_trial(path: str, selection: dict[str, Any], *,
     among the rooms the robot *learns* in, never a test room: a short
     goal-episode run in ``goal-training`` predicts the collision-free rate in
     unseen rooms far better than :func:`best_trial`'s rank sum (README,
-    "Choosing the avoidance rule base").
+    "Choosing the avoidance rule base"). The result is kept for the process
+    (same log file, unchanged, and same selection), so a sweep whose points
+    share the selection runs it once.
 
     Raises
     ------
@@ -170,6 +173,18 @@ def select_trial(path: str, selection: dict[str, Any], *,
         ``score`` is not a key the protocol reports, or is NaN for a trial.
     """
     sel = {**SELECTION_DEFAULTS, **selection}
+    st = os.stat(path)  # (a sweep prepares every point with the same selection: once)
+    key = (os.path.realpath(path), st.st_mtime_ns, st.st_size, tuple(sorted(sel.items())),
+           plugins_dirs)
+    if key not in _SELECTED:
+        _SELECTED[key] = _select(path, sel, plugins_dirs)
+    return _SELECTED[key]
+
+
+_SELECTED: dict[tuple[Any, ...], int] = {}
+
+
+def _select(path: str, sel: dict[str, Any], plugins_dirs: tuple[str, ...]) -> int:
     best, best_score = -1, -math.inf
     for k in open_log(path).trial_indices():
         out = evaluate_log(path, world=str(sel["world"]), trial=k, seed=int(sel["seed"]),
