@@ -40,9 +40,9 @@ def _load(log: str, trial: int, arbiter: str | None) -> Any:
     key = (log, trial, arbiter)
     if key not in _LOADED:
         from sitframe.config import validate_config
+        from sitframe.logged import logged_policy as _logged_policy
         from sitframe.logs import open_log
         from sitframe.pluginmanager import Registry, get_plugin_manager
-        from sitframe.prepare import logged_policy as _logged_policy
 
         lg = open_log(log)
         cfg = validate_config(lg.config, file=log)
@@ -82,7 +82,7 @@ def _evaluate(task: tuple[str, str, int, str | None, str, int, int]) -> dict[str
     return {"arbiter": name, "world": world, "seed": seed, **{k: out[k] for k in KEYS}}
 
 
-def select_trial(log: str, episodes: int = 20, seed: int = 1000, workers: int = 2) -> int:
+def select_trial(log: str, episodes: int = 100, seed: int = 1000, workers: int = 2) -> int:
     """The trial whose frozen policies do best in a short goal-episode run in the log's
     learning world: most collision-free episodes, then success, then SPL."""
     from sitframe.logs import open_log
@@ -148,7 +148,8 @@ def draw_paths(runs: list[tuple[str, str, int, str | None]], world: str, seed: i
             ax.legend(loc="lower right", fontsize=8)
         ax.plot(*xy[0], "o", color="tab:green", ms=7)
         ax.set_title(f"{name}: {'reached' if p['success'][e] else 'not reached'} in "
-                     f"{p['time'][e]:.0f} s, SPL {p['spl'][e]:.2f}, {len(hits)} collisions",
+                     f"{p['time'][e]:.0f} s, SPL {p['spl'][e]:.2f}, {len(hits)} collision"
+                     f"{'' if len(hits) == 1 else 's'}",
                      fontsize=9)
     fig.suptitle(f"Goal episode {e} of seed {seed} in '{world}' (start: green dot, goal: star)")
     fig.tight_layout()
@@ -181,6 +182,8 @@ def main() -> None:
     ap.add_argument("--cdb-log", default="logs/goal-finding.h5")
     ap.add_argument("--learned-log", default="logs/goal-finding-learned.h5")
     ap.add_argument("--learned-trial", type=int, default=None)
+    ap.add_argument("--select-episodes", type=int, default=100,
+                    help="episodes of the short run that picks the learned trial")
     ap.add_argument("--worlds", nargs="+", default=list(WORLDS))
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--episodes", type=int, default=50)
@@ -191,8 +194,9 @@ def main() -> None:
     args = ap.parse_args()
     k = args.learned_trial
     if k is None:
-        k = select_trial(args.learned_log, workers=args.workers)
-        print(f"learned trial {k}: the best of a 20-episode goal run in its learning world")
+        k = select_trial(args.learned_log, args.select_episodes, workers=args.workers)
+        print(f"learned trial {k}: the best of a {args.select_episodes}-episode goal run in "
+              "its learning world")
     runs = [("cdb", args.cdb_log, 0, None), ("priority", args.cdb_log, 0, "priority"),
             ("learned", args.learned_log, k, None)]
     tasks = [(name, log, trial, arb, w, s, args.episodes) for w in args.worlds

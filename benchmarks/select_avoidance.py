@@ -10,7 +10,7 @@ goal-finding fusion (CDB, ``sitframe evaluate LOG --trial K --goal-episodes N``)
 
 and prints the Spearman correlation with the test rooms' collision-free rate
 of (a) today's ``trial = "best"`` score (rank sum of training-room collisions
-and coverage, :func:`sitframe.prepare.best_trial`; lower is better, so a
+and coverage, :func:`sitframe.logged.best_trial`; lower is better, so a
 useful score correlates *negatively*) and (b) the short goal run's
 collision-free rate (a useful score correlates positively), and the rule base
 each picks.
@@ -42,7 +42,7 @@ def _cf(task: tuple[str, int, str, int, int]) -> dict[str, Any]:
 
 
 def rank_sums(log: str) -> dict[int, float]:
-    """Trial -> the rank sum :func:`sitframe.prepare.best_trial` minimises."""
+    """Trial -> the rank sum :func:`sitframe.logged.best_trial` minimises."""
     from sitframe.logs import open_log
 
     lg = open_log(log)
@@ -58,30 +58,34 @@ def main() -> None:
     ap.add_argument("log")
     ap.add_argument("--short", type=int, default=20, help="pairs of the short training run")
     ap.add_argument("--test", type=int, default=100, help="pairs per test room")
+    ap.add_argument("--short-world", default=None,
+                    help="room of the short run (default: the log's training room)")
+    ap.add_argument("--worlds", nargs="+", default=list(TEST_WORLDS), help="test rooms")
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
+    from sitframe.logged import best_trial
     from sitframe.logs import open_log
-    from sitframe.prepare import best_trial
 
     lg = open_log(args.log)
     trials = lg.trial_indices()
-    train_world = lg.config["experiment"]["world"]
+    train_world = args.short_world or lg.config["experiment"]["world"]
+    worlds = tuple(args.worlds)
     tasks = [(args.log, k, train_world, 1000, args.short) for k in trials]
-    tasks += [(args.log, k, w, 0, args.test) for w in TEST_WORLDS for k in trials]
+    tasks += [(args.log, k, w, 0, args.test) for w in worlds for k in trials]
     with ProcessPoolExecutor(args.workers) as pool:
         rows = list(pool.map(_cf, tasks))
     short = {r["trial"]: r["cf"] for r in rows if r["world"] == train_world}
-    test = {w: {r["trial"]: r["cf"] for r in rows if r["world"] == w} for w in TEST_WORLDS}
+    test = {w: {r["trial"]: r["cf"] for r in rows if r["world"] == w} for w in worlds}
     rs = rank_sums(args.log)
     print(f"| trial | rank sum (training) | short goal run CF ({train_world}) | "
-          + " | ".join(f"CF {w}" for w in TEST_WORLDS) + " |")
-    print("|---|---|---|" + "---|" * len(TEST_WORLDS))
+          + " | ".join(f"CF {w}" for w in worlds) + " |")
+    print("|---|---|---|" + "---|" * len(worlds))
     for k in trials:
         print(f"| {k} | {rs[k]:.1f} | {short[k]:.2f} | "
-              + " | ".join(f"{test[w][k]:.2f}" for w in TEST_WORLDS) + " |")
+              + " | ".join(f"{test[w][k]:.2f}" for w in worlds) + " |")
     print()
     best_rs, best_short = best_trial(lg), max(trials, key=lambda k: (short[k], -k))
-    for w in TEST_WORLDS:
+    for w in worlds:
         y = [test[w][k] for k in trials]
         a = spearmanr([rs[k] for k in trials], y).statistic
         b = spearmanr([short[k] for k in trials], y).statistic

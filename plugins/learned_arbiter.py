@@ -30,6 +30,16 @@ W[a_i]`` where ``a_i`` is the action of situation ``i``'s rule in the current
 context: ``heading = sum_k w_k heading_k``, speed the same average over the
 behaviours that propose one.
 
+**Safety hand-over** (``safety = [near, far]`` [m], ``safety_behaviour``,
+default the first behaviour; off by default). Close to an obstacle one
+behaviour takes over as in CDB: with ``h`` = 1 below ``near``, 0 beyond
+``far``, linear between (on the nearest range), the weights are ``h e_s +
+(1 - h) w`` (``e_s`` the safety behaviour alone, ``w`` the learned
+weighting), and each rule learns with its strength scaled by ``1 - h``: the
+arbiter is credited only for what it decided. The arbitration learned is
+then *where the robot is free to choose*: which behaviour leads, when to
+follow a wall.
+
 **Learning.** :class:`sitframe.QLearningParams` (same keys and meaning as
 ``fuzzy-q``; defaults here: ``update = "standard"``, ``terminal_on_collision
 = true``, relative temperature 0.25, ``b = 5``, ``p = 50``). Convergence is the
@@ -49,7 +59,13 @@ far in the episode:
 3. otherwise ``progress * max(0, d_best - d) + time``: +``progress``
    (100) per metre of *new* approach to the goal, and ``time`` (-1) each
    iteration. Moving away costs only time, so a detour around a trap is
-   not punished beyond its length, and dithering earns nothing.
+   not punished beyond its length, and dithering earns nothing. With
+   ``signed = true`` the progress term is ``progress * (d_before - d)``
+   instead (potential-based shaping: every step says whether it went
+   towards the goal or away, at the price of punishing the first half of a
+   detour);
+4. minus ``near_cost * max(0, near - nearest range)`` (both 0 by default):
+   a cost of passing close to obstacles.
 
 A new episode (the goal moved) starts a new ``d_best``.
 """
@@ -136,8 +152,9 @@ class GoalProgressReward:
 
     def __init__(self, *, progress: float = 100.0, time: float = -1.0,
                  collision: float = -50.0, goal: float = 50.0, near: float = 0.0,
-                 near_cost: float = 0.0) -> None:
+                 near_cost: float = 0.0, signed: bool = False) -> None:
         self.progress = P.number("progress", progress, lo=0.0)
+        self.signed = P.boolean("signed", signed)
         self.near = P.number("near", near, lo=0.0)
         self.near_cost = P.number("near_cost", near_cost, lo=0.0)
         self.time = P.number("time", time)
@@ -160,7 +177,8 @@ class GoalProgressReward:
         if d <= tr.after.goal.radius:
             return self.goal
         close = self.near_cost * max(0.0, self.near - tr.after.nearest)
-        return self.progress * max(0.0, best - d) + self.time - close
+        gain = _goal_distance(tr.before) - d if self.signed else max(0.0, best - d)
+        return self.progress * gain + self.time - close
 
 
 def default_actions(labels: Sequence[str]) -> list[dict[str, float]]:
@@ -185,7 +203,12 @@ class FuzzyQArbiter:
         robot counts as stalled (0: no stall context).
     stall_margin
         How much closer [m] than the best so far counts as a new approach.
-    alpha, gamma, b, p, temperature, ...
+    proximity
+        ``[near, far]`` [m]: split every goal context into ``close`` and
+        ``far`` by the nearest range (doubles the rules); ``[]`` off.
+    safety, safety_behaviour
+        The safety hand-over (module docstring); ``[]`` off.
+    alpha, gamma, b, p, temperature, alpha_visits, ...
         :class:`sitframe.QLearningParams`.
     """
 
@@ -199,6 +222,8 @@ class FuzzyQArbiter:
         stall_iterations: int = 20,
         stall_margin: float = 0.1,
         proximity: Sequence[float] = (),
+        safety: Sequence[float] = (),
+        safety_behaviour: str | None = None,
         alpha: float = 0.3,
         gamma: float = 0.9,
         b: int = 5,
@@ -212,6 +237,7 @@ class FuzzyQArbiter:
         activation: float = 0.3,
         terminal_on_collision: bool = True,
         min_updates: int = 0,
+        alpha_visits: float = 0.0,
     ) -> None:
         self.sectors = int(P.number("sectors", sectors, lo=1, integer=True))
         if self.sectors not in SECTOR_NAMES:
@@ -225,12 +251,21 @@ class FuzzyQArbiter:
             raise InputError(f"expected [near, far] with near < far [m], or [] (no proximity "
                              f"context), got {prox}", key="proximity")
         self.proximity = tuple(prox)
+        safe = P.number_list("safety", list(safety), lo=0.0) if len(safety) else []
+        if safe and (len(safe) != 2 or safe[0] >= safe[1]):
+            raise InputError(f"expected [near, far] with near < far [m], or [] (no safety "
+                             f"hand-over), got {safe}", key="safety")
+        self.safety = tuple(safe)
+        self.safety_behaviour = None if safety_behaviour is None else \
+            P.string("safety_behaviour", safety_behaviour)
+        self._safe_k = 0
+        self._close = 0.0
         self.qparams = QLearningParams(
             alpha=alpha, gamma=gamma, b=b, p=p, temperature=temperature,
             temperature_mode=temperature_mode, temperature_decay=temperature_decay,
             temperature_min=temperature_min, q_init_value=q_init_value, update=update,
             activation=activation, terminal_on_collision=terminal_on_collision,
-            min_updates=min_updates)
+            min_updates=min_updates, alpha_visits=alpha_visits)
         self._actions_cfg = None if actions is None else self._check_actions(actions)
         names = list(SECTOR_NAMES[self.sectors])
         if self.stall_iterations:
@@ -276,6 +311,12 @@ class FuzzyQArbiter:
                 W[i, list(labels).index(lb)] = w
         self.W = W / W.sum(axis=1, keepdims=True)
         self._labels = tuple(labels)
+        if self.safety_behaviour is not None:
+            if self.safety_behaviour not in labels:
+                raise InputError(f"the 'fuzzy-q-arbiter' arbiter names behaviour "
+                                 f"'{self.safety_behaviour}', but the run's behaviours are: "
+                                 f"{', '.join(labels)}", key="safety_behaviour")
+            self._safe_k = list(labels).index(self.safety_behaviour)
 
     def bind(self, run: RunContext) -> None:
         """Build the (A, k) weighting matrix over the run's behaviour labels."""
@@ -334,6 +375,13 @@ class FuzzyQArbiter:
         u[(2 * j + 1) * self.c:(2 * j + 2) * self.c] = (1.0 - close) * ctx.memberships
         return u
 
+    def _closeness(self, ctx: Context) -> float:
+        """How much the safety hand-over holds: 1 below ``safety[0]``, 0 beyond ``safety[1]``."""
+        if not self.safety:
+            return 0.0
+        a, b = self.safety
+        return min(1.0, max(0.0, (b - ctx.nearest) / (b - a)))
+
     def _stalled(self) -> bool:
         return bool(self.stall_iterations) and self._track.since >= self.stall_iterations
 
@@ -347,6 +395,10 @@ class FuzzyQArbiter:
         self._track.observe(context)
         self._u = self._state(context, self._stalled())
         w = self._u @ self.W[self.rules]
+        if self.safety:
+            self._close = close = self._closeness(context)
+            w = (1.0 - close) * w
+            w[self._safe_k] += close
         props = list(proposals.values())
         return Proposal.blend(props, w), w / w.sum()
 
@@ -358,7 +410,8 @@ class FuzzyQArbiter:
         stalled = bool(self.stall_iterations) and self._track.since + 1 >= \
             self.stall_iterations and _goal_distance(after) >= self._track.best - self.stall_margin
         u1 = self._state(after, stalled)
-        self.learner.update(self._u, reward, u1, transition.outcome.collided,
+        u0 = self._u * (1.0 - self._close) if self.safety else self._u
+        self.learner.update(u0, reward, u1, transition.outcome.collided,
                             transition.before.iteration)
         self.rules = self.learner.rule_base
 

@@ -238,15 +238,16 @@ class EvaluationProtocol(Protocol):
     """How the evaluate stage runs and scores episodes of the frozen behaviours.
 
     A run uses the protocol a component names in its class attribute
-    ``evaluation_protocol``. The protocol is created from the config table
-    :attr:`table` (its keys but ``worlds``); the evaluate stage runs one
-    *batch* of episodes in each world of that table's ``worlds``: a trial of
-    its own in a run that does not learn, else an evaluation of each learning
-    trial with that trial's learned policies. The core runs every episode
-    through the one simulation loop, without learning; a batch is logged as
-    one trial (episodes concatenated, ``first_iteration`` gives each one's
-    first row) with the per-episode figures under ``episodes/`` and the
-    aggregates as ``eval/<world>/<key>`` summary scalars.
+    ``evaluation_protocol``, else ``frozen`` (``plugins/frozen_evaluation.py``).
+    The protocol is created from the config table :attr:`table` (its keys but
+    ``worlds``); the evaluate stage runs one *batch* of episodes in each world
+    of that table's ``worlds``: a trial of its own in a run that does not
+    learn, else an evaluation of each learning trial with that trial's learned
+    policies. The core runs every episode through the one simulation loop,
+    without learning; a batch is logged as one trial (episodes concatenated,
+    ``first_iteration`` gives each one's first row) with the per-episode
+    figures under ``episodes/``, the core's figures (:data:`sitframe.loop.EVAL_KEYS`)
+    and the aggregates as ``eval/<world>/<key>`` summary scalars.
 
     Attributes
     ----------
@@ -260,7 +261,8 @@ class EvaluationProtocol(Protocol):
     An optional ``check_world(world)`` raises :class:`sitframe.errors.InputError`
     for a world the protocol cannot use, before anything runs. A parameter
     ``episodes`` (episodes per batch) is what ``sitframe evaluate LOG
-    --goal-episodes N`` sets.
+    --goal-episodes N`` sets. :meth:`score_episode`, :meth:`aggregate` are optional;
+    ``episodic = False`` (*continuing*): a batch is one run on its own seed, not logged per episode.
     """
 
     name: ClassVar[str]

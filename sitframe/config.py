@@ -28,13 +28,16 @@ thesis's Table A.1):
     behaviour = "LABEL"}`` to start from a learned policy (``trial = "best"``
     picks the trial whose frozen rule base ranked best on collisions and
     coverage when evaluated in the log's own learning world; see
-    :func:`sitframe.prepare.best_trial`), then the
+    :func:`sitframe.logged.best_trial`; a table ``trial = {world = "W",
+    episodes = 100, score = "collision_free_rate", seed = 0}`` picks the
+    trial that scores highest in that many episodes of the evaluation
+    protocol in world W, see :func:`sitframe.evaluation.select_trial`), then the
     behaviour's own parameters.
 ``[arbiter]``
     ``component`` (default ``"single"``) and its parameters.
 ``[evaluate]``
     ``worlds`` (default: the shipped novel rooms and the learning world),
-    ``iterations``.
+    ``iterations``: the default ``frozen`` evaluation protocol's.
 ``[goal]``
     ``episodes``, ``timeout``, ``min_distance``, ``worlds``, ``pairs``
     (``"random"`` or ``"world"``), ``radius``, ``margin``, optionally ``train``
@@ -114,6 +117,7 @@ DEFAULTS: dict[str, dict[str, Any]] = {
              "pairs": "random", "radius": 0.3, "margin": 0.1},
     "plugins": {"dirs": []},
 }
+DEFAULT_PROTOCOL = "frozen"  # the evaluation protocol of a run whose components name none
 #: Optional sections without defaults (absent from a config that does not use them, so the
 #: config's text, and so its hash, stays what it was before they existed).
 OPTIONAL_SECTIONS = ("prerequisites",)
@@ -185,10 +189,9 @@ class CollectSection:
 
 @dataclass(frozen=True)
 class EvaluateSection:
-    """``[evaluate]``: the worlds and length of each trial's frozen-policy evaluation."""
+    """``[evaluate]``: the worlds of the default evaluation (``iterations``: the protocol's)."""
 
     worlds: tuple[str, ...]
-    iterations: int
 
 
 @dataclass(frozen=True)
@@ -226,7 +229,7 @@ class Config:
             Component.of(cfg["interpreter"]),
             {label: Component.of(t) for label, t in cfg["behaviours"].items()},
             Component.of(cfg["arbiter"]),
-            EvaluateSection(tuple(v["worlds"]), int(v["iterations"])),
+            EvaluateSection(tuple(v["worlds"])),
             tuple(cfg["plugins"]["dirs"]), dict(cfg.get("prerequisites", {})),
             {k: t for k, t in cfg.items() if isinstance(t, dict)})
 
@@ -411,10 +414,32 @@ def _validate_behaviours(value: dict[str, Any], file: str | None) -> dict[str, A
                                      "; expected log, trial, behaviour",
                                      file=file, key=f"{key}.policy_from.{k}")
             _at(P.string, "log", pf["log"], file, f"{key}.policy_from")
-            if "trial" in pf and pf["trial"] != "best":
+            if isinstance(pf.get("trial"), dict):
+                _check_selection(pf["trial"], file, f"{key}.policy_from.trial")
+            elif "trial" in pf and pf["trial"] != "best":
                 _at(P.number, "trial", pf["trial"], file, f"{key}.policy_from", lo=0, integer=True)
         out[label] = t
     return out
+
+
+#: Keys of a ``policy_from.trial`` selection table and their defaults
+#: (:func:`sitframe.evaluation.select_trial`).
+SELECTION_DEFAULTS: dict[str, Any] = {"world": "", "episodes": 100,
+                                      "score": "collision_free_rate", "seed": 0}
+
+
+def _check_selection(sel: dict[str, Any], file: str | None, key: str) -> None:
+    for k in sel:
+        if k not in SELECTION_DEFAULTS:
+            raise InputError(f"unknown key{did_you_mean(k, list(SELECTION_DEFAULTS))}; expected "
+                             f"{', '.join(SELECTION_DEFAULTS)}", file=file, key=f"{key}.{k}")
+    if "world" not in sel:
+        raise InputError("expected the world the trials are compared in, e.g. world = "
+                         "\"goal-training\"", file=file, key=f"{key}.world")
+    _at(P.string, "world", sel["world"], file, key)
+    _at(P.string, "score", sel.get("score", "collision_free_rate"), file, key)
+    _at(P.number, "episodes", sel.get("episodes", 100), file, key, lo=1, integer=True)
+    _at(P.number, "seed", sel.get("seed", 0), file, key, lo=0, integer=True)
 
 
 def _check_core(cfg: dict[str, Any], file: str | None) -> None:

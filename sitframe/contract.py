@@ -34,7 +34,7 @@ REQUIRED: dict[str, tuple[str, ...]] = {
     "reward": ("__call__",),
     "behaviour": ("reset", "propose"),
     "arbiter": ("combine",),
-    "protocol": ("episode_starts", "terminated", "score_episode", "aggregate"),
+    "protocol": ("episode_starts", "terminated"),
 }
 
 #: Optional lifecycle methods any component may define (called when present).

@@ -1,23 +1,40 @@
 """Evaluate a log's learned policies in any world, and print its rule bases.
 
-``evaluate_log`` runs one trial's frozen policies (or a batch of an evaluation
-protocol's episodes) in a world file of the user's choice; ``rule_base_table``
+``evaluate_log`` runs one trial's frozen policies in a world file of the user's
+choice (one run, or a batch of the run's evaluation protocol's episodes); ``rule_base_table``
 is the table ``sitframe run`` prints.
 """
 
 from __future__ import annotations
 
+import math
+import os
 from typing import Any
 
 import numpy as np
 
 from sitframe.clustering import describe_prototype
-from sitframe.config import META_KEYS, Config, load_config, validate_config
+from sitframe.config import (
+    DEFAULT_PROTOCOL,
+    META_KEYS,
+    SELECTION_DEFAULTS,
+    Config,
+    load_config,
+    validate_config,
+)
 from sitframe.errors import InputError
+from sitframe.logged import BEST_TRIAL_RULE, best_of, check_state, logged_policy
 from sitframe.logs import open_log
-from sitframe.loop import STAGE_BATCH, STAGE_EVAL, TrialSpec, batch_scores, simulate, stage_seed
+from sitframe.loop import (
+    EVAL_KEYS,
+    STAGE_BATCH,
+    STAGE_EVAL,
+    TrialSpec,
+    batch_scores,
+    simulate,
+    stage_seed,
+)
 from sitframe.pluginmanager import Registry, get_plugin_manager
-from sitframe.prepare import BEST_TRIAL_RULE, best_of, check_state, logged_policy
 from sitframe.records import LearnedPolicy, summary_key
 from sitframe.resolve import Resolved
 
@@ -90,7 +107,7 @@ def evaluate_log(
     source = log_path
     if goal_episodes:
         res0 = Resolved.build(cfg, registry, log_path)
-        if res0.protocol_name() is None:
+        if res0.protocol_name(default=None) is None:
             cfg, policies, source = _fusion_config(cfg, policies, list(pinned), fusion,
                                                    log_path)
     if arbiter is not None:
@@ -99,37 +116,89 @@ def evaluate_log(
     res = Resolved.build(cfg, registry, source)
     res.world(world, key="--world")
     check_state(res, state, log_path)
+    # the run's protocol with the episodes asked for, or one frozen run of ``iterations``
+    name = res.protocol_name(default=None) if goal_episodes else DEFAULT_PROTOCOL
+    if name is None:
+        raise InputError("no component names an evaluation_protocol to run episodes of; "
+                         "expected a behaviour such as 'goal'", file=source, key="behaviours")
+    table = res.protocol(name).table
+    cfg[table] = {**cfg[table], **({"episodes": goal_episodes} if goal_episodes
+                                   else {"iterations": iterations})}
+    res = Resolved.build(cfg, registry, source)
+    stage = (STAGE_BATCH, 0) if goal_episodes else (STAGE_EVAL, trial)
+    result = simulate(res, TrialSpec(index=trial, seed=stage_seed(seed, *stage), world=world,
+                                     iterations=int(res.protocol(name).iterations),
+                                     learn=False, interpreter_state=state, policies=policies,
+                                     protocol=name))
+    out = {"log": log_path, "world": world, "trial": trial}
     if goal_episodes:
-        name = res.protocol_name()
-        if name is None:
-            raise InputError("no component names an evaluation_protocol to run episodes of; "
-                             "expected a behaviour such as 'goal'", file=source,
-                             key="behaviours")
-        table = res.protocol(name).table
-        cfg[table] = {**cfg[table], "episodes": goal_episodes}
-        res = Resolved.build(cfg, registry, source)  # (with the episodes asked for)
-        spec = TrialSpec(index=trial, seed=stage_seed(seed, STAGE_BATCH, 0), world=world,
-                         iterations=int(res.protocol(name).iterations), learn=False,
-                         interpreter_state=state, policies=policies, protocol=name)
-        result = simulate(res, spec)
-        return {"log": log_path, "world": world, "trial": trial,
-                "arbiter": res.config.arbiter.name, **batch_scores(result)}
-    spec = TrialSpec(index=trial, seed=stage_seed(seed, STAGE_EVAL, trial), world=world,
-                     iterations=iterations, learn=False, interpreter_state=state,
-                     policies=policies)
-    result = simulate(res, spec)
-    s = result.summary
-    out = {
-        "log": log_path, "world": world, "trial": trial,
-        "iterations": s["iterations"], "collisions": s["collisions"],
-        "collisions_per_1000": s["collisions_per_1000"], "distance_m": s["distance_m"],
-        "mean_speed_m_s": s["mean_speed_m_s"], "coverage": s["coverage"],
-    }
+        return {**out, "arbiter": res.config.arbiter.name, **batch_scores(result)}
+    out.update({key: result.summary[key] for key in EVAL_KEYS})
     for _label, (_beh, reward) in res.behaviours().items():
         metrics = getattr(reward, "metrics", None)
         if metrics is not None:
             out.update(metrics(result.arrays))
     return out
+
+
+def selection_rule(selection: dict[str, Any]) -> str:
+    """:func:`select_trial`'s rule for ``selection``, in words."""
+    sel = {**SELECTION_DEFAULTS, **selection}
+    return (f"highest {sel['score']} in {sel['episodes']} episodes in '{sel['world']}', "
+            f"seed {sel['seed']}")
+
+
+def select_trial(path: str, selection: dict[str, Any], *,
+                 plugins_dirs: tuple[str, ...] = ()) -> int:
+    """The trial of log ``path`` whose frozen policies score highest in a short episode run.
+
+    ``policy_from.trial = {world, episodes, score, seed}``. Every trial runs
+    the same ``episodes`` episodes (same start/goal pairs: ``seed``) of the
+    evaluation protocol in ``world``, exactly as ``sitframe evaluate PATH
+    --world W --trial K --goal-episodes N --seed S`` does (a log of a run
+    without a protocol, e.g. obstacle avoidance, is fused with goal seeking
+    by the ``goal-finding`` preset's CDB); the trial with the highest
+    ``score`` (a key of that command's output, default
+    ``collision_free_rate``) wins, ties to the lowest index. Choose ``world``
+    among the rooms the robot *learns* in, never a test room: a short
+    goal-episode run in ``goal-training`` predicts the collision-free rate in
+    unseen rooms far better than :func:`best_trial`'s rank sum (README,
+    "Choosing the avoidance rule base"). The result is kept for the process
+    (same log file, unchanged, and same selection), so a sweep whose points
+    share the selection runs it once.
+
+    Raises
+    ------
+    InputError
+        ``score`` is not a key the protocol reports, or is NaN for a trial.
+    """
+    sel = {**SELECTION_DEFAULTS, **selection}
+    st = os.stat(path)  # (a sweep prepares every point with the same selection: once)
+    key = (os.path.realpath(path), st.st_mtime_ns, st.st_size, tuple(sorted(sel.items())),
+           plugins_dirs)
+    if key not in _SELECTED:
+        _SELECTED[key] = _select(path, sel, plugins_dirs)
+    return _SELECTED[key]
+
+
+_SELECTED: dict[tuple[Any, ...], int] = {}
+
+
+def _select(path: str, sel: dict[str, Any], plugins_dirs: tuple[str, ...]) -> int:
+    best, best_score = -1, -math.inf
+    for k in open_log(path).trial_indices():
+        out = evaluate_log(path, world=str(sel["world"]), trial=k, seed=int(sel["seed"]),
+                           goal_episodes=int(sel["episodes"]), plugins_dirs=plugins_dirs)
+        v = out.get(str(sel["score"]))
+        if not isinstance(v, (int, float)) or math.isnan(v):
+            raise InputError(f"cannot select a trial by '{sel['score']}': the episodes report "
+                             f"{'NaN' if isinstance(v, float) else 'no such score'} for trial "
+                             f"{k}; expected one of "
+                             f"{', '.join(x for x, y in out.items() if isinstance(y, float))}",
+                             file=path, key="policy_from.trial.score")
+        if v > best_score:
+            best, best_score = int(k), float(v)
+    return best
 
 
 def _pinned(behaviours: dict[str, dict[str, Any]], cfg: dict[str, Any]

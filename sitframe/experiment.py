@@ -105,12 +105,11 @@ class Experiment:
         text = to_toml(cfg)
         e = self.config.experiment
         names = self.config.worlds()
-        #: The run's evaluation protocol (:meth:`Resolved.protocol_name`); None = frozen.
+        #: The run's evaluation protocol (:meth:`Resolved.protocol_name`) and its worlds.
         self.protocol = self.res.protocol_name()
-        self.eval_worlds = list(self.config.evaluate.worlds)
-        if self.protocol is not None and "evaluate" in e.stages:
-            self.eval_worlds = self.res.protocol_worlds(self.protocol)
-            names += self.eval_worlds
+        self.eval_worlds = self.res.protocol_worlds(self.protocol) \
+            if "evaluate" in e.stages else []
+        names += self.eval_worlds
         worlds = {n: self.res.world(n, "experiment.world" if n == e.world else "worlds").text
                   for n in dict.fromkeys(names)}
         plugins = [dataclasses.asdict(info) for info, _c in self.registry.plugins_table()]
@@ -179,8 +178,7 @@ class Experiment:
         return TrialSpec(
             index=k, seed=stage_seed(self.info.seed, STAGE_TRIALS, k), world=e.world,
             iterations=e.iterations, learn=True, interpreter_state=interpreter_state,
-            policies=policies or {}, evaluate=evaluate,
-            eval_iterations=self.config.evaluate.iterations, protocol=self.protocol)
+            policies=policies or {}, evaluate=evaluate, protocol=self.protocol)
 
     # -- phases (``run`` composes them; a sweep interleaves them across runs) --
     def begin(self) -> None:
@@ -251,7 +249,7 @@ class Experiment:
                     policies: dict[str, dict[str, np.ndarray]] | None = None,
                     trials: list[int] | None = None) -> list[TrialSpec]:
         """Specs of the trials to run: the learning trials (all, or the indices ``trials``),
-        or, in a run with an evaluation protocol that does not learn, one batch of its
+        or, in a run that does not learn, one batch of its evaluation protocol's
         episodes per world (trial ``j``: world ``j``, seed of stage :data:`STAGE_BATCH`).
 
         A learning trial evaluates its own learned policies (:func:`evaluation_specs`).
@@ -260,7 +258,7 @@ class Experiment:
         if "learn" in stages:
             idx = range(self.info.n_trials) if trials is None else trials
             return [self.trial_spec(k, interpreter_state, policies) for k in idx]
-        if self.protocol is None or "evaluate" not in stages:
+        if "evaluate" not in stages:
             return []
         return [TrialSpec(index=j, seed=stage_seed(self.info.seed, STAGE_BATCH, j), world=name,
                           iterations=int(self.res.protocol(self.protocol).iterations),

@@ -505,9 +505,11 @@ def _raycast(
     dist = np.where(hit, np.maximum(t, 0.0), max_range)
     parallel = denom == 0.0
     if parallel.any():
-        # Collinear segments (and points lying on the ray's line): the ray meets
-        # the nearest end ahead of it, or 0 if it starts on the segment.
-        coll = parallel & (u_num == 0.0)
+        # Collinear segments (and points lying on the ray's line, within the same
+        # hair: a ray along a wall from a point on it can round to parallel with
+        # an offset of 1e-16): the ray meets the nearest end ahead of it, or 0 if
+        # it starts on the segment.
+        coll = parallel & (np.abs(u_num) <= _EPS)
         if coll.any():
             ta = wx * dx + wy * dy  # projection of the start point
             tb = ta + s.ex * dx + s.ey * dy  # projection of the end point

@@ -148,8 +148,8 @@ def sitframe_protocols() -> list[Any]:
     :class:`sitframe.components.EvaluationProtocol`. A run uses the protocol
     that one of its components names in a class attribute
     ``evaluation_protocol`` (the built-in ``goal`` behaviour names
-    ``"goal-episodes"``); without one, each learning trial's frozen policy is
-    evaluated in the ``[evaluate] worlds``.
+    ``"goal-episodes"``); without one, the built-in ``frozen``: one run from
+    the start of each ``[evaluate] worlds`` world.
 
     :return: A list of factories with unique ``name`` attributes and a class
         attribute ``table``: the config table whose keys (except ``worlds``,
@@ -202,8 +202,8 @@ def sitframe_step(record: StepRecord) -> None:
     worker process when trials run in parallel), after the behaviours learned
     from the iteration, once per iteration (each is 1.5 s of robot time),
     only if at least one plugin implements it. Not called in the evaluations
-    of a learning trial (frozen runs or batches of an evaluation protocol's
-    episodes); called in the episodes of a batch that is a trial of its own.
+    of a learning trial (batches of an evaluation protocol's episodes);
+    called in the episodes of a batch that is a trial of its own.
 
     :param record: An immutable :class:`sitframe.records.StepRecord` holding
         references (not copies) to this iteration's arrays. Do not keep it
@@ -217,9 +217,9 @@ def sitframe_step(record: StepRecord) -> None:
 def sitframe_trial_data(trial: TrialResult) -> dict[str, Any] | None:
     """Hand per-trial data for the log.
 
-    Called once per learning trial and once per frozen evaluation, in the
-    process that simulated it (like :func:`sitframe_step`), right after the
-    loop and before the trial is sent to the main process.
+    Called once per learning trial and once per evaluation episode (logged for
+    a continuing protocol's, e.g. ``frozen``), in the process that simulated
+    it (like :func:`sitframe_step`), right after the loop.
 
     :param trial: The finished :class:`sitframe.records.TrialResult` (its
         per-iteration arrays, behaviour data and summary).

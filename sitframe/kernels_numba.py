@@ -62,7 +62,7 @@ def _ray(ox: float, oy: float, ddx: float, ddy: float, seg: np.ndarray,
                 d = t if t > 0.0 else 0.0
                 if d < best:
                     best = d
-        elif u_num == 0.0:  # collinear: the nearest end ahead, 0 when on it
+        elif -_EPS <= u_num <= _EPS:  # collinear: the nearest end ahead, 0 when on it
             ta = wx * ddx + wy * ddy
             tb = ta + ex[j] * ddx + ey[j] * ddy
             # (numpy's max/min propagate NaN: a NaN end never hits)

@@ -90,6 +90,14 @@ class QLearningParams:
         then a collision's target (-30 + 0.9 V) differs from a safe action's
         (~+27 + 0.9 V) by less than the noise in V, and the learned rule base
         tolerates collisions.
+    alpha_visits
+        Learning-rate schedule per rule and action: ``alpha * k / (k + n)``
+        after ``n`` updates of that rule's action, ``k = alpha_visits``
+        (0 = constant ``alpha``, the thesis). A decaying rate lets Q settle
+        (stochastic approximation) where a noisy reward would otherwise keep
+        flipping near-equal greedy actions, so the thesis's convergence
+        criterion can be met; ``k`` is roughly the number of updates after
+        which the rate has halved.
     min_updates
         Convergence also requires every situation's rules to have been updated
         at least this many times (0 = the thesis's criterion alone). A greedy
@@ -122,6 +130,7 @@ class QLearningParams:
     terminal_on_collision: bool = False
     min_updates: int = 0
     tie_break: str = "first"
+    alpha_visits: float = 0.0
 
     def __post_init__(self) -> None:
         P.number("alpha", self.alpha, lo=0.0, hi=1.0, lo_open=True)
@@ -140,6 +149,7 @@ class QLearningParams:
         P.boolean("terminal_on_collision", self.terminal_on_collision)
         P.number("min_updates", self.min_updates, lo=0, integer=True)
         P.choice("tie_break", self.tie_break, TIE_BREAKS)
+        P.number("alpha_visits", self.alpha_visits, lo=0.0)
 
 
 TIE_BREAKS = ("first", "centre")
@@ -227,6 +237,7 @@ class FuzzyQLearner:
         self.since_change = 0
         self.n_changes = 0
         self.updates = np.zeros(c, dtype=np.int64)
+        self._visits: dict[tuple[int, int], int] = {}  # (rule, action) -> updates (alpha_visits)
         self._rows = np.arange(c)
         #: (c,) absolute TD error of each rule updated by the last :meth:`update` (0 elsewhere),
         #: kept only once ``track_td`` is set (an evolving interpreter asks for them).
@@ -301,9 +312,14 @@ class FuzzyQLearner:
             rules = self.rule_base.tolist()
             alpha, gamma, thesis = prm.alpha, prm.gamma, prm.update == "thesis"
             target = reward + gamma * v_next
+            kappa = prm.alpha_visits
             for i in active:
                 w, a = u0[i], rules[i]
                 cur = q.item(i, a)
+                if kappa:
+                    n = self._visits.setdefault((i, a), 0)
+                    self._visits[i, a] = n + 1
+                    alpha = prm.alpha * kappa / (kappa + n)
                 delta = (w * reward + gamma * w * v_next - cur) if thesis else target - cur
                 q[i, a] = cur + alpha * delta if thesis else cur + alpha * w * delta
                 self.updates[i] += 1
@@ -381,6 +397,8 @@ class FuzzyQLearner:
         self._evolving = True
         q0 = float(self.params.q_init_value)
         i = int(event.id)
+        touched = {i, *(int(j) for j in event.parents)}  # (their learning rates start anew)
+        self._visits = {k: n for k, n in self._visits.items() if k[0] not in touched}
         if event.kind in ("create", "split"):
             if event.parents:
                 prior = np.asarray(event.weights) @ self.q[list(event.parents)]

@@ -71,7 +71,7 @@ from sitframe.world import Goal, World
 #: Seed stages (:func:`stage_seed`); ``STAGE_BATCH``: the episode batches of a run that
 #: does not learn (one per world of its evaluation protocol).
 STAGE_COLLECT, STAGE_CLUSTER, STAGE_TRIALS, STAGE_EVAL, STAGE_BATCH = 0, 1, 2, 3, 4
-#: Summary keys of a frozen-policy evaluation (``evaluate --json`` and ``eval/<world>/...``).
+#: Figures the core measures of every evaluation (``eval/<world>/...``, ``evaluate --json``).
 EVAL_KEYS = ("iterations", "collisions", "collisions_per_1000", "distance_m", "mean_speed_m_s",
              "coverage")
 
@@ -104,8 +104,6 @@ class TrialSpec:
         Behaviour label -> policy dict to load before the trial.
     evaluate
         World names to evaluate the trial's final policy in afterwards.
-    eval_iterations
-        Iterations per evaluation.
     start
         Start pose (x [m], y [m], theta [rad]); ``None`` = the world's start.
     goal
@@ -115,7 +113,7 @@ class TrialSpec:
         The evaluation protocol (:class:`sitframe.components.EvaluationProtocol`)
         by name: a spec that does not learn is then a *batch* of its episodes in
         ``world`` (:func:`run_batch`), returned as one trial; a learning spec's
-        evaluations are such batches. ``None``: frozen-policy evaluations.
+        evaluations are such batches. ``None``: a plain run (one episode).
     observed
         Whether ``sitframe_step`` observers see the trial's iterations (not in
         the evaluations of a learning trial).
@@ -129,7 +127,6 @@ class TrialSpec:
     interpreter_state: dict[str, Any]
     policies: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
     evaluate: tuple[str, ...] = ()
-    eval_iterations: int = 1000
     start: tuple[float, float, float] | None = None
     goal: tuple[float, float, float] | None = None
     protocol: str | None = None
@@ -191,7 +188,7 @@ def simulate(
     step_hook: Callable[[StepRecord], Any] | None = None,
     protocol: Any = None,
 ) -> TrialResult:
-    """Run one trial (learning, frozen evaluation or episode) and return its arrays.
+    """Run one trial (learning, a batch of evaluation episodes, or one episode); return it.
 
     An evaluation ``protocol``'s ``terminated(context)``, called after every
     iteration, ends the trial early; ``iterations`` is then only its limit. A
@@ -568,32 +565,37 @@ def run_batch(res: Resolved, spec: TrialSpec, *,
 
     Start poses (and goals) come from the protocol, given a Generator seeded
     by ``spec.seed``; episode ``e`` runs with its own seed spawned from it, so
-    a batch is reproducible and episode ``e`` does not depend on the others.
+    a batch is reproducible and episode ``e`` does not depend on the others
+    (a continuing protocol, ``episodic = False``: one run on ``spec.seed``).
     Each episode is :func:`simulate` from its start, with its goal, until the
     protocol's ``terminated`` or its ``iterations``. The trial holds the
-    episodes' arrays concatenated (``pose`` has one extra row per episode;
-    ``episodes["first_iteration"]`` gives each one's first row), the
-    per-episode figures (one array per key, and one ``NNNN`` group per
-    episode) and the summary (:func:`trial_summary` over all episodes) with
-    the protocol's aggregates as ``eval/<world>/<key>``.
+    episodes' arrays concatenated (``pose`` has one extra row per episode),
+    the summary (:func:`trial_summary`) with the protocol's aggregates as
+    ``eval/<world>/<key>`` and, if episodic, ``episodes``: starts, goals,
+    ``first_iteration`` (each one's first row) and the per-episode figures
+    (one array per key, one ``NNNN`` group per episode); else the run's plugin data.
     """
     k = spec.index
     with _in_trial(k):
         proto = res.protocol(str(spec.protocol))
     o = res.origins[proto.table]
     world = res.world(spec.world, key=f"{proto.table}.worlds")
+    episodic = bool(getattr(proto, "episodic", True))
     ss = np.random.SeedSequence(spec.seed % 2**64)
     rng = np.random.default_rng(ss.spawn(1)[0])
     starts, goals = call(o, "episode_starts", proto.episode_starts, world, rng, res.robot,
                          trial=k)
     starts = np.asarray(starts, dtype=float)
     n = len(starts)
-    if starts.shape != (n, 3) or n < 1 or (goals is not None and np.shape(goals) != (n, 3)):
+    if starts.shape != (n, 3) or n < 1 or (goals is not None and np.shape(goals) != (n, 3)) \
+            or (n > 1 and not episodic):
         raise PluginFault(f"returned starts of shape {starts.shape} and goals of shape "
                           f"{None if goals is None else np.shape(goals)}; expected (n, 3) "
-                          "each (goals may be None), n >= 1", where=str(o),
-                          method="episode_starts", trial=k)
-    seeds = np.random.SeedSequence(spec.seed % 2**64, spawn_key=(1,)).generate_state(n, np.uint64)
+                          "each (goals may be None), n >= 1 (n = 1: episodic is False)",
+                          where=str(o), method="episode_starts", trial=k)
+    seeds = np.random.SeedSequence(spec.seed % 2**64, spawn_key=(1,)).generate_state(
+        n, np.uint64) if episodic else [spec.seed]
+    score = getattr(proto, "score_episode", None)
     parts: list[TrialResult] = []
     figures: list[dict[str, Any]] = []
     for e in range(n):
@@ -601,31 +603,31 @@ def run_batch(res: Resolved, spec: TrialSpec, *,
         ep = dataclasses.replace(spec, seed=int(seeds[e]), iterations=int(proto.iterations),
                                  evaluate=(), start=tuple(float(v) for v in starts[e]),
                                  goal=goal, protocol=None)
-        r = simulate(res, ep, step_hook=step_hook, protocol=proto)
-        parts.append(r)
-        figures.append(_checked(o, "score_episode", check_data, lambda r=r, e=e: (
-            proto.score_episode(r.arrays, starts[e], None if goals is None else goals[e],
-                                res.robot)), k, "per-episode figures"))
+        parts.append(r := simulate(res, ep, step_hook=step_hook, protocol=proto))
+        figures.append({} if score is None else _checked(
+            o, "score_episode", check_data, lambda r=r, e=e: score(
+                r.arrays, starts[e], None if goals is None else goals[e], res.robot), k,
+            "per-episode figures"))
     per_ep = {key: np.asarray([f[key] for f in figures]) for key in figures[0]}
     scores = _checked(o, "aggregate", check_data, lambda: proto.aggregate(per_ep), k,
-                      "the batch's scores")
+                      "the batch's scores") if hasattr(proto, "aggregate") else {}
     arrays = {key: np.concatenate([p.arrays[key] for p in parts]) for key in parts[0].arrays}
-    first = np.cumsum([0] + [int(p.arrays["collision"].size) for p in parts[:-1]])
-    episodes: dict[str, Any] = {**per_ep, "start": starts}
-    if goals is not None:
-        episodes["goal"] = goals
-    episodes["first_iteration"] = first.astype(np.int64)
-    for e, f in enumerate(figures):
-        episodes[f"{e:04d}"] = row = {**f, "start": starts[e]}
-        if goals is not None:
-            row["goal"] = goals[e]
+    episodes: dict[str, Any] = {}
+    if episodic:
+        first = np.cumsum([0] + [int(p.arrays["collision"].size) for p in parts[:-1]])
+        episodes = {**per_ep, "start": starts, **({} if goals is None else {"goal": goals}),
+                    "first_iteration": first.astype(np.int64)}
+        for e, f in enumerate(figures):
+            episodes[f"{e:04d}"] = {**f, "start": starts[e],
+                                    **({} if goals is None else {"goal": goals[e]})}
     summary = trial_summary(world, arrays, {}, res.robot)  # (nothing converges here)
     summary["distance_m"] = float(np.asarray(  # (not across the jumps between episodes)
         [path_length(p.arrays["pose"][:, :2]) for p in parts]).sum())
     for key, v in scores.items():
         summary[summary_key("eval", world.name, key)] = v
     return TrialResult(k, spec.seed, world.name, arrays, parts[0].behaviours, summary,
-                       episodes, policies=parts[0].policies)
+                       episodes, policies=parts[0].policies,
+                       plugin_data={} if episodic else parts[0].plugin_data)
 
 
 def batch_scores(result: TrialResult) -> dict[str, Any]:
@@ -751,9 +753,9 @@ def evaluation_specs(spec: TrialSpec, policies: dict[str, LearnedPolicy],
     ``policies`` are the trial's learned policies (``TrialResult.policies``);
     ``situations`` the trial's final interpreter state when its situations
     evolved (``TrialResult.situations["state"]``), else the spec's is used.
-    With a ``spec.protocol`` each evaluation is a batch of its episodes
-    (:func:`run_batch`) with these policies, else one frozen-policy run of
-    ``eval_iterations`` from the world's start.
+    Each evaluation is a batch of ``spec.protocol``'s episodes (:func:`run_batch`)
+    with these policies (by default one run from the world's start, the
+    ``frozen`` protocol).
     Parallel executors run these as separate tasks; :func:`attach_evaluation`
     adds their results to the trial in this order.
     """
@@ -761,21 +763,21 @@ def evaluation_specs(spec: TrialSpec, policies: dict[str, LearnedPolicy],
         return []
     return [dataclasses.replace(
         spec, seed=stage_seed(spec.seed % (2**63), STAGE_EVAL, k), world=wname,
-        iterations=spec.eval_iterations, learn=False, policies=dict(policies), evaluate=(),
+        learn=False, policies=dict(policies), evaluate=(),
         observed=False, interpreter_state=situations or spec.interpreter_state)
         for k, wname in enumerate(spec.evaluate)]
 
 
-#: Per-iteration arrays of a frozen-policy evaluation kept in the log (enough to
-#: replay it and to see where and in which situation it collided).
+#: Per-iteration arrays of an evaluation kept in the log (enough to replay it and
+#: to see where and in which situation it collided).
 EVAL_ARRAYS = ("pose", "collision", "contact", "command", "nearest", READING, "memberships")
 
 
 def attach_evaluation(result: TrialResult, wname: str, ev: TrialResult) -> None:
     """Add evaluation ``ev`` in world ``wname`` (``eval/<wname>/...``) to its trial's result.
 
-    A batch of episodes (:func:`run_batch`) also brings its per-episode
-    figures (``episodes/eval/<wname>/...``) and its protocol's aggregates.
+    Its arrays (:data:`EVAL_ARRAYS`), per-episode records (``episodes/eval/<wname>/...``),
+    the figures of :data:`EVAL_KEYS`, its protocol's aggregates and its plugin data.
     """
     for key in EVAL_ARRAYS:
         if key in ev.arrays:

@@ -220,15 +220,10 @@ def _earlier(tag: Any, other: Any) -> bool:
         return False
 
 
-def _splittable(spec: TrialSpec) -> bool:
-    """Whether the trial's evaluations can run as separate tasks (a learning trial's can)."""
-    return bool(spec.evaluate) and spec.learn
-
-
 class TrialPipeline:
     """Feeds trials to an executor and yields them as they complete.
 
-    Each trial is split into its learning part and its frozen-policy
+    Each trial is split into its learning part and its
     evaluations (:func:`~sitframe.loop.evaluation_specs`), which run as
     separate tasks once the learning part has finished: the work then comes
     in pieces small enough to keep every worker busy until the end, instead of
@@ -274,7 +269,7 @@ class TrialPipeline:
     def _fill(self) -> None:
         while self._queue and self._learning < self.window:
             tag, handle, spec = self._queue.popleft()
-            learn = dataclasses.replace(spec, evaluate=()) if _splittable(spec) else spec
+            learn = dataclasses.replace(spec, evaluate=()) if spec.evaluate else spec
             fut = self.executor.submit(self.run, handle, learn)
             self._inflight[fut] = ("learn", tag, (handle, spec))
             self._learning += 1
@@ -295,8 +290,7 @@ class TrialPipeline:
         if kind == "learn":
             self._learning -= 1
             handle, spec = info
-            evs = (evaluation_specs(spec, value.policies, value.situations.get("state"))
-                   if _splittable(spec) else [])
+            evs = evaluation_specs(spec, value.policies, value.situations.get("state"))
             if not evs:
                 return value
             self._partial[tag] = [value, [None] * len(evs), len(evs), [ev.world for ev in evs]]

@@ -3,7 +3,7 @@
 ``prepare_experiment`` checks everything that can be wrong with the input before a
 byte is written, opens the logs a config builds on (``clusters_from``,
 ``policy_from``; intact logs only) and fingerprints what it reads from them;
-``best_trial`` is the rule ``policy_from.trial = "best"`` applies::
+which trial of such a log (:mod:`sitframe.logged`) is reused::
 
     from sitframe.config import load_config
     from sitframe.prepare import prepare_experiment
@@ -26,14 +26,14 @@ from typing import Any
 import h5py
 import numpy as np
 
-from sitframe.clustering import average_ranks
 from sitframe.collect import trajectory_poses
 from sitframe.config import config_hash, load_config, to_toml, validate_config
-from sitframe.errors import InputError
+from sitframe.errors import InputError, note
+from sitframe.evaluation import select_trial, selection_rule
 from sitframe.experiment import Experiment
+from sitframe.logged import best_trial, check_state, logged_policy
 from sitframe.logs import Log, lock_log, open_log, unlock_log
-from sitframe.records import LearnedPolicy, summary_key
-from sitframe.resolve import Resolved
+from sitframe.records import LearnedPolicy
 
 
 def _resolve_path(path: str, base_dir: str) -> str:
@@ -115,7 +115,13 @@ def prepare_experiment(
         path = _resolve_path(pf["log"], base_dir)
         log = source_log(path, f"behaviours.{label}.policy_from")
         which = pf.get("trial", 0)
-        trial = log.trial(best_trial(log) if which == "best" else int(which))
+        if isinstance(which, dict):
+            k = select_trial(path, which, plugins_dirs=dirs)
+            note(f"behaviours.{label}.policy_from: trial {k} of {pf['log']} "
+                 f"({selection_rule(which)})")
+            trial = log.trial(k)
+        else:
+            trial = log.trial(best_trial(log) if which == "best" else int(which))
         src_label = pf.get("behaviour", label)
         if src_label not in trial.behaviours:
             raise InputError(f"trial {trial.index} has no behaviour '{src_label}' (it has "
@@ -304,70 +310,3 @@ def _check_collect(exp: Experiment, source: str | None) -> None:
                          f"situations to fit; expected at least {k}: collect more "
                          "(collect.worlds, collect.rate_hz, collect.mode) or lower c",
                          file=source, key="interpreter.c")
-
-
-def check_state(res: Resolved, state: dict[str, Any], path: str) -> None:
-    """Load a logged interpreter state into a fresh interpreter (InputError if it does not fit)."""
-    try:
-        res.interpreter().load_state(state)
-    except (ValueError, KeyError, TypeError) as exc:
-        why = f"missing {exc}" if isinstance(exc, KeyError) else exc
-        raise InputError(f"its situations do not fit this config's interpreter: {why}",
-                         file=path, key="cluster/state") from None
-
-
-def best_trial(log: Log) -> int:
-    """The trial whose frozen rule base did best in the log's learning world.
-
-    Quality is judged, as the project judges it everywhere, by collisions
-    *and* coverage: each trial is ranked by ``eval/<learning world>/
-    collisions_per_1000`` (fewest first) and by ``eval/<learning
-    world>/coverage`` (most first), ties sharing their average rank, and the
-    trial with the smallest sum of the two ranks is chosen; ties go to fewer
-    collisions per 1000 iterations after convergence, then to the lowest
-    index. Collisions alone would favour a rule base that loops in one corner
-    of the room (few collisions because it hardly goes anywhere). Only the
-    learning world is used, never the other evaluation rooms, so choosing a
-    trial this way does not peek at rooms the robot is later tested in.
-
-    Raises
-    ------
-    InputError
-        The log has no trials, or no evaluation in its learning world.
-    """
-    table = log.summary()
-    world = log.config.get("experiment", {}).get("world", "training")
-    column = summary_key("eval", world, "collisions_per_1000", sep=".")
-    names = table.dtype.names or ()
-    if table.size == 0 or column not in names:
-        raise InputError(f"cannot pick the best trial: the log has no evaluation in its learning "
-                         f"world '{world}' (include 'evaluate' and '{world}' in the run)",
-                         file=log.path, key="summary")
-    after = table["collisions_per_1000_after_convergence"] if \
-        "collisions_per_1000_after_convergence" in names else np.zeros(table.size)
-    cov_key = summary_key("eval", world, "coverage", sep=".")
-    coverage = table[cov_key] if cov_key in names \
-        else np.zeros(table.size)
-    return best_of(table["trial"], table[column], coverage, after)
-
-
-#: How :func:`best_trial` chooses, in one line (shown by ``sitframe run``).
-BEST_TRIAL_RULE = "smallest rank sum of (fewest collisions, most coverage)"
-
-
-def best_of(index: Any, eval_collisions: Any, coverage: Any, after_collisions: Any) -> int:
-    """The rule of :func:`best_trial` on parallel sequences (NaN ranks worst)."""
-    coll = np.nan_to_num(np.asarray(eval_collisions, float), nan=np.inf)
-    cov = np.nan_to_num(np.asarray(coverage, float), nan=-np.inf)
-    score = average_ranks(coll) + average_ranks(-cov)
-    order = np.lexsort((np.asarray(index),
-                        np.nan_to_num(np.asarray(after_collisions, float), nan=np.inf), score))
-    return int(np.asarray(index)[order[0]])
-
-
-def logged_policy(trial: Any, label: str, path: str) -> LearnedPolicy | None:
-    """A trial's learned policy of ``label``, located at the log on error."""
-    try:
-        return trial.learned_policy(label)
-    except InputError as exc:
-        raise exc.at(file=path) from None

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from sitframe.config import Component, Config
+from sitframe.config import DEFAULT_PROTOCOL, Component, Config
 from sitframe.contract import (
     Origin,
     call,
@@ -184,12 +184,12 @@ class Resolved:
                           self._reward(key, table))
         return out
 
-    def protocol_name(self) -> str | None:
-        """The evaluation protocol the run's components name (``evaluation_protocol``), or None.
+    def protocol_name(self, default: str | None = DEFAULT_PROTOCOL) -> str | None:
+        """The evaluation protocol the run's components name (``evaluation_protocol``).
 
         A component asks for the protocol its behaviour is judged by with a
         class attribute, e.g. ``evaluation_protocol = "goal-episodes"``; two
-        components naming different protocols are an input error.
+        components naming different protocols are an input error; none: ``default``.
         """
         comps = [b for b, _r in self.behaviours().values()] + [self.arbiter()]
         names = sorted({n for c in comps if (n := getattr(c, "evaluation_protocol", None))})
@@ -197,7 +197,7 @@ class Resolved:
             raise InputError(f"the components ask for different evaluation protocols "
                              f"({', '.join(names)}); expected one", file=self.file,
                              key="behaviours")
-        return names[0] if names else None
+        return names[0] if names else default
 
     def protocol(self, name: str) -> Any:
         """A fresh evaluation protocol ``name``, created from its config table (but ``worlds``)."""

@@ -495,7 +495,32 @@ def summarise_tables(tables: list[np.ndarray]) -> dict[str, Any]:
         row[summary_key("eval", w, "coverage_median", sep="_")] = \
             _median_iqr(col(summary_key("eval", w, "coverage", sep=".")))[0]
     row["eval_worlds"] = worlds
+    row["eval_scores"] = scores = _protocol_scores(tables)
+    for w, keys in scores.items():
+        for key in keys:
+            c = col(summary_key("eval", w, key, sep="."))
+            pre = summary_key("eval", w, key, sep="_")
+            row[f"{pre}_median"], row[f"{pre}_q25"], row[f"{pre}_q75"] = _median_iqr(c)
     return row
+
+
+#: Evaluation figures every evaluation has (the frozen run's); the others in a summary
+#: table (``eval.<world>.<key>``) are an episode protocol's scores, e.g. ``success_rate``.
+_FROZEN_KEYS = ("iterations", "collisions", "collisions_per_1000", "distance_m",
+                "mean_speed_m_s", "coverage", "episodes")
+
+
+def _protocol_scores(tables: list[np.ndarray]) -> dict[str, list[str]]:
+    """World -> the episode protocol's score keys in the tables, in order of appearance."""
+    out: dict[str, list[str]] = {}
+    for t in tables:
+        for name in t.dtype.names or ():
+            m = re.fullmatch(r"eval\.(.+)\.([^.]+)", name)
+            if m and m.group(2) not in _FROZEN_KEYS and t[name].dtype.kind in "fiub":
+                keys = out.setdefault(m.group(1), [])
+                if m.group(2) not in keys:
+                    keys.append(m.group(2))
+    return out
 
 
 def summarise_log(path: str | Path) -> dict[str, Any]:
@@ -627,6 +652,30 @@ def markdown_table(result: dict[str, Any], *, pooled: bool = False) -> str:
             cov = summary_key("eval", w, "coverage_median", sep="_")
             cells.append(_num(r.get(cov, math.nan), 2))
         lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n" + _scores_table(rows, keys, pooled)
+
+
+def _scores_table(rows: list[dict[str, Any]], keys: list[str], pooled: bool) -> str:
+    """The episode protocol's scores (goal episodes: success, SPL, ...), median [IQR] over
+    the trials, one line per point and world; empty when no evaluation had a protocol."""
+    worlds = list(dict.fromkeys(w for r in rows for w in r.get("eval_scores", {})))
+    if not worlds:
+        return ""
+    names = list(dict.fromkeys(k for r in rows for ks in r["eval_scores"].values() for k in ks))
+    head = [*(k.rsplit(".", 1)[-1] for k in keys), *(["seeds"] if pooled else []), "world",
+            *names]
+    lines = ["", "Episode scores, median [IQR] over the trials:", "",
+             "| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+    for r in rows:
+        for w in worlds:
+            if w not in r.get("eval_scores", {}):
+                continue
+            cells = [_fmt_value(r[k]) for k in keys] + ([str(r["seeds"])] if pooled else [])
+            cells.append(w)
+            for name in names:
+                pre = summary_key("eval", w, name, sep="_")
+                cells.append(_med_iqr(r, pre, 2) if f"{pre}_median" in r else "–")
+            lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 

@@ -14,7 +14,7 @@ import pytest
 from sitframe.cli import main
 from sitframe.config import load_config, preset_text, validate_config
 from sitframe.errors import InputError
-from sitframe.evaluation import evaluate_log
+from sitframe.evaluation import evaluate_log, select_trial
 from sitframe.logs import open_log
 from sitframe.loop import TrialSpec, batch_scores, simulate
 from sitframe.pluginmanager import Registry, get_plugin_manager
@@ -162,6 +162,7 @@ def goal_config(tmp_path, oa_log, extra: str = "") -> str:
     # (our own small log instead of the preset's prerequisite run)
     text = preset_text("goal-finding").split("[prerequisites]")[0]
     text = text.replace("logs/obstacle-avoidance-12.h5", oa_log)
+    text = text.replace("episodes = 100, seed = 0", "episodes = 2, seed = 0")  # (selection)
     text = text.replace("episodes = 50", "episodes = 2").replace(
         'worlds = ["goal", "novel-1", "novel-2"]', 'worlds = ["goal"]')
     p = tmp_path / "gf.toml"
@@ -249,3 +250,55 @@ def test_learning_goal_run_evaluates_each_trials_learned_policy():
         np.testing.assert_array_equal(t.episodes["eval/goal/pose"], again.arrays["pose"])
         untrained = simulate(exp.res, dataclasses.replace(ev, policies={}))
         assert not np.array_equal(untrained.arrays["pose"], again.arrays["pose"])
+
+
+@pytest.fixture(scope="module")
+def oa3_log(tmp_path_factory, oa_log):
+    """Three short avoidance trials on oa_log's situations: rule bases that differ."""
+    d = tmp_path_factory.mktemp("oa3")
+    cfg, source, _ = load_config("obstacle-avoidance-12")
+    cfg["experiment"].update(trials=3, iterations=150, stages=["learn"], clusters_from=oa_log)
+    out = str(d / "oa3.h5")
+    exp, kw = prepare_experiment(cfg, source=source, out=out)
+    exp.run(**kw)
+    return out
+
+
+def test_policy_from_selects_the_trial_with_the_best_short_episode_run(tmp_path, oa3_log,
+                                                                        capsys):
+    """``policy_from.trial = {world, episodes, score}``: the trial whose fusion scores highest
+    in the same short goal-episode run (ties to the lowest index), said in one note line."""
+    sel = {"world": "goal-training", "episodes": 3, "seed": 4}
+    scores = {k: evaluate_log(oa3_log, world="goal-training", trial=k, seed=4, goal_episodes=3)
+              for k in range(3)}
+    for key in ("collision_free_rate", "spl"):
+        want = max(range(3), key=lambda k, key=key: (scores[k][key], -k))
+        assert select_trial(oa3_log, {**sel, "score": key}) == want
+    text = Path(goal_config(tmp_path, oa3_log)).read_text()
+    assert 'trial = { world = "goal-training"' in preset_text("goal-finding")
+    path = tmp_path / "sel.toml"
+    path.write_text(text.replace('episodes = 2, seed = 0', 'episodes = 3, seed = 4'))
+    assert main(["run", str(path), "--out", str(tmp_path / "sel.h5")]) == 0
+    err = capsys.readouterr().err
+    want = max(range(3), key=lambda k: (scores[k]["collision_free_rate"], -k))
+    assert f"behaviours.avoid.policy_from: trial {want} of {oa3_log} (highest " \
+        "collision_free_rate in 3 episodes in 'goal-training', seed 4)" in err
+
+
+@pytest.mark.parametrize("table, where, what", [
+    ('{ world = "goal-training", episode = 3 }', "policy_from.trial.episode",
+     "did you mean 'episodes'"),
+    ('{ episodes = 3 }', "policy_from.trial.world", "expected the world"),
+    ('{ world = "goal-training", episodes = 0 }', "policy_from.trial", "episodes"),
+    ('{ world = "goal-training", episodes = 2, score = "speed" }', "policy_from.trial.score",
+     "no such score"),
+])
+def test_a_bad_selection_table_is_one_line(tmp_path, oa3_log, capsys, table, where, what):
+    text = Path(goal_config(tmp_path, oa3_log)).read_text()
+    start = text.index("trial = {")
+    text = text[:start] + "trial = " + table + text[text.index("}", start) + 1:]
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    assert main(["run", str(path), "--out", str(tmp_path / "bad.h5")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and where in err[0] and what in err[0], err

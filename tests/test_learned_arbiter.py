@@ -65,6 +65,21 @@ def test_reward_pays_new_approach_only_and_punishes_collision():
     assert r(tr(ctx(4.9, 5), ctx(4.9, 5, goal=(0, 0)))) == -1
 
 
+def test_signed_reward_pays_every_step_towards_the_goal_and_charges_every_step_away():
+    r = GoalProgressReward(progress=100, time=-1, signed=True, near=0.5, near_cost=10)
+    ok = SimpleNamespace(collided=False)
+
+    def tr(a, b):
+        return Transition(a, None, ok, b)  # type: ignore[arg-type]
+
+    assert r(tr(ctx(0, 5, it=0), ctx(1, 5))) == pytest.approx(100 * 1 - 1)
+    assert r(tr(ctx(1, 5), ctx(0.5, 5))) == pytest.approx(-100 * 0.5 - 1)  # away: charged
+    assert r(tr(ctx(0.5, 5), ctx(0.8, 5))) == pytest.approx(100 * 0.3 - 1)  # back: paid again
+    assert r(tr(ctx(0.8, 5), ctx(1.0, 5, nearest=0.2))) == pytest.approx(100 * 0.2 - 1 - 3)
+    with pytest.raises(InputError, match="signed"):
+        GoalProgressReward(signed="yes")
+
+
 def test_weights_follow_the_rules_and_policy_round_trips():
     arb = FuzzyQArbiter(actions=[{"avoid": 1}, {"goal": 1}, {"avoid": 1, "goal": 3}],
                         stall_iterations=0)
@@ -88,6 +103,29 @@ def test_weights_follow_the_rules_and_policy_round_trips():
     np.testing.assert_array_equal(other.rules, rules)
     with pytest.raises(ValueError, match="goal contexts"):
         FuzzyQArbiter(stall_iterations=5).load_policy(pol)
+
+
+def test_safety_hands_over_to_one_behaviour_by_the_nearest_range():
+    """``safety = [a, b]``: the safety behaviour's weight is 1 below ``a`` m, falls linearly
+    to 0 at ``b``, and the learned weighting fills the rest; rules learn only by their share."""
+    arb = FuzzyQArbiter(actions=[{"avoid": 1}, {"goal": 1}], stall_iterations=0,
+                        safety=[0.3, 0.8], safety_behaviour="avoid")
+    arb._bind(["avoid", "goal"])
+    arb.reset(np.random.default_rng(0), 2, 10)
+    arb.rules = np.ones(8, dtype=np.intp)  # every rule: goal alone
+    arb.learner = None
+    props = {"avoid": Proposal(60.0, None), "goal": Proposal(-20.0, None)}
+    for nearest, w_avoid in ((0.1, 1.0), (0.3, 1.0), (0.55, 0.5), (0.8, 0.0), (2.0, 0.0)):
+        p, w = arb.combine(ctx(0, 0, goal=(5, 0), nearest=nearest), props)
+        np.testing.assert_allclose(w, [w_avoid, 1 - w_avoid])
+        assert p.heading_deg == pytest.approx(w_avoid * 60 - (1 - w_avoid) * 20)
+    reg = Registry.collect(get_plugin_manager())
+    with pytest.raises(InputError, match="near < far") as info:
+        Resolved.build(goal_run(safety=[0.8, 0.3]), reg)
+    assert "arbiter.safety" in str(info.value)
+    with pytest.raises(InputError, match="names behaviour 'avoyd'") as info:
+        Resolved.build(goal_run(safety=[0.3, 0.8], safety_behaviour="avoyd"), reg).arbiter()
+    assert "safety_behaviour" in str(info.value)
 
 
 def test_bad_arbiter_config_names_the_key():

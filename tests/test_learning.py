@@ -90,6 +90,7 @@ def test_params_validate_with_key():
     ("terminal_on_collision", [1, "yes"], [True]),
     ("min_updates", [-1, 0.5], [0]),
     ("tie_break", ["middle"], ["centre"]),
+    ("alpha_visits", [-1.0, "x"], [0.0, 20.0]),
 ])
 def test_every_learning_parameter_is_checked_at_its_bounds(key, bad, good):
     """Table A.1's ranges: a value outside is refused naming the key; the bound itself (or
@@ -138,6 +139,30 @@ def test_standard_update():
     lr.update(u0, 10.0, u1, False, 0)
     assert lr.q[0, 0] == pytest.approx(1.0 + 0.5 * 0.8 * (10 + 0.9 * v - 1.0))
     assert lr.q[1, 1] == pytest.approx(5.0 + 0.5 * 0.2 * (10 + 0.9 * v - 5.0))
+
+
+def test_alpha_visits_decays_the_rate_per_rule_and_action():
+    """``alpha_visits = k``: the n-th update (from 0) of a rule's action uses alpha*k/(k+n),
+    counted separately per rule and action; 0 keeps the constant rate."""
+    lr = _learner(alpha=0.5, gamma=0.0, activation=0.0, update="standard", b=100,
+                  alpha_visits=2.0)
+    lr.q[:] = 0.0
+    lr.rule_base[:] = [0, 1]
+    u = np.array([1.0, 1.0])
+    expect, rates = 0.0, [0.5 * 2 / (2 + n) for n in range(4)]
+    for rate in rates:
+        lr.update(u, 8.0, u, False, 0)
+        expect += rate * (8.0 - expect)
+    assert lr.q[0, 0] == pytest.approx(expect) and lr.q[1, 1] == pytest.approx(expect)
+    lr.rule_base[:] = [1, 1]  # rule 0's action 1 was never updated: it starts at alpha
+    lr.update(np.array([1.0, 0.0]), 8.0, u, False, 0)
+    assert lr.q[0, 1] == pytest.approx(0.5 * 8.0)
+    const = _learner(alpha=0.5, gamma=0.0, activation=0.0, update="standard", b=100)
+    const.q[:] = 0.0
+    const.rule_base[:] = [0, 0]
+    for _ in range(4):
+        const.update(u, 8.0, u, False, 0)
+    assert const.q[0, 0] == pytest.approx(8.0 * (1 - 0.5 ** 4))
 
 
 def test_rule_base_changes_after_b_iterations_or_collision():

@@ -11,6 +11,7 @@ from sitframe import Proposal, hookimpl
 from sitframe.config import validate_config
 from sitframe.errors import InputError, PluginFault
 from sitframe.experiment import Experiment
+from sitframe.loop import TrialSpec, simulate
 from sitframe.pluginmanager import get_plugin_manager
 
 STATE = {"centers": np.array([[0.5] * 8, [3.0] * 8]), "m": 1.2}
@@ -51,6 +52,13 @@ class Lapper:
         return Proposal(0.0, None)
 
 
+class Ahead(Lapper):
+    """Names no evaluation protocol: its run gets the default, ``frozen``."""
+
+    name = "ahead"
+    evaluation_protocol = None
+
+
 class Plugin:
     @hookimpl
     def sitframe_protocols(self) -> list[Any]:
@@ -58,16 +66,17 @@ class Plugin:
 
     @hookimpl
     def sitframe_behaviours(self) -> list[Any]:
-        return [Lapper]
+        return [Lapper, Ahead]
 
 
-def experiment(**evaluate: Any) -> Experiment:
+def experiment(behaviour: str = "lapper", noise: float = 0.0, **evaluate: Any) -> Experiment:
     pm = get_plugin_manager()
     pm.register(Plugin(), name="laps-plugin")
     cfg = validate_config({
         "experiment": {"stages": ["evaluate"]},
+        "sensor": {"component": "pioneer-sonar", "noise_std": noise},
         "interpreter": {"component": "fcm", "c": 2},
-        "behaviours": {"lap": {"component": "lapper"}},
+        "behaviours": {"lap": {"component": behaviour}},
         "arbiter": {"component": "single"},
         "evaluate": {"worlds": ["training"], "iterations": 20, **evaluate},
     })
@@ -90,6 +99,26 @@ def test_a_protocol_breaking_the_contract_is_a_plugin_fault(monkeypatch):
         experiment().run(interpreter_state=STATE)
 
 
+def test_without_a_named_protocol_each_world_gets_one_frozen_run_on_the_batch_seed():
+    exp = experiment("ahead", noise=0.05)  # (noisy readings: the seed shows)
+    assert exp.protocol == "frozen"
+    (trial,) = exp.run(interpreter_state=STATE).trials
+    assert trial.arrays["collision"].size == 20 and trial.episodes == {}  # one run, no records
+    # the run is the plain run from the world's start on the batch's own seed (what keeps the
+    # numbers of every evaluation logged before the protocol was a plugin)
+    plain = simulate(exp.res, TrialSpec(index=0, seed=trial.seed, world="training",
+                                        iterations=20, learn=False, interpreter_state=STATE))
+    assert np.array_equal(plain.arrays["reading"], trial.arrays["reading"])
+    assert plain.summary["coverage"] == trial.summary["coverage"]
+
+
+def test_a_continuing_protocol_with_several_starts_is_a_plugin_fault(monkeypatch):
+    monkeypatch.setattr(Laps, "episodic", False, raising=False)
+    with pytest.raises(PluginFault, match="episode_starts.*n = 1: episodic is False"):
+        experiment().run(interpreter_state=STATE)
+
+
 def test_an_unknown_protocol_lists_the_available_ones():
-    with pytest.raises(InputError, match="unknown protocol 'nope'.*available: goal-episodes, laps"):
+    with pytest.raises(InputError,
+                       match="unknown protocol 'nope'.*available: frozen, goal-episodes, laps"):
         experiment().res.protocol("nope")

@@ -213,3 +213,27 @@ def test_sweep_on_a_two_worker_dask_cluster_gives_the_local_summaries(swept, tmp
     for update in ("thesis", "standard"):
         assert there[f"update={update}"] == here[f"update={update}_c=4"]
         assert compare_logs(local / f"update={update}_c=4.h5", out / f"update={update}.h5") == []
+
+
+def test_tables_give_an_episode_protocols_scores_per_world():
+    """A goal sweep's tables show the goal episodes' scores (success, SPL, ...) per world,
+    median [IQR] over the trials of every seed, not only frozen-run collisions."""
+    from sitframe.sweep import markdown_table, summarise_tables
+
+    def table(success: list[float], spl: list[float]) -> np.ndarray:
+        dt = [("trial", "i8"), ("converged", "?"), ("convergence_iteration", "f8"),
+              ("eval.goal.success_rate", "f8"), ("eval.goal.spl", "f8"),
+              ("eval.goal.episodes", "f8"), ("eval.u-trap.success_rate", "f8")]
+        rows = [(i, False, np.nan, s, p, 50.0, np.nan) for i, (s, p) in
+                enumerate(zip(success, spl, strict=True))]
+        return np.array(rows + [(len(rows), False, np.nan, np.nan, np.nan, np.nan, 0.5)], dt)
+
+    row = summarise_tables([table([1.0, 0.8], [0.6, 0.7]), table([0.9], [0.5])])
+    assert row["eval_scores"] == {"goal": ["success_rate", "spl"], "u-trap": ["success_rate"]}
+    assert row["eval_goal_success_rate_median"] == 0.9  # NaN rows (other worlds) left out
+    assert row["eval_goal_spl_q25"] == np.percentile([0.6, 0.7, 0.5], 25)
+    assert row["eval_u-trap_success_rate_median"] == 0.5
+    md = markdown_table({"points": [{"point": "all", "trials": 5, **row}], "keys": []})
+    assert "| world | success_rate | spl |" in md
+    assert "| goal | 0.90 [0.85, 0.95] | 0.60 [0.55, 0.65] |" in md
+    assert "| u-trap | 0.50 [0.50, 0.50] | – |" in md

@@ -20,8 +20,8 @@ Choices the issue leaves open (also in the README, "Gymnasium"):
 - **Episodes**: a start pose drawn uniformly among free poses with
   ``start_margin`` (0.1 m) of clearance beyond the robot's radius; goal tasks
   draw start and goal from the protocol (``[goal]`` table: min_distance,
-  margin, radius). The time limit is the goal protocol's ``timeout``, else
-  ``evaluate.iterations`` (1000): it *truncates*. A goal task *terminates*
+  margin, radius). The time limit is the run's evaluation protocol's (goal:
+  ``timeout``; else ``evaluate.iterations``, 1000): it *truncates*. A goal task *terminates*
   when the goal is reached; a collision terminates only with
   ``terminate_on_collision=True`` (the robot recovers and carries on, as in
   sitframe's own trials).
@@ -146,8 +146,7 @@ class Task:
             if hasattr(proto, "check_world"):
                 proto.check_world(res.world(wname, key="world"))
         if max_steps is None:
-            max_steps = proto.iterations if proto is not None else \
-                int(cfg.get("evaluate", {}).get("iterations", 1000))
+            max_steps = int((proto or res.protocol(res.protocol_name())).iterations)
         if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
             raise ValueError(f"max_steps: expected a positive integer, got {max_steps!r}")
         if not (isinstance(start_margin, int | float) and start_margin >= 0):

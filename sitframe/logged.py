@@ -1,0 +1,87 @@
+"""Learned policies in logs: which trial a config reuses, and reading its policy back.
+
+``policy_from.trial = "best"`` picks :func:`best_trial`; a number picks that
+trial; a selection table picks by a short episode run
+(:func:`sitframe.evaluation.select_trial`). :func:`logged_policy` reads a
+trial's learned policy and :func:`check_state` checks that logged situations
+fit a config's interpreter.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from sitframe.clustering import average_ranks
+from sitframe.errors import InputError
+from sitframe.logs import Log
+from sitframe.records import LearnedPolicy, summary_key
+from sitframe.resolve import Resolved
+
+
+def check_state(res: Resolved, state: dict[str, Any], path: str) -> None:
+    """Load a logged interpreter state into a fresh interpreter (InputError if it does not fit)."""
+    try:
+        res.interpreter().load_state(state)
+    except (ValueError, KeyError, TypeError) as exc:
+        why = f"missing {exc}" if isinstance(exc, KeyError) else exc
+        raise InputError(f"its situations do not fit this config's interpreter: {why}",
+                         file=path, key="cluster/state") from None
+
+
+def best_trial(log: Log) -> int:
+    """The trial whose frozen rule base did best in the log's learning world.
+
+    Quality is judged, as the project judges it everywhere, by collisions
+    *and* coverage: each trial is ranked by ``eval/<learning world>/
+    collisions_per_1000`` (fewest first) and by ``eval/<learning
+    world>/coverage`` (most first), ties sharing their average rank, and the
+    trial with the smallest sum of the two ranks is chosen; ties go to fewer
+    collisions per 1000 iterations after convergence, then to the lowest
+    index. Collisions alone would favour a rule base that loops in one corner
+    of the room (few collisions because it hardly goes anywhere). Only the
+    learning world is used, never the other evaluation rooms, so choosing a
+    trial this way does not peek at rooms the robot is later tested in.
+
+    Raises
+    ------
+    InputError
+        The log has no trials, or no evaluation in its learning world.
+    """
+    table = log.summary()
+    world = log.config.get("experiment", {}).get("world", "training")
+    column = summary_key("eval", world, "collisions_per_1000", sep=".")
+    names = table.dtype.names or ()
+    if table.size == 0 or column not in names:
+        raise InputError(f"cannot pick the best trial: the log has no evaluation in its learning "
+                         f"world '{world}' (include 'evaluate' and '{world}' in the run)",
+                         file=log.path, key="summary")
+    after = table["collisions_per_1000_after_convergence"] if \
+        "collisions_per_1000_after_convergence" in names else np.zeros(table.size)
+    cov_key = summary_key("eval", world, "coverage", sep=".")
+    coverage = table[cov_key] if cov_key in names \
+        else np.zeros(table.size)
+    return best_of(table["trial"], table[column], coverage, after)
+
+
+#: How :func:`best_trial` chooses, in one line (shown by ``sitframe run``).
+BEST_TRIAL_RULE = "smallest rank sum of (fewest collisions, most coverage)"
+
+
+def best_of(index: Any, eval_collisions: Any, coverage: Any, after_collisions: Any) -> int:
+    """The rule of :func:`best_trial` on parallel sequences (NaN ranks worst)."""
+    coll = np.nan_to_num(np.asarray(eval_collisions, float), nan=np.inf)
+    cov = np.nan_to_num(np.asarray(coverage, float), nan=-np.inf)
+    score = average_ranks(coll) + average_ranks(-cov)
+    order = np.lexsort((np.asarray(index),
+                        np.nan_to_num(np.asarray(after_collisions, float), nan=np.inf), score))
+    return int(np.asarray(index)[order[0]])
+
+
+def logged_policy(trial: Any, label: str, path: str) -> LearnedPolicy | None:
+    """A trial's learned policy of ``label``, located at the log on error."""
+    try:
+        return trial.learned_policy(label)
+    except InputError as exc:
+        raise exc.at(file=path) from None
