@@ -671,7 +671,16 @@ class TrialLog:
         return {k[len(head):]: v for k, v in self.situations.items() if k.startswith(head)}
 
     def policy(self, label: str) -> dict[str, np.ndarray]:
-        """The learned rule bases (``output -> (c,) action indices``) of behaviour ``label``."""
+        """The learned rule bases (``output -> (c,) action indices``) of behaviour ``label``.
+
+        Raises
+        ------
+        ValueError
+            The trial has no behaviour ``label`` (the message lists those it has).
+        """
+        if label not in self.behaviours:
+            raise ValueError(f"trial {self.index} has no behaviour '{label}'; it has: "
+                             f"{', '.join(self.behaviours) or 'none'}")
         data = self.behaviours[label]
         return {k.split("/", 1)[1]: np.asarray(v) for k, v in data.items()
                 if k.startswith("policy/")}
@@ -680,7 +689,8 @@ class TrialLog:
         """The :class:`LearnedPolicy` of behaviour ``label`` (``None`` if it learned none).
 
         Logs written before contract v2 kept the action values under
-        ``singletons/<output>``; they are read the same way.
+        ``singletons/<output>``; they are read the same way. A label the trial
+        does not have is a ``ValueError`` (:meth:`policy`), not ``None``.
         """
         data = self.behaviours.get(label, {})
         outs = {}

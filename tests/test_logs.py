@@ -148,6 +148,8 @@ def test_learned_policies_read_back(written):
     assert np.array_equal(got["heading"].q, want["heading"].q) and got["speed"].q is None
     assert t.policy("avoid")["heading"].tolist() == [2, 0]
     assert t.learned_policy("goal") is None  # a behaviour that learns nothing
+    with pytest.raises(ValueError, match=r"has no behaviour 'avoyd'; it has: .*avoid"):
+        t.learned_policy("avoyd")  # a typo is not "learned nothing"
 
 
 def test_a_policy_logged_before_contract_v2_reads_with_its_old_names(written, tmp_path):
