@@ -86,6 +86,8 @@ Config (``[interpreter]``)::
     error_decay = 0.9
     prune_after = 0       # 0 = never prune
     check_every = 50
+    grow_until = 0        # readings of a learning trial after which nothing is created
+                          # or split (0 = no limit); merges, prunes and adaptation go on
 """
 
 from __future__ import annotations
@@ -116,7 +118,7 @@ class EvolvingInterpreter(FCMInterpreter):
                  merge_distance: float = 0.4, split_ratio: float = 4.0,
                  split_min_updates: int = 100, split_min_distance: float = 0.4,
                  error_decay: float = 0.9, prune_after: int = 0, check_every: int = 50,
-                 **fcm: Any) -> None:
+                 grow_until: int = 0, **fcm: Any) -> None:
         super().__init__(**fcm)
         self.capacity = int(P.number("capacity", capacity, lo=2, hi=MAX_CAPACITY, integer=True))
         self.create_d2 = float(P.number("create_distance", create_distance, lo=0.0,
@@ -133,6 +135,7 @@ class EvolvingInterpreter(FCMInterpreter):
         self.error_decay = float(P.number("error_decay", error_decay, lo=0.0, hi=1.0))
         self.prune_after = int(P.number("prune_after", prune_after, lo=0, integer=True))
         self.check_every = int(P.number("check_every", check_every, lo=1, integer=True))
+        self.grow_until = int(P.number("grow_until", grow_until, lo=0, integer=True))
         self.dim: int | None = None
         self._set_prototypes(np.zeros((0, 0)), np.zeros(0, dtype=np.int64), np.zeros(0), 0)
         self.frozen = False
@@ -169,7 +172,7 @@ class EvolvingInterpreter(FCMInterpreter):
         self.t += 1
         diff = self.Fa - x  # (the alive prototypes, kept contiguous: this is the hot loop)
         d2 = np.einsum("ij,ij->i", diff, diff)
-        if not self.frozen and self._cover(x, d2):
+        if not self.frozen and self._growing() and self._cover(x, d2):
             diff = self.Fa - x
             d2 = np.einsum("ij,ij->i", diff, diff)
         ids = self.ids
@@ -356,12 +359,17 @@ class EvolvingInterpreter(FCMInterpreter):
         keep = u >= 1e-3
         return tuple(int(i) for i in ids[keep]), u[keep] / u[keep].sum()
 
+    def _growing(self) -> bool:
+        """Whether situations may still be created or split (``grow_until``)."""
+        return self.grow_until == 0 or self.t <= self.grow_until
+
     def _checks(self) -> None:
         """Merge, prune and split: at most one of each per check."""
         self._sync()
         self._merge()
         self._prune()
-        self._split()
+        if self._growing():
+            self._split()
         self._compact()
         self.err_sum *= self.error_decay
         self.err_n *= self.error_decay

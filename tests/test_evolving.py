@@ -96,6 +96,39 @@ def test_starts_from_an_fcm_state() -> None:
                                fcm.memberships(np.array([0.5, 0.9])))
 
 
+def test_nothing_is_created_or_split_after_grow_until_readings() -> None:
+    """``grow_until = n``: the trial's first n readings may create situations, later ones
+    are only assigned (learning can then converge on the situations it has)."""
+    ev = _interp(grow_until=3)
+    _start(ev)
+    a, b, c = np.zeros(3), np.full(3, 2.0), np.full(3, 4.0)
+    for x in (a, b, b):  # readings 1-3: situation 0, then 1 from the two far ones
+        ev.memberships(x)
+    assert [e.kind for e in ev.events()] == ["create", "create"]
+    for _ in range(5):  # readings 4-8: as far again, but past grow_until
+        u = ev.memberships(c)
+    assert ev.events() == [] and u[1] > 0.99 and u[2:].sum() == 0.0
+
+    def kinds(grow_until: int) -> list[str]:  # the split of the test below, at reading 9
+        e = _interp(split_ratio=2.0, split_min_updates=2, split_min_distance=0.1, check_every=9,
+                    create_distance=10.0, grow_until=grow_until)
+        e.load_state({"ids": np.arange(3), "feature_centers": np.array([[0.0, 0], [5, 0],
+                      [10, 0]]), "evidence": np.ones(3), "next_id": 3, "capacity": 6,
+                      "transform": "range", "offset": 0.1, "m": 1.2})
+        _start(e)
+        for t, x in enumerate([np.array([v, 0.0]) for v in (1.0, 4.5, 9.5)] * 3):
+            e.memberships(x)
+            if t:
+                err = np.zeros(6)
+                err[(t - 1) % 3] = 1.0 if (t - 1) % 3 == 0 else 0.1
+                e.observe_errors(err)
+        return [v.kind for v in e.events()]
+
+    assert kinds(0) == kinds(9) == ["split"] and kinds(8) == []
+    with pytest.raises(ValueError, match="grow_until"):
+        _interp(grow_until=-1)
+
+
 def test_split_where_td_errors_stay_large() -> None:
     ev = _interp(split_ratio=2.0, split_min_updates=2, split_min_distance=0.1, check_every=9,
                  create_distance=10.0)
