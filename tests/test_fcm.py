@@ -349,3 +349,29 @@ def test_huge_max_iter_allocates_nothing_up_front():
     X = np.array([[0.0], [0.0], [1.0]])
     r = fcm(X, 2, max_iter=3_159_563_044, seed=0)  # found by the fuzzer: 23.5 GiB before
     assert r.converged and r.objective_history.shape == (r.n_iter,)
+
+
+@pytest.mark.parametrize(("u", "message"), [
+    (np.array([0.5, 0.5]), r"2-D \(n, c\) membership array with c >= 2, got shape \(2,\)"),
+    (np.ones((3, 1)), r"c >= 2, got shape \(3, 1\)"),
+    (np.zeros((0, 2)), r"got shape \(0, 2\)"),
+    (np.array([[np.nan, 1.0]]), r"^u must hold finite memberships in \[0, 1\]$"),
+    (np.array([[-0.1, 1.1]]), r"^u must hold finite memberships in \[0, 1\]$"),
+    (np.array([[0.0, 1.0 + 1e-6]]), r"^u must hold finite memberships in \[0, 1\]$"),
+    (np.array([[0.5, 0.75], [0.45, 0.45]]), r"row 0 sums to 1\.25"),  # the row farthest from 1
+    (np.array([[0.5, 0.5], [0.25, 0.5]]), r"rows must sum to 1 .*row 1 sums to 0\.75"),
+    (np.array([[0.5, 0.5], [0.5, 0.5 - 2e-6]]), "row 1 sums to"),
+])
+def test_partition_measures_refuse_what_is_not_a_fuzzy_partition(u, message):
+    """A membership matrix that is not a fuzzy c-partition is refused, naming what is wrong
+    (the shape, the entry range, the first row that does not sum to 1)."""
+    with pytest.raises(ValueError, match=message):
+        partition_measures(u)
+    with pytest.raises(TypeError, match=r"^u must be a real numeric array, got ndarray of dtype"):
+        partition_measures(np.array([["a", "b"]]))
+
+
+def test_partition_measures_accept_a_partition_within_rounding():
+    """Rows summing to 1 within 1e-6 and entries a hair above 1 (1e-9) are a partition."""
+    u = np.array([[0.5, 0.5 + 5e-7], [1.0 + 1e-9, 0.0]])
+    assert math.isfinite(partition_measures(u)["pc"])
