@@ -375,3 +375,44 @@ def test_partition_measures_accept_a_partition_within_rounding():
     """Rows summing to 1 within 1e-6 and entries a hair above 1 (1e-9) are a partition."""
     u = np.array([[0.5, 0.5 + 5e-7], [1.0 + 1e-9, 0.0]])
     assert math.isfinite(partition_measures(u)["pc"])
+
+
+_X = np.array([[0.0, 1.0], [1.0, 0.0], [2.0, 2.0]])
+
+
+@pytest.mark.parametrize(("call", "error", "message"), [
+    (lambda: fcm(np.zeros((0, 2)), 2), ValueError,
+     r"^X must have at least one sample and one feature, got shape \(0, 2\)$"),
+    (lambda: fcm(np.zeros((3, 0)), 2), ValueError,
+     r"^X must have at least one sample and one feature, got shape \(3, 0\)$"),
+    (lambda: fcm(_X * 1e151, 2), ValueError,
+     r"^X values must have magnitude <= 1e150 \(squared distances must not overflow\), "
+     r"got 2e\+151$"),
+    (lambda: fcm(_X, 2, m=True), TypeError, r"^m must be a real number > 1, got True \(bool\)$"),
+    (lambda: fcm(_X, 2, m="2"), TypeError, r"^m must be a real number > 1, got '2' \(str\)$"),
+    (lambda: fcm(_X, "2"), TypeError,
+     r"^c must be an integer >= 2 and <= n_samples \(3\), got '2' \(str\)$"),
+    (lambda: fcm(_X, 2, max_iter=1.5), TypeError,
+     r"^max_iter must be an integer, got 1\.5 \(float\)$"),
+    (lambda: fcm(_X, 2, max_iter=0), ValueError, r"^max_iter must be an integer >= 1, got 0$"),
+    (lambda: fcm(_X, 2, seed=-1), ValueError,
+     r"^seed must be a non-negative integer, a numpy Generator or None, got -1$"),
+    (lambda: fcm(_X, 2, seed="x"), TypeError,
+     r"^seed must be an int, a numpy.random.Generator or None, got 'x' \(str\)$"),
+    (lambda: fcm(_X, 2, init_centers=np.zeros((3, 2))), ValueError,
+     r"^init_centers must have shape \(2, 2\) \(clusters x features of X\), got \(3, 2\)$"),
+    (lambda: memberships(_X, np.zeros((2, 3)), 1.5), ValueError,
+     r"^centers must have shape \('c', 2\) \(clusters x features of X\), got \(2, 3\)$"),
+])
+def test_fcm_refuses_bad_input_naming_the_argument_and_the_value(call, error, message):
+    """Each bad argument of fcm / memberships is refused with a message that names the
+    argument, what was expected and what was given (its type for a wrong type)."""
+    with pytest.raises(error, match=message):
+        call()
+
+
+def test_fcm_accepts_its_bounds():
+    """The largest magnitude allowed (1e150) and seed None (fresh entropy) are accepted."""
+    big = np.array([[0.0, 1e150], [1.0, 0.0], [2.0, 2.0]])
+    assert memberships(big, big[:2], 1.5).shape == (3, 2)
+    assert fcm(_X, 2, seed=None).centers.shape == (2, 2)
