@@ -93,6 +93,8 @@ from sitframe import (
 )
 from sitframe import params as P
 
+from .arbiters import _label_index
+
 #: Names of the goal-bearing sectors for 4 and 8 sectors (others: ``s0``, ``s1``, ...).
 SECTOR_NAMES = {1: ("any",), 2: ("ahead", "behind"), 4: ("ahead", "left", "behind", "right"),
                 8: ("ahead", "ahead_left", "left", "behind_left", "behind", "behind_right",
@@ -181,6 +183,21 @@ class GoalProgressReward:
         return self.progress * gain + self.time - close
 
 
+def _near_far(name: str, value: Sequence[float], off: str) -> tuple[float, ...]:
+    """A ``[near, far]`` range [m] with near < far, or ``()`` for ``[]`` (``off``)."""
+    v = P.number_list(name, list(value), lo=0.0) if len(value) else []
+    if v and (len(v) != 2 or v[0] >= v[1]):
+        raise InputError(f"expected [near, far] with near < far [m], or [] ({off}), got {v}",
+                         key=name)
+    return tuple(v)
+
+
+def _closeness(nearest: float, near_far: tuple[float, ...]) -> float:
+    """1 below ``near_far[0]``, 0 beyond ``near_far[1]``, linear between (nearest range [m])."""
+    a, b = near_far
+    return min(1.0, max(0.0, (b - nearest) / (b - a)))
+
+
 def default_actions(labels: Sequence[str]) -> list[dict[str, float]]:
     """Each behaviour alone, then each pair at 1/2 each."""
     acts = [{lb: 1.0} for lb in labels]
@@ -246,16 +263,8 @@ class FuzzyQArbiter:
         self.stall_iterations = int(P.number("stall_iterations", stall_iterations, lo=0,
                                              integer=True))
         self.stall_margin = P.number("stall_margin", stall_margin, lo=0.0)
-        prox = P.number_list("proximity", list(proximity), lo=0.0) if len(proximity) else []
-        if prox and (len(prox) != 2 or prox[0] >= prox[1]):
-            raise InputError(f"expected [near, far] with near < far [m], or [] (no proximity "
-                             f"context), got {prox}", key="proximity")
-        self.proximity = tuple(prox)
-        safe = P.number_list("safety", list(safety), lo=0.0) if len(safety) else []
-        if safe and (len(safe) != 2 or safe[0] >= safe[1]):
-            raise InputError(f"expected [near, far] with near < far [m], or [] (no safety "
-                             f"hand-over), got {safe}", key="safety")
-        self.safety = tuple(safe)
+        self.proximity = _near_far("proximity", proximity, "no proximity context")
+        self.safety = _near_far("safety", safety, "no safety hand-over")
         self.safety_behaviour = None if safety_behaviour is None else \
             P.string("safety_behaviour", safety_behaviour)
         self._safe_k = 0
@@ -304,19 +313,12 @@ class FuzzyQArbiter:
         W = np.zeros((len(acts), len(labels)))
         for i, a in enumerate(acts):
             for lb, w in a.items():
-                if lb not in labels:
-                    raise InputError(f"the 'fuzzy-q-arbiter' arbiter names behaviour '{lb}', "
-                                     f"but the run's behaviours are: {', '.join(labels)}",
-                                     key=f"actions[{i}].{lb}")
-                W[i, list(labels).index(lb)] = w
+                W[i, _label_index(list(labels), lb, f"actions[{i}].{lb}", self.name)] = w
         self.W = W / W.sum(axis=1, keepdims=True)
         self._labels = tuple(labels)
         if self.safety_behaviour is not None:
-            if self.safety_behaviour not in labels:
-                raise InputError(f"the 'fuzzy-q-arbiter' arbiter names behaviour "
-                                 f"'{self.safety_behaviour}', but the run's behaviours are: "
-                                 f"{', '.join(labels)}", key="safety_behaviour")
-            self._safe_k = list(labels).index(self.safety_behaviour)
+            self._safe_k = _label_index(list(labels), self.safety_behaviour,
+                                        "safety_behaviour", self.name)
 
     def bind(self, run: RunContext) -> None:
         """Build the (A, k) weighting matrix over the run's behaviour labels."""
@@ -369,18 +371,10 @@ class FuzzyQArbiter:
         if not self.proximity:
             u[j * self.c:(j + 1) * self.c] = ctx.memberships
             return u
-        a, b = self.proximity
-        close = min(1.0, max(0.0, (b - ctx.nearest) / (b - a)))
+        close = _closeness(ctx.nearest, self.proximity)
         u[2 * j * self.c:(2 * j + 1) * self.c] = close * ctx.memberships
         u[(2 * j + 1) * self.c:(2 * j + 2) * self.c] = (1.0 - close) * ctx.memberships
         return u
-
-    def _closeness(self, ctx: Context) -> float:
-        """How much the safety hand-over holds: 1 below ``safety[0]``, 0 beyond ``safety[1]``."""
-        if not self.safety:
-            return 0.0
-        a, b = self.safety
-        return min(1.0, max(0.0, (b - ctx.nearest) / (b - a)))
 
     def _stalled(self) -> bool:
         return bool(self.stall_iterations) and self._track.since >= self.stall_iterations
@@ -396,7 +390,7 @@ class FuzzyQArbiter:
         self._u = self._state(context, self._stalled())
         w = self._u @ self.W[self.rules]
         if self.safety:
-            self._close = close = self._closeness(context)
+            self._close = close = _closeness(context.nearest, self.safety)
             w = (1.0 - close) * w
             w[self._safe_k] += close
         props = list(proposals.values())

@@ -436,10 +436,11 @@ def _check_selection(sel: dict[str, Any], file: str | None, key: str) -> None:
     if "world" not in sel:
         raise InputError("expected the world the trials are compared in, e.g. world = "
                          "\"goal-training\"", file=file, key=f"{key}.world")
+    sel = {**SELECTION_DEFAULTS, **sel}
     _at(P.string, "world", sel["world"], file, key)
-    _at(P.string, "score", sel.get("score", "collision_free_rate"), file, key)
-    _at(P.number, "episodes", sel.get("episodes", 100), file, key, lo=1, integer=True)
-    _at(P.number, "seed", sel.get("seed", 0), file, key, lo=0, integer=True)
+    _at(P.string, "score", sel["score"], file, key)
+    _at(P.number, "episodes", sel["episodes"], file, key, lo=1, integer=True)
+    _at(P.number, "seed", sel["seed"], file, key, lo=0, integer=True)
 
 
 def _check_core(cfg: dict[str, Any], file: str | None) -> None:

@@ -317,7 +317,7 @@ class FuzzyQLearner:
                 w, a = u0[i], rules[i]
                 cur = q.item(i, a)
                 if kappa:
-                    n = self._visits.setdefault((i, a), 0)
+                    n = self._visits.get((i, a), 0)
                     self._visits[i, a] = n + 1
                     alpha = prm.alpha * kappa / (kappa + n)
                 delta = (w * reward + gamma * w * v_next - cur) if thesis else target - cur
