@@ -26,8 +26,9 @@ smallest squared distance (``s_ij = d2_min,j / d2_ij`` in ``(0, 1]``), so that
 
 which is Eq. 3.2 with the largest term equal to 1: no overflow for any ``m > 1``
 or any distance. Ratios are floored at ``10**(-300 / (p + 1))`` so that no power
-underflows into subnormal numbers (a membership below ~1e-300 is reported as
-~1e-300 instead of a smaller number; it changes nothing measurable). A point
+underflows into subnormal numbers: a membership below ``10**(-300 p / (p + 1))``
+(1e-250 at ``m = 1.2``, 1e-150 at ``m = 2``, 1e-100 at ``m = 3``) is reported as
+that value instead of a smaller one; it changes nothing measurable. A point
 that sits exactly on a centre gets membership 1 there and exactly 0 elsewhere
 (split equally between identical centres).
 
@@ -171,16 +172,14 @@ class FCMResult:
 
 def _real(X: object, name: str) -> np.ndarray:
     """``X`` as a float64 array; complex, string and date arrays are a TypeError (not cast)."""
-    kind = getattr(getattr(X, "dtype", None), "kind", None)
     try:
-        if kind is None:
-            kind = np.asarray(X).dtype.kind
-        if kind not in "biufO":
-            raise TypeError(f"dtype kind {kind!r}")
-        return np.asarray(X, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be a real numeric array, got {type(X).__name__}"
-                        f"{f' of dtype {X.dtype}' if hasattr(X, 'dtype') else ''}") from exc
+        arr = np.asarray(X)
+        if arr.dtype.kind in "biufO":  # (bool, int, float, object holding numbers)
+            return arr.astype(np.float64, copy=False)
+    except (TypeError, ValueError):
+        pass
+    raise TypeError(f"{name} must be a real numeric array, got {type(X).__name__}"
+                    f"{f' of dtype {X.dtype}' if hasattr(X, 'dtype') else ''}")
 
 
 def _check_X(X: object, name: str = "X") -> np.ndarray:
@@ -204,15 +203,12 @@ def _check_X(X: object, name: str = "X") -> np.ndarray:
     return np.ascontiguousarray(arr)
 
 
-def _check_int(value: object, name: str, lo: int, hi: int | None = None, extra: str = "") -> int:
+def _check_int(value: object, name: str, lo: int) -> int:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{name} must be an integer{extra}, got {value!r} "
-                        f"({type(value).__name__})")
-    v = int(value)
-    if v < lo or (hi is not None and v > hi):
-        rng = f">= {lo}" + (f" and <= {hi}" if hi is not None else "")
-        raise ValueError(f"{name} must be an integer {rng}{extra}, got {v}")
-    return v
+        raise TypeError(f"{name} must be an integer, got {value!r} ({type(value).__name__})")
+    if int(value) < lo:
+        raise ValueError(f"{name} must be an integer >= {lo}, got {int(value)}")
+    return int(value)
 
 
 def _check_m(m: object) -> float:
@@ -291,14 +287,12 @@ class _Workspace:
     there is a single block.
     """
 
-    def __init__(self, X: np.ndarray, c: int, m: float, block: int | None = None):
+    def __init__(self, X: np.ndarray, c: int, m: float):
         n, d = X.shape
         self.X, self.n, self.d, self.c, self.m = X, n, d, c, m
         self.p, self.twice_p = _power_plan(m)
         self.floor = 10.0 ** (-_FLOOR_DECADES / (self.p + 1.0))
-        if block is None:
-            block = max(2048, _BLOCK_ELEMENTS // c)
-        self.block = block
+        block = max(2048, _BLOCK_ELEMENTS // c)
         xsq = np.einsum("ij,ij->i", X, X)
         self.xzero = _REL_ZERO * xsq
         self.starts = list(range(0, n, block))
@@ -371,7 +365,6 @@ class _Workspace:
             # a point on a centre: membership 1 there (shared by identical centres), 0 elsewhere
             s[:, zero_cols] = exact[:, on] == 0.0
             dmin[zero_cols] = 0.0
-            d2[:, zero_cols] = exact[:, on]
         tp = self.twice_p
         if tp is None:
             np.power(s, self.p, out=w)
@@ -406,14 +399,11 @@ class _Workspace:
             YT = self._YT[:, : S.shape[0]]
             np.multiply(self.XT1s[k], Sm, out=YT)
             num += (YT @ w1.T).T  # (c, d+1): weighted sums | weight totals
-        tot = num[:, d : d + 1]
-        Vn = np.empty_like(V)
-        if np.all(tot > 0.0):
-            np.divide(num[:, :d], tot, out=Vn)
-        else:  # a centre no point belongs to at all: leave it where it is
-            ok = tot[:, 0] > 0.0
-            Vn[ok] = num[ok, :d] / tot[ok]
-            Vn[~ok] = V[~ok]
+        # a centre whose weights are all 0 (every point on another centre, or underflow at
+        # a large m) stays where it is
+        ok = num[:, d] > 0.0
+        Vn = V.copy()
+        Vn[ok] = num[ok, :d] / num[ok, d:]
         return Vn, objective
 
     def finalize(self, V: np.ndarray) -> tuple[np.ndarray, float]:
@@ -637,7 +627,7 @@ def fcm(
 
 
 def _fcm_core(ws: _Workspace, V0: np.ndarray, tol: float, max_iter: int) -> FCMResult:
-    V = np.array(V0, dtype=np.float64, copy=True)
+    V = V0  # (validated float64; never written to: each step returns new centres)
     history: list[float] = []  # grows with the iterations run, not max_iter (may be huge)
     converged = False
     it = 0
@@ -653,7 +643,7 @@ def _fcm_core(ws: _Workspace, V0: np.ndarray, tol: float, max_iter: int) -> FCMR
     u, objective = ws.finalize(V)
     return FCMResult(
         centers=V, u=u, objective=objective, n_iter=it, converged=converged, m=ws.m,
-        objective_history=np.asarray(history, dtype=np.float64),
+        objective_history=np.array(history),
     )
 
 

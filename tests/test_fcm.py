@@ -416,3 +416,197 @@ def test_fcm_accepts_its_bounds():
     big = np.array([[0.0, 1e150], [1.0, 0.0], [2.0, 2.0]])
     assert memberships(big, big[:2], 1.5).shape == (3, 2)
     assert fcm(_X, 2, seed=None).centers.shape == (2, 2)
+
+
+# ------------------------------------------------------ the arithmetic behind Eq. 3.2
+
+
+def naive_objective(X, V, m):
+    """Eq. 3.1: sum_ij u_ij**m |x_j - v_i|**2 with the memberships of Eq. 3.2."""
+    d2 = ((X[:, None, :] - V[None, :, :]) ** 2).sum(-1)
+    return float((naive_memberships(X, V, m) ** m * d2).sum())
+
+
+def naive_update(X, V, m):
+    """The FCM centre update: v_i = sum_j u_ij**m x_j / sum_j u_ij**m."""
+    um = naive_memberships(X, V, m) ** m
+    return (um.T @ X) / um.sum(axis=0)[:, None]
+
+
+# 2/(m-1) an integer (products), a half-integer (products and a square root) or neither
+# (np.power): 1.2 -> 10, 1.25 -> 8, 4/3 -> 6, 1.4 -> 5, 1.5 -> 4, 5/3 -> 3, 2 -> 2, 3 -> 1.
+@pytest.mark.parametrize("m", [1.2, 1.25, 4 / 3, 1.4, 1.5, 5 / 3, 2.0, 3.0, 1.3, 2.7])
+def test_every_fuzzifier_gives_eq_3_2_the_objective_and_the_centre_update(m):
+    """Whatever m, memberships are Eq. 3.2, the objective history starts at J_m of the
+    initial centres (Eq. 3.1) and one iteration moves the centres by the FCM update."""
+    rng = np.random.default_rng(2)
+    X, V = rng.normal(size=(60, 3)), rng.normal(size=(5, 3))
+    np.testing.assert_allclose(memberships(X, V, m), naive_memberships(X, V, m),
+                               rtol=1e-10, atol=1e-300)
+    r = fcm(X, 5, m, init_centers=V, max_iter=1)
+    assert r.objective_history[0] == pytest.approx(naive_objective(X, V, m), rel=1e-10)
+    np.testing.assert_allclose(r.centers, naive_update(X, V, m), rtol=1e-10)
+    assert r.objective == pytest.approx(naive_objective(X, r.centers, m), rel=1e-10)
+
+
+def test_large_data_sets_give_the_same_results_as_small_ones():
+    """5000 samples and 20 centres (processed in several cache-sized blocks) give the
+    memberships, objective and centre updates of the whole data set, and a sample on a
+    centre far down the data still gets membership 1 there."""
+    rng = np.random.default_rng(4)
+    X, V = rng.uniform(0, 3, (5000, 4)), rng.uniform(0, 3, (20, 4))
+    X[4500] = V[3]
+    rest = np.arange(5000) != 4500
+    u = memberships(X, V, 1.2)
+    np.testing.assert_array_equal(u[4500], np.eye(20)[3])
+    np.testing.assert_allclose(u[rest], naive_memberships(X[rest], V, 1.2), rtol=1e-9,
+                               atol=1e-300)
+    r = fcm(X[rest], 20, 1.2, init_centers=V, max_iter=2, tol=1e-12)
+    assert r.n_iter == 2 and r.converged is False
+    V1 = naive_update(X[rest], V, 1.2)
+    assert r.objective_history[0] == pytest.approx(naive_objective(X[rest], V, 1.2), rel=1e-9)
+    assert r.objective_history[1] == pytest.approx(naive_objective(X[rest], V1, 1.2), rel=1e-9)
+    np.testing.assert_allclose(r.centers, naive_update(X[rest], V1, 1.2), rtol=1e-9)
+    assert r.objective == pytest.approx(naive_objective(X[rest], r.centers, 1.2), rel=1e-9)
+
+
+def test_samples_on_and_within_round_off_of_centres():
+    """A sample on a centre gets membership 1 there; one 1e-9 from another centre gets
+    Eq. 3.2 (its distance recomputed exactly, not from the expansion's round-off)."""
+    V = np.array([[1.0, 2.0], [3.0, 1.0], [0.0, 0.0]])
+    X = np.array([[1.0, 2.0], [3.0 + 1e-9, 1.0], [2.0, 2.0]])
+    u = memberships(X, V, 2.0)
+    np.testing.assert_array_equal(u[0], [1.0, 0.0, 0.0])
+    np.testing.assert_allclose(u[1:], naive_memberships(X[1:], V, 2.0), rtol=1e-9)
+
+
+def _far_cluster(s):
+    """1-D samples whose squared-distance ratio to centre 0 vs centre 1 is ``s``."""
+    r = np.sqrt(s)
+    return (r / (1.0 + r))[:, None]
+
+
+def test_tiny_memberships_are_exact_down_to_1e_295_and_floored_at_1e_300_below():
+    """m = 1.01: a membership down to ~1e-295 is Eq. 3.2; a smaller one is reported as
+    ~1e-300, never as 0 or a subnormal number -- also in a batch with a sample on a centre."""
+    V = np.array([[0.0], [1.0]])
+    s = 10.0 ** np.array([-1.0, -2.0, -2.9, -2.95])
+    X = _far_cluster(s)
+    np.testing.assert_allclose(memberships(X, V, 1.01), naive_memberships(X, V, 1.01),
+                               rtol=1e-8, atol=0)
+    far = np.vstack([[0.0], _far_cluster(10.0 ** np.array([-5.0, -40.0]))])
+    u = memberships(far, V, 1.01)
+    np.testing.assert_array_equal(u[0], [1.0, 0.0])
+    assert np.all((u[1:, 1] >= 1e-301) & (u[1:, 1] <= 1e-296))
+
+
+def test_a_centre_no_sample_belongs_to_stays_where_it_is():
+    """When every sample sits on another centre, a centre with no membership at all keeps
+    its place (no 0/0) and the others stay on their samples."""
+    X = np.array([[0.0], [0.0], [1.0], [1.0]])
+    with np.errstate(all="raise"):
+        r = fcm(X, 3, init_centers=np.array([[0.0], [1.0], [5.0]]))
+    np.testing.assert_array_equal(r.centers, [[0.0], [1.0], [5.0]])
+    np.testing.assert_array_equal(r.u, [[1, 0, 0], [1, 0, 0], [0, 1, 0], [0, 1, 0]])
+    assert r.converged is True and r.n_iter == 1 and r.objective == 0.0
+
+
+def test_an_unconverged_run_says_so_after_exactly_max_iter_updates():
+    X = blobs()
+    r = fcm(X, 4, seed=0, tol=1e-14, max_iter=3)
+    assert r.converged is False and r.n_iter == 3 and r.objective_history.shape == (3,)
+
+
+def test_convergence_needs_a_move_strictly_below_tol():
+    """Stop when max |V_t+1 - V_t| < tol: a move of exactly tol is not convergence."""
+    X, V0 = blobs(), blobs()[[0, 100, 200]]
+    first = fcm(X, 3, init_centers=V0, max_iter=1)
+    move = float(np.max(np.abs(first.centers - V0)))
+    assert fcm(X, 3, init_centers=V0, tol=move, max_iter=2).n_iter == 2
+    assert fcm(X, 3, init_centers=V0, tol=np.nextafter(move, np.inf), max_iter=2).n_iter == 1
+
+
+def test_a_centre_whose_weights_underflow_keeps_its_place_and_the_others_move():
+    """m = 60 and a centre 1e145 away: its weights underflow to exactly 0 (Eq. 3.2 would
+    divide 0 by 0) and it stays where it is; the other centres, whose weights are tiny
+    (~1e-70) but not 0, move by the FCM update."""
+    rng = np.random.default_rng(5)
+    C = rng.uniform(0, 1, (19, 2))
+    X = C[rng.integers(0, 19, 60)] + rng.normal(0, 1e-4, (60, 2))
+    V = np.vstack([C, [[1e145, 1e145]]])
+    with np.errstate(all="raise"):
+        r = fcm(X, 20, 60.0, init_centers=V, max_iter=1)
+    np.testing.assert_array_equal(r.centers[19], V[19])
+    um = naive_memberships(X, V, 60.0) ** 60.0
+    np.testing.assert_allclose(r.centers[:19], (um.T @ X)[:19] / um.sum(axis=0)[:19, None],
+                               rtol=0, atol=1e-9)
+    assert np.max(np.abs(r.centers[:19] - C)) > 1e-5
+
+
+def test_fcm_accepts_lists_ints_bools_and_object_arrays_as_numbers():
+    """Any real numeric array-like is data: a list, an int, bool or object array (as
+    pandas may give) clusters exactly like its float64 version."""
+    Xf = np.array([[0.0, 1.0], [1.0, 0.0], [1.0, 1.0], [0.0, 0.0], [1.0, 1.0]])
+    want = fcm(Xf, 2, seed=1)
+    for X in (Xf.tolist(), Xf.astype(int), Xf.astype(bool), Xf.astype(object)):
+        got = fcm(X, 2, seed=1)
+        np.testing.assert_array_equal(got.centers, want.centers)
+        np.testing.assert_array_equal(got.u, want.u)
+        np.testing.assert_array_equal(memberships(X, want.centers, 1.2), want.u)
+    with pytest.raises(TypeError, match=r"^X must be a real numeric array, got list$"):
+        fcm([["a", "b"], ["c", "d"]], 2)
+    with pytest.raises(TypeError,
+                       match=r"^X must be a real numeric array, got ndarray of dtype complex128$"):
+        fcm(Xf.astype(complex), 2)
+
+
+@pytest.fixture(params=["numpy", "compiled"])
+def membership_path(request, monkeypatch):
+    """Run MembershipFunction on the numpy code or on the compiled kernels."""
+    from sitframe import kernels
+
+    if request.param == "compiled":
+        pytest.importorskip("numba")
+        k = kernels.load()
+        if k is None:
+            pytest.skip("compiled kernels switched off (SITFRAME_NUMBA=0)")
+        monkeypatch.setattr(kernels, "_LOADED", [k])
+    else:
+        monkeypatch.setattr(kernels, "_LOADED", [None])
+    return request.param
+
+
+def test_membership_function_is_eq_3_2_on_either_path(membership_path):
+    """The controller's per-reading memberships: Eq. 3.2 near and far (squared distances
+    below and above 1), 1 on a centre, shared equally between identical centres, a single
+    centre gets everything, and ~1e-300 (not 0 or subnormal) at m = 1.01."""
+    from sitframe.fcm import MembershipFunction
+
+    V = np.array([[0.0, 0.0], [0.5, 0.0], [3.0, 1.0]])
+    f = MembershipFunction(V, 1.5)
+    X = np.array([[0.1, 0.1], [0.25, 0.3], [2.0, 2.0], [-4.0, 1.0]])
+    np.testing.assert_allclose([f(x) for x in X], naive_memberships(X, V, 1.5), rtol=1e-12)
+    np.testing.assert_array_equal(f(np.array([0.5, 0.0])), [0.0, 1.0, 0.0])
+    twin = MembershipFunction(np.array([[1.0, 1.0], [1.0, 1.0], [1.5, 1.0]]), 1.2)
+    np.testing.assert_array_equal(twin(np.array([1.0, 1.0])), [0.5, 0.5, 0.0])
+    np.testing.assert_array_equal(MembershipFunction(V[:1], 1.2)(np.array([7.0, 1.0])), [1.0])
+    for table in (V.astype(object), V.tolist()):  # (as pandas or a config may give them)
+        np.testing.assert_array_equal(MembershipFunction(table, 1.5)(X[1]), f(X[1]))
+    fine = MembershipFunction(np.array([[0.0], [1.0]]), 1.01)
+    x = _far_cluster(10.0 ** np.array([-2.95, -5.0, -40.0]))
+    np.testing.assert_allclose(fine(x[0]), naive_memberships(x[:1], fine.centers, 1.01)[0],
+                               rtol=1e-8)
+    for xi in x[1:]:
+        assert 1e-301 <= fine(xi)[1] <= 1e-299
+
+
+@pytest.mark.parametrize(("centers", "shape"), [
+    (np.zeros(3), r"\(3,\)"), (np.zeros((0, 3)), r"\(0, 3\)"),
+    (np.array([[0.0, np.nan]]), r"\(1, 2\)"), (np.array([[0.0, np.inf], [1.0, 1.0]]), r"\(2, 2\)"),
+])
+def test_membership_function_refuses_centres_that_are_not_a_finite_table(centers, shape):
+    from sitframe.fcm import MembershipFunction
+
+    with pytest.raises(ValueError, match=rf"^centers must be a finite \(c, d\) array, got shape "
+                                         rf"{shape}$"):
+        MembershipFunction(centers, 1.2)

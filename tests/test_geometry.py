@@ -7,6 +7,7 @@ import warnings
 
 import numpy as np
 import pytest
+from geometry_reference import point_segment_distance_reference, raycast_reference
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
@@ -48,8 +49,8 @@ def test_raycast_matches_reference(segs: np.ndarray, ox: float, oy: float, angs:
     origins = np.tile([ox, oy], (len(angs), 1))
     a = np.array(angs)
     fast = g.raycast(origins, a, segs, 4.0)
-    lo = g._raycast_reference(origins, a, segs, 4.0, tol=1e-9)
-    hi = g._raycast_reference(origins, a, segs, 4.0, tol=-1e-9)
+    lo = raycast_reference(origins, a, segs, 4.0, tol=1e-9)
+    hi = raycast_reference(origins, a, segs, 4.0, tol=-1e-9)
     assert np.all(fast >= lo - 1e-7), (fast, lo)
     assert np.all(fast <= hi + 1e-7), (fast, hi)
     assert np.all((fast >= 0) & (fast <= 4.0))
@@ -95,7 +96,7 @@ def test_ray_parallel_collinear_and_points() -> None:
 @example(segs=np.array([[0.0, 0.0, 0.0, 5e-324]]), pts=np.array([[0.0, 0.5]]))
 def test_point_segment_distance_matches_reference(segs: np.ndarray, pts: np.ndarray) -> None:
     fast = g.point_segment_distance(pts, segs)
-    ref = g._point_segment_distance_reference(pts, segs)
+    ref = point_segment_distance_reference(pts, segs)
     assert fast.shape == (pts.shape[0], segs.shape[0])
     np.testing.assert_allclose(fast, ref, atol=1e-9, rtol=1e-9)
     d, idx, nearest = g.nearest_on_segments(pts, segs)
@@ -154,7 +155,7 @@ def _rim_reference(xy: np.ndarray, ang: np.ndarray, max_range: float, radius: fl
                    group: int, clip: bool) -> np.ndarray:
     """What a range finder on a disc reads, from the brute-force ray cast."""
     reach = max_range + radius
-    dist = g._raycast_reference(xy, ang, SENSOR_ROOM, reach).reshape(-1, group).min(axis=1)
+    dist = raycast_reference(xy, ang, SENSOR_ROOM, reach).reshape(-1, group).min(axis=1)
     out = np.where(dist >= reach, max_range, dist - radius)
     return np.clip(out, 0.0, max_range) if clip else out
 
@@ -177,7 +178,7 @@ def test_sensor_casts_match_the_reference_with_and_without_compiled_kernels(
     ang = rng.uniform(-4.0, 4.0, (6, 12))
     ang[5, :3] = [0.0, 0.1, -0.1]
     pairs = list(zip(xy, ang, strict=True))
-    ref = np.stack([g._raycast_reference(p, a, SENSOR_ROOM, 2.5) for p, a in pairs])
+    ref = np.stack([raycast_reference(p, a, SENSOR_ROOM, 2.5) for p, a in pairs])
     assert (ref == 2.5).any() and (ref < 2.5).any()
     many = g.cast_rays_many(s, xy, ang, 2.5)
     np.testing.assert_allclose(many, ref, rtol=0, atol=1e-9)

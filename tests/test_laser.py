@@ -5,13 +5,13 @@ from __future__ import annotations
 import h5py
 import numpy as np
 import pytest
+from geometry_reference import raycast_reference
 from helpers import run_config, small_config
 
 from sitframe import InputError
 from sitframe import analysis as A
 from sitframe.cli import main
 from sitframe.clustering import describe_prototype
-from sitframe.geometry import _raycast_reference
 from sitframe.plugins.laser import LaserScanner, sitframe_sensors
 from sitframe.plugins.sonar import PIONEER_ANGLES_DEG as PIONEER
 from sitframe.world import load_world, parse_world
@@ -49,7 +49,7 @@ def test_matches_the_brute_force_reference(kwargs: dict) -> None:
         got = laser.read(world, pose, rng)
         rays = np.radians(laser.angles_deg) + pose[2]
         # bracket the fast cast by the reference with hit tolerances of +-1e-9 m
-        lo, hi = (_raycast_reference(pose[:2], rays, segs, reach, tol=t) for t in (1e-9, -1e-9))
+        lo, hi = (raycast_reference(pose[:2], rays, segs, reach, tol=t) for t in (1e-9, -1e-9))
         expect_lo = np.where(lo >= reach, laser.max_range, lo - laser.robot_radius)
         expect_hi = np.where(hi >= reach, laser.max_range, hi - laser.robot_radius)
         assert got.shape == (laser.beams,)
