@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 import warnings
 
 import numpy as np
@@ -203,6 +204,8 @@ def test_sensor_casts_match_the_reference_with_and_without_compiled_kernels(
     assert g.rim_ranges(s, 1.5, 2.0, ang[0], 1.2, 0.13).tolist() == [1.2] * 12
     assert g.rim_ranges_many(s, np.array([[1.5, 2.0]]), ang[:1], 1.2, 0.13, 3,
                              clip=True).tolist() == [[1.2] * 4]
+    assert g.rim_ranges_many(s, np.array([[1.5, 2.0]]), ang[:1], 1.2, 0.13).tolist() == [
+        [1.2] * 12]
     # bad groups and shapes are refused naming what was expected
     for group in (0, 5):
         with pytest.raises(ValueError, match=rf"^rim_ranges: 12 rays do not make groups of "
@@ -294,5 +297,152 @@ def test_polygon_self_intersection_open_closed_folds_and_edge_lengths():
                    [[0, 0], [1, -1], [2, 0], [1, 1]],
                    [[0, 0], [0.5, 0], [1, 0], [1, 1], [0, 1]]):  # collinear, same direction
         assert g.polygon_self_intersection(np.array(simple, dtype=float)) is None, simple
-    for fold in ([[0, 0], [2, 0], [1, 0], [1, 1]], [[0, 0], [2, 2], [1, 1], [3, 0]]):
+    for fold in ([[0, 0], [2, 0], [1, 0], [1, 1]], [[0, 0], [2, 2], [1, 1], [3, 0]],
+                 [[0, 0], [4, 4], [2, 2], [5, 0]], [[0, 0], [0, 2], [0, 1], [1, 1]]):
         assert g.polygon_self_intersection(np.array(fold, dtype=float)) == (0, 1), fold
+
+
+@pytest.fixture(params=["compiled", "numpy"])
+def kernel_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    """Run a test with the compiled kernels and again with the numpy path (no numba)."""
+    from sitframe import kernels
+
+    if request.param == "numpy":
+        monkeypatch.setattr(kernels, "_LOADED", [None])
+    elif kernels.load() is None:
+        pytest.skip("compiled kernels switched off")
+    return request.param
+
+
+A = 1.0  # a ray direction with both components non-zero and inexact
+D = np.array([math.cos(A), math.sin(A)])
+# (origin, angle, segments, expected reading with max_range 5): parallel and collinear
+# segments, the 1e-12 tolerance at the ray's origin and at a segment's ends, hits beyond
+# max_range; each reading is the documented one ("a ray that starts on a segment reads 0,
+# a ray along a collinear segment hits its nearest end")
+RAY_EDGES = [
+    ((0.0, 0.0), 0.0, [[2.0, -0.5, 2.0, 0.5]], 2.0),  # square on: cross(d, e) = 1
+    ((0.0, 0.0), 0.0, [[2.0, 0.0, 3.0, 0.0]], 2.0),  # collinear ahead
+    ((0.0, 0.0), 0.0, [[3.0, 0.0, 2.0, 0.0]], 2.0),  # ... drawn the other way
+    ((0.0, 0.0), 0.0, [[0.5, 0.0, 2.0, 0.0]], 0.5),
+    ((0.0, 0.0), 0.0, [[-1.0, 0.0, 0.5, 0.0]], 0.0),  # starts on it
+    ((0.0, 0.0), 0.0, [[-1.0, 0.0, 0.0, 0.0]], 0.0),  # starts on its end
+    ((0.0, 0.0), 0.0, [[-3.0, 0.0, -1.0, 0.0]], 5.0),  # collinear behind
+    ((0.0, 0.0), 0.0, [[1.0, 1.0, 3.0, 1.0], [-3.0, 0.0, -1.0, 0.0]], 5.0),  # parallel beside
+    ((0.0, 0.0), 0.0, [[10.0, -1.0, 10.0, 1.0]], 5.0),  # beyond max_range
+    ((0.0, 1e-12), 0.0, [[2.0, 0.0, 3.0, 0.0]], 2.0),  # collinear within the hair
+    ((0.0, 2e-12), 0.0, [[2.0, 0.0, 3.0, 0.0]], 5.0),  # ... and just beyond it
+    ((1e-12, 0.0), 0.0, [[0.0, -1.0, 0.0, 1.0]], 0.0),  # 1e-12 past a wall: on it
+    ((0.0, -1e-12), 0.0, [[1.0, 0.0, 1.0, 1.0]], 1.0),  # grazing an end by 1e-12
+    ((0.0, 1.0 + 1e-12), 0.0, [[1.0, 0.0, 1.0, 1.0]], 1.0),  # ... the other end
+    # a wall 1e10 m long rising 1e-300 m: the quotients overflow (and are not hits)
+    ((0.0, 1.0), 0.0, [[0.0, 0.0, 1e10, 1e-300]], 5.0),
+    # along the inexact direction D: end points 2 D, 4 D are exact multiples of D
+    ((0.0, 0.0), A, [[*(2 * D), *(4 * D)]], 2.0),
+    ((0.0, 0.0), A, [[*(4 * D), *(2 * D)]], 2.0),
+    ((0.0, 0.0), A, [[*(-2 * D), *(2 * D)]], 0.0),
+    ((0.0, 0.0), A, [[*(-4 * D), *(-2 * D)]], 5.0),
+]
+
+
+def test_raycast_edge_cases_with_and_without_compiled_kernels(kernel_path: str) -> None:
+    """Every edge reads what the docstring says, quietly (no RuntimeWarning), on both paths."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for origin, angle, segs, want in RAY_EDGES:
+            got = g.raycast(np.array([origin]), np.array([angle]), np.array(segs), 5.0)
+            assert got.shape == (1,)
+            assert got[0] == pytest.approx(want, abs=1e-12), (origin, angle, segs)
+        # several origins, one per ray; a single (2,) origin for all rays; a scalar angle
+        walls = g.polygon_edges(np.array([[-1.0, -2.0], [3.0, -2.0], [3.0, 4.0], [-1.0, 4.0]]))
+        got = g.raycast(np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 3.0]]),
+                        np.array([0.0, math.pi, -math.pi / 2]), walls, 10.0)
+        np.testing.assert_allclose(got, [3.0, 2.0, 5.0], rtol=0, atol=1e-12)
+        got = g.raycast(np.array([1.0, 1.0]), np.array([0.0, math.pi, -math.pi / 2]), walls, 10.0)
+        np.testing.assert_allclose(got, [2.0, 2.0, 3.0], rtol=0, atol=1e-12)
+        assert g.raycast(np.array([1.0, 1.0]), 0.0, walls, 10.0).tolist() == [2.0]
+        # max_range 0 (the documented edge) reads 0; an int max_range is a number
+        assert g.raycast(np.zeros((2, 2)), np.zeros(2), walls, 0).tolist() == [0.0, 0.0]
+        assert g.raycast(np.zeros((1, 2)), np.zeros(1), walls[:0], 3).tolist() == [3.0]
+
+
+def test_inputs_of_any_float_precision_are_read_as_float64(kernel_path: str) -> None:
+    """float32 angles, segments and vertices (a policy's or a file's) give the readings of
+    their float64 values: the arithmetic is float64 whatever the input's precision."""
+    rng = np.random.default_rng(7)
+    ang = rng.uniform(-4.0, 4.0, 24).astype(np.float32)
+    xy = rng.uniform(0.5, 5.5, (3, 2)).astype(np.float32)
+    room = SENSOR_ROOM.astype(np.float32)
+    a64, xy64, room64 = ang.astype(np.float64), xy.astype(np.float64), room.astype(np.float64)
+    s = g.SegmentSet(room)
+    assert s.segments.dtype == np.float64
+    assert np.array_equal(s.packed, g.SegmentSet(room64).packed)
+    assert np.array_equal(g.raycast(xy[0], ang, room, 2.5), g.raycast(xy64[0], a64, room64, 2.5))
+    assert np.array_equal(g.cast_rays(s, *xy64[0], ang, 2.5), g.cast_rays(s, *xy64[0], a64, 2.5))
+    assert np.array_equal(g.rim_ranges(s, *xy64[0], ang, 2.5, 0.3, 2),
+                          g.rim_ranges(s, *xy64[0], a64, 2.5, 0.3, 2))
+    many = ang.reshape(3, 8)
+    assert np.array_equal(g.cast_rays_many(s, xy, many, 2.5),
+                          g.cast_rays_many(s, xy64, many.astype(np.float64), 2.5))
+    assert np.array_equal(g.rim_ranges_many(s, xy, many, 2.5, 0.3, 2),
+                          g.rim_ranges_many(s, xy64, many.astype(np.float64), 2.5, 0.3, 2))
+    tri = rng.uniform(-3.0, 3.0, (5, 2)).astype(np.float32)
+    assert g.polygon_area(tri) == g.polygon_area(tri.astype(np.float64))
+    pts = rng.uniform(-3.0, 3.0, (40, 2))
+    assert np.array_equal(g.point_in_polygon(pts, tri),
+                          g.point_in_polygon(pts, tri.astype(np.float64)))
+    assert g.polygon_edges(tri).dtype == g.polyline_segments(tri).dtype == np.float64
+
+
+def test_geometry_refuses_bad_input_naming_it() -> None:
+    segs = np.array([[0.0, 0.0, 1.0, 0.0]])
+    with pytest.raises(ValueError, match=r"^origins must have shape \(k, 2\) = x, y; "
+                                         r"got shape \(2, 3\)$"):
+        g.raycast(np.zeros((2, 3)), np.zeros(2), segs, 1.0)
+    with pytest.raises(TypeError, match=r"^origins must be a \(k, 2\) array of numbers, "
+                                        r"got \[\['a', 'b'\]\]$"):
+        g.raycast([["a", "b"]], np.zeros(1), segs, 1.0)
+    with pytest.raises(ValueError, match=r"^origins \(n, 2\) and angles_rad \(n,\) must have "
+                                         r"the same n; got 3 and 2$"):
+        g.raycast(np.zeros((3, 2)), np.zeros(2), segs, 1.0)
+    for bad in (-1.0, -1e-300, float("nan"), "5", None, [1.0]):
+        with pytest.raises(ValueError, match=rf"^max_range must be a number >= 0, "
+                                             rf"got {re.escape(repr(bad))}$"):
+            g.raycast(np.zeros((1, 2)), np.zeros(1), segs, bad)
+    with pytest.raises(ValueError, match=r"^segments must have shape \(S, 4\) = x0, y0, x1, y1; "
+                                         r"got shape \(3, 3\)$"):
+        g.raycast(np.zeros((1, 2)), np.zeros(1), np.zeros((3, 3)), 1.0)
+    with pytest.raises(TypeError, match=r"^segments must be an \(S, 4\) array of numbers, "
+                                        r"got \[\[0, 0, 1, 'x'\]\]$"):
+        g.SegmentSet([[0, 0, 1, "x"]])
+    with pytest.raises(TypeError, match=r"^points must be a \(k, 2\) array of numbers, "
+                                        r"got \[\['a', 'b'\]\]$"):
+        g.point_segment_distance([["a", "b"]], segs)
+    for bad in (np.zeros(3), np.zeros((2, 3)), np.zeros((2, 2, 2))):
+        with pytest.raises(ValueError, match=r"^points must have shape \(k, 2\) = x, y; "
+                                             rf"got shape {re.escape(str(bad.shape))}$"):
+            g.min_distance(bad, segs)
+    # the documented edges: a single (2,) point is one point; no segments, no nearest one
+    assert g.min_distance([3.0, 4.0], segs).tolist() == [np.hypot(2.0, 4.0)]
+    assert g.point_segment_distance((1.0, 2.0), segs).tolist() == [[2.0]]
+    assert g.min_distance(np.zeros((3, 2)), segs[:0]).tolist() == [math.inf] * 3
+
+
+def test_segment_set_is_read_only_with_its_documented_arrays() -> None:
+    """A SegmentSet (a world's walls, shared by every sensor) cannot be written to through
+    its arrays; its bounding boxes and 1/|e|² are the documented ones, 0 for a point and for
+    a segment too short for 1/|e|² (|e|² below the smallest normal float, 2**-1022)."""
+    segs = np.array([[0.0, 3.0, 2.0, 1.0], [-1.0, -2.0, -4.0, 5.0], [1.0, 1.0, 1.0, 1.0],
+                     [0.0, 0.0, 2.0**-512, 0.0], [0.0, 0.0, 0.0, 2.0**-511]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        s = g.SegmentSet(segs)
+    for arr in (s.segments, s.packed, s.ax, s.inv_len2):
+        with pytest.raises(ValueError, match="read-only"):
+            arr[0] = 7.0
+    segs[0, 0] = 9.0  # (a copy: the caller's array stays the caller's)
+    assert s.segments[0, 0] == 0.0
+    assert s.lo.tolist() == [[0.0, 1.0], [-4.0, -2.0], [1.0, 1.0], [0.0, 0.0], [0.0, 0.0]]
+    assert s.hi.tolist() == [[2.0, 3.0], [-1.0, 5.0], [1.0, 1.0], [2.0**-512, 0.0],
+                             [0.0, 2.0**-511]]
+    assert s.inv_len2.tolist() == [1 / 8, 1 / 58, 0.0, 0.0, 2.0**1022]
