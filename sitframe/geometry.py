@@ -366,10 +366,10 @@ def rim_ranges(segments: SegmentSet, x: float, y: float, angles_rad: np.ndarray,
         (n,) readings [m] in ``[-radius, max_range]`` (``[0, max_range]`` with ``clip``).
     """
     ang = np.asarray(angles_rad, dtype=np.float64)
-    n = ang.shape[0] // group if group >= 1 else 0
-    if n * group != ang.shape[0]:
+    if not group >= 1 or ang.shape[0] % group:
         raise ValueError(f"rim_ranges: {ang.shape[0]} rays do not make groups of {group!r}; "
                          "expected a positive group size that divides the number of rays")
+    n = ang.shape[0] // group
     k = kernels()
     if k is None:
         reach = max_range + radius
@@ -455,10 +455,11 @@ def rim_ranges_many(segments: SegmentSet, xy: np.ndarray, angles_rad: np.ndarray
     """
     ang = np.asarray(angles_rad, dtype=np.float64)
     xy = np.asarray(xy, dtype=np.float64)
-    n = ang.shape[1] // group if ang.ndim == 2 and group >= 1 else 0
-    if ang.ndim != 2 or n * group != ang.shape[1] or xy.shape != (ang.shape[0], 2):
+    if (ang.ndim != 2 or not group >= 1 or ang.shape[1] % group
+            or xy.shape != (ang.shape[0], 2)):
         raise ValueError(f"rim_ranges_many: expected (N, 2) centres and (N, n * {group!r}) "
                          f"angles, got {xy.shape} and {ang.shape}")
+    n = ang.shape[1] // group
     k = kernels()
     if k is None:
         reach = max_range + radius

@@ -212,8 +212,10 @@ def test_sensor_casts_match_the_reference_with_and_without_compiled_kernels(
                                              rf"{group}; expected a positive group size that "
                                              r"divides the number of rays$"):
             g.rim_ranges(s, 1.0, 1.0, ang[0], 2.5, 0.3, group)
+    with pytest.raises(ValueError, match=r"^rim_ranges: 0 rays do not make groups of 0; "):
+        g.rim_ranges(s, 1.0, 1.0, ang[0, :0], 2.5, 0.3, 0)  # (no rays, no group either)
     for bad_xy, bad_ang, group in [(xy[:, :1], ang, 1), (xy, ang, 0), (xy, ang, 5),
-                                   (xy[:1], ang[0], 1)]:
+                                   (xy[:1], ang[0], 1), (xy, ang[:, :0], 0), (xy, ang, -3)]:
         with pytest.raises(ValueError, match=r"^rim_ranges_many: expected \(N, 2\) centres "
                                              rf"and \(N, n \* {group}\) angles, got "):
             g.rim_ranges_many(s, bad_xy, bad_ang, 2.5, 0.3, group)
@@ -446,3 +448,18 @@ def test_segment_set_is_read_only_with_its_documented_arrays() -> None:
     assert s.hi.tolist() == [[2.0, 3.0], [-1.0, 5.0], [1.0, 1.0], [2.0**-512, 0.0],
                              [0.0, 2.0**-511]]
     assert s.inv_len2.tolist() == [1 / 8, 1 / 58, 0.0, 0.0, 2.0**1022]
+
+
+def test_many_origins_cast_as_one_next_to_max_range() -> None:
+    """Row i of cast_rays_many is cast_rays from origin i (documented), also for a wall a
+    hair inside max_range and for short ranges, where the walls each origin's rays are
+    tested against are chosen by distance."""
+    for max_range in (1e-4, 0.5, 2.0):
+        x = max_range * (1.0 - 5e-10) if max_range > 1e-3 else max_range - 5e-13
+        s = g.SegmentSet(np.array([[x, -1.0, x, 1.0], [0.8 * x, 5.0, 0.8 * x, 6.0]]))
+        xy = np.array([[0.0, 0.0], [0.0, 0.5], [0.1 * x, 0.0]])
+        ang = np.tile([0.0, 0.1, math.pi], (3, 1))
+        many = g.cast_rays_many(s, xy, ang, max_range)
+        for i, (ox, oy) in enumerate(xy):
+            assert np.array_equal(many[i], g.cast_rays(s, ox, oy, ang[i], max_range)), max_range
+        assert 0.0 < many[0, 0] < max_range  # the wall is within range, and hit
