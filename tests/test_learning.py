@@ -455,8 +455,9 @@ def test_no_rule_strength_gives_the_mean_singleton():
     assert fcs.output(np.zeros(2)) == 20.0
 
 
-def _evolving_learner(converged: bool = False) -> FuzzyQLearner:
-    lr = FuzzyQLearner(5, 3, QLearningParams(q_init_value=10.0, alpha_visits=4.0),
+def _evolving_learner(converged: bool = False, tie_break: str = "first") -> FuzzyQLearner:
+    lr = FuzzyQLearner(5, 3, QLearningParams(q_init_value=10.0, alpha_visits=4.0,
+                                             tie_break=tie_break),
                        np.random.default_rng(0), 20)
     lr.q[:] = [[1.0, 4.0, 2.0], [6.0, 0.0, 3.0], [2.0, 2.0, 8.0], [5.0, 1.0, 1.0],
                [0.0, 9.0, 3.0]]
@@ -491,6 +492,9 @@ def test_a_new_situation_starts_from_its_parents_pulled_to_the_optimistic_start(
     orphan.situations_changed(SituationEvent(kind, 2, (), np.zeros(0)))
     np.testing.assert_array_equal(orphan.q[2], [10.0, 10.0, 10.0])
     assert orphan.converged_at is None
+    halfway = _evolving_learner()  # the default optimism: half way to Q0
+    halfway.situations_changed(SituationEvent(kind, 4, (3,), np.array([1.0])))
+    np.testing.assert_allclose(halfway.q[4], 0.5 * before[3] + 0.5 * 10.0, rtol=1e-15)
 
 
 def test_merging_averages_by_visits_and_pruning_resets():
@@ -512,12 +516,12 @@ def test_merging_averages_by_visits_and_pruning_resets():
     np.testing.assert_array_equal(lr.rule_base, lr.greedy)
     assert lr.converged_at == 7  # a merge does not re-open learning
     assert {k[0] for k in lr._visits} == {1, 2, 4}
-    lr = _evolving_learner()
+    lr = _evolving_learner(tie_break="centre")
     rules = lr.rule_base.copy()
     lr.situations_changed(SituationEvent("prune", 4, (), np.zeros(0), removed=(4,)))
     np.testing.assert_array_equal(lr.q[4], [10.0, 10.0, 10.0])
     assert lr.updates[4] == 0 and lr.removed[4] and lr.removed.sum() == 1
-    np.testing.assert_array_equal(lr.greedy, lr.q.argmax(axis=1))
+    np.testing.assert_array_equal(lr.greedy, [*lr.q[:4].argmax(axis=1), 1])  # the tie: centre
     np.testing.assert_array_equal(lr.rule_base, rules)  # not converged: rules stay learned
 
 
@@ -565,9 +569,11 @@ def test_an_evolving_learner_without_any_update_yet_does_not_converge():
 def test_final_rule_base_breaks_ties_as_configured():
     """Before convergence the final rule base is the greedy one, ties broken by
     ``tie_break`` (``centre``: the action nearest the middle)."""
-    lr = FuzzyQLearner(2, 3, QLearningParams(tie_break="centre"), np.random.default_rng(0), 5)
-    lr.q[:] = [[2.0, 2.0, 2.0], [5.0, 1.0, 5.0]]
-    np.testing.assert_array_equal(lr.final_rule_base(), [1, 0])
+    for tie_break, want in (("centre", [1, 0, 1]), ("first", [0, 0, 0])):
+        lr = FuzzyQLearner(3, 3, QLearningParams(tie_break=tie_break),
+                           np.random.default_rng(0), 5)
+        lr.q[:] = [[2.0, 2.0, 2.0], [5.0, 1.0, 5.0], [5.0, 5.0, 1.0]]
+        np.testing.assert_array_equal(lr.final_rule_base(), want)
 
 
 def test_softmax_is_finite_for_large_q_values_and_rows_far_apart():
