@@ -41,7 +41,7 @@ def test_configured_and_default_parameters_reach_the_learner():
     kw = dict(alpha=0.5, gamma=0.8, b=3, p=7, temperature=0.5, temperature_mode="absolute",
               temperature_decay=0.9, temperature_min=0.1, q_init="random", q_init_value=1.0,
               q_init_spread=0.5, update="standard", activation=0.2, terminal_on_collision=True,
-              min_updates=2, tie_break="centre")
+              min_updates=2, tie_break="centre", alpha_visits=20.0)
     b = FuzzyQBehaviour(**kw, new_row_optimism=0.25)
     assert {k: getattr(b.qparams, k) for k in kw} == kw
     assert b.new_row_optimism == 0.25
@@ -51,7 +51,7 @@ def test_configured_and_default_parameters_reach_the_learner():
         alpha=0.3, gamma=0.9, b=5, p=50, temperature=0.25, temperature_mode="relative",
         temperature_decay=1.0, temperature_min=0.0, q_init="constant", q_init_value=0.0,
         q_init_spread=0.0, update="thesis", activation=0.3, terminal_on_collision=False,
-        min_updates=0, tie_break="first")
+        min_updates=0, tie_break="first", alpha_visits=0.0)
     assert d.new_row_optimism == 0.5
     assert list(d.singletons) == ["heading"] and d.learn_outputs == ["heading"]
     assert d.singletons["heading"].tolist() == [90, 60, 30, 0, -30, -60, -90]

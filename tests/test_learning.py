@@ -446,10 +446,148 @@ def test_softmax_draws_follow_the_boltzmann_probabilities():
     got = freq([[0, 2, 4], [-4, 0, 0], [7, 7, 7]], absolute, temperature=2.0)
     e2 = np.exp([-2.0, 0.0, 0.0])
     np.testing.assert_allclose(got, [p, e2 / e2.sum(), [1 / 3] * 3], atol=0.02)
-    assert greedy_actions(np.array([[1.0, 3.0, 3.0]])).tolist() == [1]  # default: first
+    assert greedy_actions(np.array([[3.0, 3.0, 1.0]])).tolist() == [0]  # default: first
 
 
 def test_no_rule_strength_gives_the_mean_singleton():
     assert centre_of_gravity(np.zeros(3), np.array([90.0, 0.0, -30.0])) == 20.0
     fcs = SituationFCS(np.array([90.0, 0.0, -30.0]), np.array([0, 1]))
     assert fcs.output(np.zeros(2)) == 20.0
+
+
+def _evolving_learner(converged: bool = False, tie_break: str = "first") -> FuzzyQLearner:
+    lr = FuzzyQLearner(5, 3, QLearningParams(q_init_value=10.0, alpha_visits=4.0,
+                                             tie_break=tie_break),
+                       np.random.default_rng(0), 20)
+    lr.q[:] = [[1.0, 4.0, 2.0], [6.0, 0.0, 3.0], [2.0, 2.0, 8.0], [5.0, 1.0, 1.0],
+               [0.0, 9.0, 3.0]]
+    lr.updates[:] = [3, 1, 0, 5, 7]
+    lr.greedy = lr.q.argmax(axis=1)
+    lr._visits = {(i, a): 2 for i in range(5) for a in range(3)}
+    if converged:
+        lr.converged_at, lr.stable_changes = 7, 50
+        lr.rule_base = lr.greedy.copy()
+    return lr
+
+
+@pytest.mark.parametrize("kind", ["create", "split"])
+def test_a_new_situation_starts_from_its_parents_pulled_to_the_optimistic_start(kind):
+    """create/split: Q of the new row = (1 - optimism) * sum_j w_j Q_j + optimism * Q0, no
+    updates yet, alive; a converged learner re-opens learning; the learning rates of the
+    new row and its parents start anew; other rows are untouched."""
+    from sitframe.situations import SituationEvent
+
+    lr = _evolving_learner(converged=True)
+    before = lr.q.copy()
+    lr.removed[4] = True
+    lr.situations_changed(SituationEvent(kind, 4, (0, 1), np.array([0.25, 0.75])),
+                          optimism=0.2)
+    want = 0.8 * (0.25 * before[0] + 0.75 * before[1]) + 0.2 * 10.0
+    np.testing.assert_allclose(lr.q[4], want, rtol=1e-15)
+    np.testing.assert_array_equal(lr.q[:4], before[:4])
+    assert lr.updates[4] == 0 and not lr.removed[4]
+    assert lr.converged_at is None and lr.stable_changes == 0
+    assert {k[0] for k in lr._visits} == {2, 3}
+    orphan = _evolving_learner()
+    orphan.situations_changed(SituationEvent(kind, 2, (), np.zeros(0)))
+    np.testing.assert_array_equal(orphan.q[2], [10.0, 10.0, 10.0])
+    assert orphan.converged_at is None
+    halfway = _evolving_learner()  # the default optimism: half way to Q0
+    halfway.situations_changed(SituationEvent(kind, 4, (3,), np.array([1.0])))
+    np.testing.assert_allclose(halfway.q[4], 0.5 * before[3] + 0.5 * 10.0, rtol=1e-15)
+
+
+def test_merging_averages_by_visits_and_pruning_resets():
+    """merge: the survivor's Q is the mean of the merged rows weighted by updates + 1 and
+    it inherits their updates; absorbed rows go back to Q0 with no updates and are marked
+    removed; the greedy rule base follows, and a converged learner executes it. prune resets
+    and removes the row only."""
+    from sitframe.situations import SituationEvent
+
+    lr = _evolving_learner(converged=True)
+    before = lr.q.copy()
+    lr.situations_changed(SituationEvent("merge", 0, (0, 3), np.array([0.5, 0.5]),
+                                         removed=(3,)))
+    np.testing.assert_allclose(lr.q[0], (4 * before[0] + 6 * before[3]) / 10, rtol=1e-15)
+    assert lr.updates[0] == 8 and lr.updates[3] == 0
+    np.testing.assert_array_equal(lr.q[3], [10.0, 10.0, 10.0])
+    np.testing.assert_array_equal(lr.removed, [False, False, False, True, False])
+    np.testing.assert_array_equal(lr.greedy, lr.q.argmax(axis=1))
+    np.testing.assert_array_equal(lr.rule_base, lr.greedy)
+    assert lr.converged_at == 7  # a merge does not re-open learning
+    assert {k[0] for k in lr._visits} == {1, 2, 4}
+    lr = _evolving_learner(tie_break="centre")
+    rules = lr.rule_base.copy()
+    lr.situations_changed(SituationEvent("prune", 4, (), np.zeros(0), removed=(4,)))
+    np.testing.assert_array_equal(lr.q[4], [10.0, 10.0, 10.0])
+    assert lr.updates[4] == 0 and lr.removed[4] and lr.removed.sum() == 1
+    np.testing.assert_array_equal(lr.greedy, [*lr.q[:4].argmax(axis=1), 1])  # the tie: centre
+    np.testing.assert_array_equal(lr.rule_base, rules)  # not converged: rules stay learned
+
+
+@pytest.mark.parametrize("update", ["thesis", "standard"])
+@pytest.mark.parametrize("terminal", [False, True])
+def test_frozen_rules_report_the_td_errors_of_their_update_rule(update, terminal):
+    """After convergence the errors the frozen rules would get follow the update rule
+    (thesis: weighted by the rule strength; standard: unweighted), a collision ends the
+    episode only with ``terminal_on_collision``, and a rule exactly at ``activation`` is
+    active. Counts of updates are exact: one per active rule and iteration."""
+    prm = QLearningParams(alpha=0.5, gamma=0.5, b=100, activation=0.2, update=update,
+                          terminal_on_collision=terminal)
+    lr = FuzzyQLearner(3, 2, prm, np.random.default_rng(0), 10)
+    lr.q[:] = [[1.0, 2.0], [3.0, 4.0], [5.0, 6.0]]
+    lr.rule_base[:] = [0, 1, 0]
+    u0, u1 = np.array([0.7, 0.2, 0.1]), np.array([0.0, 0.0, 1.0])
+    for t in range(3):
+        lr.update(u0, 10.0, u1, False, t)
+    np.testing.assert_array_equal(lr.updates, [3, 3, 0])
+    lr.track_td, lr.converged_at = True, 3
+    q = lr.q.copy()
+    lr.update(u0, 10.0, u1, True, 3)  # a collision
+    v_next = 0.0 if terminal else q.max(axis=1) @ u1
+    w = u0[:2] if update == "thesis" else 1.0
+    cur = q[[0, 1], [0, 1]]
+    np.testing.assert_allclose(lr.td_abs, [*np.abs(w * 10 + 0.5 * w * v_next - cur), 0.0])
+    np.testing.assert_array_equal(lr.q, q)
+    np.testing.assert_array_equal(lr.updates, [3, 3, 0])
+
+
+def test_an_evolving_learner_without_any_update_yet_does_not_converge():
+    """With situations created on-line, rows never updated are not yet situations: a run
+    whose rules were never strong enough to be updated has not met ``min_updates = 1``."""
+    from sitframe.situations import SituationEvent
+
+    lr = FuzzyQLearner(3, 2, QLearningParams(b=1, p=1, activation=0.5, min_updates=1),
+                       np.random.default_rng(0), 10)
+    lr.situations_changed(SituationEvent("create", 0, (), np.zeros(0)))
+    weak = np.full(3, 1 / 3)
+    for t in range(5):
+        lr.update(weak, 1.0, weak, False, t)
+    assert lr.updates.sum() == 0 and lr.converged_at is None
+
+
+def test_final_rule_base_breaks_ties_as_configured():
+    """Before convergence the final rule base is the greedy one, ties broken by
+    ``tie_break`` (``centre``: the action nearest the middle)."""
+    for tie_break, want in (("centre", [1, 0, 1]), ("first", [0, 0, 0])):
+        lr = FuzzyQLearner(3, 3, QLearningParams(tie_break=tie_break),
+                           np.random.default_rng(0), 5)
+        lr.q[:] = [[2.0, 2.0, 2.0], [5.0, 1.0, 5.0], [5.0, 5.0, 1.0]]
+        np.testing.assert_array_equal(lr.final_rule_base(), want)
+
+
+def test_softmax_is_finite_for_large_q_values_and_rows_far_apart():
+    """Q-values in the thousands, rows thousands apart, small temperatures: the soft-max
+    still draws by its own row's Boltzmann weights (no overflow, no 0/0)."""
+    q = np.repeat([[1000.0, 999.0, 998.0], [0.0, 1.0, 2.0]], 4000, axis=0)
+    for params in (QLearningParams(temperature=0.5),
+                   QLearningParams(temperature=1.0, temperature_mode="absolute")):
+        with np.errstate(all="raise"):
+            picks = softmax_choice(q, params, np.random.default_rng(1))
+        first, second = (np.bincount(picks[k * 4000:(k + 1) * 4000], minlength=3) / 4000
+                         for k in (0, 1))
+        scale = 0.5 * 2.0 if params.temperature_mode == "relative" else 1.0  # tau * spread
+        p = np.exp(np.array([0.0, -1.0, -2.0]) / scale)
+        p /= p.sum()
+        np.testing.assert_allclose(first, p, atol=0.03)
+        np.testing.assert_allclose(second, p[::-1], atol=0.03)
