@@ -385,11 +385,16 @@ def _write_files(c: Case, where: Path, D: str) -> None:
 
 
 def _snapshot(*dirs: Path) -> dict[str, tuple[int, int]]:
+    """Sizes and times of the files under ``dirs`` (and their names: a new folder shows
+    by what it holds). Python's own bytecode caches of an imported plugin folder
+    (``__pycache__``, written unless PYTHONDONTWRITEBYTECODE is set) are not output."""
     out = {}
     for d in dirs:
         for p in d.rglob("*"):
+            if "__pycache__" in p.parts:
+                continue
             st = p.stat()
-            out[str(p)] = (st.st_size, st.st_mtime_ns)
+            out[str(p)] = (st.st_size, st.st_mtime_ns) if p.is_file() else (0, 0)
     return out
 
 
