@@ -28,9 +28,12 @@ Segment sets are passed as one ``(5, S)`` array :attr:`SegmentSet.packed
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 from numba import njit
+
+from sitframe.kernels import announce_compilation
 
 __all__ = ["arc_angles", "arc_poses", "backoff", "backoffs", "cast", "cast_each",
            "contact_points", "fcm_ratios", "first_contact", "label_strengths", "linspace",
@@ -555,4 +558,5 @@ def _warm() -> None:
     label_strengths(np.ones((2, 2)), one, out)
 
 
+announce_compilation(Path(__file__))
 _warm()

@@ -218,3 +218,39 @@ def test_rim_ranges_many_rows_are_rim_ranges(room: World,
         rows = [geo.rim_ranges(room.segment_set, x, y, a, 3.0, 0.15, group, clip=clip)
                 for (x, y), a in zip(xy, ang, strict=True)]
         assert np.array_equal(fast, np.stack(rows)) and np.array_equal(slow, fast)
+
+
+def test_the_first_run_after_an_install_says_why_it_waits(tmp_path, monkeypatch) -> None:
+    """On a terminal, a process about to compile the kernels (no numba cache index as new as
+    their source) says so in one line; with the cache filled, or off a terminal, nothing."""
+    import io
+    import os
+
+    src = tmp_path / "kernels_numba.py"
+    src.write_text("# kernels\n")
+    cache = tmp_path / "__pycache__"
+    cache.mkdir()
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    def said(stream: io.StringIO) -> str:
+        monkeypatch.setattr("sys.stderr", stream)
+        kernels.announce_compilation(src)
+        return stream.getvalue()
+
+    assert kernels.compile_pending(src)  # no cache yet
+    assert said(Terminal()).startswith("sitframe: compiling the simulator's kernels with numba")
+    assert said(Terminal()).count("\n") == 1
+    assert said(io.StringIO()) == ""  # a pipe or a log: never
+    index = cache / "kernels_numba.cast-40.py311.nbi"
+    index.write_bytes(b"")
+    t = src.stat().st_mtime
+    os.utime(index, (t + 1, t + 1))
+    assert not kernels.compile_pending(src) and said(Terminal()) == ""
+    os.utime(src, (t + 2, t + 2))  # the source changed after the cache was written
+    assert kernels.compile_pending(src)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "elsewhere"))
+    assert not kernels.compile_pending(src)  # a cache elsewhere is not claimed either way
