@@ -25,11 +25,9 @@ from __future__ import annotations
 
 import os
 import sys
-from pathlib import Path
 from types import ModuleType
 
-__all__ = ["WARMUP_CALLS", "announce_compilation", "compile_pending", "kernels", "load",
-           "wanted"]
+__all__ = ["WARMUP_CALLS", "kernels", "load", "wanted"]
 
 #: Calls of :func:`kernels` answered with the numpy path before numba is loaded:
 #: a process that simulates only a few hundred iterations (a check of a config, a
@@ -44,32 +42,6 @@ _CALLS = [0]
 def wanted() -> bool:
     """Whether the kernels are to be used (``SITFRAME_NUMBA`` is not ``0``)."""
     return os.environ.get("SITFRAME_NUMBA", "1").strip() != "0"
-
-
-def compile_pending(source: Path) -> bool:
-    """Whether numba will compile the kernels of ``source`` instead of loading them.
-
-    numba caches a module's kernels in the ``__pycache__`` folder beside it (index files
-    ``<module>.<kernel>-<line>.py<version>.nbi``) and compiles again when the source is
-    newer than its index. So: no index there at least as new as ``source``. A cache
-    elsewhere (``NUMBA_CACHE_DIR``, or numba's per-user folder when the package's folder
-    is read-only) is not looked for: False (nothing is claimed).
-    """
-    if os.environ.get("NUMBA_CACHE_DIR") or not os.access(source.parent, os.W_OK):
-        return False
-    newest = source.stat().st_mtime
-    return not any(p.stat().st_mtime >= newest
-                   for p in (source.parent / "__pycache__").glob(f"{source.stem}.*.nbi"))
-
-
-def announce_compilation(source: Path) -> None:
-    """Say on a terminal why the first run after an install waits (numba compiling).
-
-    Printed only when stderr is a terminal, so logs, pipes and tests never see it.
-    """
-    if sys.stderr is not None and sys.stderr.isatty() and compile_pending(source):
-        print("sitframe: compiling the simulator's kernels with numba (once after an "
-              "install or upgrade; some 10-40 s)", file=sys.stderr, flush=True)
 
 
 def load() -> ModuleType | None:

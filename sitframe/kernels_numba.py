@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from sitframe.kernels import announce_compilation
+from sitframe.numba_cache import announce_compilation
 
 __all__ = ["arc_angles", "arc_poses", "backoff", "backoffs", "cast", "cast_each",
            "contact_points", "fcm_ratios", "first_contact", "label_strengths", "linspace",

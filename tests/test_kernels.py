@@ -226,6 +226,8 @@ def test_the_first_run_after_an_install_says_why_it_waits(tmp_path, monkeypatch)
     import io
     import os
 
+    from sitframe import numba_cache
+
     src = tmp_path / "kernels_numba.py"
     src.write_text("# kernels\n")
     cache = tmp_path / "__pycache__"
@@ -238,10 +240,10 @@ def test_the_first_run_after_an_install_says_why_it_waits(tmp_path, monkeypatch)
 
     def said(stream: io.StringIO) -> str:
         monkeypatch.setattr("sys.stderr", stream)
-        kernels.announce_compilation(src)
+        numba_cache.announce_compilation(src)
         return stream.getvalue()
 
-    assert kernels.compile_pending(src)  # no cache yet
+    assert numba_cache.compile_pending(src)  # no cache yet
     assert said(Terminal()).startswith("sitframe: compiling the simulator's kernels with numba")
     assert said(Terminal()).count("\n") == 1
     assert said(io.StringIO()) == ""  # a pipe or a log: never
@@ -249,8 +251,8 @@ def test_the_first_run_after_an_install_says_why_it_waits(tmp_path, monkeypatch)
     index.write_bytes(b"")
     t = src.stat().st_mtime
     os.utime(index, (t + 1, t + 1))
-    assert not kernels.compile_pending(src) and said(Terminal()) == ""
+    assert not numba_cache.compile_pending(src) and said(Terminal()) == ""
     os.utime(src, (t + 2, t + 2))  # the source changed after the cache was written
-    assert kernels.compile_pending(src)
+    assert numba_cache.compile_pending(src)
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "elsewhere"))
-    assert not kernels.compile_pending(src)  # a cache elsewhere is not claimed either way
+    assert not numba_cache.compile_pending(src)  # a cache elsewhere is not claimed either way
