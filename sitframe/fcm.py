@@ -206,9 +206,10 @@ def _check_X(X: object, name: str = "X") -> np.ndarray:
 def _check_int(value: object, name: str, lo: int) -> int:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise TypeError(f"{name} must be an integer, got {value!r} ({type(value).__name__})")
-    if int(value) < lo:
-        raise ValueError(f"{name} must be an integer >= {lo}, got {int(value)}")
-    return int(value)
+    v = int(value)
+    if v < lo:
+        raise ValueError(f"{name} must be an integer >= {lo}, got {v}")
+    return v
 
 
 def _check_m(m: object) -> float:

@@ -537,9 +537,9 @@ def test_a_centre_whose_weights_underflow_keeps_its_place_and_the_others_move():
     with np.errstate(all="raise"):
         r = fcm(X, 20, 60.0, init_centers=V, max_iter=1)
     np.testing.assert_array_equal(r.centers[19], V[19])
-    um = naive_memberships(X, V, 60.0) ** 60.0
-    np.testing.assert_allclose(r.centers[:19], (um.T @ X)[:19] / um.sum(axis=0)[:19, None],
-                               rtol=0, atol=1e-9)
+    with np.errstate(invalid="ignore"):  # (the naive update of the far centre is 0 / 0)
+        want = naive_update(X, V, 60.0)[:19]
+    np.testing.assert_allclose(r.centers[:19], want, rtol=0, atol=1e-9)
     assert np.max(np.abs(r.centers[:19] - C)) > 1e-5
 
 
