@@ -10,15 +10,12 @@ from __future__ import annotations
 
 import html
 import json
-import math
 from importlib import resources
 from typing import Any
 
-import numpy as np
-
 from sitframe.analysis.results import Table, _fmt, _is_num
 
-__all__ = ["esc", "json_script", "number", "page", "table_html", "template"]
+__all__ = ["esc", "json_script", "page", "table_html", "template"]
 
 
 def esc(value: Any) -> str:
@@ -58,17 +55,6 @@ def table_html(t: Table, *, table_id: str | None = None,
     return (f'<div class="tablewrap"><table{ident}><caption>{esc(t.title)}</caption>'
             f"<thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
             f"{notes}</div>")
-
-
-def number(v: Any, digits: int = 2) -> str:
-    """A finite float with ``digits`` decimals, an int as is, anything else as '–'."""
-    if isinstance(v, int | np.integer) and not isinstance(v, bool):
-        return str(int(v))
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        return "–"
-    return f"{f:.{digits}f}" if math.isfinite(f) else "–"
 
 
 def page(title: str, body: str, *, scripts: tuple[str, ...] = ()) -> str:
