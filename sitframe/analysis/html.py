@@ -13,7 +13,7 @@ import json
 from importlib import resources
 from typing import Any
 
-from sitframe.analysis.results import Table, _fmt, _is_num
+from sitframe.analysis.results import Table
 
 __all__ = ["esc", "json_script", "page", "table_html", "template"]
 
@@ -41,15 +41,12 @@ def table_html(t: Table, *, table_id: str | None = None,
 
     ``highlight`` marks rows (class ``sig``), e.g. significant differences.
     """
-    num = [all(_is_num(r[i]) for r in t.rows) for i in range(len(t.columns))]
     head = "".join(f"<th>{esc(c)}</th>" for c in t.columns)
-    body = []
-    for j, r in enumerate(t.rows):
-        cells = "".join(
-            f'<td{" class=num" if n else ""}>{esc(_fmt(v, t.digits) or "–")}</td>'
-            for v, n in zip(r, num, strict=True))
+    num, body = t.numeric(), []
+    for j, r in enumerate(t.cells()):
         cls = ' class="sig"' if highlight and highlight[j] else ""
-        body.append(f"<tr{cls}>{cells}</tr>")
+        body.append(f"<tr{cls}>" + "".join(f'<td{" class=num" if n else ""}>{esc(c)}</td>'
+                                           for c, n in zip(r, num, strict=True)) + "</tr>")
     ident = f' id="{esc(table_id)}"' if table_id else ""
     notes = "".join(f'<p class="note">{esc(n)}</p>' for n in t.notes)
     return (f'<div class="tablewrap"><table{ident}><caption>{esc(t.title)}</caption>'

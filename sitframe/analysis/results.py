@@ -464,14 +464,21 @@ class Table:
         i = self.columns.index(name)
         return [r[i] for r in self.rows]
 
+    def cells(self) -> list[list[str]]:
+        """The rows as text, ``"–"`` for an empty cell (Markdown and HTML)."""
+        return [[_fmt(v, self.digits) or "–" for v in r] for r in self.rows]
+
+    def numeric(self) -> list[bool]:
+        """Per column: whether every cell is a number (such columns are right-aligned)."""
+        return [all(_is_num(r[i]) for r in self.rows) for i in range(len(self.columns))]
+
     def to_markdown(self) -> str:
         """GitHub-flavoured Markdown: bold title line, table, notes."""
-        cells = [[_fmt(v, self.digits) or "–" for v in r] for r in self.rows]
-        num = [all(_is_num(r[i]) for r in self.rows) for i in range(len(self.columns))]
         lines = [f"**{self.title}**", "",
                  "| " + " | ".join(self.columns) + " |",
-                 "|" + "|".join("---:" if n else ":---" for n in num) + "|"]
-        lines += ["| " + " | ".join(c.replace("|", "\\|") for c in r) + " |" for r in cells]
+                 "|" + "|".join("---:" if n else ":---" for n in self.numeric()) + "|"]
+        lines += ["| " + " | ".join(c.replace("|", "\\|") for c in r) + " |"
+                  for r in self.cells()]
         if self.notes:
             lines += [""] + [f"{n}  " for n in self.notes]
         return "\n".join(lines) + "\n"
