@@ -41,13 +41,14 @@ import math
 import os
 import re
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from scipy import stats
 
-from sitframe.analysis.results import Table, _summary, as_log
+from sitframe.analysis.results import Table, _col, _summary, as_log
 from sitframe.errors import InputError
 from sitframe.records import summary_key
 
@@ -178,11 +179,7 @@ def trial_metrics(summary: np.ndarray) -> dict[str, tuple[str, str, np.ndarray]]
         key -> (label, statistic, values (n,) float, NaN where a trial has none).
     """
     names = summary.dtype.names or ()
-
-    def col(n: str) -> np.ndarray:
-        return np.asarray(summary[n], dtype=np.float64) if n in names \
-            else np.full(summary.size, np.nan)
-
+    col = partial(_col, summary)
     conv = col("converged") > 0.5
     out: dict[str, tuple[str, str, np.ndarray]] = {
         "convergence_rate": ("Converged trials (share)", "share", conv.astype(np.float64)),

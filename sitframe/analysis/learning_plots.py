@@ -24,7 +24,12 @@ from matplotlib.lines import Line2D
 from matplotlib.ticker import FuncFormatter, MultipleLocator
 
 from sitframe.analysis.clustering_plots import OKABE_ITO
-from sitframe.analysis.results import CollisionIntervals, _deg, reward_per_window
+from sitframe.analysis.results import (
+    CollisionIntervals,
+    _deg,
+    collision_points,
+    reward_per_window,
+)
 from sitframe.analysis.world_plot import plot_world
 from sitframe.world import World
 
@@ -391,17 +396,11 @@ def _draw_path(ax, world: World, pose: np.ndarray, collision: np.ndarray | None,
     ax.add_collection(lc)
     ax.plot(*xy[0], "o", ms=4.5, mfc="white", mec="black", mew=1.0, zorder=7)
     ax.plot(*xy[-1], "s", ms=4.5, mfc="black", mec="black", zorder=7)
-    n_coll = 0
-    if collision is not None:
-        col = np.asarray(collision, dtype=bool)[start:stop]
-        idx = np.flatnonzero(col) + start
-        n_coll = idx.size
-        if idx.size:
-            if contact is not None and np.isfinite(np.asarray(contact)[idx]).all():
-                pts = np.asarray(contact)[idx]
-            else:  # no contact points logged: mark the pose after the colliding iteration
-                pts = np.asarray(pose)[idx + 1, :2]
-            ax.plot(pts[:, 0], pts[:, 1], "x", ms=4, mew=1.1, color=_C["vermillion"], zorder=8)
+    idx = np.zeros(0, np.intp) if collision is None else \
+        np.flatnonzero(np.asarray(collision, dtype=bool)[start:stop]) + start
+    if idx.size:
+        pts = collision_points(pose, idx, contact)
+        ax.plot(pts[:, 0], pts[:, 1], "x", ms=4, mew=1.1, color=_C["vermillion"], zorder=8)
     x0, y0, x1, y1 = world.bounds
     if max(x1 - x0, y1 - y0) > 8:  # 1 m ticks crowd a column-wide panel; grid stays at 1 m
         for axis in (ax.xaxis, ax.yaxis):
@@ -413,7 +412,7 @@ def _draw_path(ax, world: World, pose: np.ndarray, collision: np.ndarray | None,
     ax.tick_params(labelsize=_FONT - 1)
     ax.xaxis.label.set_fontsize(_FONT)
     ax.yaxis.label.set_fontsize(_FONT)
-    return lc, n_coll
+    return lc, idx.size
 
 
 def _path_legend(fig, n_coll_any: bool, loc: str = "outside lower center") -> None:
