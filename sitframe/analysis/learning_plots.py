@@ -415,13 +415,20 @@ def _draw_path(ax, world: World, pose: np.ndarray, collision: np.ndarray | None,
     return lc, idx.size
 
 
-def _path_legend(fig, n_coll_any: bool, loc: str = "outside lower center") -> None:
+def _path_keys(fig: Figure, lc: LineCollection, ax: Any, collisions: bool,
+               **colorbar: Any) -> None:
+    """The colour bar (iteration) beside ``ax`` and the legend (start, end, collisions) below."""
+    fig.set_layout_engine("constrained")
+    cb = fig.colorbar(lc, ax=ax, **colorbar)
+    cb.set_label("Iteration", fontsize=_FONT)
+    cb.ax.tick_params(labelsize=_FONT - 1)
     handles = [Line2D([], [], ls="", marker="o", ms=4.5, mfc="white", mec="black", label="start"),
                Line2D([], [], ls="", marker="s", ms=4.5, color="black", label="end")]
-    if n_coll_any:
+    if collisions:
         handles.append(Line2D([], [], ls="", marker="x", ms=4, mew=1.1, color=_C["vermillion"],
                               label="collision"))
-    fig.legend(handles=handles, loc=loc, ncols=len(handles), fontsize=_FONT - 1, frameon=False)
+    fig.legend(handles=handles, loc="outside lower center", ncols=len(handles),
+               fontsize=_FONT - 1, frameon=False)
 
 
 def _window(n: int, start: int | None, stop: int | None) -> tuple[int, int]:
@@ -473,11 +480,7 @@ def plot_trajectory(
     fig = Figure(figsize=(_COL, min((_COL - 1.25) * aspect + 1.05, 5.5)))
     ax = fig.add_subplot()
     lc, n_coll = _draw_path(ax, world, P, collision, contact, s, e, robot_radius)
-    fig.set_layout_engine("constrained")
-    cb = fig.colorbar(lc, ax=ax, shrink=0.95, pad=0.02, aspect=25)
-    cb.set_label("Iteration", fontsize=_FONT)
-    cb.ax.tick_params(labelsize=_FONT - 1)
-    _path_legend(fig, collision is not None)
+    _path_keys(fig, lc, ax, collision is not None, shrink=0.95, pad=0.02, aspect=25)
     ax.set_title(title or f"{world.name}: it. {s}–{e}, {n_coll} collisions", fontsize=_FONT)
     return fig
 
@@ -519,7 +522,6 @@ def plot_evaluation_paths(
     ncols = ncols or min(3, len(names))
     nrows = math.ceil(len(names) / ncols)
     fig = Figure(figsize=(2.45 * ncols + 0.5, 2.35 * nrows + 0.55))
-    lcs = []
     for k, name in enumerate(names):
         ax = fig.add_subplot(nrows, ncols, k + 1)
         ep = episodes[name]
@@ -527,15 +529,10 @@ def plot_evaluation_paths(
         s, e = _window(n, start, stop)
         lc, n_coll = _draw_path(ax, worlds[name], ep["pose"], ep.get("collision"),
                                 ep.get("contact"), s, e, robot_radius)
-        lcs.append(lc)
         cov = "" if not coverage or name not in coverage else (
             f", coverage {coverage[name]:.2f}")
         ax.set_title(f"{name}: it. {s}–{e}, {n_coll} coll.{cov}", fontsize=_FONT - 1)
-    fig.set_layout_engine("constrained")
-    cb = fig.colorbar(lcs[-1], ax=fig.axes, shrink=0.7, pad=0.01, aspect=30)
-    cb.set_label("Iteration", fontsize=_FONT)
-    cb.ax.tick_params(labelsize=_FONT - 1)
-    _path_legend(fig, True)
+    _path_keys(fig, lc, fig.axes, True, shrink=0.7, pad=0.01, aspect=30)
     if title:
         fig.suptitle(title, fontsize=_FONT + 1)
     return fig
