@@ -36,7 +36,6 @@ from sitframe.world import World
 __all__ = [
     "ITERATION_S",
     "plot_collision_intervals",
-    "plot_compare_rewards",
     "plot_evaluation_paths",
     "plot_exploration",
     "plot_learning_curves",
@@ -338,45 +337,6 @@ def plot_learning_curves(
     fig.legend(handles=handles, fontsize=_FONT - 1, loc="outside lower center",
                ncols=len(handles), frameon=False)
     ax.set_xlim(0, max(n * window, 1))
-    return fig
-
-
-def plot_compare_rewards(
-    runs: Mapping[str, Mapping[int, np.ndarray]],
-    window: int = 50,
-    *,
-    title: str | None = None,
-) -> Figure:
-    """Mean reward per window of several runs: mean over trials with an interquartile band.
-
-    Parameters
-    ----------
-    runs : mapping name -> (mapping trial -> reward array)
-    window : int, default 50
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-    """
-    colours = [_C["blue"], _C["vermillion"], _C["bluish_green"], _C["reddish_purple"],
-               _C["orange"], _C["sky_blue"]]
-    fig, ax = _panel(2.4, f"Mean reward per {window} it.",
-                     title or "Mean over trials; band = interquartile range")
-    xmax = 1
-    for (name, rew), col in zip(runs.items(), colours * 4, strict=False):
-        curves = [reward_per_window(v, window) for v in rew.values()]
-        if not curves:
-            continue
-        M = _by_window(curves)
-        n = M.shape[1]
-        x = (np.arange(n) + 0.5) * window
-        ax.fill_between(x, np.nanpercentile(M, 25, axis=0), np.nanpercentile(M, 75, axis=0),
-                        color=col, alpha=0.2, lw=0)
-        ax.plot(x, np.nanmean(M, axis=0), color=col, lw=1.3, label=f"{name} ({len(curves)} tr.)")
-        xmax = max(xmax, n * window)
-    ax.set_xlim(0, xmax)
-    fig.legend(fontsize=_FONT - 1, loc="outside lower center", ncols=min(len(runs), 3),
-               frameon=False)
     return fig
 
 

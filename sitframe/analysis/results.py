@@ -53,7 +53,6 @@ __all__ = [
     "as_log",
     "clustering_trials",
     "collision_intervals",
-    "compare_runs",
     "convergence_iteration",
     "convergence_table",
     "evaluation_episodes",
@@ -734,64 +733,3 @@ def convergence_table(log: LogLike) -> Table:
         notes.append(f"Log status is '{lg.status}': only finished trials are listed.")
     return Table(f"Convergence of {s.size} learning trials ({os.path.basename(lg.path)})",
                  ["Trial", "Converged", *[n for n, _ in series]], rows, notes=notes, digits=2)
-
-
-def compare_runs(a: LogLike, b: LogLike, names: tuple[str, str] | None = None) -> Table:
-    """Convergence and quality of two runs side by side.
-
-    Each metric is the mean ± standard deviation over the run's finished
-    trials (convergence iteration and post-convergence collisions over its
-    converged trials), taken from the logs' summary tables.
-
-    Parameters
-    ----------
-    a, b
-        The two logs (or paths).
-    names
-        Column headers; default the file names.
-
-    Returns
-    -------
-    Table
-        One row per metric; columns ``Metric``, name A, name B.
-    """
-    la, lb = as_log(a), as_log(b)
-    if names is None:
-        names = (os.path.basename(la.path), os.path.basename(lb.path))
-        if names[0] == names[1]:
-            names = (la.path, lb.path)
-    sa, sb = _summary(la), _summary(lb)
-    worlds = sorted(set(_eval_worlds(sa)) | set(_eval_worlds(sb)))
-
-    def ms(v: np.ndarray, d: int = 1) -> str:
-        v = v[np.isfinite(v)]
-        if v.size == 0:
-            return "–"
-        return f"{v.mean():.{d}f} ± {v.std(ddof=1):.{d}f}" if v.size > 1 else f"{v[0]:.{d}f}"
-
-    def metrics(lg: Log, s: np.ndarray) -> list[str]:
-        conv = _col(s, "converged") > 0.5
-        it = _col(s, "convergence_iteration")
-        out = [f"{s.size}" + ("" if lg.complete else f" (status {lg.status})"),
-               f"{int(conv.sum())}/{s.size}",
-               ms(it[conv], 0),
-               ms(_col(s, "collisions_per_1000_after_convergence")[conv]),
-               ms(_col(s, "collisions_per_1000")),
-               ms(_col(s, "coverage"), 2)]
-        rew = [n for n in (s.dtype.names or ()) if n.startswith("mean_reward_")]
-        out.append(ms(_col(s, rew[0]), 2) if rew else "–")
-        for w in worlds:
-            out += [ms(_col(s, "collisions_per_1000", w)), ms(_col(s, "coverage", w), 2)]
-        return out
-
-    labels = ["Finished trials", "Converged trials", "Convergence iteration",
-              "Collisions after convergence [/1000 it.]", "Collisions, whole trial [/1000 it.]",
-              "Coverage, learning world", "Mean reward per iteration"]
-    for w in worlds:
-        labels += [f"Evaluation {w}: collisions [/1000 it.]", f"Evaluation {w}: coverage"]
-    va, vb = metrics(la, sa), metrics(lb, sb)
-    rows = [[m, x, y] for m, x, y in zip(labels, va, vb, strict=True)]
-    return Table("Comparison of two runs (mean ± s.d. over trials)",
-                 ["Metric", names[0], names[1]], rows,
-                 notes=["Convergence iteration and collisions after convergence: converged "
-                        "trials only."])
