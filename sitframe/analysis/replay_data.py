@@ -103,16 +103,19 @@ def _episode(P: _Packer, arrays: dict[str, np.ndarray], rules: np.ndarray | None
     return out
 
 
-def _rules(tr: TrialLog) -> tuple[str, str, np.ndarray, np.ndarray | None, str] | None:
-    """(label, output, action values, per-iteration rule indices (L, c) or None, unit)."""
+def _policy(tr: TrialLog) -> tuple[dict[str, Any], np.ndarray | None, np.ndarray | None]:
+    """The learned output of a trial: its descriptor (``behaviour``, ``output``, ``actions``,
+    ``unit``), its rule indices per iteration (L, c) if logged, and its final ones (1, c).
+    Without a learned output: ``({}, None, None)``."""
     try:
         label, output = R.learned_output(tr)
     except InputError:
-        return None
+        return {}, None, None
     po = tr.policies[label].outputs[output]
     per_it = tr.behaviours[label].get(f"{output}/rule_base")
-    return label, output, np.asarray(po.actions, dtype=np.float64), \
-        None if per_it is None else np.asarray(per_it), po.unit
+    return ({"behaviour": label, "output": output,
+             "actions": np.asarray(po.actions, dtype=np.float64).tolist(), "unit": po.unit},
+            None if per_it is None else np.asarray(per_it), np.asarray(po.rules)[None, :])
 
 
 def replay_payload(log: Log, trials: dict[int, TrialLog]) -> dict[str, Any]:
@@ -146,12 +149,10 @@ def replay_payload(log: Log, trials: dict[int, TrialLog]) -> dict[str, Any]:
     episodes: list[dict[str, Any]] = []
     for k in sorted(trials):
         tr = trials[k]
-        rb = _rules(tr)
+        policy, per_it, frozen = _policy(tr)
         conv = R.convergence_iteration(tr)
         # the rule per situation: per iteration while learning, the frozen policy otherwise
-        frozen = None if rb is None else \
-            np.asarray(tr.policies[rb[0]].outputs[rb[1]].rules)[None, :]
-        own = rb[3] if rb is not None and rb[3] is not None else (None if learns else frozen)
+        own = per_it if per_it is not None else (None if learns else frozen)
         runs: list[tuple[str, str, dict[str, np.ndarray], np.ndarray | None]] = [
             ("learning" if learns else "run", tr.world, tr.arrays, own)]
         runs += [("evaluation", w, arrays, frozen)
@@ -163,9 +164,7 @@ def replay_payload(log: Log, trials: dict[int, TrialLog]) -> dict[str, Any]:
             if ep is None:
                 continue
             ep.update(trial=k, kind=kind, world=world,
-                      convergence=conv if kind == "learning" else None)
-            if rb is not None:
-                ep.update(behaviour=rb[0], output=rb[1], actions=rb[2].tolist(), unit=rb[4])
+                      convergence=conv if kind == "learning" else None, **policy)
             episodes.append(ep)
     worlds = {name: {"walls": [np.round(a, 3).tolist() for a in w.walls],
                      "obstacles": [np.round(a, 3).tolist() for a in w.obstacles],
