@@ -486,12 +486,8 @@ def _write_index(rep: AnalysisReport, lg: Log) -> None:
         lines += ["## Incomplete log", "",
                   "This log is incomplete; everything below is computed from what it holds.", ""]
         lines += [f"- {p}" for p in rep.problems] + [""]
-    section = None
-    for sec, name, caption in rep.files:
-        if sec != section:
-            lines += ["", f"## {sec}", ""]
-            section = sec
-        lines.append(f"- [{name}]({name}) — {caption}")
+    for sec, files in groupby(rep.files, key=lambda f: f[0]):
+        lines += ["", f"## {sec}", ""] + [f"- [{n}]({n}) — {c}" for _s, n, c in files]
     if rep.skipped:
         lines += ["", "## Not produced", ""] + [f"- {s}" for s in rep.skipped]
     lines += ["", f"Written by `sitframe analyse` in {rep.seconds:.1f} s.", ""]
