@@ -59,7 +59,8 @@ def _path_cmap() -> ListedColormap:
 
 
 def _panel(height: float, ylabel: str, title: str, *, zero: bool = True,
-           xlabel: str = "Iteration (1 it. = 1.5 s)", ylabel_size: float = _FONT) -> Any:
+           xlabel: str = "Iteration (1 it. = 1.5 s)", ylabel_size: float = _FONT
+           ) -> tuple[Figure, Any]:
     """A one-column figure over iterations: labels, title, y grid, (``zero``) a line at 0.
 
     Returns the figure and its axes.

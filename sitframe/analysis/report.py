@@ -149,22 +149,22 @@ class _Writer:
         self.dpi = dpi
         self.tables: dict[str, R.Table] = {}  # stem -> table, for the HTML page
 
-    def figure(self, section: str, name: str, caption: str, make: Callable[[], Any]) -> None:
+    def _make(self, name: str, make: Callable[[], Any]) -> Any:
+        """``make()``, or None when the log does not support it (noted as skipped)."""
         try:
-            fig = make()
+            return make()
         except _EXPECTED as exc:
             self.r.skipped.append(f"{name}: {exc}")
-            return
-        if fig is None:
+            return None
+
+    def figure(self, section: str, name: str, caption: str, make: Callable[[], Any]) -> None:
+        if (fig := self._make(name, make)) is None:
             return
         fig.savefig(os.path.join(self.r.out_dir, name), dpi=self.dpi)
         self.r.files.append((section, name, caption))
 
     def table(self, section: str, stem: str, caption: str, make: Callable[[], R.Table]) -> None:
-        try:
-            t = make()
-        except _EXPECTED as exc:
-            self.r.skipped.append(f"{stem}.md/.csv: {exc}")
+        if (t := self._make(f"{stem}.md/.csv", make)) is None:
             return
         t.save(os.path.join(self.r.out_dir, stem))
         self.tables[stem] = t
