@@ -715,18 +715,14 @@ def convergence_table(log: LogLike) -> Table:
     for w in worlds:
         series += [(f"{w} collisions [/1000 it.]", _col(s, "collisions_per_1000", w)),
                    (f"{w} coverage", _col(s, "coverage", w))]
-    rows: list[list[Any]] = []
-    for j in range(s.size):
-        row: list[Any] = [int(s["trial"][j]), bool(conv[j])]
-        for name, v in series:
-            row.append(int(v[j]) if name == "Convergence iteration" and np.isfinite(v[j])
-                       else float(v[j]))
-        rows.append(row)
-    if s.size:
-        mean: list[Any] = ["mean", f"{int(conv.sum())}/{s.size}"]
-        for _name, v in series:
-            mean.append(float(np.nanmean(v)) if np.isfinite(v).any() else float("nan"))
-        rows.append(mean)
+    rows: list[list[Any]] = [
+        [int(s["trial"][j]), bool(conv[j])]
+        + [int(v[j]) if v is it and np.isfinite(v[j]) else float(v[j]) for _n, v in series]
+        for j in range(s.size)]
+    if s.size:  # convergence iteration: over the converged trials (the others are NaN)
+        rows.append(["mean", f"{int(conv.sum())}/{s.size}"]
+                    + [float(np.nanmean(v)) if np.isfinite(v).any() else math.nan
+                       for _n, v in series])
     notes = ["Coverage = fraction of the world's free 0.5 m grid cells visited.",
              "Mean convergence iteration over converged trials only."]
     if not lg.complete:
