@@ -177,7 +177,7 @@ def test_shipped_sweeps_load(name):
 
     path = Path(__file__).resolve().parents[1] / "sweeps" / f"{name}.toml"
     sweep = load_sweep(str(path))
-    assert len(sweep.points) == {"ablation": 6, "sensors": 20, "sensors-beams": 10,
+    assert len(sweep.points) == {"ablation": 60, "sensors": 20, "sensors-beams": 10,
                                  "oa12-optimism": 40, "oa8-optimism": 40}.get(name, 10)
     if name == "sensors":  # a whole [sensor] table per value, replacing the base's
         sonar, laser = sweep.points[0], sweep.points[-1]
