@@ -29,7 +29,6 @@ the partition coefficient effectively counts twice, as in the thesis's list.
 from __future__ import annotations
 
 import math
-import numbers
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -37,12 +36,13 @@ from typing import Any
 
 import numpy as np
 
+from sitframe import params as P
 from sitframe.fcm import (
     MEASURE_DIRECTIONS,
     _as_generator,
     _check_c,
-    _check_int,
     _check_m,
+    _check_tol,
     _check_X,
     _fcm_core,
     _ignore_underflow,
@@ -264,15 +264,6 @@ class ClusteringTrials:
         return {k: float(v[self.chosen]) for k, v in self.measures.items()}
 
 
-def _check_tol(tol: object) -> float:
-    if isinstance(tol, bool) or not isinstance(tol, numbers.Real) or not (
-        math.isfinite(float(tol)) and float(tol) > 0
-    ):
-        raise ValueError(f"tol must be a finite real number > 0 (centre movement, units of X), "
-                         f"got {tol!r}")
-    return float(tol)
-
-
 @_ignore_underflow
 def cluster_trials(
     X: np.ndarray,
@@ -320,10 +311,10 @@ def cluster_trials(
     Xa = _check_X(X)
     n, d = Xa.shape
     c = _check_c(c, n)
-    n_trials = _check_int(n_trials, "n_trials", 1)
+    n_trials = int(P.number("n_trials", n_trials, lo=1, integer=True))
     mf = _check_m(m)
     tol = _check_tol(tol)
-    max_iter = _check_int(max_iter, "max_iter", 1)
+    max_iter = int(P.number("max_iter", max_iter, lo=1, integer=True))
     rng = _as_generator(seed)
     inits = np.empty((n_trials, c, d))
     for t in range(n_trials):
