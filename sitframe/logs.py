@@ -521,32 +521,22 @@ def _write_trial(g: h5py.Group, trial: TrialResult, behaviour_labels: list[str] 
     g.attrs["index"] = trial.index
     g.attrs["seed"] = np.uint64(trial.seed)
     g.attrs["world"] = trial.world
-    for k, v in trial.summary.items():
-        _write_value(g.require_group("summary"), k.replace("/", "."), v)
-    for k, v in trial.arrays.items():
-        _write_value(g, k, v)
+    groups = {"summary": {k.replace("/", "."): v for k, v in trial.summary.items()},
+              **trial.arrays, "behaviours": {lb: dict(d) for lb, d in trial.behaviours.items()}}
+    for label, pol in trial.policies.items():
+        box = groups["behaviours"].setdefault(label, {})
+        for out, o in pol.outputs.items():
+            box[f"policy/{out}"] = np.asarray(o.rules).astype(np.int16)
+            box[f"actions/{out}"], box[f"units/{out}"] = o.actions, o.unit
+            if o.q is not None:
+                box[f"q/{out}"] = np.asarray(o.q, dtype=np.float64)
+    groups |= {"episodes": trial.episodes, "plugins": trial.plugin_data,
+               "situations": trial.situations}
+    for k, v in groups.items():
+        if not isinstance(v, dict) or v:  # (no empty groups)
+            _write_value(g, k, v)
     if behaviour_labels:
         g["weights"].attrs["columns"] = json.dumps(behaviour_labels)
-    for label, data in trial.behaviours.items():
-        bg = g.require_group("behaviours").require_group(label)
-        for k, v in data.items():
-            _write_value(bg, k, v)
-    for label, pol in trial.policies.items():
-        bg = g.require_group("behaviours").require_group(label)
-        for out, o in pol.outputs.items():
-            _write_value(bg, f"policy/{out}", np.asarray(o.rules).astype(np.int16))
-            _write_value(bg, f"actions/{out}", o.actions)
-            _write_value(bg, f"units/{out}", o.unit)
-            if o.q is not None:
-                _write_value(bg, f"q/{out}", np.asarray(o.q, dtype=np.float64))
-    for k, v in trial.episodes.items():
-        _write_value(g.require_group("episodes"), k, v)
-    for plugin, data in trial.plugin_data.items():
-        pg = g.require_group("plugins").require_group(plugin)
-        for k, v in data.items():
-            _write_value(pg, k, v)
-    for k, v in trial.situations.items():
-        _write_value(g.require_group("situations"), k, v)
 
 
 def _summary_row(g: h5py.Group) -> dict[str, Any]:
