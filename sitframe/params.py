@@ -121,6 +121,20 @@ def string(name: str, value: Any) -> str:
     return value
 
 
+def known_keys(table: Any, known: Sequence[str], *, prefix: str = "",
+               file: str | None = None) -> None:
+    """Reject a key of the mapping ``table`` that is not in ``known``, suggesting the closest.
+
+    The error's key is ``prefix.key`` (``key`` without a prefix); ``known`` is
+    listed in the order given.
+    """
+    for key in table:
+        if key not in known:
+            raise InputError(f"unknown key{did_you_mean(str(key), known)}; expected one of "
+                             f"{', '.join(known)}", file=file,
+                             key=f"{prefix}.{key}" if prefix else str(key))
+
+
 def accepted_params(factory: Any) -> tuple[set[str], bool]:
     """Keyword parameter names ``factory`` accepts, and whether it takes ``**kwargs``."""
     try:
