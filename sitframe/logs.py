@@ -371,26 +371,18 @@ class LogWriter:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             tmp = self._scratch()
             with h5py.File(tmp, "w") as f:
-                a = f.attrs
-                a["schema"] = SCHEMA
-                a["schema_version"] = SCHEMA_VERSION
-                a["status"] = "running"
-                a["name"] = info.name
-                a["created"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
-                a["config"] = info.config_text
-                a["config_hash"] = info.config_hash
-                a["seed"] = info.seed
-                a["n_trials"] = info.n_trials
-                a["iterations"] = info.iterations
-                a["source"] = str(info.extra.get("source", ""))
-                a["versions"] = json.dumps(info.extra.get("versions", {}))
-                a["plugins"] = json.dumps(info.plugins)
-                a["worlds"] = json.dumps(info.worlds)
-                if info.extra.get("sensor"):
-                    a["sensor"] = json.dumps(info.extra["sensor"])
-                a["inputs"] = json.dumps(info.extra.get("inputs", {}))
-                if info.extra.get("code_hash"):
-                    a["code_hash"] = str(info.extra["code_hash"])
+                ex = info.extra
+                f.attrs.update({
+                    "schema": SCHEMA, "schema_version": SCHEMA_VERSION, "status": "running",
+                    "name": info.name, "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                    "config": info.config_text, "config_hash": info.config_hash,
+                    "seed": info.seed, "n_trials": info.n_trials, "iterations": info.iterations,
+                    "source": str(ex.get("source", "")),
+                    "versions": json.dumps(ex.get("versions", {})),
+                    "plugins": json.dumps(info.plugins), "worlds": json.dumps(info.worlds),
+                    **({"sensor": json.dumps(ex["sensor"])} if ex.get("sensor") else {}),
+                    "inputs": json.dumps(ex.get("inputs", {})),
+                    **({"code_hash": str(ex["code_hash"])} if ex.get("code_hash") else {})})
                 f.create_group("trials")
             os.replace(tmp, self.path)
         except BaseException as exc:
