@@ -262,15 +262,10 @@ class LogWriter:
 
     Notes
     -----
-    A finished trial is written to its own file in :func:`shard_folder`
-    (scratch name, then renamed) and linked from the run file by a
-    copy-on-write transaction of the run file, which holds only the run's
-    attributes, stages, links and summary table: writing a trial costs the
-    same whether it is the first or the thousandth. The end of the run
-    (:meth:`set_status` with a final status) packs the trials into the run
-    file. The published run file is only ever replaced by a complete, closed
-    HDF5 file, and only by the process holding the log's lock
-    (:func:`lock_log`, taken by the first transaction).
+    Trials go to their own files in :func:`shard_folder`, linked from the run
+    file; :meth:`set_status` with a final status packs them into it. Only the
+    process holding the log's lock (:func:`lock_log`) replaces the published
+    file, and only by a complete, closed one.
     """
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
