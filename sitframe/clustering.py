@@ -32,6 +32,7 @@ import math
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -588,10 +589,7 @@ def describe_prototype(
     a = (a + 180.0) % 360.0 - 180.0  # [-180, 180)
     front, diag, side = SECTORS_DEG
     mag = np.abs(a)
-
-    def level(mask: np.ndarray) -> float:
-        return float(v[mask].min()) if mask.any() else math.inf
-
+    level = partial(_level, v)
     is_ahead, is_l, is_r = mag <= front, (a > diag) & (a <= side), (a < -diag) & (a >= -side)
     fl, fr = level((a > front) & (a <= diag)), level((a < -front) & (a >= -diag))
     left, right, behind = level(is_l), level(is_r), level(mag > side)
@@ -624,6 +622,11 @@ def describe_prototype(
     return "obstacle behind" if behind < far else "open space"
 
 
+def _level(v: np.ndarray, mask: np.ndarray) -> float:
+    """The smallest range of the beams in ``mask`` (``inf`` if there are none)."""
+    return float(v[mask].min()) if mask.any() else math.inf
+
+
 def _ahead(v: np.ndarray, a: np.ndarray, is_ahead: np.ndarray, left: float,
            right: float) -> float:
     """The range ahead [m] for :func:`describe_prototype`: what blocks the way, not a side wall.
@@ -640,9 +643,7 @@ def _ahead(v: np.ndarray, a: np.ndarray, is_ahead: np.ndarray, left: float,
     on the labelled set with poses perturbed by up to 12 deg and 0.2 m: 99 %
     right with 1.5, 97 % with 2 and 90 % when such readings always count.
     """
-    def level(mask: np.ndarray) -> float:
-        return float(v[mask].min()) if mask.any() else math.inf
-
+    level = partial(_level, v)
     half_l, half_r = level(is_ahead & (a > 0)), level(is_ahead & (a < 0))
     cands = [level(is_ahead & (a == 0)), max(half_l, half_r)]
     if half_l < SIDE_WALL_REACH * left:
