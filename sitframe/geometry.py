@@ -129,8 +129,14 @@ class SegmentSet:
         self.hi = np.maximum(seg[:, :2], seg[:, 2:])
 
     def subset(self, index: np.ndarray) -> SegmentSet:
-        """Return the segments selected by ``index`` (bool mask or integer indices)."""
-        return SegmentSet(self.segments[index])
+        """Return the segments selected by ``index`` (bool mask or integer indices), their
+        derived arrays copied from this set's, not recomputed (the robot's step uses it)."""
+        sub = SegmentSet.__new__(SegmentSet)
+        sub.segments, sub.packed = self.segments[index], self.packed[:, index]
+        sub.n = sub.segments.shape[0]
+        sub.ax, sub.ay, sub.ex, sub.ey, sub.inv_len2 = sub.packed
+        sub.lo, sub.hi = self.lo[index], self.hi[index]
+        return sub
 
     def __len__(self) -> int:
         return self.n
