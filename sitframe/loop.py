@@ -411,14 +411,17 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
     t = 0
     pose = env.start
     n_done = spec.iterations
+    ctx = None
     try:
-        reading = sensor.read(world, pose, rng)
-        check_reading(reading, d)
-        step_at = at_u
-        u = interp.memberships(reading)
-        check_memberships(u, c)
-        ctx = Context(0, pose, reading, u, _nearest(reading), world, goal)
         for t in range(spec.iterations):
+            if ctx is None:  # the trial's (or a training episode's) first reading
+                step_at = at_read
+                reading = sensor.read(world, pose, rng)
+                check_reading(reading, d)
+                step_at = at_u
+                u = interp.memberships(reading)
+                check_memberships(u, c)
+                ctx = Context(t, pose, reading, u, _nearest(reading), world, goal)
             proposals = {}
             for lb, beh, step_at in at_propose:  # noqa: B007 - step_at names the caller on a fault
                 proposals[lb] = check_proposal(beh.propose(ctx))
@@ -454,13 +457,7 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
                 break
             if chain is not None and chain.over(ctx, t + 1, spec.iterations):
                 pose, goal = next(chain.pairs)  # the next training episode starts here
-                step_at = at_read
-                reading = sensor.read(world, pose, rng)
-                check_reading(reading, d)
-                step_at = at_u
-                u = interp.memberships(reading)
-                check_memberships(u, c)
-                ctx = Context(t + 1, pose, reading, u, _nearest(reading), world, goal)
+                ctx = None
     except (KeyboardInterrupt, TaskCancelled, PluginFault, InputError):
         raise  # (a plugin's InputError names the input it found wrong)
     except Exception as exc:
