@@ -471,12 +471,8 @@ def summarise_tables(tables: list[np.ndarray]) -> dict[str, Any]:
     row["conv_iter_median"], row["conv_iter_q25"], row["conv_iter_q75"] = _median_iqr(it)
     post = col("collisions_per_1000_after_convergence")[conv]
     row["post_coll_median"], row["post_coll_q25"], row["post_coll_q75"] = _median_iqr(post)
-    worlds: list[str] = []
-    for t in tables:
-        for name in t.dtype.names or ():
-            m = re.fullmatch(r"eval\.(.+)\.collisions_per_1000", name)
-            if m and m.group(1) not in worlds:
-                worlds.append(m.group(1))
+    worlds = list(dict.fromkeys(m.group(1) for t in tables for name in t.dtype.names or ()
+                                if (m := re.fullmatch(r"eval\.(.+)\.collisions_per_1000", name))))
     for w in worlds:
         c = col(summary_key("eval", w, "collisions_per_1000", sep="."))
         k = summary_key("eval", w, "coll", sep="_")
