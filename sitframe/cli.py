@@ -36,10 +36,10 @@ LOG`` finishes it).
 from __future__ import annotations
 
 import argparse
-import importlib
 import json
 import math
 import os
+import pkgutil
 import signal
 import sys
 from functools import partial
@@ -110,18 +110,18 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("presets", help="list the shipped experiment presets")
     sub.add_parser("plugins", help="list discovered plugins and their components")
     for name, module in EXTRA_COMMANDS.items():
-        mod = importlib.import_module(module)
+        mod = pkgutil.resolve_name(module)
         sp = sub.add_parser(name, help=mod.HELP, description=mod.__doc__)
         mod.add_arguments(sp)
     return p
 
 
-#: Subcommands implemented in their own modules: name -> module with ``HELP``,
+#: Subcommands implemented elsewhere: name -> module (or ``module:Class``) with ``HELP``,
 #: ``add_arguments(parser)`` and ``main(args) -> int`` (exit status).
-EXTRA_COMMANDS: dict[str, str] = {"analyse": "sitframe.analysis.commands",
-                                  "replay": "sitframe.analysis.commands_replay",
-                                  "compare": "sitframe.analysis.commands_compare",
-                                  "export": "sitframe.analysis.commands_export",
+EXTRA_COMMANDS: dict[str, str] = {"analyse": "sitframe.analysis.commands:Analyse",
+                                  "replay": "sitframe.analysis.commands:Replay",
+                                  "compare": "sitframe.analysis.commands:Compare",
+                                  "export": "sitframe.analysis.commands:Export",
                                   "sweep": "sitframe.sweep", "pack": "sitframe.pack"}
 
 
@@ -216,7 +216,7 @@ def _dispatch(args: argparse.Namespace) -> int:
     if cmd == "plugins":
         return cmd_plugins(args)
     if cmd in EXTRA_COMMANDS:
-        return int(importlib.import_module(EXTRA_COMMANDS[cmd]).main(args))
+        return int(pkgutil.resolve_name(EXTRA_COMMANDS[cmd]).main(args))
     raise AssertionError(cmd)  # pragma: no cover - argparse enforces the choices
 
 

@@ -1,5 +1,5 @@
 """Figure parts of ``sitframe analyse`` checked without a whole report: evolving-situation
-figures, a world's forced trajectories and goal, the report's number formatting."""
+figures, a world's forced trajectories and goal."""
 
 from __future__ import annotations
 
@@ -13,7 +13,6 @@ import pytest  # noqa: E402
 from matplotlib.patches import Circle, FancyArrowPatch  # noqa: E402
 
 from sitframe.analysis import situation_plots as SP  # noqa: E402
-from sitframe.analysis.html import number  # noqa: E402
 from sitframe.analysis.world_plot import plot_world  # noqa: E402
 from sitframe.world import load_world  # noqa: E402
 
@@ -66,10 +65,3 @@ def test_world_plot_numbers_each_forced_leg_and_marks_the_goal():
                and p.get_facecolor()[:3] == matplotlib.colors.to_rgb("gold")]
     assert len(circles) == 1 and circles[0].center == tuple(goal.goal.position)
     assert circles[0].radius == goal.goal.radius
-
-
-@pytest.mark.parametrize("value, text", [
-    (3, "3"), (np.int64(4), "4"), (1.2345, "1.23"), (np.float32(0.5), "0.50"),
-    (float("nan"), "–"), (float("inf"), "–"), ("x", "–"), (None, "–"), (True, "1.00")])
-def test_report_numbers(value, text):
-    assert number(value) == text

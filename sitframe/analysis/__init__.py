@@ -24,7 +24,7 @@ _EXPORTS: dict[str, str] = {
     # results: arrays, dataclasses, tables
     **{name: "sitframe.analysis.results" for name in (
         "CollisionIntervals", "Table", "as_log", "clustering_trials", "collision_intervals",
-        "compare_runs", "convergence_iteration", "convergence_table", "evaluation_episodes",
+        "convergence_iteration", "convergence_table", "evaluation_episodes",
         "exploration_counts", "learned_output", "lookup_table", "representative_trial",
         "reward_per_window", "robot_radius", "rule_base_table", "rule_bases_across_trials",
         "sensor_angles", "sensor_max_range", "situation_labels", "sweep_result")},
@@ -32,7 +32,7 @@ _EXPORTS: dict[str, str] = {
     **{name: "sitframe.analysis.clustering_plots" for name in (
         "OKABE_ITO", "plot_measures_by_c", "plot_measures_by_trial", "plot_prototypes")},
     **{name: "sitframe.analysis.learning_plots" for name in (
-        "plot_collision_intervals", "plot_compare_rewards", "plot_evaluation_paths",
+        "plot_collision_intervals", "plot_evaluation_paths",
         "plot_exploration", "plot_learning_curves", "plot_reward_per_window",
         "plot_trajectory")},
     "plot_world": "sitframe.analysis.world_plot",

@@ -9,6 +9,7 @@ Colours are from the Okabe-Ito colour-blind-safe palette.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -149,39 +150,36 @@ def plot_prototypes(
     return fig
 
 
-def _finite_for_plot(values: np.ndarray) -> tuple[np.ndarray, int]:
-    v = np.asarray(values, dtype=np.float64).copy()
-    bad = ~np.isfinite(v)
-    v[bad] = np.nan
-    return v, int(bad.sum())
-
-
-def _note_nonfinite(ax, n_bad: int) -> None:
-    if n_bad:
-        ax.text(0.98, 0.04, f"{n_bad} infinite, not shown", transform=ax.transAxes,
-                ha="right", va="bottom", fontsize=_FONT - 2, color=OKABE_ITO["black"])
-
-
-def _measure_grid(n: int) -> tuple[Figure, np.ndarray]:
-    ncols = 4
-    nrows = math.ceil(n / ncols)
-    fig = Figure(figsize=(7.2, 1.8 * nrows + 0.4), layout="constrained")
-    axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False).ravel())
-    for ax in axes[n:]:
+def _plot_measures(measures: dict[str, np.ndarray], draw: Any, xlabel: str, units: str,
+                   title: str, legend: bool = True) -> Figure:
+    """One panel per validity measure, four per row; ``draw(ax, values)`` plots a measure
+    (non-finite values as NaN, counted in a note), then the panel gets its title, labels,
+    grid and, for MinCard, the zero line."""
+    keys = list(MEASURE_DIRECTIONS)
+    fig = Figure(figsize=(7.2, 1.8 * math.ceil(len(keys) / 4) + 0.4), layout="constrained")
+    axes = fig.subplots(math.ceil(len(keys) / 4), 4, squeeze=False).ravel()
+    for ax in axes[len(keys):]:
         ax.set_visible(False)
-    return fig, axes
-
-
-def _style_measure_panel(ax: Axes, key: str, units: str, xlabel: str, n_bad: int) -> None:
-    """Title, labels, grid and the zero line (MinCard) shared by the validity-measure panels."""
-    if key == "min_card":
-        ax.axhline(0, color=OKABE_ITO["black"], lw=0.6, ls="--")
-    ax.set_title(_panel_title(key), fontsize=_FONT - 0.5)
-    ax.set_ylabel(_YLABELS[key].replace("{u}", units), fontsize=_FONT)
-    ax.set_xlabel(xlabel, fontsize=_FONT)
-    ax.tick_params(labelsize=_FONT - 1)
-    ax.grid(lw=0.3, alpha=0.5)
-    _note_nonfinite(ax, n_bad)
+    for ax, key in zip(axes, keys, strict=False):
+        v = np.asarray(measures[key], dtype=np.float64)
+        n_bad = int((~np.isfinite(v)).sum())
+        draw(ax, np.where(np.isfinite(v), v, np.nan))
+        if key == "min_card":
+            ax.axhline(0, color=OKABE_ITO["black"], lw=0.6, ls="--")
+        ax.set_title(_panel_title(key), fontsize=_FONT - 0.5)
+        ax.set_ylabel(_YLABELS[key].replace("{u}", units), fontsize=_FONT)
+        ax.set_xlabel(xlabel, fontsize=_FONT)
+        ax.tick_params(labelsize=_FONT - 1)
+        ax.grid(lw=0.3, alpha=0.5)
+        if n_bad:
+            ax.text(0.98, 0.04, f"{n_bad} infinite, not shown", transform=ax.transAxes,
+                    ha="right", va="bottom", fontsize=_FONT - 2, color=OKABE_ITO["black"])
+    if legend:
+        handles, lbls = axes[0].get_legend_handles_labels()
+        fig.legend(handles, lbls, loc="outside lower center", ncols=len(lbls), fontsize=_FONT,
+                   frameon=False)
+    fig.suptitle(title, fontsize=_FONT + 1)
+    return fig
 
 
 def plot_measures_by_trial(trials: ClusteringTrials, *, units: str = "m") -> Figure:
@@ -201,14 +199,11 @@ def plot_measures_by_trial(trials: ClusteringTrials, *, units: str = "m") -> Fig
     -------
     matplotlib.figure.Figure
     """
-    keys = list(MEASURE_DIRECTIONS)
-    fig, axes = _measure_grid(len(keys))
-    T = trials.n_trials
-    idx = np.arange(T)
+    idx = np.arange(trials.n_trials)
     ok = trials.eligible
     k = trials.chosen
-    for ax, key in zip(axes, keys, strict=False):
-        v, n_bad = _finite_for_plot(trials.measures[key])
+
+    def draw(ax: Axes, v: np.ndarray) -> None:
         ax.plot(idx, v, color=OKABE_ITO["blue"], lw=0.6, alpha=0.5)
         ax.plot(idx[ok], v[ok], "o", ms=2.8, color=OKABE_ITO["blue"], label="trial")
         if (~ok).any():
@@ -217,13 +212,10 @@ def plot_measures_by_trial(trials: ClusteringTrials, *, units: str = "m") -> Fig
         ax.axvline(k, color=OKABE_ITO["vermillion"], lw=0.8, alpha=0.6, zorder=0)
         ax.plot([k], [v[k]], "D", ms=5, color=OKABE_ITO["vermillion"],
                 label=f"chosen (trial {k})", zorder=4)
-        _style_measure_panel(ax, key, units, "Trial index", n_bad)
-    handles, lbls = axes[0].get_legend_handles_labels()
-    fig.legend(handles, lbls, loc="outside lower center", ncols=len(lbls), fontsize=_FONT,
-               frameon=False)
-    fig.suptitle(f"Validity measures of {T} FCM trials (c = {trials.c}, m = {trials.m:g})",
-                 fontsize=_FONT + 1)
-    return fig
+
+    return _plot_measures(trials.measures, draw, "Trial index", units,
+                          f"Validity measures of {trials.n_trials} FCM trials "
+                          f"(c = {trials.c}, m = {trials.m:g})")
 
 
 def plot_measures_by_c(sweep: SweepResult, *, units: str = "m") -> Figure:
@@ -242,26 +234,22 @@ def plot_measures_by_c(sweep: SweepResult, *, units: str = "m") -> Figure:
     -------
     matplotlib.figure.Figure
     """
-    keys = list(MEASURE_DIRECTIONS)
-    fig, axes = _measure_grid(len(keys))
     order = np.argsort(sweep.cs)
     cs = sweep.cs[order]
     fb = sweep.fallback[order]
-    for ax, key in zip(axes, keys, strict=False):
-        v, n_bad = _finite_for_plot(sweep.measures[key][order])
+
+    def draw(ax: Axes, v: np.ndarray) -> None:
         ax.plot(cs, v, "-", color=OKABE_ITO["bluish_green"], lw=1.0)
         ax.plot(cs[~fb], v[~fb], "o", ms=3, color=OKABE_ITO["bluish_green"],
                 label="chosen trial")
         if fb.any():
             ax.plot(cs[fb], v[fb], "o", ms=3, mfc="none", color=OKABE_ITO["vermillion"],
                     label="no trial with MinCard > 0")
-        _style_measure_panel(ax, key, units, "Number of clusters $c$", n_bad)
         if cs.size <= 20:
             ax.set_xticks(cs[:: max(1, math.ceil(cs.size / 7))])
-    if fb.any():
-        handles, lbls = axes[0].get_legend_handles_labels()
-        fig.legend(handles, lbls, loc="outside lower center", ncols=len(lbls), fontsize=_FONT,
-                   frameon=False)
-    fig.suptitle(f"Validity of the chosen partition vs. number of clusters "
-                 f"(m = {sweep.m:g}, {sweep.n_trials} trials per c)", fontsize=_FONT + 1)
-    return fig
+
+    return _plot_measures({k: v[order] for k, v in sweep.measures.items()}, draw,
+                          "Number of clusters $c$", units,
+                          f"Validity of the chosen partition vs. number of clusters "
+                          f"(m = {sweep.m:g}, {sweep.n_trials} trials per c)",
+                          legend=bool(fb.any()))

@@ -41,13 +41,14 @@ import math
 import os
 import re
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from scipy import stats
 
-from sitframe.analysis.results import Table, _summary, as_log
+from sitframe.analysis.results import Table, _col, _summary, as_log
 from sitframe.errors import InputError
 from sitframe.records import summary_key
 
@@ -178,11 +179,7 @@ def trial_metrics(summary: np.ndarray) -> dict[str, tuple[str, str, np.ndarray]]
         key -> (label, statistic, values (n,) float, NaN where a trial has none).
     """
     names = summary.dtype.names or ()
-
-    def col(n: str) -> np.ndarray:
-        return np.asarray(summary[n], dtype=np.float64) if n in names \
-            else np.full(summary.size, np.nan)
-
+    col = partial(_col, summary)
     conv = col("converged") > 0.5
     out: dict[str, tuple[str, str, np.ndarray]] = {
         "convergence_rate": ("Converged trials (share)", "share", conv.astype(np.float64)),
@@ -206,32 +203,41 @@ def trial_metrics(summary: np.ndarray) -> dict[str, tuple[str, str, np.ndarray]]
     return out
 
 
-def _ci(x: np.ndarray, statistic: str, rng: np.random.Generator) -> tuple[float, float, float]:
-    if x.size == 0:
+def _boot(runs: list[list[np.ndarray]], statistic: str,
+          rng: np.random.Generator, clustered: bool) -> tuple[float, float, float]:
+    """The statistic of one run, or of two runs the second's minus the first's, and its
+    bootstrap interval.
+
+    A run is a list of clusters (its seeds' trial values, NaN dropped). Clustered, and when
+    every run has two or more clusters, whole clusters are resampled; otherwise the pooled
+    trial values. One value gives no interval (NaN); identical values a zero-width one.
+    """
+    fn = np.mean if statistic == "share" else np.median
+    pooled = [np.concatenate(r) if r else np.empty(0) for r in runs]
+    if min(p.size for p in pooled) == 0:
         return math.nan, math.nan, math.nan
-    fn = np.mean if statistic == "share" else np.median
-    est = float(fn(x))
-    if x.size < 2 or np.all(x == x[0]):
-        return est, (est if x.size > 1 else math.nan), (est if x.size > 1 else math.nan)
-    res = stats.bootstrap((x,), fn, n_resamples=RESAMPLES, confidence_level=LEVEL,
-                          method="percentile", random_state=rng, vectorized=True)
-    return est, float(res.confidence_interval.low), float(res.confidence_interval.high)
 
+    def stat(*xs: np.ndarray, axis: int = -1) -> Any:
+        v = [fn(x, axis=axis) for x in xs]
+        return v[-1] - v[0] if len(v) == 2 else v[0]
 
-def _diff(a: np.ndarray, b: np.ndarray, statistic: str,
-          rng: np.random.Generator) -> tuple[float, float, float] | None:
-    if a.size < 2 or b.size < 2:
-        return None
-    fn = np.mean if statistic == "share" else np.median
-
-    def d(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
-        return fn(y, axis=axis) - fn(x, axis=axis)
-
-    est = float(d(a, b))
-    if np.all(np.r_[a, b] == a[0]):
+    est = float(stat(*pooled))
+    allv = np.concatenate(pooled)
+    if allv.size < 2:
+        return est, math.nan, math.nan
+    if np.all(allv == allv[0]):
         return est, est, est
-    res = stats.bootstrap((a, b), d, n_resamples=RESAMPLES, confidence_level=LEVEL,
-                          method="percentile", random_state=rng, vectorized=True)
+    kw: dict[str, Any] = {"n_resamples": RESAMPLES, "confidence_level": LEVEL,
+                          "method": "percentile", "random_state": rng}
+    if clustered and all(len(r) >= 2 for r in runs):
+        def resampled(*idx: np.ndarray) -> Any:
+            return stat(*(np.concatenate([r[int(i)] for i in ix])
+                          for r, ix in zip(runs, idx, strict=True)))
+
+        res = stats.bootstrap(tuple(np.arange(len(r)) for r in runs), resampled,
+                              vectorized=False, **kw)
+    else:
+        res = stats.bootstrap(tuple(pooled), stat, vectorized=True, **kw)
     return est, float(res.confidence_interval.low), float(res.confidence_interval.high)
 
 
@@ -258,60 +264,22 @@ def _holm(p: np.ndarray) -> np.ndarray:
     return out
 
 
-def _cluster_ci(clusters: list[np.ndarray], statistic: str,
-                rng: np.random.Generator) -> tuple[float, float, float]:
-    """Estimate over the pooled trials; interval from resampling whole runs (seeds)."""
-    fn = np.mean if statistic == "share" else np.median
-    pooled = np.concatenate(clusters)
-    if len(clusters) < 2 or np.all(pooled == pooled[0]):
-        return _ci(pooled, statistic, rng)
-
-    def stat(idx: np.ndarray) -> float:
-        return float(fn(np.concatenate([clusters[int(i)] for i in idx])))
-
-    res = stats.bootstrap((np.arange(len(clusters)),), stat, n_resamples=RESAMPLES,
-                          confidence_level=LEVEL, method="percentile", random_state=rng,
-                          vectorized=False)
-    return float(fn(pooled)), float(res.confidence_interval.low), \
-        float(res.confidence_interval.high)
-
-
-def _cluster_diff(a: list[np.ndarray], b: list[np.ndarray], statistic: str,
-                  rng: np.random.Generator) -> tuple[float, float, float] | None:
-    fn = np.mean if statistic == "share" else np.median
-    pa, pb = np.concatenate(a), np.concatenate(b)
-    est = float(fn(pb) - fn(pa))
-    if np.all(np.r_[pa, pb] == pa[0]):
-        return est, est, est
-
-    def stat(ia: np.ndarray, ib: np.ndarray) -> float:
-        return float(fn(np.concatenate([b[int(i)] for i in ib]))
-                     - fn(np.concatenate([a[int(i)] for i in ia])))
-
-    res = stats.bootstrap((np.arange(len(a)), np.arange(len(b))), stat, n_resamples=RESAMPLES,
-                          confidence_level=LEVEL, method="percentile", random_state=rng,
-                          vectorized=False)
-    return est, float(res.confidence_interval.low), float(res.confidence_interval.high)
-
-
 def _metric(key: str, label: str, statistic: str, runs: list[list[np.ndarray]],
             clustered: bool, rng: np.random.Generator) -> MetricResult:
     """One metric; ``runs[j]`` holds run j's trial values per seed (NaN already dropped)."""
     runs = [[c for c in r if c.size] for r in runs]
     vals = [np.concatenate(r) if r else np.empty(0) for r in runs]
     res = MetricResult(key, label, statistic, vals, runs=[len(r) for r in runs])
-    fn = np.mean if statistic == "share" else np.median
-    for r, v in zip(runs, vals, strict=True):
-        e, lo, hi = (_cluster_ci(r, statistic, rng) if clustered and r
-                     else _ci(v, statistic, rng))
+    for r in runs:
+        e, lo, hi = _boot([r], statistic, rng, clustered)
         res.estimate.append(e)
         res.low.append(lo)
         res.high.append(hi)
     # the unit of the test: one trial, or one run (its median) when runs pool several seeds
+    fn = np.mean if statistic == "share" else np.median
     res.p = _rank_test([np.array([fn(c) for c in r]) for r in runs] if clustered else vals)
     if len(vals) == 2 and all(v.size >= 2 for v in vals):
-        res.diff = (_cluster_diff(runs[0], runs[1], statistic, rng) if clustered
-                    else _diff(vals[0], vals[1], statistic, rng))
+        res.diff = _boot(runs, statistic, rng, clustered)
     return res
 
 

@@ -13,6 +13,7 @@ import csv
 import math
 import os
 import re
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -28,19 +29,28 @@ _COLOURS = ("#0072B2", "#E69F00", "#009E73", "#CC79A7", "#D55E00", "#56B4E9", "#
             "#F0E442")
 
 
-def _grid(n: int) -> tuple[int, int]:
+def _metric_panels(cmp: Comparison, row_height: float, extra: float) -> tuple[Any, np.ndarray]:
+    """A figure with one titled panel per metric (``*`` when different), three per row."""
+    from matplotlib.figure import Figure
+
+    n = len(cmp.metrics)
     cols = min(3, n)
-    return math.ceil(n / cols), cols
+    rows = math.ceil(n / cols)
+    fig = Figure(figsize=(4.0 * cols, row_height * rows + extra), layout="constrained")
+    axs = fig.subplots(rows, cols, squeeze=False).ravel()
+    for ax, m in zip(axs, cmp.metrics, strict=False):
+        ax.set_title(_wrap(m.label) + ("  *" if m.different else ""), fontsize=9)
+        ax.tick_params(axis="y", labelsize=8)
+        ax.grid(True, axis="y", color="0.9")
+    for ax in axs[n:]:
+        ax.set_visible(False)
+    return fig, axs
 
 
 def plot_metrics(cmp: Comparison, seed: int = 0) -> Any:
     """One panel per metric: trial values per run (dots), estimate and 95 % interval (bar)."""
-    from matplotlib.figure import Figure
-
-    rows, cols = _grid(len(cmp.metrics))
     k = len(cmp.names)
-    fig = Figure(figsize=(4.0 * cols, (2.6 + 0.12 * k) * rows + 0.6), layout="constrained")
-    axs = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
+    fig, axs = _metric_panels(cmp, 2.6 + 0.12 * k, 0.6)
     rng = np.random.default_rng(seed)
     for ax, m in zip(axs, cmp.metrics, strict=False):
         for j, v in enumerate(m.values):
@@ -55,15 +65,9 @@ def plot_metrics(cmp: Comparison, seed: int = 0) -> Any:
                             capsize=3, lw=1.5)
         if m.statistic == "share":
             ax.set_ylim(-0.05, 1.05)
-        star = "  *" if m.different else ""
-        ax.set_title(_wrap(m.label) + star, fontsize=9)
         ax.set_xticks(range(k), [_wrap(n, 18) for n in cmp.names],
                       fontsize=7, rotation=30 if k > 3 else 0, ha="right" if k > 3 else "center")
         ax.set_xlim(-0.6, k - 0.3)
-        ax.tick_params(axis="y", labelsize=8)
-        ax.grid(True, axis="y", color="0.9")
-    for ax in axs[len(cmp.metrics):]:
-        ax.set_visible(False)
     fig.suptitle(f"Trial values (dots), median (share for convergence) and {LEVEL:.0%} "
                  f"bootstrap interval (diamond, bar); * = different at 5 % ({cmp.test}, Holm)",
                  fontsize=10)
@@ -71,8 +75,6 @@ def plot_metrics(cmp: Comparison, seed: int = 0) -> Any:
 
 
 def _wrap(text: str, width: int = 34) -> str:
-    import textwrap
-
     return "\n".join(textwrap.wrap(text, width)) or text
 
 
@@ -86,17 +88,13 @@ def _axis_order(values: list[str]) -> list[str]:
 
 def plot_axis(cmp: Comparison, key: str) -> Any:
     """Every metric against the sweep axis ``key``: one line per combination of the others."""
-    from matplotlib.figure import Figure
-
     xs = _axis_order([a[key] for a in cmp.axes.values()])
     others = [k for k in next(iter(cmp.axes.values())) if k != key]
     lines: dict[tuple[str, ...], dict[str, int]] = {}
     for j, name in enumerate(cmp.names):
         a = cmp.axes[name]
         lines.setdefault(tuple(a[k] for k in others), {})[a[key]] = j
-    rows, cols = _grid(len(cmp.metrics))
-    fig = Figure(figsize=(4.0 * cols, 2.7 * rows + 0.9), layout="constrained")
-    axs = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
+    fig, axs = _metric_panels(cmp, 2.7, 0.9)
     for ax, m in zip(axs, cmp.metrics, strict=False):
         for li, (combo, idx) in enumerate(lines.items()):
             pos = [xs.index(x) + 0.06 * (li - (len(lines) - 1) / 2) for x in idx]
@@ -111,14 +109,9 @@ def plot_axis(cmp: Comparison, key: str) -> Any:
             ax.errorbar(np.array(pos)[order], est[order], yerr=err[:, order], marker="o",
                         ms=4, capsize=3, lw=1.2, color=_COLOURS[li % len(_COLOURS)],
                         label=label)
-        ax.set_title(_wrap(m.label) + ("  *" if m.different else ""), fontsize=9)
         ax.set_xticks(range(len(xs)), xs, fontsize=8)
         ax.set_xlim(-0.5, len(xs) - 0.5)
         ax.set_xlabel(key, fontsize=8)
-        ax.tick_params(axis="y", labelsize=8)
-        ax.grid(True, axis="y", color="0.9")
-    for ax in axs[len(cmp.metrics):]:
-        ax.set_visible(False)
     handles, labels = axs[0].get_legend_handles_labels()
     if labels:
         fig.legend(handles, labels, loc="outside lower center", ncols=min(4, len(labels)),

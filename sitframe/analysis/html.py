@@ -10,15 +10,12 @@ from __future__ import annotations
 
 import html
 import json
-import math
 from importlib import resources
 from typing import Any
 
-import numpy as np
+from sitframe.analysis.results import Table
 
-from sitframe.analysis.results import Table, _fmt, _is_num
-
-__all__ = ["esc", "json_script", "number", "page", "table_html", "template"]
+__all__ = ["esc", "json_script", "page", "table_html", "template"]
 
 
 def esc(value: Any) -> str:
@@ -44,31 +41,17 @@ def table_html(t: Table, *, table_id: str | None = None,
 
     ``highlight`` marks rows (class ``sig``), e.g. significant differences.
     """
-    num = [all(_is_num(r[i]) for r in t.rows) for i in range(len(t.columns))]
     head = "".join(f"<th>{esc(c)}</th>" for c in t.columns)
-    body = []
-    for j, r in enumerate(t.rows):
-        cells = "".join(
-            f'<td{" class=num" if n else ""}>{esc(_fmt(v, t.digits) or "–")}</td>'
-            for v, n in zip(r, num, strict=True))
+    num, body = t.numeric(), []
+    for j, r in enumerate(t.cells()):
         cls = ' class="sig"' if highlight and highlight[j] else ""
-        body.append(f"<tr{cls}>{cells}</tr>")
+        body.append(f"<tr{cls}>" + "".join(f'<td{" class=num" if n else ""}>{esc(c)}</td>'
+                                           for c, n in zip(r, num, strict=True)) + "</tr>")
     ident = f' id="{esc(table_id)}"' if table_id else ""
     notes = "".join(f'<p class="note">{esc(n)}</p>' for n in t.notes)
     return (f'<div class="tablewrap"><table{ident}><caption>{esc(t.title)}</caption>'
             f"<thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
             f"{notes}</div>")
-
-
-def number(v: Any, digits: int = 2) -> str:
-    """A finite float with ``digits`` decimals, an int as is, anything else as '–'."""
-    if isinstance(v, int | np.integer) and not isinstance(v, bool):
-        return str(int(v))
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        return "–"
-    return f"{f:.{digits}f}" if math.isfinite(f) else "–"
 
 
 def page(title: str, body: str, *, scripts: tuple[str, ...] = ()) -> str:

@@ -14,22 +14,28 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
+from matplotlib.ticker import FuncFormatter, MultipleLocator
 
 from sitframe.analysis.clustering_plots import OKABE_ITO
-from sitframe.analysis.results import CollisionIntervals, reward_per_window
+from sitframe.analysis.results import (
+    CollisionIntervals,
+    _deg,
+    collision_points,
+    reward_per_window,
+)
 from sitframe.analysis.world_plot import plot_world
 from sitframe.world import World
 
 __all__ = [
     "ITERATION_S",
     "plot_collision_intervals",
-    "plot_compare_rewards",
     "plot_evaluation_paths",
     "plot_exploration",
     "plot_learning_curves",
@@ -52,16 +58,34 @@ def _path_cmap() -> ListedColormap:
     return ListedColormap(base(np.linspace(0.0, 0.82, 256)), name="cividis_dark")
 
 
-def _deg(a: float) -> str:
-    return f"{a:+g}°" if a else "0°"
+def _panel(height: float, ylabel: str, title: str, *, zero: bool = True,
+           xlabel: str = "Iteration (1 it. = 1.5 s)", ylabel_size: float = _FONT
+           ) -> tuple[Figure, Any]:
+    """A one-column figure over iterations: labels, title, y grid, (``zero``) a line at 0.
 
-
-def _finish(ax, *, grid: str = "both") -> None:
+    Returns the figure and its axes.
+    """
+    fig = Figure(figsize=(_COL, height), layout="constrained")
+    ax = fig.add_subplot()
+    if zero:
+        ax.axhline(0, color="0.4", lw=0.6)
+    ax.set_xlabel(xlabel, fontsize=_FONT)
+    ax.set_ylabel(ylabel, fontsize=ylabel_size)
+    ax.set_title(title, fontsize=_FONT)
     ax.tick_params(labelsize=_FONT - 1)
-    ax.grid(True, axis=grid, lw=0.3, alpha=0.5)
+    ax.grid(True, axis="y", lw=0.3, alpha=0.5)
     ax.set_axisbelow(True)
     for side in ("top", "right"):
         ax.spines[side].set_visible(False)
+    return fig, ax
+
+
+def _by_window(curves: list[np.ndarray]) -> np.ndarray:
+    """Curves of unequal length as rows of one (n, longest) array, padded with NaN."""
+    M = np.full((len(curves), max(c.size for c in curves)), np.nan)
+    for i, c in enumerate(curves):
+        M[i, :c.size] = c
+    return M
 
 
 def _mark_convergence(ax, convergence: int | None, n_iterations: int | None = None) -> None:
@@ -192,8 +216,10 @@ def plot_collision_intervals(
     it, iv = intervals.iterations, intervals.intervals
     L = intervals.n_iterations
     tail = L - (int(it[-1]) + 1 if it.size else 0)  # collision-free iterations at the end
-    fig = Figure(figsize=(_COL, 2.4), layout="constrained")
-    ax = fig.add_subplot()
+    fig, ax = _panel(2.4, "Iterations since previous collision",
+                     title or f"{it.size} collisions in {L} iterations", zero=False,
+                     xlabel="Iteration of the collision (1 it. = 1.5 s)",
+                     ylabel_size=_FONT - 0.5)
     top = max(int(iv.max()) if iv.size else 1, tail, 1)
     if log_scale is None:
         log_scale = bool(iv.size) and top / max(int(iv.min()), 1) > 100
@@ -210,32 +236,20 @@ def plot_collision_intervals(
         ax.annotate(f"{tail} it. collision-free\nto the end", (L, tail), xytext=(-4, 0),
                     textcoords="offset points", ha="right", va="center",
                     fontsize=_FONT - 1.5, color=_C["blue"])
-    if log_scale:
-        from matplotlib.ticker import FuncFormatter
-
+    if log_scale:  # (before the secondary axis is made, which follows the scale it sees)
         ax.set_yscale("log")
-        ax.set_ylim(base, top * 2.0)
         ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _p: f"{v:g}"))
-    else:
-        ax.set_ylim(0, top * 1.12 + 1)
+    ax.set_ylim(*((base, top * 2.0) if log_scale else (0, top * 1.12 + 1)))
     ax.set_xlim(0, max(L, 1) * 1.02)
-    _mark_convergence(ax, convergence, intervals.n_iterations)
-    ax.set_xlabel("Iteration of the collision (1 it. = 1.5 s)", fontsize=_FONT)
-    ax.set_ylabel("Iterations since previous collision", fontsize=_FONT - 0.5)
+    _mark_convergence(ax, convergence, L)
     sec = ax.secondary_yaxis("right", functions=(lambda x: x * ITERATION_S / 60.0,
                                                  lambda m: m * 60.0 / ITERATION_S))
     sec.set_ylabel("Minutes of robot time", fontsize=_FONT - 0.5)
     sec.tick_params(labelsize=_FONT - 1)
     if log_scale:
-        from matplotlib.ticker import FuncFormatter
-
         sec.set_yscale("log")
         sec.yaxis.set_major_formatter(FuncFormatter(lambda v, _p: f"{v:g}"))
-    _finish(ax, grid="y")
     ax.spines["right"].set_visible(True)
-    n = it.size
-    ax.set_title(title or f"{n} collisions in {intervals.n_iterations} iterations",
-                 fontsize=_FONT)
     return fig
 
 
@@ -269,18 +283,13 @@ def plot_reward_per_window(
     r = np.asarray(reward, dtype=np.float64)
     means = reward_per_window(r, window)
     x = np.arange(means.size) * window
-    fig = Figure(figsize=(_COL, 2.3), layout="constrained")
-    ax = fig.add_subplot()
-    ax.axhline(0, color="0.4", lw=0.6)
+    fig, ax = _panel(2.3, f"{reward_label} per {window} it.",
+                     title or f"Mean reward per {window} iterations")
     ax.bar(x, means, width=window, align="edge", color=np.where(
         means >= 0, _C["sky_blue"], _C["orange"]), edgecolor="white", lw=0.2)
     ax.step(np.r_[x, r.size], np.r_[means, means[-1:]], where="post", color=_C["blue"], lw=0.7)
     ax.set_xlim(0, max(r.size, 1))
     _mark_convergence(ax, convergence, r.size)
-    ax.set_xlabel("Iteration (1 it. = 1.5 s)", fontsize=_FONT)
-    ax.set_ylabel(f"{reward_label} per {window} it.", fontsize=_FONT)
-    _finish(ax, grid="y")
-    ax.set_title(title or f"Mean reward per {window} iterations", fontsize=_FONT)
     return fig
 
 
@@ -307,9 +316,8 @@ def plot_learning_curves(
     matplotlib.figure.Figure
     """
     convergence = convergence or {}
-    fig = Figure(figsize=(_COL, 2.4), layout="constrained")
-    ax = fig.add_subplot()
-    ax.axhline(0, color="0.4", lw=0.6)
+    fig, ax = _panel(2.4, f"Mean reward per {window} it.",
+                     title or "Learning curves of all trials")
     curves = {k: reward_per_window(v, window) for k, v in rewards.items()}
     n = max((c.size for c in curves.values()), default=0)
     for k, c in curves.items():
@@ -320,10 +328,8 @@ def plot_learning_curves(
             ax.plot([x[conv // window]], [c[conv // window]], "o", ms=3.5,
                     color=_C["vermillion"], zorder=4)
     if curves:
-        M = np.full((len(curves), n), np.nan)
-        for i, c in enumerate(curves.values()):
-            M[i, :c.size] = c
-        ax.plot((np.arange(n) + 0.5) * window, np.nanmean(M, axis=0), color=_C["blue"], lw=1.6)
+        ax.plot((np.arange(n) + 0.5) * window, np.nanmean(_by_window(list(curves.values())),
+                                                          axis=0), color=_C["blue"], lw=1.6)
     handles = [Line2D([], [], color="0.6", lw=0.8, label="one trial"),
                Line2D([], [], color=_C["blue"], lw=1.6, label=f"mean of {len(curves)} trials")]
     if any(v is not None for v in convergence.values()):
@@ -332,57 +338,6 @@ def plot_learning_curves(
     fig.legend(handles=handles, fontsize=_FONT - 1, loc="outside lower center",
                ncols=len(handles), frameon=False)
     ax.set_xlim(0, max(n * window, 1))
-    ax.set_xlabel("Iteration (1 it. = 1.5 s)", fontsize=_FONT)
-    ax.set_ylabel(f"Mean reward per {window} it.", fontsize=_FONT)
-    _finish(ax, grid="y")
-    ax.set_title(title or "Learning curves of all trials", fontsize=_FONT)
-    return fig
-
-
-def plot_compare_rewards(
-    runs: Mapping[str, Mapping[int, np.ndarray]],
-    window: int = 50,
-    *,
-    title: str | None = None,
-) -> Figure:
-    """Mean reward per window of several runs: mean over trials with an interquartile band.
-
-    Parameters
-    ----------
-    runs : mapping name -> (mapping trial -> reward array)
-    window : int, default 50
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-    """
-    colours = [_C["blue"], _C["vermillion"], _C["bluish_green"], _C["reddish_purple"],
-               _C["orange"], _C["sky_blue"]]
-    fig = Figure(figsize=(_COL, 2.4), layout="constrained")
-    ax = fig.add_subplot()
-    ax.axhline(0, color="0.4", lw=0.6)
-    xmax = 1
-    for (name, rew), col in zip(runs.items(), colours * 4, strict=False):
-        curves = [reward_per_window(v, window) for v in rew.values()]
-        if not curves:
-            continue
-        n = max(c.size for c in curves)
-        M = np.full((len(curves), n), np.nan)
-        for i, c in enumerate(curves):
-            M[i, :c.size] = c
-        x = (np.arange(n) + 0.5) * window
-        ax.fill_between(x, np.nanpercentile(M, 25, axis=0), np.nanpercentile(M, 75, axis=0),
-                        color=col, alpha=0.2, lw=0)
-        ax.plot(x, np.nanmean(M, axis=0), color=col, lw=1.3, label=f"{name} ({len(curves)} tr.)")
-        xmax = max(xmax, n * window)
-    ax.set_xlim(0, xmax)
-    ax.set_xlabel("Iteration (1 it. = 1.5 s)", fontsize=_FONT)
-    ax.set_ylabel(f"Mean reward per {window} it.", fontsize=_FONT)
-    fig.legend(fontsize=_FONT - 1, loc="outside lower center", ncols=min(len(runs), 3),
-               frameon=False)
-    _finish(ax, grid="y")
-    ax.set_title(title or "Mean over trials; band = interquartile range",
-                 fontsize=_FONT)
     return fig
 
 
@@ -402,21 +357,13 @@ def _draw_path(ax, world: World, pose: np.ndarray, collision: np.ndarray | None,
     ax.add_collection(lc)
     ax.plot(*xy[0], "o", ms=4.5, mfc="white", mec="black", mew=1.0, zorder=7)
     ax.plot(*xy[-1], "s", ms=4.5, mfc="black", mec="black", zorder=7)
-    n_coll = 0
-    if collision is not None:
-        col = np.asarray(collision, dtype=bool)[start:stop]
-        idx = np.flatnonzero(col) + start
-        n_coll = idx.size
-        if idx.size:
-            if contact is not None and np.isfinite(np.asarray(contact)[idx]).all():
-                pts = np.asarray(contact)[idx]
-            else:  # no contact points logged: mark the pose after the colliding iteration
-                pts = np.asarray(pose)[idx + 1, :2]
-            ax.plot(pts[:, 0], pts[:, 1], "x", ms=4, mew=1.1, color=_C["vermillion"], zorder=8)
+    idx = np.zeros(0, np.intp) if collision is None else \
+        np.flatnonzero(np.asarray(collision, dtype=bool)[start:stop]) + start
+    if idx.size:
+        pts = collision_points(pose, idx, contact)
+        ax.plot(pts[:, 0], pts[:, 1], "x", ms=4, mew=1.1, color=_C["vermillion"], zorder=8)
     x0, y0, x1, y1 = world.bounds
     if max(x1 - x0, y1 - y0) > 8:  # 1 m ticks crowd a column-wide panel; grid stays at 1 m
-        from matplotlib.ticker import MultipleLocator
-
         for axis in (ax.xaxis, ax.yaxis):
             axis.set_major_locator(MultipleLocator(2.0))
             axis.set_minor_locator(MultipleLocator(1.0))
@@ -426,16 +373,23 @@ def _draw_path(ax, world: World, pose: np.ndarray, collision: np.ndarray | None,
     ax.tick_params(labelsize=_FONT - 1)
     ax.xaxis.label.set_fontsize(_FONT)
     ax.yaxis.label.set_fontsize(_FONT)
-    return lc, n_coll
+    return lc, idx.size
 
 
-def _path_legend(fig, n_coll_any: bool, loc: str = "outside lower center") -> None:
+def _path_keys(fig: Figure, lc: LineCollection, ax: Any, collisions: bool,
+               **colorbar: Any) -> None:
+    """The colour bar (iteration) beside ``ax`` and the legend (start, end, collisions) below."""
+    fig.set_layout_engine("constrained")
+    cb = fig.colorbar(lc, ax=ax, **colorbar)
+    cb.set_label("Iteration", fontsize=_FONT)
+    cb.ax.tick_params(labelsize=_FONT - 1)
     handles = [Line2D([], [], ls="", marker="o", ms=4.5, mfc="white", mec="black", label="start"),
                Line2D([], [], ls="", marker="s", ms=4.5, color="black", label="end")]
-    if n_coll_any:
+    if collisions:
         handles.append(Line2D([], [], ls="", marker="x", ms=4, mew=1.1, color=_C["vermillion"],
                               label="collision"))
-    fig.legend(handles=handles, loc=loc, ncols=len(handles), fontsize=_FONT - 1, frameon=False)
+    fig.legend(handles=handles, loc="outside lower center", ncols=len(handles),
+               fontsize=_FONT - 1, frameon=False)
 
 
 def _window(n: int, start: int | None, stop: int | None) -> tuple[int, int]:
@@ -487,11 +441,7 @@ def plot_trajectory(
     fig = Figure(figsize=(_COL, min((_COL - 1.25) * aspect + 1.05, 5.5)))
     ax = fig.add_subplot()
     lc, n_coll = _draw_path(ax, world, P, collision, contact, s, e, robot_radius)
-    fig.set_layout_engine("constrained")
-    cb = fig.colorbar(lc, ax=ax, shrink=0.95, pad=0.02, aspect=25)
-    cb.set_label("Iteration", fontsize=_FONT)
-    cb.ax.tick_params(labelsize=_FONT - 1)
-    _path_legend(fig, collision is not None)
+    _path_keys(fig, lc, ax, collision is not None, shrink=0.95, pad=0.02, aspect=25)
     ax.set_title(title or f"{world.name}: it. {s}–{e}, {n_coll} collisions", fontsize=_FONT)
     return fig
 
@@ -533,7 +483,6 @@ def plot_evaluation_paths(
     ncols = ncols or min(3, len(names))
     nrows = math.ceil(len(names) / ncols)
     fig = Figure(figsize=(2.45 * ncols + 0.5, 2.35 * nrows + 0.55))
-    lcs = []
     for k, name in enumerate(names):
         ax = fig.add_subplot(nrows, ncols, k + 1)
         ep = episodes[name]
@@ -541,15 +490,10 @@ def plot_evaluation_paths(
         s, e = _window(n, start, stop)
         lc, n_coll = _draw_path(ax, worlds[name], ep["pose"], ep.get("collision"),
                                 ep.get("contact"), s, e, robot_radius)
-        lcs.append(lc)
         cov = "" if not coverage or name not in coverage else (
             f", coverage {coverage[name]:.2f}")
         ax.set_title(f"{name}: it. {s}–{e}, {n_coll} coll.{cov}", fontsize=_FONT - 1)
-    fig.set_layout_engine("constrained")
-    cb = fig.colorbar(lcs[-1], ax=fig.axes, shrink=0.7, pad=0.01, aspect=30)
-    cb.set_label("Iteration", fontsize=_FONT)
-    cb.ax.tick_params(labelsize=_FONT - 1)
-    _path_legend(fig, True)
+    _path_keys(fig, lc, fig.axes, True, shrink=0.7, pad=0.01, aspect=30)
     if title:
         fig.suptitle(title, fontsize=_FONT + 1)
     return fig

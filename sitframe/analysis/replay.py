@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from sitframe.analysis import results as R
+from sitframe.analysis.replay_data import REPLAY_ARRAYS
 from sitframe.errors import InputError
 from sitframe.situations import count_per_iteration
 from sitframe.world import parse_world
@@ -105,7 +106,6 @@ def replay(
     u = np.asarray(tr.arrays["memberships"], dtype=np.float64)
     cmd = np.asarray(tr.arrays["command"], dtype=np.float64)
     coll = np.asarray(tr.arrays["collision"], dtype=bool)
-    contact = np.asarray(tr.arrays.get("contact", np.full((coll.size, 2), np.nan)))
     rew_keys = [k for k in tr.arrays if k.startswith("reward/")]
     reward = np.asarray(tr.arrays[rew_keys[0]]) if rew_keys else None
     L = coll.size
@@ -175,8 +175,8 @@ def replay(
                label="collision")], loc="upper center", fontsize=_FONT - 1, frameon=False,
         ncols=4, bbox_to_anchor=(0.5, 1.0 - 0.32 / fig.get_figheight()), handlelength=1.6,
         columnspacing=1.2)
-    coll_pts = np.where(np.isfinite(contact).all(axis=1)[:, None], contact, pose[1:, :2])
     cidx = np.flatnonzero(coll[start:stop]) + start
+    cpts = R.collision_points(pose, cidx, tr.arrays.get("contact"))
     ray_col_seen, ray_col_free = C["bluish_green"], "0.6"
 
     def draw(i: int) -> list[Any]:
@@ -194,8 +194,8 @@ def replay(
         hits.set_data(tip[~free, 0], tip[~free, 1])
         lo = start if trail is None else max(start, i - trail)
         path_line.set_data(pose[lo:i + 1, 0], pose[lo:i + 1, 1])
-        done = cidx[cidx <= i]
-        crosses.set_data(coll_pts[done, 0], coll_pts[done, 1])
+        done = cpts[cidx <= i]
+        crosses.set_data(done[:, 0], done[:, 1])
         s = int(np.argmax(u[i]))
         phase = ("learning" if conv is None or i < conv else frozen)
         rw = f"   reward {reward[i]:+6.1f}" if reward is not None else ""
@@ -304,18 +304,13 @@ def _replay_trial(lg: Any, trial: int, evaluation: str | None) -> Any:
     tr = lg.trial(trial)
     what = f"trial {trial}"
     if evaluation is not None:
-        prefix = f"eval/{evaluation}/"
-        worlds = sorted({k.split("/")[1] for k in tr.episodes if k.startswith("eval/")})
-        if evaluation not in worlds:
+        episodes = R.evaluation_episodes(tr)
+        if evaluation not in episodes:
             raise InputError(f"trial {trial} has no evaluation in world '{evaluation}'; it has "
-                             f"{worlds or 'none'}", file=lg.path, key="--eval")
-        arrays = {k[len(prefix):]: v for k, v in tr.episodes.items() if k.startswith(prefix)}
-        if "reading" not in arrays and "sonar" in arrays:  # a log from before contract v2
-            arrays["reading"] = arrays["sonar"]
-        tr = dataclasses.replace(tr, world=evaluation, arrays=arrays)
+                             f"{sorted(episodes) or 'none'}", file=lg.path, key="--eval")
+        tr = dataclasses.replace(tr, world=evaluation, arrays=episodes[evaluation])
         what = f"trial {trial}, evaluation in {evaluation}"
-    need = [k for k in ("pose", "reading", "memberships", "command", "collision")
-            if k not in tr.arrays]
+    need = [k for k in REPLAY_ARRAYS if k not in tr.arrays]
     if need:
         raise InputError(f"{what} lacks the arrays {need}" + (
             " (an older log: its evaluations kept only pose and collision)" if evaluation

@@ -27,9 +27,11 @@ import numpy as np
 from sitframe.analysis import results as R
 from sitframe.errors import InputError
 from sitframe.logs import Log, TrialLog
-from sitframe.world import parse_world
 
-__all__ = ["replay_payload"]
+__all__ = ["REPLAY_ARRAYS", "replay_payload"]
+
+#: The per-iteration arrays an episode needs to be replayed.
+REPLAY_ARRAYS = ("pose", "reading", "memberships", "command", "collision")
 
 #: Array name -> quantisation scale (stored integer = round(value * scale)).
 SCALES = {"pose_xy": 1000.0, "pose_th": 1000.0, "memberships": 100.0,
@@ -71,8 +73,7 @@ class _Packer:
 
 def _episode(P: _Packer, arrays: dict[str, np.ndarray], rules: np.ndarray | None,
              max_range: float) -> dict[str, Any] | None:
-    need = ("pose", "reading", "memberships", "command", "collision")
-    if any(k not in arrays for k in need):
+    if any(k not in arrays for k in REPLAY_ARRAYS):
         return None
     pose = np.asarray(arrays["pose"], dtype=np.float64)
     coll = np.asarray(arrays["collision"], dtype=bool)
@@ -80,10 +81,7 @@ def _episode(P: _Packer, arrays: dict[str, np.ndarray], rules: np.ndarray | None
     reading = np.clip(np.nan_to_num(np.asarray(arrays["reading"], dtype=np.float64),
                                     nan=max_range, posinf=max_range), 0.0, max_range)
     cmd = np.nan_to_num(np.asarray(arrays["command"], dtype=np.float64))
-    contact = np.asarray(arrays.get("contact", np.full((n, 2), np.nan)), dtype=np.float64)
-    idx = np.flatnonzero(coll)
-    pts = np.where(np.isfinite(contact[idx]).all(axis=1)[:, None], contact[idx],
-                   pose[idx + 1, :2])
+    pts = R.collision_points(pose, np.flatnonzero(coll), arrays.get("contact"))
     theta = np.angle(np.exp(1j * pose[:, 2]))  # wrapped to (-pi, pi] so it fits int16 mrad
     out: dict[str, Any] = {
         "n": int(n),
@@ -105,16 +103,19 @@ def _episode(P: _Packer, arrays: dict[str, np.ndarray], rules: np.ndarray | None
     return out
 
 
-def _rules(tr: TrialLog) -> tuple[str, str, np.ndarray, np.ndarray | None, str] | None:
-    """(label, output, action values, per-iteration rule indices (L, c) or None, unit)."""
+def _policy(tr: TrialLog) -> tuple[dict[str, Any], np.ndarray | None, np.ndarray | None]:
+    """The learned output of a trial: its descriptor (``behaviour``, ``output``, ``actions``,
+    ``unit``), its rule indices per iteration (L, c) if logged, and its final ones (1, c).
+    Without a learned output: ``({}, None, None)``."""
     try:
         label, output = R.learned_output(tr)
     except InputError:
-        return None
+        return {}, None, None
     po = tr.policies[label].outputs[output]
     per_it = tr.behaviours[label].get(f"{output}/rule_base")
-    return label, output, np.asarray(po.actions, dtype=np.float64), \
-        None if per_it is None else np.asarray(per_it), po.unit
+    return ({"behaviour": label, "output": output,
+             "actions": np.asarray(po.actions, dtype=np.float64).tolist(), "unit": po.unit},
+            None if per_it is None else np.asarray(per_it), np.asarray(po.rules)[None, :])
 
 
 def replay_payload(log: Log, trials: dict[int, TrialLog]) -> dict[str, Any]:
@@ -148,19 +149,14 @@ def replay_payload(log: Log, trials: dict[int, TrialLog]) -> dict[str, Any]:
     episodes: list[dict[str, Any]] = []
     for k in sorted(trials):
         tr = trials[k]
-        rb = _rules(tr)
+        policy, per_it, frozen = _policy(tr)
         conv = R.convergence_iteration(tr)
         # the rule per situation: per iteration while learning, the frozen policy otherwise
-        frozen = None if rb is None else \
-            np.asarray(tr.policies[rb[0]].outputs[rb[1]].rules)[None, :]
-        own = rb[3] if rb is not None and rb[3] is not None else (None if learns else frozen)
+        own = per_it if per_it is not None else (None if learns else frozen)
         runs: list[tuple[str, str, dict[str, np.ndarray], np.ndarray | None]] = [
-            ("learning" if learns else "run", tr.world, dict(tr.arrays), own)]
-        for w, arrays in R.evaluation_episodes(tr).items():
-            arrays = dict(arrays)
-            if "reading" not in arrays and "sonar" in arrays:
-                arrays["reading"] = arrays["sonar"]
-            runs.append(("evaluation", w, arrays, frozen))
+            ("learning" if learns else "run", tr.world, tr.arrays, own)]
+        runs += [("evaluation", w, arrays, frozen)
+                 for w, arrays in R.evaluation_episodes(tr).items()]
         for kind, world, arrays, rules in runs:
             if rules is not None and rules.ndim != 2:
                 rules = None
@@ -168,21 +164,14 @@ def replay_payload(log: Log, trials: dict[int, TrialLog]) -> dict[str, Any]:
             if ep is None:
                 continue
             ep.update(trial=k, kind=kind, world=world,
-                      convergence=conv if kind == "learning" else None)
-            if rb is not None:
-                ep.update(behaviour=rb[0], output=rb[1], actions=rb[2].tolist(), unit=rb[4])
+                      convergence=conv if kind == "learning" else None, **policy)
             episodes.append(ep)
-    worlds = {}
-    for name, text in log.worlds.items():
-        try:
-            w = parse_world(text, file=f"{log.path}:worlds/{name}")
-        except InputError:  # a world the log holds damaged: drawn empty, not fatal
-            continue
-        worlds[name] = {"walls": [np.round(a, 3).tolist() for a in w.walls],
-                        "obstacles": [np.round(a, 3).tolist() for a in w.obstacles],
-                        "bounds": [float(b) for b in w.bounds],
-                        "goal": None if w.goal is None else
-                        [*map(float, w.goal.position), float(w.goal.radius)]}
+    worlds = {name: {"walls": [np.round(a, 3).tolist() for a in w.walls],
+                     "obstacles": [np.round(a, 3).tolist() for a in w.obstacles],
+                     "bounds": [float(b) for b in w.bounds],
+                     "goal": None if w.goal is None else
+                     [*map(float, w.goal.position), float(w.goal.radius)]}
+              for name, w in R.parsed_worlds(log).items()}  # (a damaged world: left out)
     labels = R.situation_labels(log)
     return {"worlds": worlds, "episodes": episodes, "radius": R.robot_radius(log),
             "sensor": {"angles_deg": spec.angles_deg.tolist(), "max_range": spec.max_range},

@@ -29,6 +29,8 @@ import tempfile
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from functools import cache
+from itertools import groupby
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +41,6 @@ from sitframe.analysis.report_html import write_report_html
 from sitframe.errors import InputError
 from sitframe.logs import Log, TrialLog
 from sitframe.records import summary_key
-from sitframe.world import parse_world
 
 __all__ = ["AnalysisReport", "analyse", "log_problems"]
 
@@ -137,16 +138,9 @@ def log_problems(log: R.LogLike) -> list[str]:
 
 
 def _ranges(ks: Iterable[int]) -> str:
-    ks = sorted(ks)
-    parts: list[str] = []
-    i = 0
-    while i < len(ks):
-        j = i
-        while j + 1 < len(ks) and ks[j + 1] == ks[j] + 1:
-            j += 1
-        parts.append(str(ks[i]) if i == j else f"{ks[i]}-{ks[j]}")
-        i = j + 1
-    return ", ".join(parts)
+    """``[0, 1, 2, 5]`` -> ``"0-2, 5"``."""
+    runs = [[k for _i, k in g] for _d, g in groupby(enumerate(sorted(ks)), lambda p: p[1] - p[0])]
+    return ", ".join(str(r[0]) if len(r) == 1 else f"{r[0]}-{r[-1]}" for r in runs)
 
 
 class _Writer:
@@ -155,36 +149,26 @@ class _Writer:
         self.dpi = dpi
         self.tables: dict[str, R.Table] = {}  # stem -> table, for the HTML page
 
-    def figure(self, section: str, name: str, caption: str, make: Callable[[], Any]) -> None:
+    def _make(self, name: str, make: Callable[[], Any]) -> Any:
+        """``make()``, or None when the log does not support it (noted as skipped)."""
         try:
-            fig = make()
+            return make()
         except _EXPECTED as exc:
             self.r.skipped.append(f"{name}: {exc}")
-            return
-        if fig is None:
+            return None
+
+    def figure(self, section: str, name: str, caption: str, make: Callable[[], Any]) -> None:
+        if (fig := self._make(name, make)) is None:
             return
         fig.savefig(os.path.join(self.r.out_dir, name), dpi=self.dpi)
         self.r.files.append((section, name, caption))
 
     def table(self, section: str, stem: str, caption: str, make: Callable[[], R.Table]) -> None:
-        try:
-            t = make()
-        except _EXPECTED as exc:
-            self.r.skipped.append(f"{stem}.md/.csv: {exc}")
+        if (t := self._make(f"{stem}.md/.csv", make)) is None:
             return
         t.save(os.path.join(self.r.out_dir, stem))
         self.tables[stem] = t
         self.r.files.append((section, f"{stem}.md", caption + f" ([CSV]({stem}.csv))"))
-
-
-def _worlds(lg: Log) -> dict[str, Any]:
-    out = {}
-    for name, text in lg.worlds.items():
-        try:
-            out[name] = parse_world(text, file=f"{lg.path}:worlds/{name}")
-        except InputError:
-            continue
-    return out
 
 
 def analyse(
@@ -256,13 +240,7 @@ def analyse(
 
         # ------------------------------------------------------------- learning
         idx = lg.trial_indices()
-        loaded: dict[int, TrialLog] = {}
-
-        def get(k: int) -> TrialLog:
-            if k not in loaded:
-                loaded[k] = lg.trial(k)
-            return loaded[k]
-
+        get = cache(lg.trial)  # each trial read once
         if idx:
             _learning_section(W, lg, rep, trials, idx, get, window, path_iterations,
                               radius, LP)
@@ -308,8 +286,7 @@ def _clustering_section(W: _Writer, lg: Log, rep: AnalysisReport, CP: Any) -> No
                          max_range=spec.max_range,
                          labels=R.situation_labels(lg, numbered=False)))
         # J_m is in the squared units of the clustered features (see the fcm plugin's transform)
-        transform = str(lg.stage("cluster").get("transform", "range")) \
-            if lg.has("cluster") else "range"
+        transform = str(lg.stage("cluster").get("transform", "range"))
         units = {"log": "(log m)", "inverse": "(1/m)"}.get(transform, "m")
         if ct is not None:
             W.figure(sec, "measures_by_trial.png",
@@ -361,7 +338,7 @@ def _learning_section(W: _Writer, lg: Log, rep: AnalysisReport, trials: Any, idx
     else:
         chosen = [int(k) for k in trials]  # (checked against the log by analyse)
     rep.trials = chosen
-    worlds = _worlds(lg)
+    worlds = R.parsed_worlds(lg)
     if get(idx[0]).situations:
         _situation_figures(W, lg, {k: get(k) for k in idx}, chosen, worlds, radius)
     for k in chosen:
@@ -509,12 +486,8 @@ def _write_index(rep: AnalysisReport, lg: Log) -> None:
         lines += ["## Incomplete log", "",
                   "This log is incomplete; everything below is computed from what it holds.", ""]
         lines += [f"- {p}" for p in rep.problems] + [""]
-    section = None
-    for sec, name, caption in rep.files:
-        if sec != section:
-            lines += ["", f"## {sec}", ""]
-            section = sec
-        lines.append(f"- [{name}]({name}) — {caption}")
+    for sec, files in groupby(rep.files, key=lambda f: f[0]):
+        lines += ["", f"## {sec}", ""] + [f"- [{n}]({n}) — {c}" for _s, n, c in files]
     if rep.skipped:
         lines += ["", "## Not produced", ""] + [f"- {s}" for s in rep.skipped]
     lines += ["", f"Written by `sitframe analyse` in {rep.seconds:.1f} s.", ""]

@@ -15,6 +15,7 @@ page needs no network and opens from ``file://``.
 from __future__ import annotations
 
 import os
+from itertools import groupby
 from typing import Any
 
 from sitframe.analysis import html as H
@@ -109,6 +110,17 @@ held at that iteration. Space plays/pauses, arrow keys step.</p>
 </section>"""
 
 
+def _item(name: str, caption: str, tables: dict[str, Table]) -> str:
+    """A figure of the page, or a table with links to its CSV and Markdown files."""
+    stem, ext = os.path.splitext(name)
+    if ext == ".png":
+        return (f'<figure><img src="{H.esc(name)}" alt="{H.esc(caption)}">'
+                f"<figcaption>{H.esc(caption)}</figcaption></figure>")
+    return (f'{H.table_html(tables[stem])}<p class="note">'
+            f'{H.esc(caption.split(" ([CSV]")[0])} · <a href="{H.esc(stem)}.csv">CSV</a> · '
+            f'<a href="{H.esc(name)}">Markdown</a></p>')
+
+
 def write_report_html(rep: Any, lg: Log, trials: dict[int, TrialLog],
                       tables: dict[str, Table]) -> str:
     """Write ``index.html`` into ``rep.out_dir`` and return its path.
@@ -125,29 +137,17 @@ def write_report_html(rep: Any, lg: Log, trials: dict[int, TrialLog],
     tables
         Table stem -> :class:`Table`, for the tables in ``rep.files``.
     """
-    sections: list[tuple[str, list[str]]] = []
-    for sec, name, caption in rep.files:
-        if not sections or sections[-1][0] != sec:
-            sections.append((sec, []))
-        stem, ext = os.path.splitext(name)
-        if ext == ".png":
-            sections[-1][1].append(f'<figure><img src="{H.esc(name)}" alt="{H.esc(caption)}">'
-                                   f"<figcaption>{H.esc(caption)}</figcaption></figure>")
-        elif stem in tables:
-            cap = caption.split(" ([CSV]")[0]
-            sections[-1][1].append(f'{H.table_html(tables[stem])}<p class="note">{H.esc(cap)}'
-                                   f' · <a href="{H.esc(stem)}.csv">CSV</a> · '
-                                   f'<a href="{H.esc(name)}">Markdown</a></p>')
-    anchors = [(f"sec{j}", s) for j, (s, _) in enumerate(sections)]
+    sections = [(sec, "".join(_item(name, caption, tables) for _s, name, caption in files))
+                for sec, files in groupby(rep.files, key=lambda f: f[0])]
     toc = ('<nav class="toc"><a href="#replay">Replay</a>'
-           + "".join(f'<a href="#{a}">{H.esc(s)}</a>' for a, s in anchors)
+           + "".join(f'<a href="#sec{j}">{H.esc(s)}</a>' for j, (s, _) in enumerate(sections))
            + '<a href="#config">Config</a><a href="#plugins-sec">Plugins</a></nav>')
     body = [f"<h1>{H.esc(lg.attrs.get('name', 'sitframe run'))}: analysis of "
             f"<code>{H.esc(os.path.basename(lg.path))}</code></h1>", toc, _meta(lg, rep),
             _warnings(lg, rep)]
     body.append(_replay(lg, trials, rep.trials[0] if rep.trials else None))
-    for (a, sec), (_s, items) in zip(anchors, sections, strict=True):
-        body.append(f'<section id="{a}"><h2>{H.esc(sec)}</h2>{"".join(items)}</section>')
+    body += [f'<section id="sec{j}"><h2>{H.esc(sec)}</h2>{items}</section>'
+             for j, (sec, items) in enumerate(sections)]
     body.append('<section id="config"><h2>Config</h2><details open><summary>The resolved '
                 f'config the run used (TOML)</summary><pre>{H.esc(lg.attrs.get("config", ""))}'
                 "</pre></details></section>")

@@ -45,6 +45,7 @@ from sitframe.errors import InputError
 from sitframe.fcm import MEASURE_DIRECTIONS
 from sitframe.logs import Log, TrialLog, open_log
 from sitframe.records import summary_key
+from sitframe.world import World, parse_world
 
 __all__ = [
     "CollisionIntervals",
@@ -52,7 +53,6 @@ __all__ = [
     "as_log",
     "clustering_trials",
     "collision_intervals",
-    "compare_runs",
     "convergence_iteration",
     "convergence_table",
     "evaluation_episodes",
@@ -93,6 +93,17 @@ def _section(log: Log, name: str) -> dict[str, Any]:
     except Exception:  # noqa: BLE001 - a log with a broken config is still analysable
         return {}
     return sec if isinstance(sec, dict) else {}
+
+
+def parsed_worlds(log: Log) -> dict[str, World]:
+    """The worlds the log holds, parsed (a damaged one is left out)."""
+    out = {}
+    for name, text in log.worlds.items():
+        try:
+            out[name] = parse_world(text, file=f"{log.path}:worlds/{name}")
+        except InputError:
+            continue
+    return out
 
 
 def sensor_angles(log: LogLike) -> np.ndarray:
@@ -173,9 +184,7 @@ def clustering_trials(log: LogLike) -> ClusteringTrials:
         if key not in st:
             raise InputError(f"the cluster stage has no '{key}' (not an FCM clustering?)",
                              file=lg.path, key=f"cluster/{key}")
-    names = _names(st["measure_names"])
-    M = np.asarray(st["trial_measures"], dtype=np.float64)
-    measures = {k: M[:, i] for i, k in enumerate(names)}
+    measures = _measures(st, "trial_measures")
     missing = [k for k in MEASURE_DIRECTIONS if k not in measures]
     if missing:
         raise InputError(f"the cluster stage lacks the measures {missing}", file=lg.path,
@@ -199,10 +208,13 @@ def clustering_trials(log: LogLike) -> ClusteringTrials:
     )
 
 
-def _names(value: Any) -> list[str]:
-    if isinstance(value, str):
-        return list(json.loads(value))
-    return [v.decode() if isinstance(v, bytes) else str(v) for v in np.asarray(value).ravel()]
+def _measures(stage: dict[str, Any], key: str) -> dict[str, np.ndarray]:
+    """Measure name -> column of the cluster stage's (rows, measures) array ``key``."""
+    names = stage["measure_names"]
+    names = list(json.loads(names)) if isinstance(names, str) else [
+        v.decode() if isinstance(v, bytes) else str(v) for v in np.asarray(names).ravel()]
+    M = np.asarray(stage[key], dtype=np.float64)
+    return {k: M[:, i] for i, k in enumerate(names)}
 
 
 def sweep_result(log: LogLike) -> SweepResult | None:
@@ -215,9 +227,7 @@ def sweep_result(log: LogLike) -> SweepResult | None:
     if not lg.has("cluster/sweep_c"):
         return None
     st = lg.stage("cluster")
-    names = _names(st["measure_names"])
-    M = np.asarray(st["sweep_measures"], dtype=np.float64)
-    measures = {k: M[:, i] for i, k in enumerate(names)}
+    measures = _measures(st, "sweep_measures")
     cs = np.asarray(st["sweep_c"], dtype=np.int64)
     interp = _section(lg, "interpreter")
     fb = ~(measures.get("min_card", np.ones(cs.size)) > 0)
@@ -271,10 +281,6 @@ def _policy_output(trial: TrialLog, label: str, output: str) -> Any:
     return pol.outputs[output]
 
 
-def _singletons(trial: TrialLog, label: str, output: str) -> np.ndarray:
-    return _policy_output(trial, label, output).actions
-
-
 def exploration_counts(trial: TrialLog, label: str | None = None, output: str = "heading",
                        *, start: int = 0, stop: int | None = None) -> np.ndarray:
     """How often each (dominant situation, executed action) pair occurred (Fig. 5.4).
@@ -302,7 +308,7 @@ def exploration_counts(trial: TrialLog, label: str | None = None, output: str = 
                          f"('{output}/rule_base', as fuzzy-q does), so the executed actions "
                          "are unknown", key=f"behaviours/{label}/{output}/rule_base")
     rb = np.asarray(trial.behaviours[label][f"{output}/rule_base"])
-    A = _singletons(trial, label, output).size
+    A = _policy_output(trial, label, output).actions.size
     n = min(u.shape[0], rb.shape[0])
     sl = slice(start, n if stop is None else min(stop, n))
     u, rb = u[sl], rb[sl]
@@ -366,27 +372,46 @@ def reward_per_window(reward: np.ndarray, window: int = 50) -> np.ndarray:
     if window < 1:
         raise ValueError(f"window must be >= 1 iteration, got {window}")
     r = np.asarray(reward, dtype=np.float64).ravel()
-    n = math.ceil(r.size / window)
-    if n == 0:
+    if r.size == 0:
         return np.zeros(0)
-    sums = np.add.reduceat(r, np.arange(0, r.size, window))
-    sizes = np.diff(np.r_[np.arange(0, r.size, window), r.size])
-    return sums / sizes
+    starts = np.arange(0, r.size, window)
+    return np.add.reduceat(r, starts) / np.diff(np.r_[starts, r.size])
 
 
 def evaluation_episodes(trial: TrialLog) -> dict[str, dict[str, np.ndarray]]:
     """Evaluation runs of a trial: world name -> {``pose`` (n+1, 3), ``collision`` (n,), ...}.
 
     Logs written since evaluations keep more also hold ``contact`` (n, 2),
-    ``command`` (n, 2), ``nearest`` (n,), ``sonar`` (n, d) and ``memberships``
+    ``command`` (n, 2), ``nearest`` (n,), ``reading`` (n, d) and ``memberships``
     (n, c) per world (the evaluation figure marks collisions at the contact).
+    A log from before contract v2 names the reading ``sonar``; it is given as
+    ``reading`` too.
     """
     out: dict[str, dict[str, np.ndarray]] = {}
     for key, val in trial.episodes.items():
         parts = key.split("/")
         if len(parts) == 3 and parts[0] == "eval":
             out.setdefault(parts[1], {})[parts[2]] = np.asarray(val)
+    for d in out.values():
+        if "reading" not in d and "sonar" in d:
+            d["reading"] = d["sonar"]
     return {w: d for w, d in out.items() if "pose" in d}
+
+
+def collision_points(pose: np.ndarray, iterations: np.ndarray,
+                     contact: np.ndarray | None = None) -> np.ndarray:
+    """Where the collisions of ``iterations`` (k,) happened, (k, 2) [m].
+
+    The logged contact point (``contact``, (L, 2)); where there is none (not
+    logged, or NaN), the robot's position after the colliding iteration
+    (``pose`` row ``i + 1``).
+    """
+    it = np.asarray(iterations, dtype=np.intp)
+    after = np.asarray(pose)[it + 1, :2]
+    if contact is None:
+        return after
+    at = np.asarray(contact, dtype=np.float64)[it]
+    return np.where(np.isfinite(at).all(axis=1)[:, None], at, after)
 
 
 def _summary(lg: Log) -> np.ndarray:
@@ -464,14 +489,21 @@ class Table:
         i = self.columns.index(name)
         return [r[i] for r in self.rows]
 
+    def cells(self) -> list[list[str]]:
+        """The rows as text, ``"–"`` for an empty cell (Markdown and HTML)."""
+        return [[_fmt(v, self.digits) or "–" for v in r] for r in self.rows]
+
+    def numeric(self) -> list[bool]:
+        """Per column: whether every cell is a number (such columns are right-aligned)."""
+        return [all(_is_num(r[i]) for r in self.rows) for i in range(len(self.columns))]
+
     def to_markdown(self) -> str:
         """GitHub-flavoured Markdown: bold title line, table, notes."""
-        cells = [[_fmt(v, self.digits) or "–" for v in r] for r in self.rows]
-        num = [all(_is_num(r[i]) for r in self.rows) for i in range(len(self.columns))]
         lines = [f"**{self.title}**", "",
                  "| " + " | ".join(self.columns) + " |",
-                 "|" + "|".join("---:" if n else ":---" for n in num) + "|"]
-        lines += ["| " + " | ".join(c.replace("|", "\\|") for c in r) + " |" for r in cells]
+                 "|" + "|".join("---:" if n else ":---" for n in self.numeric()) + "|"]
+        lines += ["| " + " | ".join(c.replace("|", "\\|") for c in r) + " |"
+                  for r in self.cells()]
         if self.notes:
             lines += [""] + [f"{n}  " for n in self.notes]
         return "\n".join(lines) + "\n"
@@ -540,7 +572,7 @@ def lookup_table(log: LogLike, trial: int | TrialLog, label: str | None = None,
     tr = trial if isinstance(trial, TrialLog) else lg.trial(trial)
     label, output = learned_output(tr, label, output)
     q = np.asarray(tr.behaviours[label][f"{output}/q"], dtype=np.float64)
-    singles = _singletons(tr, label, output)
+    singles = _policy_output(tr, label, output).actions
     labels = _labels_for(lg, q.shape[0])
     heading = output == "heading"
     cols = (["Situation", "Description"]
@@ -639,16 +671,17 @@ def rule_bases_across_trials(log: LogLike, label: str | None = None,
                  cols + ["Most frequent", "Agreement [%]"], rows, notes=notes, digits=0)
 
 
-def _summary_columns(s: np.ndarray) -> tuple[list[str], list[str]]:
-    names = s.dtype.names or ()
-    worlds: list[str] = []
-    for n in names:
-        if n.startswith("eval.") and n.endswith(".collisions_per_1000"):
-            worlds.append(n[len("eval."):-len(".collisions_per_1000")])
-    return list(names), worlds
+def _eval_worlds(s: np.ndarray) -> list[str]:
+    """The evaluation worlds of a summary table (those with a collision rate)."""
+    head, tail = "eval.", ".collisions_per_1000"
+    return [n[len(head):-len(tail)] for n in s.dtype.names or ()
+            if n.startswith(head) and n.endswith(tail)]
 
 
-def _col(s: np.ndarray, name: str) -> np.ndarray:
+def _col(s: np.ndarray, name: str, world: str | None = None) -> np.ndarray:
+    """Column ``name`` (of evaluation ``world``, if given) as floats; NaN if absent."""
+    if world is not None:
+        name = summary_key("eval", world, name, sep=".")
     names = s.dtype.names or ()
     return np.asarray(s[name], dtype=np.float64) if name in names else np.full(s.size, np.nan)
 
@@ -670,7 +703,7 @@ def convergence_table(log: LogLike) -> Table:
     """
     lg = as_log(log)
     s = _summary(lg)
-    _, worlds = _summary_columns(s)
+    worlds = _eval_worlds(s)
     conv = _col(s, "converged") > 0.5
     it = np.where(conv, _col(s, "convergence_iteration"), np.nan)
     series: list[tuple[str, np.ndarray]] = [
@@ -680,86 +713,19 @@ def convergence_table(log: LogLike) -> Table:
         ("Coverage", _col(s, "coverage")),
     ]
     for w in worlds:
-        series.append((f"{w} collisions [/1000 it.]",
-                       _col(s, summary_key("eval", w, "collisions_per_1000", sep="."))))
-        series.append((f"{w} coverage", _col(s, summary_key("eval", w, "coverage", sep="."))))
-    rows: list[list[Any]] = []
-    for j in range(s.size):
-        row: list[Any] = [int(s["trial"][j]), bool(conv[j])]
-        for name, v in series:
-            row.append(int(v[j]) if name == "Convergence iteration" and np.isfinite(v[j])
-                       else float(v[j]))
-        rows.append(row)
-    if s.size:
-        mean: list[Any] = ["mean", f"{int(conv.sum())}/{s.size}"]
-        for _name, v in series:
-            mean.append(float(np.nanmean(v)) if np.isfinite(v).any() else float("nan"))
-        rows.append(mean)
+        series += [(f"{w} collisions [/1000 it.]", _col(s, "collisions_per_1000", w)),
+                   (f"{w} coverage", _col(s, "coverage", w))]
+    rows: list[list[Any]] = [
+        [int(s["trial"][j]), bool(conv[j])]
+        + [int(v[j]) if v is it and np.isfinite(v[j]) else float(v[j]) for _n, v in series]
+        for j in range(s.size)]
+    if s.size:  # convergence iteration: over the converged trials (the others are NaN)
+        rows.append(["mean", f"{int(conv.sum())}/{s.size}"]
+                    + [float(np.nanmean(v)) if np.isfinite(v).any() else math.nan
+                       for _n, v in series])
     notes = ["Coverage = fraction of the world's free 0.5 m grid cells visited.",
              "Mean convergence iteration over converged trials only."]
     if not lg.complete:
         notes.append(f"Log status is '{lg.status}': only finished trials are listed.")
     return Table(f"Convergence of {s.size} learning trials ({os.path.basename(lg.path)})",
                  ["Trial", "Converged", *[n for n, _ in series]], rows, notes=notes, digits=2)
-
-
-def compare_runs(a: LogLike, b: LogLike, names: tuple[str, str] | None = None) -> Table:
-    """Convergence and quality of two runs side by side.
-
-    Each metric is the mean ± standard deviation over the run's finished
-    trials (convergence iteration and post-convergence collisions over its
-    converged trials), taken from the logs' summary tables.
-
-    Parameters
-    ----------
-    a, b
-        The two logs (or paths).
-    names
-        Column headers; default the file names.
-
-    Returns
-    -------
-    Table
-        One row per metric; columns ``Metric``, name A, name B.
-    """
-    la, lb = as_log(a), as_log(b)
-    if names is None:
-        names = (os.path.basename(la.path), os.path.basename(lb.path))
-        if names[0] == names[1]:
-            names = (la.path, lb.path)
-    sa, sb = _summary(la), _summary(lb)
-    worlds = sorted(set(_summary_columns(sa)[1]) | set(_summary_columns(sb)[1]))
-
-    def ms(v: np.ndarray, d: int = 1) -> str:
-        v = v[np.isfinite(v)]
-        if v.size == 0:
-            return "–"
-        return f"{v.mean():.{d}f} ± {v.std(ddof=1):.{d}f}" if v.size > 1 else f"{v[0]:.{d}f}"
-
-    def metrics(lg: Log, s: np.ndarray) -> list[str]:
-        conv = _col(s, "converged") > 0.5
-        it = _col(s, "convergence_iteration")
-        out = [f"{s.size}" + ("" if lg.complete else f" (status {lg.status})"),
-               f"{int(conv.sum())}/{s.size}",
-               ms(it[conv], 0),
-               ms(_col(s, "collisions_per_1000_after_convergence")[conv]),
-               ms(_col(s, "collisions_per_1000")),
-               ms(_col(s, "coverage"), 2)]
-        rew = [n for n in (s.dtype.names or ()) if n.startswith("mean_reward_")]
-        out.append(ms(_col(s, rew[0]), 2) if rew else "–")
-        for w in worlds:
-            out.append(ms(_col(s, summary_key("eval", w, "collisions_per_1000", sep="."))))
-            out.append(ms(_col(s, summary_key("eval", w, "coverage", sep=".")), 2))
-        return out
-
-    labels = ["Finished trials", "Converged trials", "Convergence iteration",
-              "Collisions after convergence [/1000 it.]", "Collisions, whole trial [/1000 it.]",
-              "Coverage, learning world", "Mean reward per iteration"]
-    for w in worlds:
-        labels += [f"Evaluation {w}: collisions [/1000 it.]", f"Evaluation {w}: coverage"]
-    va, vb = metrics(la, sa), metrics(lb, sb)
-    rows = [[m, x, y] for m, x, y in zip(labels, va, vb, strict=True)]
-    return Table("Comparison of two runs (mean ± s.d. over trials)",
-                 ["Metric", names[0], names[1]], rows,
-                 notes=["Convergence iteration and collisions after convergence: converged "
-                        "trials only."])

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.figure import Figure
 
@@ -25,7 +24,8 @@ def plot_situation_counts(counts: dict[int, np.ndarray], title: str) -> Figure:
     ``counts`` maps a trial index to its (L,) count per iteration
     (:func:`sitframe.situations.count_per_iteration`).
     """
-    fig, ax = plt.subplots(figsize=(7, 3.6), layout="constrained")
+    fig = Figure(figsize=(7, 3.6), layout="constrained")  # (no pyplot: nothing to close)
+    ax = fig.add_subplot()
     for k, c in sorted(counts.items()):
         ax.step(np.arange(c.size), c, where="post", lw=1.2, alpha=0.8, label=f"trial {k}")
     ax.set_xlabel("Iteration")

@@ -129,16 +129,15 @@ class Task:
         label = _task_behaviour(cfg, source)
         table = cfg["behaviours"][label]
         registry = Registry.collect(get_plugin_manager(plugins_dirs=plugins_dirs))
-        res0 = Resolved.build(cfg, registry, source, base_dir=base)
-        goal_task = res0.protocol_name() == "goal-episodes"
+        wname = world or cfg["experiment"]["world"]
+        res = Resolved.build(cfg, registry, source, worlds=(wname,), base_dir=base)
+        goal_task = res.protocol_name() == "goal-episodes"
         rname = reward or table.get("reward") or (GOAL_REWARD if goal_task else None)
         if rname is None:
             raise ValueError(f"config {source or '<dict>'}: behaviour '{label}' has no reward; "
                              "expected a reward in its table or reward=... for the env")
         rparams = dict(reward_params if reward_params is not None else
                        (table.get("reward_params", {}) if rname == table.get("reward") else {}))
-        wname = world or cfg["experiment"]["world"]
-        res = Resolved.build(cfg, registry, source, worlds=(wname,), base_dir=base)
         proto = None
         if goal_task:
             proto = res.protocol("goal-episodes")
