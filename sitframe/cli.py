@@ -220,9 +220,9 @@ def _dispatch(args: argparse.Namespace) -> int:
     raise AssertionError(cmd)  # pragma: no cover - argparse enforces the choices
 
 
-def _positive(name: str, value: int | None, hi: int | None = None) -> None:
+def _count(name: str, value: int | None, hi: int | None = None, lo: int = 1) -> None:
     if value is not None:
-        P.number(f"--{name}", value, lo=1, hi=hi, integer=True)
+        P.number(f"--{name}", value, lo=lo, hi=hi, integer=True)
 
 
 # ---------------------------------------------------------------------------
@@ -335,10 +335,9 @@ def _prepare_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
     from sitframe.parallel import make_executor
     from sitframe.prepare import make_prerequisites, prepare_experiment
 
-    _positive("trials", args.trials)
-    _positive("iterations", args.iterations)
-    if args.seed is not None and args.seed < 0:
-        raise InputError(f"must be a non-negative integer, got {args.seed}", key="--seed")
+    _count("trials", args.trials)
+    _count("iterations", args.iterations)
+    _count("seed", args.seed, lo=0)
     cfg, source, base_dir = load_config(args.experiment)
     e = cfg["experiment"]
     for key in ("trials", "seed", "world", "iterations", "clusters_from"):
@@ -443,10 +442,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     from sitframe.config import MAX_ITERATIONS, MAX_TRIALS
     from sitframe.evaluation import evaluate_log
 
-    _positive("iterations", args.iterations, MAX_ITERATIONS)
-    _positive("goal-episodes", args.goal_episodes, MAX_TRIALS)
-    if args.seed < 0:
-        raise InputError(f"must be a non-negative integer, got {args.seed}", key="--seed")
+    _count("iterations", args.iterations, MAX_ITERATIONS)
+    _count("goal-episodes", args.goal_episodes, MAX_TRIALS)
+    _count("seed", args.seed, lo=0)
     summary = evaluate_log(args.log, world=args.world, trial=args.trial,
                            iterations=args.iterations, seed=args.seed,
                            plugins_dirs=tuple(args.plugins_dir),

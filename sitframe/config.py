@@ -330,12 +330,8 @@ def validate_config(raw: dict[str, Any], *, file: str | None = None) -> dict[str
             cfg[section] = {log: _at(P.string, log, run, file, section)
                             for log, run in value.items()}
         else:
-            known = _CORE_KEYS[section] | OPTIONAL_KEYS.get(section, set())
-            for key in value:
-                if key not in known:
-                    raise InputError(
-                        f"unknown key{did_you_mean(key, known)}; expected one of "
-                        f"{', '.join(sorted(known))}", file=file, key=f"{section}.{key}")
+            P.known_keys(value, sorted(_CORE_KEYS[section] | OPTIONAL_KEYS.get(section, set())),
+                         prefix=section, file=file)
             cfg[section].update(value)
     _check_core(cfg, file)
     _check_utf8(cfg, file, "")
@@ -371,11 +367,7 @@ def _at(fn: Any, name: str, value: Any, file: str | None, prefix: str, **kw: Any
 
 
 def _validate_robot(value: dict[str, Any], file: str | None) -> dict[str, Any]:
-    known, _ = P.accepted_params(RobotParams)
-    for key in value:
-        if key not in known:
-            raise InputError(f"unknown key{did_you_mean(key, known)}; expected one of "
-                             f"{', '.join(sorted(known))}", file=file, key=f"robot.{key}")
+    P.known_keys(value, sorted(P.accepted_params(RobotParams)[0]), prefix="robot", file=file)
     try:
         RobotParams(**value)
     except InputError as exc:
@@ -408,11 +400,8 @@ def _validate_behaviours(value: dict[str, Any], file: str | None) -> dict[str, A
             if not isinstance(pf, dict) or "log" not in pf:
                 raise InputError("expected a table {log = \"path.h5\", trial = 0, "
                                  "behaviour = \"label\"}", file=file, key=f"{key}.policy_from")
-            for k in pf:
-                if k not in ("log", "trial", "behaviour"):
-                    raise InputError(f"unknown key{did_you_mean(k, ['log', 'trial', 'behaviour'])}"
-                                     "; expected log, trial, behaviour",
-                                     file=file, key=f"{key}.policy_from.{k}")
+            P.known_keys(pf, ("log", "trial", "behaviour"), prefix=f"{key}.policy_from",
+                         file=file)
             _at(P.string, "log", pf["log"], file, f"{key}.policy_from")
             if isinstance(pf.get("trial"), dict):
                 _check_selection(pf["trial"], file, f"{key}.policy_from.trial")
@@ -429,10 +418,7 @@ SELECTION_DEFAULTS: dict[str, Any] = {"world": "", "episodes": 100,
 
 
 def _check_selection(sel: dict[str, Any], file: str | None, key: str) -> None:
-    for k in sel:
-        if k not in SELECTION_DEFAULTS:
-            raise InputError(f"unknown key{did_you_mean(k, list(SELECTION_DEFAULTS))}; expected "
-                             f"{', '.join(SELECTION_DEFAULTS)}", file=file, key=f"{key}.{k}")
+    P.known_keys(sel, list(SELECTION_DEFAULTS), prefix=key, file=file)
     if "world" not in sel:
         raise InputError("expected the world the trials are compared in, e.g. world = "
                          "\"goal-training\"", file=file, key=f"{key}.world")

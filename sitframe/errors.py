@@ -47,7 +47,12 @@ class InputError(SitframeError, ValueError):
         key = self.key
         if key_prefix:
             key = f"{key_prefix}.{key}" if key else key_prefix
-        return InputError(self.message, file=file or self.file, key=key)
+        return type(self)(self.message, file=file or self.file, key=key)
+
+
+class InputTypeError(InputError, TypeError):
+    """An :class:`InputError` for a value of the wrong type: also a :class:`TypeError`,
+    as numpy and scikit-learn style callers expect."""
 
 
 class PluginError(SitframeError):

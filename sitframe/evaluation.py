@@ -229,11 +229,9 @@ def _fusion_config(log_cfg: dict[str, Any], policies: dict[str, LearnedPolicy],
     src = want if want in sources else sources[0]
     table = {k: v for k, v in log_cfg["behaviours"][src].items()
              if k == "component" or k not in META_KEYS}
-    behaviours = {}
-    for lb, t in fcfg["behaviours"].items():
-        behaviours[lb] = table if lb == slot else {k: v for k, v in t.items()
-                                                   if k != "policy_from"}
-    fcfg["behaviours"] = behaviours
+    fcfg["behaviours"] = {lb: table if lb == slot else {k: v for k, v in t.items()
+                                                        if k != "policy_from"}
+                          for lb, t in fcfg["behaviours"].items()}
     for section in ("sensor", "interpreter", "robot"):
         fcfg[section] = log_cfg[section]
     fcfg["experiment"]["clusters_from"] = ""

@@ -25,13 +25,7 @@ import pluggy
 from sitframe import __version__
 from sitframe.collect import Collected, collect_trajectories, collect_wander, concat_collected
 from sitframe.config import config_hash, to_toml
-from sitframe.contract import (
-    BoundaryError,
-    call,
-    check_data,
-    fault,
-    sensor_spec_mismatch,
-)
+from sitframe.contract import BoundaryError, call, check_data, fault, sensor_spec_mismatch
 from sitframe.errors import InputError, PluginError, PluginFault, TaskCancelled
 from sitframe.loop import (
     STAGE_BATCH,
@@ -45,10 +39,7 @@ from sitframe.loop import (
 )
 from sitframe.parallel import InOrder, SerialExecutor, TrialPipeline
 from sitframe.pluginmanager import Registry, get_plugin_manager
-from sitframe.records import (
-    RunInfo,
-    TrialResult,
-)
+from sitframe.records import RunInfo, TrialResult
 from sitframe.resolve import Resolved
 
 

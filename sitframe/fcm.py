@@ -53,6 +53,7 @@ from typing import Literal, ParamSpec, TypeVar
 
 import numpy as np
 
+from sitframe import params as P
 from sitframe.kernels import kernels
 
 __all__ = [
@@ -203,32 +204,16 @@ def _check_X(X: object, name: str = "X") -> np.ndarray:
     return np.ascontiguousarray(arr)
 
 
-def _check_int(value: object, name: str, lo: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{name} must be an integer, got {value!r} ({type(value).__name__})")
-    v = int(value)
-    if v < lo:
-        raise ValueError(f"{name} must be an integer >= {lo}, got {v}")
-    return v
-
-
 def _check_m(m: object) -> float:
-    if isinstance(m, bool) or not isinstance(m, numbers.Real):
-        raise TypeError(f"m must be a real number > 1, got {m!r} ({type(m).__name__})")
-    mf = float(m)
-    if not (math.isfinite(mf) and mf > 1.0):
-        raise ValueError(f"m must be a finite real number > 1 (m = 1 is a hard partition), "
-                         f"got {mf}")
-    return mf
+    return float(P.number("m", m, lo=1, lo_open=True, hint=" (m = 1 is a hard partition)"))
 
 
 def _check_c(c: object, n: int) -> int:
-    msg = f"c must be an integer >= 2 and <= n_samples ({n}), got {c!r}"
-    if isinstance(c, bool) or not isinstance(c, numbers.Integral):
-        raise TypeError(f"{msg} ({type(c).__name__})")
-    if not 2 <= int(c) <= n:
-        raise ValueError(msg)
-    return int(c)
+    return int(P.number("c", c, lo=2, hi=n, integer=True, hint=" (at most n_samples)"))
+
+
+def _check_tol(tol: object) -> float:
+    return float(P.number("tol", tol, lo=0, lo_open=True, hint=" (centre movement, units of X)"))
 
 
 def _check_centers(centers: object, c: int | None, d: int, name: str) -> np.ndarray:
@@ -614,17 +599,13 @@ def fcm(
     n, d = Xa.shape
     c = _check_c(c, n)
     mf = _check_m(m)
-    if isinstance(tol, bool) or not isinstance(tol, numbers.Real):
-        raise TypeError(f"tol must be a positive real number, got {tol!r}")
-    if not (math.isfinite(float(tol)) and float(tol) > 0):
-        raise ValueError(f"tol must be a finite real number > 0 (centre movement, units of X), "
-                         f"got {tol}")
-    max_iter = _check_int(max_iter, "max_iter", 1)
+    tol = _check_tol(tol)
+    max_iter = int(P.number("max_iter", max_iter, lo=1, integer=True))
     if init_centers is None:
         V0 = init_centers_from_data(Xa, c, _as_generator(seed))
     else:
         V0 = _check_centers(init_centers, c, d, "init_centers")
-    return _fcm_core(_Workspace(Xa, c, mf), V0, float(tol), max_iter)
+    return _fcm_core(_Workspace(Xa, c, mf), V0, tol, max_iter)
 
 
 def _fcm_core(ws: _Workspace, V0: np.ndarray, tol: float, max_iter: int) -> FCMResult:

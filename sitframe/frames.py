@@ -114,9 +114,8 @@ def _trials(log: Log, trials: Iterable[int] | None) -> list[TrialLog]:
 def iterations_frame(log: Log, trials: Iterable[int] | None = None) -> Any:
     """One row per iteration of the learning trials (default all), with a ``trial`` column."""
     pd = _pandas()
-    lg = log
     parts = [_frame(tr.arrays, {"trial": tr.index, "world": tr.world},
-                    _weight_labels(lg, tr.index)) for tr in _trials(lg, trials)]
+                    _weight_labels(log, tr.index)) for tr in _trials(log, trials)]
     return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
 
 

@@ -129,8 +129,14 @@ class SegmentSet:
         self.hi = np.maximum(seg[:, :2], seg[:, 2:])
 
     def subset(self, index: np.ndarray) -> SegmentSet:
-        """Return the segments selected by ``index`` (bool mask or integer indices)."""
-        return SegmentSet(self.segments[index])
+        """Return the segments selected by ``index`` (bool mask or integer indices), their
+        derived arrays copied from this set's, not recomputed (the robot's step uses it)."""
+        sub = SegmentSet.__new__(SegmentSet)
+        sub.segments, sub.packed = self.segments[index], self.packed[:, index]
+        sub.n = sub.segments.shape[0]
+        sub.ax, sub.ay, sub.ex, sub.ey, sub.inv_len2 = sub.packed
+        sub.lo, sub.hi = self.lo[index], self.hi[index]
+        return sub
 
     def __len__(self) -> int:
         return self.n
@@ -372,12 +378,8 @@ def rim_ranges(segments: SegmentSet, x: float, y: float, angles_rad: np.ndarray,
     n = ang.shape[0] // group
     k = kernels()
     if k is None:
-        reach = max_range + radius
-        dist = cast_rays(segments, x, y, ang, reach)
-        if group > 1:
-            dist = dist.reshape(n, group).min(axis=1)
-        out = np.where(dist >= reach, max_range, dist - radius)
-        return np.clip(out, 0.0, max_range) if clip else out
+        return _rim(cast_rays(segments, x, y, ang, max_range + radius), max_range, radius,
+                    group, clip)
     out = np.empty(n)
     k.ranges(float(x), float(y), np.cos(ang), np.sin(ang), segments.packed, float(max_range),
              float(radius), int(group), bool(clip), out)
@@ -462,16 +464,23 @@ def rim_ranges_many(segments: SegmentSet, xy: np.ndarray, angles_rad: np.ndarray
     n = ang.shape[1] // group
     k = kernels()
     if k is None:
-        reach = max_range + radius
-        dist = cast_rays_many(segments, xy, ang, reach)
-        if group > 1:
-            dist = dist.reshape(xy.shape[0], n, group).min(axis=2)
-        out = np.where(dist >= reach, max_range, dist - radius)
-        return np.clip(out, 0.0, max_range) if clip else out
+        return _rim(cast_rays_many(segments, xy, ang, max_range + radius), max_range, radius,
+                    group, clip)
     out = np.empty((xy.shape[0], n))
     k.ranges_many(xy, np.cos(ang), np.sin(ang), segments.packed, float(max_range),
                   float(radius), int(group), bool(clip), out)
     return out
+
+
+def _rim(dist: np.ndarray, max_range: float, radius: float, group: int,
+         clip: bool) -> np.ndarray:
+    """Readings from the rim: the (..., n * group) ray distances from the centre, each
+    group's nearest, less ``radius``; ``max_range`` where nothing was hit (numpy fallback)."""
+    reach = max_range + radius
+    if group > 1:
+        dist = dist.reshape(*dist.shape[:-1], -1, group).min(axis=-1)
+    out = np.where(dist >= reach, max_range, dist - radius)
+    return np.clip(out, 0.0, max_range) if clip else out
 
 
 _EPS = 1e-12

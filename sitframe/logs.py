@@ -262,15 +262,10 @@ class LogWriter:
 
     Notes
     -----
-    A finished trial is written to its own file in :func:`shard_folder`
-    (scratch name, then renamed) and linked from the run file by a
-    copy-on-write transaction of the run file, which holds only the run's
-    attributes, stages, links and summary table: writing a trial costs the
-    same whether it is the first or the thousandth. The end of the run
-    (:meth:`set_status` with a final status) packs the trials into the run
-    file. The published run file is only ever replaced by a complete, closed
-    HDF5 file, and only by the process holding the log's lock
-    (:func:`lock_log`, taken by the first transaction).
+    Trials go to their own files in :func:`shard_folder`, linked from the run
+    file; :meth:`set_status` with a final status packs them into it. Only the
+    process holding the log's lock (:func:`lock_log`) replaces the published
+    file, and only by a complete, closed one.
     """
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
@@ -371,26 +366,18 @@ class LogWriter:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             tmp = self._scratch()
             with h5py.File(tmp, "w") as f:
-                a = f.attrs
-                a["schema"] = SCHEMA
-                a["schema_version"] = SCHEMA_VERSION
-                a["status"] = "running"
-                a["name"] = info.name
-                a["created"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
-                a["config"] = info.config_text
-                a["config_hash"] = info.config_hash
-                a["seed"] = info.seed
-                a["n_trials"] = info.n_trials
-                a["iterations"] = info.iterations
-                a["source"] = str(info.extra.get("source", ""))
-                a["versions"] = json.dumps(info.extra.get("versions", {}))
-                a["plugins"] = json.dumps(info.plugins)
-                a["worlds"] = json.dumps(info.worlds)
-                if info.extra.get("sensor"):
-                    a["sensor"] = json.dumps(info.extra["sensor"])
-                a["inputs"] = json.dumps(info.extra.get("inputs", {}))
-                if info.extra.get("code_hash"):
-                    a["code_hash"] = str(info.extra["code_hash"])
+                ex = info.extra
+                f.attrs.update({
+                    "schema": SCHEMA, "schema_version": SCHEMA_VERSION, "status": "running",
+                    "name": info.name, "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                    "config": info.config_text, "config_hash": info.config_hash,
+                    "seed": info.seed, "n_trials": info.n_trials, "iterations": info.iterations,
+                    "source": str(ex.get("source", "")),
+                    "versions": json.dumps(ex.get("versions", {})),
+                    "plugins": json.dumps(info.plugins), "worlds": json.dumps(info.worlds),
+                    **({"sensor": json.dumps(ex["sensor"])} if ex.get("sensor") else {}),
+                    "inputs": json.dumps(ex.get("inputs", {})),
+                    **({"code_hash": str(ex["code_hash"])} if ex.get("code_hash") else {})})
                 f.create_group("trials")
             os.replace(tmp, self.path)
         except BaseException as exc:
@@ -521,32 +508,22 @@ def _write_trial(g: h5py.Group, trial: TrialResult, behaviour_labels: list[str] 
     g.attrs["index"] = trial.index
     g.attrs["seed"] = np.uint64(trial.seed)
     g.attrs["world"] = trial.world
-    for k, v in trial.summary.items():
-        _write_value(g.require_group("summary"), k.replace("/", "."), v)
-    for k, v in trial.arrays.items():
-        _write_value(g, k, v)
+    groups = {"summary": {k.replace("/", "."): v for k, v in trial.summary.items()},
+              **trial.arrays, "behaviours": {lb: dict(d) for lb, d in trial.behaviours.items()}}
+    for label, pol in trial.policies.items():
+        box = groups["behaviours"].setdefault(label, {})
+        for out, o in pol.outputs.items():
+            box[f"policy/{out}"] = np.asarray(o.rules).astype(np.int16)
+            box[f"actions/{out}"], box[f"units/{out}"] = o.actions, o.unit
+            if o.q is not None:
+                box[f"q/{out}"] = np.asarray(o.q, dtype=np.float64)
+    groups |= {"episodes": trial.episodes, "plugins": trial.plugin_data,
+               "situations": trial.situations}
+    for k, v in groups.items():
+        if not isinstance(v, dict) or v:  # (no empty groups)
+            _write_value(g, k, v)
     if behaviour_labels:
         g["weights"].attrs["columns"] = json.dumps(behaviour_labels)
-    for label, data in trial.behaviours.items():
-        bg = g.require_group("behaviours").require_group(label)
-        for k, v in data.items():
-            _write_value(bg, k, v)
-    for label, pol in trial.policies.items():
-        bg = g.require_group("behaviours").require_group(label)
-        for out, o in pol.outputs.items():
-            _write_value(bg, f"policy/{out}", np.asarray(o.rules).astype(np.int16))
-            _write_value(bg, f"actions/{out}", o.actions)
-            _write_value(bg, f"units/{out}", o.unit)
-            if o.q is not None:
-                _write_value(bg, f"q/{out}", np.asarray(o.q, dtype=np.float64))
-    for k, v in trial.episodes.items():
-        _write_value(g.require_group("episodes"), k, v)
-    for plugin, data in trial.plugin_data.items():
-        pg = g.require_group("plugins").require_group(plugin)
-        for k, v in data.items():
-            _write_value(pg, k, v)
-    for k, v in trial.situations.items():
-        _write_value(g.require_group("situations"), k, v)
 
 
 def _summary_row(g: h5py.Group) -> dict[str, Any]:

@@ -411,14 +411,17 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
     t = 0
     pose = env.start
     n_done = spec.iterations
+    ctx = None
     try:
-        reading = sensor.read(world, pose, rng)
-        check_reading(reading, d)
-        step_at = at_u
-        u = interp.memberships(reading)
-        check_memberships(u, c)
-        ctx = Context(0, pose, reading, u, _nearest(reading), world, goal)
         for t in range(spec.iterations):
+            if ctx is None:  # the trial's (or a training episode's) first reading
+                step_at = at_read
+                reading = sensor.read(world, pose, rng)
+                check_reading(reading, d)
+                step_at = at_u
+                u = interp.memberships(reading)
+                check_memberships(u, c)
+                ctx = Context(t, pose, reading, u, _nearest(reading), world, goal)
             proposals = {}
             for lb, beh, step_at in at_propose:  # noqa: B007 - step_at names the caller on a fault
                 proposals[lb] = check_proposal(beh.propose(ctx))
@@ -454,13 +457,7 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
                 break
             if chain is not None and chain.over(ctx, t + 1, spec.iterations):
                 pose, goal = next(chain.pairs)  # the next training episode starts here
-                step_at = at_read
-                reading = sensor.read(world, pose, rng)
-                check_reading(reading, d)
-                step_at = at_u
-                u = interp.memberships(reading)
-                check_memberships(u, c)
-                ctx = Context(t + 1, pose, reading, u, _nearest(reading), world, goal)
+                ctx = None
     except (KeyboardInterrupt, TaskCancelled, PluginFault, InputError):
         raise  # (a plugin's InputError names the input it found wrong)
     except Exception as exc:
@@ -681,24 +678,19 @@ def _loop_fault(exc: Exception, step_at: _Step, trial: int, t: int, res: Resolve
 def _check_trial_values(readings: np.ndarray, u: np.ndarray, weights: np.ndarray,
                         origins: dict[str, Origin], trial: int) -> None:
     """Vectorised checks of every reading, membership vector and weight of a finished trial."""
-    bad = ~np.isfinite(readings).all(axis=1)
-    if bad.any():
-        t = int(np.argmax(bad))
-        raise PluginFault(sensor_spec_mismatch(readings[t], readings.shape[1]) or "non-finite",
-                          where=str(origins["sensor"]), method="read", trial=trial, iteration=t)
-    bad = ~np.isfinite(u).all(axis=1) | (u < 0).any(axis=1) | \
-        (np.abs(u.sum(axis=1) - 1.0) > MEMBERSHIP_SUM_TOL)
-    if bad.any():
-        t = int(np.argmax(bad))
-        raise PluginFault(memberships_mismatch(u[t], u.shape[1]) or "invalid",
-                          where=str(origins["interpreter"]), method="memberships", trial=trial,
-                          iteration=t)
-    bad = ~np.isfinite(weights).all(axis=1)
-    if bad.any():
-        t = int(np.argmax(bad))
-        raise PluginFault(f"returned non-finite weights {weights[t].tolist()}",
-                          where=str(origins["arbiter"]), method="combine", trial=trial,
-                          iteration=t)
+    u_bad = (u < 0).any(axis=1) | (np.abs(u.sum(axis=1) - 1.0) > MEMBERSHIP_SUM_TOL)
+    for values, bad, key, method, why in (
+            (readings, None, "sensor", "read",
+             lambda r: sensor_spec_mismatch(r, readings.shape[1]) or "non-finite"),
+            (u, u_bad, "interpreter", "memberships",
+             lambda m: memberships_mismatch(m, u.shape[1]) or "invalid"),
+            (weights, None, "arbiter", "combine",
+             lambda w: f"returned non-finite weights {w.tolist()}")):
+        bad = ~np.isfinite(values).all(axis=1) | (False if bad is None else bad)
+        if bad.any():
+            t = int(np.argmax(bad))
+            raise PluginFault(why(values[t]), where=str(origins[key]), method=method,
+                              trial=trial, iteration=t)
 
 
 def _checked(origin: Origin, method: str, check: Callable[[Any], Any], fn: Callable[[], Any],

@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import inspect
 import math
+import numbers
 from collections.abc import Sequence
 from typing import Any
 
-from sitframe.errors import InputError, did_you_mean
+from sitframe.errors import InputError, InputTypeError, did_you_mean
 
 
 def _fmt(value: Any) -> str:
@@ -28,28 +29,46 @@ def number(
     lo_open: bool = False,
     hi_open: bool = False,
     integer: bool = False,
+    hint: str = "",
 ) -> float | int:
-    """Check that ``value`` is a finite (integer) number within bounds and return it."""
+    """Check that ``value`` is a finite (integer) number within bounds and return it.
+
+    Parameters
+    ----------
+    name
+        The parameter's name (the error's ``key``).
+    value
+        A real number (Python or numpy; not a bool).
+    lo, hi
+        Bounds, closed unless ``lo_open`` / ``hi_open``; ``None``: unbounded.
+    integer
+        Whether ``value`` must be integral (``3.0`` is accepted as 3).
+    hint
+        Appended to what is expected, e.g. why a bound is what it is.
+
+    Returns
+    -------
+    float or int
+        ``value`` as a Python float (an int if ``integer``).
+
+    Raises
+    ------
+    InputTypeError
+        ``value`` is not a real number, or not integral where an integer is expected.
+    InputError
+        ``value`` is non-finite or out of bounds.
+    """
     kind = "an integer" if integer else "a number"
     bounds = ""
     if lo is not None or hi is not None:
-        left = ("(" if lo_open else "[") + (str(lo) if lo is not None else "-inf")
-        right = (str(hi) if hi is not None else "inf") + (")" if hi_open else "]")
+        left = "(-inf" if lo is None else ("(" if lo_open else "[") + str(lo)
+        right = "inf)" if hi is None else str(hi) + (")" if hi_open else "]")
         bounds = f" in {left}, {right}"
-    expected = f"expected {kind}{bounds}"
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        try:
-            import numpy as np
-
-            if isinstance(value, np.integer | np.floating) and not isinstance(value, bool):
-                value = value.item()
-            else:
-                raise TypeError
-        except TypeError:
-            raise InputError(f"{expected}, got {type(value).__name__} {_fmt(value)}",
-                             key=name) from None
+    expected = f"expected {kind}{bounds}{hint}"
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):  # (numpy's too)
+        raise InputTypeError(f"{expected}, got {type(value).__name__} {_fmt(value)}", key=name)
     if integer and not (isinstance(value, int) or float(value).is_integer()):
-        raise InputError(f"{expected}, got {_fmt(value)}", key=name)
+        raise InputTypeError(f"{expected}, got {_fmt(value)}", key=name)
     if not math.isfinite(value):
         raise InputError(f"{expected}, got non-finite {value}", key=name)
     if lo is not None and (value < lo or (lo_open and value == lo)):
@@ -100,6 +119,20 @@ def string(name: str, value: Any) -> str:
     if not isinstance(value, str) or not value:
         raise InputError(f"expected a non-empty string, got {_fmt(value)}", key=name)
     return value
+
+
+def known_keys(table: Any, known: Sequence[str], *, prefix: str = "",
+               file: str | None = None) -> None:
+    """Reject a key of the mapping ``table`` that is not in ``known``, suggesting the closest.
+
+    The error's key is ``prefix.key`` (``key`` without a prefix); ``known`` is
+    listed in the order given.
+    """
+    for key in table:
+        if key not in known:
+            raise InputError(f"unknown key{did_you_mean(str(key), known)}; expected one of "
+                             f"{', '.join(known)}", file=file,
+                             key=f"{prefix}.{key}" if prefix else str(key))
 
 
 def accepted_params(factory: Any) -> tuple[set[str], bool]:

@@ -275,12 +275,10 @@ def _check_collect(exp: Experiment, source: str | None) -> None:
     if c.mode in ("wander", "both"):  # wandering holds each command 1/rate_hz seconds
         try:
             dataclasses.replace(exp.res.robot, control_period_s=1.0 / rate)
-        except InputError as exc:
-            raise InputError(f"wander mode holds each command 1/rate_hz s: {exc.message}",
-                             file=source, key="collect.rate_hz") from None
-        except (ValueError, TypeError) as exc:
-            raise InputError(f"wander mode holds each command 1/rate_hz s: {exc}",
-                             file=source, key="collect.rate_hz") from None
+        except (ValueError, TypeError) as exc:  # (an InputError's message without its key)
+            raise InputError(f"wander mode holds each command 1/rate_hz s: "
+                             f"{getattr(exc, 'message', exc)}", file=source,
+                             key="collect.rate_hz") from None
         n += c.wander_samples * len(c.worlds)
     if c.mode in ("trajectory", "both"):
         turn_step = math.radians(exp.res.robot.max_turn_rate_deg_s) / rate

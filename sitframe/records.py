@@ -218,8 +218,6 @@ class TrialResult:
     episodes: dict[str, np.ndarray] = field(default_factory=dict)
     policies: dict[str, LearnedPolicy] = field(default_factory=dict)
     plugin_data: dict[str, dict[str, Any]] = field(default_factory=dict)
-    #: With an evolving interpreter (:mod:`sitframe.situations`): the trial's final
-    #: situations (``state``), their history (``events``) and final number (``count``).
     situations: dict[str, Any] = field(default_factory=dict)
 
 

@@ -17,19 +17,10 @@ from typing import Any
 import numpy as np
 
 from sitframe.config import DEFAULT_PROTOCOL, Component, Config
-from sitframe.contract import (
-    Origin,
-    call,
-    check_protocol,
-    fault,
-    sensor_spec_mismatch,
-)
+from sitframe.contract import Origin, call, check_protocol, fault, sensor_spec_mismatch
 from sitframe.errors import InputError, PluginError, PluginFault
 from sitframe.pluginmanager import Registry
-from sitframe.records import (
-    RunContext,
-    SensorSpec,
-)
+from sitframe.records import RunContext, SensorSpec
 from sitframe.robot import RobotParams
 from sitframe.world import World, load_world
 

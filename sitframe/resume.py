@@ -98,9 +98,8 @@ def prepare_resume(
         check_state(exp.res, kwargs["interpreter_state"], p)
     have = set(log.trial_indices())
     kwargs["skip"] = frozenset(have)
-    missing = [k for k in range(exp.info.n_trials) if k not in have]
-    if "learn" not in exp.config.experiment.stages:
-        missing = []
+    missing = [k for k in range(exp.info.n_trials) if k not in have] \
+        if "learn" in exp.config.experiment.stages else []
     return exp, kwargs, missing
 
 

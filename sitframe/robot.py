@@ -431,7 +431,7 @@ def _near(segs: geo.SegmentSet, x: float, y: float, reach: float) -> geo.Segment
         idx = idx[: kern.near_segments(x, y, segs.packed, reach * reach, idx)]
     else:
         idx = np.flatnonzero(_dist2_cols(np.array([x]), np.array([y]), segs)[0] < reach * reach)
-    return _near_set(segs, idx) if idx.size else None
+    return segs.subset(idx) if idx.size else None
 
 
 def _first_contact(xs: np.ndarray, ys: np.ndarray, near: geo.SegmentSet, r2: float) -> int:
@@ -480,17 +480,6 @@ def _backoff(cx: float, cy: float, nx: float, ny: float, length: float, near: ge
     ok = d2b >= (np.minimum(d2b[0], r2) - 1e-15 if inside else r2)
     m = int(np.count_nonzero(np.logical_and.accumulate(ok))) - 1
     return (float(s[m]), float(bx[m]), float(by[m])) if m > 0 else (0.0, cx, cy)
-
-
-def _near_set(segs: geo.SegmentSet, idx: np.ndarray) -> geo.SegmentSet:
-    """Sub-set of ``segs`` without recomputing the derived arrays."""
-    sub = geo.SegmentSet.__new__(geo.SegmentSet)
-    sub.segments = segs.segments[idx]
-    sub.n = idx.size
-    sub.packed = segs.packed[:, idx]
-    sub.ax, sub.ay, sub.ex, sub.ey, sub.inv_len2 = sub.packed
-    sub.lo, sub.hi = segs.lo[idx], segs.hi[idx]
-    return sub
 
 
 def _dist2_cols(xs: np.ndarray, ys: np.ndarray, s: geo.SegmentSet) -> np.ndarray:

@@ -72,9 +72,11 @@ from typing import Any
 
 import numpy as np
 
-from sitframe.config import META_KEYS
+from sitframe.config import DEFAULTS, META_KEYS, load_config, validate_config
 from sitframe.errors import InputError, did_you_mean, note
+from sitframe.params import accepted_params, known_keys
 from sitframe.records import summary_key
+from sitframe.robot import RobotParams
 
 # start-up time: this module is imported whenever the command line builds its parser
 # (``sitframe --help`` and every command), so what only one command needs is imported
@@ -178,10 +180,7 @@ def _read_sweep_file(p: Path, path: str) -> dict[str, Any]:
 
 def _check_head(head: dict[str, Any], path: str, out: str | None) -> dict[str, Any]:
     """The ``[sweep]`` table: known keys, a ``base``, an ``out`` inside the working folder."""
-    for key in head:
-        if key not in _SWEEP_KEYS:
-            raise InputError(f"unknown key{did_you_mean(key, _SWEEP_KEYS)}; expected one of "
-                             f"{', '.join(_SWEEP_KEYS)}", file=path, key=f"sweep.{key}")
+    known_keys(head, _SWEEP_KEYS, prefix="sweep", file=path)
     if "base" not in head:
         raise InputError("missing 'base' (a preset name or the path of an experiment .toml)",
                          file=path, key="sweep.base")
@@ -202,8 +201,6 @@ def _check_head(head: dict[str, Any], path: str, out: str | None) -> dict[str, A
 
 def _load_base(base: str, p: Path, path: str) -> tuple[dict[str, Any], str, str]:
     """The base experiment: a preset name, or a .toml path relative to the sweep file."""
-    from sitframe.config import load_config
-
     base_arg = base
     if base.endswith(".toml") or "/" in base:
         bp = Path(base)
@@ -264,10 +261,6 @@ def check_key(key: str, cfg: dict[str, Any], registry: Any, *, file: str | None 
     InputError
         Located at ``<where>.<key>`` in ``file``, with the closest valid key.
     """
-    from sitframe.config import DEFAULTS
-    from sitframe.params import accepted_params
-    from sitframe.robot import RobotParams
-
     loc = f"{where}.{key}"
     parts = key.split(".")
 
@@ -382,7 +375,6 @@ def point_names(grid: dict[str, list[Any]], *, file: str | None = None
 
 
 def _prepare_points(sweep: Sweep, plugins_dirs: tuple[str, ...]) -> list[Point]:
-    from sitframe.config import validate_config
     from sitframe.prepare import prepare_experiment
 
     points = []
@@ -479,12 +471,8 @@ def summarise_tables(tables: list[np.ndarray]) -> dict[str, Any]:
     row["conv_iter_median"], row["conv_iter_q25"], row["conv_iter_q75"] = _median_iqr(it)
     post = col("collisions_per_1000_after_convergence")[conv]
     row["post_coll_median"], row["post_coll_q25"], row["post_coll_q75"] = _median_iqr(post)
-    worlds: list[str] = []
-    for t in tables:
-        for name in t.dtype.names or ():
-            m = re.fullmatch(r"eval\.(.+)\.collisions_per_1000", name)
-            if m and m.group(1) not in worlds:
-                worlds.append(m.group(1))
+    worlds = list(dict.fromkeys(m.group(1) for t in tables for name in t.dtype.names or ()
+                                if (m := re.fullmatch(r"eval\.(.+)\.collisions_per_1000", name))))
     for w in worlds:
         c = col(summary_key("eval", w, "collisions_per_1000", sep="."))
         k = summary_key("eval", w, "coll", sep="_")

@@ -441,7 +441,7 @@ def parse_world(text: str, *, file: str | None = None) -> World:
             msg = f"{msg}, line {text.count(chr(10)) + (not text.endswith(chr(10)))}"
         raise InputError(f"not valid TOML: {msg}", file=file) from exc
 
-    _check_keys(data, _TOP_KEYS, "", file)
+    P.known_keys(data, _TOP_KEYS, file=file)
     for req in ("name", "robot", "walls"):
         if req not in data:
             what = {"name": 'name = "..."', "robot": "[robot] with start = [x, y, heading_deg]",
@@ -564,7 +564,7 @@ def _table(data: dict[str, Any], name: str, keys: tuple[str, ...], required: str
     if not isinstance(t, dict):
         raise InputError(f"expected a table [{name}] with {required} = {shape}, got {t!r}",
                          file=file, key=name)
-    _check_keys(t, keys, name, file)
+    P.known_keys(t, keys, prefix=name, file=file)
     if required not in t:
         raise InputError(f"missing required key '{required}'; expected {required} = {shape}",
                          file=file, key=f"{name}.{required}")
@@ -592,18 +592,6 @@ def _check_start(world: World, xy: np.ndarray, radius: float, *, file: str | Non
             f"at least the robot radius {radius:g} m so the robot does not start touching it",
             file=file, key="robot.start",
         )
-
-
-def _check_keys(table: dict[str, Any], allowed: tuple[str, ...], prefix: str, file: str | None
-                ) -> None:
-    for key in table:
-        if key not in allowed:
-            path = f"{prefix}.{key}" if prefix else key
-            raise InputError(
-                f"unknown key {key!r}{did_you_mean(key, allowed)}; expected one of: "
-                f"{', '.join(allowed)}",
-                file=file, key=path,
-            )
 
 
 def _number(v: Any, key: str, file: str | None, *, positive: bool = False) -> float:
@@ -637,7 +625,7 @@ def _shapes(
     kind = "polygon" if polygon else "polyline"
     for i, item in enumerate(items):
         where = f"{key}[{i}]"
-        _check_keys(item, _SHAPE_KEYS, where, file)
+        P.known_keys(item, _SHAPE_KEYS, prefix=where, file=file)
         if "points" not in item:
             raise InputError(
                 "missing required key 'points'; expected points = [[x, y], ...]",

@@ -361,7 +361,7 @@ CASES = [
     case("regression-log-trial-attr-missing", "evaluate {D}/no-trial-attr.h5 --world training",
          "{D}/no-trial-attr.h5", "cannot read the log", "'seed'"),
     case("regression-evaluate-negative-seed", "evaluate {D}/small.h5 --world training --seed -1",
-         "--seed", "non-negative"),
+         "--seed:", "expected an integer in [0, inf), got -1"),
     case("regression-analyse-missing-trial", "analyse {D}/small.h5 --trial 5 -o out",
          "{D}/small.h5: --trial:", "no trial(s) [5]"),
     case("regression-run-out-unwritable", "run {D}/small.toml --workers 1 --out "

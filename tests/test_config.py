@@ -38,7 +38,7 @@ def test_defaults_are_table_a1():
         ("[experiment]\ntrails = 3\n" + MINIMAL, r"experiment.trails: unknown key \(did you "
                                                  r"mean 'trials'\?\)"),
         ("[experiment]\ntrials = 0\n" + MINIMAL, r"experiment.trials: expected an integer in "
-                                                 r"\[1, inf\], got 0"),
+                                                 r"\[1, inf\), got 0"),
         ("[experiment]\ntrials = 'x'\n" + MINIMAL, r"experiment.trials: expected an integer .*"
                                                    r"got str 'x'"),
         ("[experiment]\ndefault_speed = nan\n" + MINIMAL, r"experiment.default_speed: .*"

@@ -11,6 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
+from sitframe.errors import InputError
 from sitframe.fcm import (
     MEASURE_DIRECTIONS,
     FCMResult,
@@ -167,21 +168,39 @@ def test_init_centers_used():
 # ------------------------------------------------------------------------ bad inputs
 
 
+_C = "c: expected an integer in [2, 300] (at most n_samples), got "
+_M = "m: expected a number in (1, inf) (m = 1 is a hard partition), got "
+_TOL = "tol: expected a number in (0, inf) (centre movement, units of X), got "
+
+
+@pytest.mark.parametrize(
+    "kwargs, exc, message",
+    [
+        (dict(c=1), ValueError, _C + "1"),
+        (dict(c=0), ValueError, _C + "0"),
+        (dict(c=301), ValueError, _C + "301"),
+        (dict(c=2.5), TypeError, _C + "2.5"),
+        (dict(c=True), TypeError, _C + "bool True"),
+        (dict(c=3, m=1.0), ValueError, _M + "1.0"),
+        (dict(c=3, m=0.5), ValueError, _M + "0.5"),
+        (dict(c=3, m=float("nan")), ValueError, _M + "non-finite nan"),
+        (dict(c=3, tol=0.0), ValueError, _TOL + "0.0"),
+        (dict(c=3, tol=-1e-3), ValueError, _TOL + "-0.001"),
+        (dict(c=3, max_iter=0), ValueError, "max_iter: expected an integer in [1, inf), got 0"),
+        (dict(c=3, max_iter=2.5), TypeError, "max_iter: expected an integer in [1, inf), got 2.5"),
+    ],
+)
+def test_bad_scalar_arguments_are_named(kwargs, exc, message):
+    """A bad scalar argument is refused by sitframe.params (an InputError, and a TypeError
+    for a wrong type) naming the argument, what was expected and what was given."""
+    with pytest.raises(exc) as info:
+        fcm(blobs(), **kwargs)
+    assert isinstance(info.value, InputError) and str(info.value) == message
+
+
 @pytest.mark.parametrize(
     "kwargs, exc, words",
     [
-        (dict(c=1), ValueError, ["c must", ">= 2", "got 1"]),
-        (dict(c=0), ValueError, ["c must"]),
-        (dict(c=301), ValueError, ["c must", "n_samples (300)", "got 301"]),
-        (dict(c=2.5), TypeError, ["c must be an integer"]),
-        (dict(c=True), TypeError, ["c must"]),
-        (dict(c=3, m=1.0), ValueError, ["m must", "> 1", "got 1.0"]),
-        (dict(c=3, m=0.5), ValueError, ["m must"]),
-        (dict(c=3, m=float("nan")), ValueError, ["m must"]),
-        (dict(c=3, tol=0.0), ValueError, ["tol must", "> 0"]),
-        (dict(c=3, tol=-1e-3), ValueError, ["tol must"]),
-        (dict(c=3, max_iter=0), ValueError, ["max_iter must", ">= 1", "got 0"]),
-        (dict(c=3, max_iter=2.0), TypeError, ["max_iter must be an integer"]),
         (dict(c=3, init_centers=np.zeros((2, 8))), ValueError, ["init_centers", "(3, 8)",
                                                                 "(2, 8)"]),
         (dict(c=3, init_centers=np.zeros((3, 7))), ValueError, ["init_centers"]),
@@ -205,7 +224,7 @@ def test_bad_arguments_are_named(kwargs, exc, words):
         (np.zeros((2, 3, 4)), ["X must be a 2-D", "3-D"]),
         (np.array([[0.0, np.nan], [1.0, 1.0], [2.0, 2.0]]), ["X must be finite", "nan"]),
         (np.array([[0.0, np.inf], [1.0, 1.0], [2.0, 2.0]]), ["X must be finite", "inf"]),
-        (np.zeros((1, 3)), ["c must", "n_samples (1)"]),
+        (np.zeros((1, 3)), ["c: expected an integer in [2, 1] (at most n_samples), got 2"]),
         (np.array([["a", "b"]]), ["X must be a real numeric array"]),
     ],
 )
@@ -217,7 +236,8 @@ def test_bad_X(X, words):
 
 
 def test_memberships_bad_arguments():
-    with pytest.raises(ValueError, match="m must"):
+    with pytest.raises(ValueError, match=r"^m: expected a number in \(1, inf\) \(m = 1 is a "
+                                         r"hard partition\), got 1\.0$"):
         memberships(np.zeros((2, 2)), np.ones((2, 2)), 1.0)
     with pytest.raises(ValueError, match="centers must have shape"):
         memberships(np.zeros((2, 2)), np.ones((2, 3)), 1.2)
@@ -388,13 +408,16 @@ _X = np.array([[0.0, 1.0], [1.0, 0.0], [2.0, 2.0]])
     (lambda: fcm(_X * 1e151, 2), ValueError,
      r"^X values must have magnitude <= 1e150 \(squared distances must not overflow\), "
      r"got 2e\+151$"),
-    (lambda: fcm(_X, 2, m=True), TypeError, r"^m must be a real number > 1, got True \(bool\)$"),
-    (lambda: fcm(_X, 2, m="2"), TypeError, r"^m must be a real number > 1, got '2' \(str\)$"),
+    (lambda: fcm(_X, 2, m=True), TypeError,
+     r"^m: expected a number in \(1, inf\) \(m = 1 is a hard partition\), got bool True$"),
+    (lambda: fcm(_X, 2, m="2"), TypeError,
+     r"^m: expected a number in \(1, inf\) \(m = 1 is a hard partition\), got str '2'$"),
     (lambda: fcm(_X, "2"), TypeError,
-     r"^c must be an integer >= 2 and <= n_samples \(3\), got '2' \(str\)$"),
+     r"^c: expected an integer in \[2, 3\] \(at most n_samples\), got str '2'$"),
     (lambda: fcm(_X, 2, max_iter=1.5), TypeError,
-     r"^max_iter must be an integer, got 1\.5 \(float\)$"),
-    (lambda: fcm(_X, 2, max_iter=0), ValueError, r"^max_iter must be an integer >= 1, got 0$"),
+     r"^max_iter: expected an integer in \[1, inf\), got 1\.5$"),
+    (lambda: fcm(_X, 2, max_iter=0), ValueError,
+     r"^max_iter: expected an integer in \[1, inf\), got 0$"),
     (lambda: fcm(_X, 2, seed=-1), ValueError,
      r"^seed must be a non-negative integer, a numpy Generator or None, got -1$"),
     (lambda: fcm(_X, 2, seed="x"), TypeError,
