@@ -450,12 +450,15 @@ def _median_iqr(x: np.ndarray) -> tuple[float, float, float]:
     return float(q50), float(q25), float(q75)
 
 
-def summarise_tables(tables: list[np.ndarray]) -> dict[str, Any]:
+def summarise_tables(tables: list[np.ndarray], *, learned: bool = True) -> dict[str, Any]:
     """Statistics of the trials in one or more logs' summary tables, pooled.
 
     Medians and IQRs as in the module docstring; for every evaluation world
     also the worst trial (``eval_<w>_coll_max``) and the share of trials above
-    10 collisions per 1000 (``eval_<w>_coll_over10``).
+    10 collisions per 1000 (``eval_<w>_coll_over10``). ``learned=False`` (runs
+    without a ``learn`` stage, e.g. goal episodes of frozen behaviours) makes
+    ``convergence_rate`` NaN, shown as "–": nothing was learned, so "0 of N
+    converged" would be untrue.
     """
     n = sum(len(t) for t in tables)
     row: dict[str, Any] = {"trials": n}
@@ -466,7 +469,7 @@ def summarise_tables(tables: list[np.ndarray]) -> dict[str, Any]:
         return np.concatenate(parts) if parts else np.empty(0)
 
     conv = col("converged") > 0.5
-    row["convergence_rate"] = float(conv.mean()) if n else math.nan
+    row["convergence_rate"] = float(conv.mean()) if n and learned else math.nan
     it = col("convergence_iteration")[conv]
     row["conv_iter_median"], row["conv_iter_q25"], row["conv_iter_q75"] = _median_iqr(it)
     post = col("collisions_per_1000_after_convergence")[conv]
@@ -516,7 +519,13 @@ def summarise_log(path: str | Path) -> dict[str, Any]:
     from sitframe.logs import open_log
 
     log = open_log(path)
-    return {"log": str(path), "status": log.status, **summarise_tables([log.summary()])}
+    return {"log": str(path), "status": log.status,
+            **summarise_tables([log.summary()], learned=_learned(log))}
+
+
+def _learned(log: Any) -> bool:
+    """Whether the logged run had a ``learn`` stage."""
+    return "learn" in log.config.get("experiment", {}).get("stages", ["learn"])
 
 
 SEED_KEY = "experiment.seed"
@@ -540,12 +549,14 @@ def pool_over_seeds(result: dict[str, Any]) -> list[dict[str, Any]]:
         groups.setdefault(tuple(_fmt_value(r[k]) for k in others), []).append(r)
     rows = []
     for members in groups.values():
-        tables = [open_log(r["log"]).summary() for r in members]
+        logs = [open_log(r["log"]) for r in members]
+        tables = [lg.summary() for lg in logs]
         first = members[0]
         rows.append({"point": ", ".join(f"{k}={_fmt_value(first[k])}" for k in others) or "all",
                      **{k: first[k] for k in others}, "seeds": len(members),
                      "status": "complete" if all(r["status"] == "complete" for r in members)
-                     else "incomplete", **summarise_tables(tables)})
+                     else "incomplete",
+                     **summarise_tables(tables, learned=any(map(_learned, logs)))})
     return rows
 
 
@@ -629,7 +640,7 @@ def markdown_table(result: dict[str, Any], *, pooled: bool = False) -> str:
         n = r["trials"]
         rate = r["convergence_rate"]
         cells.append(str(n))
-        cells.append(f"{round(rate * n)}/{n}" if n else "–")
+        cells.append(f"{round(rate * n)}/{n}" if n and math.isfinite(rate) else "–")
         cells.append(_med_iqr(r, "conv_iter", 0))
         cells.append(_med_iqr(r, "post_coll", 1))
         for w in worlds:

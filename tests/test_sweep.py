@@ -237,3 +237,17 @@ def test_tables_give_an_episode_protocols_scores_per_world():
     assert "| world | success_rate | spl |" in md
     assert "| goal | 0.90 [0.85, 0.95] | 0.60 [0.55, 0.65] |" in md
     assert "| u-trap | 0.50 [0.50, 0.50] | – |" in md
+
+
+def test_a_run_that_learned_nothing_shows_no_convergence_count():
+    """Goal episodes of frozen behaviours: "–" where "0/N converged" would be untrue; a
+    learning run whose trials did not converge still shows 0/N."""
+    from sitframe.sweep import markdown_table, summarise_tables
+
+    t = np.array([(0, False, -1.0), (1, False, -1.0)],
+                 [("trial", "i8"), ("converged", "?"), ("convergence_iteration", "f8")])
+    for learned, cell in ((False, "| 2 | – |"), (True, "| 2 | 0/2 |")):
+        row = summarise_tables([t], learned=learned)
+        assert (row["convergence_rate"] == 0.0) is learned
+        md = markdown_table({"points": [{"point": "all", **row}], "keys": []})
+        assert md.splitlines()[2].startswith(cell)
