@@ -24,7 +24,7 @@ from sitframe.config import (
 )
 from sitframe.errors import InputError
 from sitframe.logged import BEST_TRIAL_RULE, best_of, check_state, logged_policy
-from sitframe.logs import open_log
+from sitframe.logs import Log, open_log
 from sitframe.loop import (
     EVAL_KEYS,
     STAGE_BATCH,
@@ -50,6 +50,7 @@ def evaluate_log(
     goal_episodes: int = 0,
     arbiter: str | None = None,
     fusion: str = "goal-finding",
+    checked: Log | None = None,
 ) -> dict[str, Any]:
     """Run trial ``trial``'s frozen policies from a log in ``world``.
 
@@ -80,9 +81,15 @@ def evaluate_log(
     its defaults). Returns ``episodes``, ``success_rate``,
     ``collisions_per_episode``, ``collision_free_rate``, ``spl``,
     ``mean_time_s``, ``heading_change_per_m``, ``mean_path_length_m``.
+
+    ``checked``: the log at ``log_path``, already opened and checked (its
+    layout and checksums), when several trials of it are evaluated in turn
+    (:func:`select_trial`); by default the log is opened and checked here.
     """
-    log = open_log(log_path)
-    log.check()
+    log = checked
+    if log is None:
+        log = open_log(log_path)
+        log.check()
     cfg = validate_config(log.config, file=log_path)
     tl = log.trial(trial)
     policies = {label: p for label in tl.behaviours
@@ -186,9 +193,12 @@ _SELECTED: dict[tuple[Any, ...], int] = {}
 
 def _select(path: str, sel: dict[str, Any], plugins_dirs: tuple[str, ...]) -> int:
     best, best_score = -1, -math.inf
-    for k in open_log(path).trial_indices():
+    log = open_log(path)
+    log.check()  # (once, not once per trial)
+    for k in log.trial_indices():
         out = evaluate_log(path, world=str(sel["world"]), trial=k, seed=int(sel["seed"]),
-                           goal_episodes=int(sel["episodes"]), plugins_dirs=plugins_dirs)
+                           goal_episodes=int(sel["episodes"]), plugins_dirs=plugins_dirs,
+                           checked=log)
         v = out.get(str(sel["score"]))
         if not isinstance(v, (int, float)) or math.isnan(v):
             raise InputError(f"cannot select a trial by '{sel['score']}': the episodes report "

@@ -160,6 +160,11 @@ class World:
         return geo.SegmentSet(self.segments)
 
     @cached_property
+    def _free_cells_memo(self) -> dict[tuple[float, float], np.ndarray]:
+        """:meth:`free_cells` results by (cell, radius): coverage is scored per episode."""
+        return {}
+
+    @cached_property
     def _regions(self) -> tuple[np.ndarray | None, tuple[np.ndarray, ...]]:
         """(outer polygon or None, solid polygons: obstacles + inner closed walls)."""
         closed = [w[:-1] for w in self.walls if _is_closed(w)]
@@ -282,7 +287,8 @@ class World:
         Returns
         -------
         numpy.ndarray
-            (n, 2) cell centres [m].
+            (n, 2) cell centres [m], read-only: computed once per world, cell and
+            radius (goal episodes score coverage once per episode).
 
         Raises
         ------
@@ -297,6 +303,16 @@ class World:
         if n_cells > MAX_GRID_CELLS * max(1.0, (COVERAGE_CELL / cell) ** 2):
             raise ValueError(f"a {cell:g} m grid over the world has {n_cells} cells; expected "
                              f"at most {MAX_GRID_CELLS} cells of {COVERAGE_CELL:g} m")
+        key = (float(cell), float(radius))
+        if key not in self._free_cells_memo:
+            free = self._free_cells(cell, radius)
+            free.setflags(write=False)
+            self._free_cells_memo[key] = free
+        return self._free_cells_memo[key]
+
+    def _free_cells(self, cell: float, radius: float) -> np.ndarray:
+        """:meth:`free_cells`, computed (the arguments checked)."""
+        x0, y0, x1, y1 = self.bounds
         xs = np.arange(x0 + cell / 2, x1, cell)
         ys = np.arange(y0 + cell / 2, y1, cell)
         gx, gy = np.meshgrid(xs, ys)

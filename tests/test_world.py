@@ -51,6 +51,10 @@ def test_good_world_parses() -> None:
     cells = w.free_cells(0.5, 0.15)
     assert cells.shape[1] == 2 and w.is_free(cells, 0.15).all()
     assert 40 < len(cells) < 96
+    # computed once per (cell, radius) and shared, so a caller cannot change it for others
+    assert w.free_cells(0.5, 0.15) is cells and w.free_cells(0.5, 0.3) is not cells
+    with pytest.raises(ValueError, match="read-only"):
+        cells[0, 0] = 0.0
     rng = np.random.default_rng(0)
     poses = np.array([w.random_free_pose(rng, 0.15, margin=0.05) for _ in range(50)])
     assert w.is_free(poses[:, :2], 0.2).all()
