@@ -110,12 +110,26 @@ def choice(name: str, value: Any, choices: Sequence[str]) -> str:
 
 
 def boolean(name: str, value: Any) -> bool:
+    """Check that ``value`` is a bool (a TOML ``true``/``false``; 0 and 1 are refused).
+
+    Raises
+    ------
+    InputError
+        ``<name>: expected true or false, got <value>``.
+    """
     if not isinstance(value, bool):
         raise InputError(f"expected true or false, got {_fmt(value)}", key=name)
     return value
 
 
 def string(name: str, value: Any) -> str:
+    """Check that ``value`` is a non-empty string (a name, a path).
+
+    Raises
+    ------
+    InputError
+        ``<name>: expected a non-empty string, got <value>``.
+    """
     if not isinstance(value, str) or not value:
         raise InputError(f"expected a non-empty string, got {_fmt(value)}", key=name)
     return value
