@@ -721,6 +721,11 @@ class Log:
         return self.status == "complete"
 
     @property
+    def learned(self) -> bool:
+        """Whether the logged run had a ``learn`` stage (True when its config does not say)."""
+        return "learn" in self.config.get("experiment", {}).get("stages", ["learn"])
+
+    @property
     def config(self) -> dict[str, Any]:
         text = self.attrs.get("config")
         if not isinstance(text, str):

@@ -678,15 +678,17 @@ def _loop_fault(exc: Exception, step_at: _Step, trial: int, t: int, res: Resolve
 def _check_trial_values(readings: np.ndarray, u: np.ndarray, weights: np.ndarray,
                         origins: dict[str, Origin], trial: int) -> None:
     """Vectorised checks of every reading, membership vector and weight of a finished trial."""
-    u_bad = (u < 0).any(axis=1) | (np.abs(u.sum(axis=1) - 1.0) > MEMBERSHIP_SUM_TOL)
+    def nonfinite(x: np.ndarray) -> np.ndarray:
+        return ~np.isfinite(x).all(axis=1)
+
     for values, bad, key, method, why in (
-            (readings, None, "sensor", "read",
+            (readings, nonfinite(readings), "sensor", "read",
              lambda r: sensor_spec_mismatch(r, readings.shape[1]) or "non-finite"),
-            (u, u_bad, "interpreter", "memberships",
+            (u, nonfinite(u) | (u < 0).any(axis=1)
+             | (np.abs(u.sum(axis=1) - 1.0) > MEMBERSHIP_SUM_TOL), "interpreter", "memberships",
              lambda m: memberships_mismatch(m, u.shape[1]) or "invalid"),
-            (weights, None, "arbiter", "combine",
+            (weights, nonfinite(weights), "arbiter", "combine",
              lambda w: f"returned non-finite weights {w.tolist()}")):
-        bad = ~np.isfinite(values).all(axis=1) | (False if bad is None else bad)
         if bad.any():
             t = int(np.argmax(bad))
             raise PluginFault(why(values[t]), where=str(origins[key]), method=method,

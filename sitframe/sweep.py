@@ -520,12 +520,7 @@ def summarise_log(path: str | Path) -> dict[str, Any]:
 
     log = open_log(path)
     return {"log": str(path), "status": log.status,
-            **summarise_tables([log.summary()], learned=_learned(log))}
-
-
-def _learned(log: Any) -> bool:
-    """Whether the logged run had a ``learn`` stage."""
-    return "learn" in log.config.get("experiment", {}).get("stages", ["learn"])
+            **summarise_tables([log.summary()], learned=log.learned)}
 
 
 SEED_KEY = "experiment.seed"
@@ -556,7 +551,7 @@ def pool_over_seeds(result: dict[str, Any]) -> list[dict[str, Any]]:
                      **{k: first[k] for k in others}, "seeds": len(members),
                      "status": "complete" if all(r["status"] == "complete" for r in members)
                      else "incomplete",
-                     **summarise_tables(tables, learned=any(map(_learned, logs)))})
+                     **summarise_tables(tables, learned=any(lg.learned for lg in logs))})
     return rows
 
 

@@ -142,7 +142,7 @@ def replay_payload(log: Log, trials: dict[int, TrialLog]) -> dict[str, Any]:
     """
     spec = log.sensor
     try:  # a run without the learn stage (e.g. goal episodes with a frozen rule base)
-        learns = "learn" in log.config.get("experiment", {}).get("stages", ["learn"])
+        learns = log.learned
     except InputError:
         learns = True
     P = _Packer()
