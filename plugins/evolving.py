@@ -198,12 +198,11 @@ class EvolvingInterpreter(FCMInterpreter):
         """
         if self.frozen or self.x_prev is None:
             return
-        hit = np.flatnonzero(errors > 0)
-        if hit.size:
-            e = errors[hit]
-            self.err_sum[hit] += e
-            self.err_n[hit] += 1
-            self.err_x[hit] += e[:, None] * self.x_prev
+        hit = errors > 0
+        e = np.where(hit, errors, 0.0)  # (whole rows: adding 0 leaves a row as it was,
+        self.err_sum += e               #  and is cheaper than indexing the rows hit)
+        self.err_n += hit
+        self.err_x += e[:, None] * self.x_prev
 
     def events(self) -> list[SituationEvent]:
         """The structural events since the last call (oldest first)."""
@@ -316,8 +315,9 @@ class EvolvingInterpreter(FCMInterpreter):
         create a situation after ``create_after`` in a row. Returns whether one was made."""
         if d2.size:
             if d2.min() <= self.create_d2:
-                self.streak = 0
-                self.streak_sum[:] = 0.0
+                if self.streak:
+                    self.streak = 0
+                    self.streak_sum[:] = 0.0
                 return False
             self.streak += 1
             self.streak_sum += x
