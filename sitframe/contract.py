@@ -134,6 +134,30 @@ class BoundaryError(Exception):
     """A value returned by plugin code broke the contract (turned into a PluginFault)."""
 
 
+def sensor_geometry(sensor: Any) -> tuple[str, np.ndarray, float]:
+    """A sensor's ``angles_deg`` as a (d,) float array and its ``max_range``.
+
+    Raises
+    ------
+    BoundaryError
+        With ``args == (member, why)``: ``angles_deg`` is not a non-empty 1-D
+        array of finite real numbers, or ``max_range`` is not a finite number > 0.
+    """
+    angles, max_range = sensor.angles_deg, sensor.max_range
+    a = np.asarray(angles)
+    why = (f"has shape {a.shape}" if a.ndim != 1 or a.size == 0 else
+           f"has dtype {a.dtype}" if a.dtype.kind not in "iuf" else
+           f"holds {a[~np.isfinite(a)][0]}" if not np.isfinite(a).all() else "")
+    if why:
+        raise BoundaryError("angles_deg", f"angles_deg {why}, expected a non-empty 1-D array "
+                            "of finite bearings [deg], one per beam")
+    if isinstance(max_range, bool) or not isinstance(max_range, _REAL) \
+            or not math.isfinite(max_range) or max_range <= 0:
+        raise BoundaryError("max_range", f"max_range is {max_range!r:.60}, expected a finite "
+                            "number > 0 [m]")
+    return str(sensor.name), a.astype(np.float64), float(max_range)
+
+
 def sensor_spec_mismatch(reading: Any, d: int) -> str | None:
     """Why ``reading`` is not a finite (d,) float array, or ``None`` if it is."""
     if not isinstance(reading, np.ndarray):

@@ -17,7 +17,15 @@ from typing import Any
 import numpy as np
 
 from sitframe.config import DEFAULT_PROTOCOL, Component, Config
-from sitframe.contract import Origin, call, check_protocol, fault, sensor_spec_mismatch
+from sitframe.contract import (
+    BoundaryError,
+    Origin,
+    call,
+    check_protocol,
+    fault,
+    sensor_geometry,
+    sensor_spec_mismatch,
+)
 from sitframe.errors import InputError, PluginError, PluginFault
 from sitframe.pluginmanager import Registry
 from sitframe.records import RunContext, SensorSpec
@@ -79,9 +87,12 @@ class Resolved:
         res = cls(cfg, registry, file, robot, base_dir=base_dir)
         sensor = res._create("sensor", "sensor", res.config.sensor, bind=False)
         o = res.origins["sensor"]
-        spec = call(o, "angles_deg", lambda: SensorSpec(
-            str(sensor.name), np.asarray(sensor.angles_deg, dtype=np.float64).reshape(-1),
-            float(sensor.max_range), str(getattr(sensor, "unit", "m"))))
+        try:
+            spec = SensorSpec(*sensor_geometry(sensor), str(getattr(sensor, "unit", "m")))
+        except BoundaryError as exc:
+            raise PluginFault(exc.args[1], where=str(o), method=exc.args[0]) from None
+        except Exception as exc:  # noqa: BLE001 - a property that raises is the plugin's
+            raise fault(exc, o, "angles_deg") from exc
         interp = res._create("interpreter", "interpreter", res.config.interpreter, bind=False)
         c = call(res.origins["interpreter"], "n_situations", lambda: interp.n_situations)
         if c is not None and (isinstance(c, bool) or not isinstance(c, int | np.integer) or c < 1):

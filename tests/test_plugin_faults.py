@@ -317,6 +317,33 @@ class Bad:
 def sitframe_sensors():
     return [Bad]
 ''', 2, S, "has no attribute 'angles_deg'", add=SENSOR_ADD, fresh=True),
+    fault("sensor-angles-nan", '''
+class Bad(SonarRing):
+    name = "bad"
+
+    def __init__(self, **kw):
+        super().__init__(**kw)
+        self.angles_deg = self.angles_deg.copy()
+        self.angles_deg[3] = math.nan  # was a traceback once the run was over
+
+@hookimpl
+def sitframe_sensors():
+    return [Bad]
+''', 2, S, "angles_deg()", "angles_deg holds nan, expected a non-empty 1-D array",
+          add=SENSOR_ADD, fresh=True),
+    fault("sensor-max-range-negative", '''
+class Bad(SonarRing):
+    name = "bad"
+
+    def __init__(self, **kw):
+        super().__init__(**kw)
+        self.max_range = -3.0  # was blamed on whatever used the readings
+
+@hookimpl
+def sitframe_sensors():
+    return [Bad]
+''', 2, S, "max_range()", "max_range is -3.0, expected a finite number > 0",
+          add=SENSOR_ADD, fresh=True),
     fault("sensor-property-raises", '''
 class Bad(SonarRing):
     name = "bad"
