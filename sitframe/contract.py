@@ -271,4 +271,35 @@ def check_data(d: Any, what: str) -> dict[str, Any]:
     if not isinstance(d, dict) or not all(isinstance(k, str) and k for k in d):
         raise BoundaryError(f"returned {type(d).__name__}, expected a dict of non-empty "
                             f"string keys to arrays or scalars ({what})")
+    for k, v in d.items():
+        why = ("'/' splits it into an empty group name" if "" in k.split("/")
+               else _unloggable(v))
+        if why:
+            raise BoundaryError(f"returned key '{k}': {why}; expected numbers, bools or strings "
+                                f"(scalars or arrays), lists of strings or dicts of these ({what})")
     return d
+
+
+#: Scalar types the log stores as attributes.
+_SCALAR = (bool, int, float, str, np.integer, np.floating, np.bool_)
+
+
+def _unloggable(v: Any) -> str | None:
+    """Why the log cannot store ``v`` (as :func:`sitframe.logs._write_value` would), or None."""
+    if v is None or isinstance(v, _SCALAR):
+        return None
+    if isinstance(v, list | tuple) and v and all(isinstance(s, str) for s in v):
+        return None
+    if isinstance(v, dict):
+        for k, sub in v.items():
+            why = "an empty key" if not str(k) else _unloggable(sub)
+            if why:
+                return f"in '{k}': {why}"
+        return None
+    try:
+        a = np.asarray(v)
+    except (TypeError, ValueError):
+        return f"a {type(v).__name__} that is no rectangular array"
+    if a.dtype.kind not in "biufc":
+        return f"a {type(v).__name__} of dtype {a.dtype}"
+    return None

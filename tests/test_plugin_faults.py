@@ -502,6 +502,24 @@ def sitframe_trial_data(trial):
     return {"n": 1} if trial.index == 0 else [1, 2]
 ''', 3, "p.py", "sitframe_trial_data() in trial 1", "returned list, expected a dict",
           trial=1),
+    fault("observer-trial-data-holds-objects", '''
+@hookimpl
+def sitframe_trial_data(trial):  # was blamed on the HDF5 logger, which could not write it
+    return {"n": 1} if trial.index == 0 else {"names": np.array(["a", "b"])}
+''', 3, "p.py", "sitframe_trial_data() in trial 1", "key 'names': a ndarray of dtype <U1",
+          trial=1),
+    fault("interpreter-state-ragged", '''
+class Bad(FCMInterpreter):
+    name = "bad"
+
+    def state(self):
+        return {**super().state(), "history": [[1.0], [1.0, 2.0]]}
+
+@hookimpl
+def sitframe_interpreters():
+    return [Bad]
+''', 3, In, "state()", "key 'history': a list that is no rectangular array", cfg=INTERP,
+          fresh=True),
     fault("observer-trial-data-raises", '''
 @hookimpl
 def sitframe_trial_data(trial):
