@@ -37,6 +37,15 @@ REQUIRED: dict[str, tuple[str, ...]] = {
     "protocol": ("episode_starts", "terminated"),
 }
 
+#: Why a run needs a method beyond the protocol (the ``needs`` of :func:`check_protocol`).
+NEEDED_BY: dict[str, str] = {
+    "learn": "the config gives it a reward to learn from",
+    "load_policy": "it has policy() or policy_from: the evaluate stage, sitframe evaluate "
+                   "and policy_from freeze it with a learned policy",
+    "policy": "it learns from a reward and the run has an evaluate stage, which evaluates "
+              "what policy() returns, frozen",
+}
+
 #: Optional lifecycle methods any component may define (called when present).
 LIFECYCLE = ("bind", "trial_start", "trial_end")
 
@@ -64,9 +73,12 @@ class Origin:
 def check_protocol(obj: Any, origin: Origin, *, needs: tuple[str, ...] = ()) -> None:
     """Raise a :class:`PluginError` naming the first missing or non-callable member.
 
-    ``needs`` adds members this run needs beyond the protocol (``learn`` for
-    a behaviour with a reward, ``load_policy`` for one given a policy).
+    ``needs`` adds members this run needs beyond the protocol (:data:`NEEDED_BY`:
+    ``learn`` for a component with a reward, ``load_policy`` for one given a
+    policy or with ``policy()``, ``policy`` for a learner whose run evaluates).
     """
+    if callable(getattr(obj, "policy", None)):
+        needs += ("load_policy",)
     for member in REQUIRED[origin.kind] + needs:
         if member in ("angles_deg", "max_range", "n_situations"):
             try:
@@ -79,8 +91,10 @@ def check_protocol(obj: Any, origin: Origin, *, needs: tuple[str, ...] = ()) -> 
                                   method=member) from None
             continue
         if not callable(getattr(obj, member, None)):
-            raise PluginError(f"{origin}: has no method '{member}' (the {origin.kind} protocol "
-                              "in sitframe.components requires it)")
+            why = NEEDED_BY.get(member) if member in needs else None
+            raise PluginError(f"{origin}: has no method '{member}' (" + (
+                f"needed: {why}" if why else
+                f"the {origin.kind} protocol in sitframe.components requires it") + ")")
     for member in LIFECYCLE:
         if hasattr(obj, member) and not callable(getattr(obj, member)):
             raise PluginError(f"{origin}: '{member}' is not a method")

@@ -269,7 +269,7 @@ class _TrialParts:
             if label in spec.policies:
                 call(o, "load_policy", beh.load_policy, spec.policies[label], trial=k)
             call(o, "reset", beh.reset, rng, c, L, trial=k)
-        if "arbiter" in spec.policies and hasattr(arbiter, "load_policy"):
+        if "arbiter" in spec.policies:  # (an arbiter with policy() has load_policy)
             call(og["arbiter"], "load_policy", arbiter.load_policy, spec.policies["arbiter"],
                  trial=k)
         if hasattr(arbiter, "reset"):

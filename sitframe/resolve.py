@@ -161,8 +161,13 @@ class Resolved:
 
     def arbiter(self) -> Any:
         table = self.config.arbiter
-        return self._create("arbiter", "arbiter", table,
-                            needs=("learn",) if table.reward is not None else ())
+        return self._create("arbiter", "arbiter", table, needs=self._learner_needs(table))
+
+    def _learner_needs(self, table: Component) -> tuple[str, ...]:
+        """What a behaviour's or the arbiter's table makes it need (``learn``, ``policy``)."""
+        if table.reward is None:
+            return ()
+        return ("learn", "policy") if "evaluate" in self.config.experiment.stages else ("learn",)
 
     def arbiter_reward(self) -> Any | None:
         """The reward the arbiter learns from (``[arbiter] reward = ...``), or ``None``."""
@@ -180,7 +185,7 @@ class Resolved:
         out = {}
         for label, table in self.config.behaviours.items():
             key = f"behaviours.{label}"
-            needs = (("learn",) if table.reward is not None else ()) + \
+            needs = self._learner_needs(table) + \
                 (("load_policy",) if table.policy_from is not None else ())
             out[label] = (self._create("behaviour", key, table, needs=needs),
                           self._reward(key, table))

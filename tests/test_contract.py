@@ -235,6 +235,8 @@ class Learner:
 
     def reset(self, rng, n_situations, iterations):
         self.score = np.zeros((n_situations, self.k))
+        if getattr(self, "frozen", None) is not None:  # evaluated as it learned
+            self.score[np.arange(n_situations), self.frozen] = 1.0
 
     def combine(self, ctx, proposals):
         s = int(ctx.memberships.argmax())
@@ -250,6 +252,9 @@ class Learner:
     def policy(self):
         return LearnedPolicy({"weight": PolicyOutput(np.arange(self.k, dtype=float),
                                                      self.score.argmax(axis=1))})
+
+    def load_policy(self, policy):
+        self.frozen = policy.outputs["weight"].rules
 
 
 @hookimpl

@@ -471,6 +471,25 @@ class Bad:
 def sitframe_behaviours():
     return [Bad]
 ''', 2, B, "has no method 'learn'", cfg=BEHAVIOUR_PLAIN),
+    fault("behaviour-learns-without-policy", '''
+class Bad(FuzzyQBehaviour):  # its evaluations used to run a fresh, unlearned instance
+    name = "bad"
+    policy = None
+
+@hookimpl
+def sitframe_behaviours():
+    return [Bad]
+''', 2, B, "has no method 'policy' (needed: it learns from a reward and the run has an "
+          "evaluate stage", cfg={**BEHAVIOUR, '"learn"]': '"learn", "evaluate"]'}, add='\n[evaluate]\nworlds = ["novel-1"]\n'),
+    fault("behaviour-policy-without-load-policy", '''
+class Bad(FuzzyQBehaviour):  # was a traceback (AttributeError) at the first evaluation
+    name = "bad"
+    load_policy = None
+
+@hookimpl
+def sitframe_behaviours():
+    return [Bad]
+''', 2, B, "has no method 'load_policy' (needed: it has policy() or policy_from", cfg=BEHAVIOUR),
     # -- arbiters: combine returns (Proposal, (k,) weights); rules checked at bind
     fault("arbiter-raises", arbiter("""
               if self.now:
