@@ -480,7 +480,8 @@ class Bad(FuzzyQBehaviour):  # its evaluations used to run a fresh, unlearned in
 def sitframe_behaviours():
     return [Bad]
 ''', 2, B, "has no method 'policy' (needed: it learns from a reward and the run has an "
-          "evaluate stage", cfg={**BEHAVIOUR, '"learn"]': '"learn", "evaluate"]'}, add='\n[evaluate]\nworlds = ["novel-1"]\n'),
+          "evaluate stage", cfg={**BEHAVIOUR, '"learn"]': '"learn", "evaluate"]'},
+          add='\n[evaluate]\nworlds = ["novel-1"]\n'),
     fault("behaviour-policy-without-load-policy", '''
 class Bad(FuzzyQBehaviour):  # was a traceback (AttributeError) at the first evaluation
     name = "bad"
