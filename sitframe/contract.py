@@ -246,8 +246,13 @@ def check_reward(r: Any) -> float:
     raise BoundaryError(f"returned {type(r).__name__} {r!r:.60}, expected a finite real number")
 
 
-def check_combined(out: Any, k: int) -> tuple[Proposal, np.ndarray]:
-    """An arbiter's ``(Proposal, (k,) weights)`` (the weights' values are checked per trial)."""
+def check_combined(out: Any, k: int, proposals: dict[str, Proposal]) -> tuple[Proposal,
+                                                                              np.ndarray]:
+    """An arbiter's ``(Proposal, (k,) weights)`` (the weights' values are checked per trial),
+    having left the ``k`` ``proposals`` it was given in place (they are logged)."""
+    if len(proposals) != k:
+        raise BoundaryError(f"changed the proposals it was given: {len(proposals)} left of {k} "
+                            "(they are logged; copy the dict to change it)")
     if out.__class__ is not tuple or len(out) != 2:
         raise BoundaryError(f"returned {type(out).__name__}, expected a tuple (Proposal, "
                             f"weights of shape ({k},))")

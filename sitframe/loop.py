@@ -426,7 +426,7 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
             for lb, beh, step_at in at_propose:  # noqa: B007 - step_at names the caller on a fault
                 proposals[lb] = check_proposal(beh.propose(ctx))
             step_at = at_combine
-            prop, weights = check_combined(arbiter.combine(ctx, proposals), n_labels)
+            prop, weights = check_combined(arbiter.combine(ctx, proposals), n_labels, proposals)
             step_at = at_core
             cmd = Command(prop.heading_deg,
                           default_speed if prop.speed_m_s is None else prop.speed_m_s)

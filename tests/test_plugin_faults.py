@@ -501,6 +501,10 @@ def sitframe_behaviours():
           arbiter("return (good[0], np.ones(3)) if self.now else good"), 3,
           A, "combine() in trial 1", "weights of shape (3,), expected (1,)", add=ARBITER_ADD,
           trial=1),
+    fault("arbiter-empties-the-proposals",  # was a traceback when the trial was logged
+          arbiter("proposals.clear()\nreturn good"), 3,
+          A, "combine() in trial 0, iteration 0", "changed the proposals it was given: 0 left of 1",
+          add=ARBITER_ADD, trial=0),
     fault("arbiter-returns-a-proposal-only",
           arbiter("return good[0] if self.now else good"), 3,
           A, "combine() in trial 1", "returned Proposal, expected a tuple (Proposal, weights",
