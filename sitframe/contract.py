@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from sitframe.errors import InputError, PluginError, PluginFault
+from sitframe.errors import PLUGIN_ERRORS, InputError, PluginError, PluginFault
 from sitframe.records import LearnedPolicy, Proposal
 
 #: Methods (and attributes) each component kind must have, checked at creation.
@@ -86,7 +86,7 @@ def check_protocol(obj: Any, origin: Origin, *, needs: tuple[str, ...] = ()) -> 
             except AttributeError:
                 raise PluginError(f"{origin}: has no attribute '{member}' (the {origin.kind} "
                                   f"protocol in sitframe.components requires it)") from None
-            except Exception as exc:  # noqa: BLE001 - a property that raises is the plugin's
+            except PLUGIN_ERRORS as exc:  # a property that raises is the plugin's
                 raise PluginFault(f"{type(exc).__name__}: {exc}", where=str(origin),
                                   method=member) from None
             continue
@@ -111,7 +111,7 @@ def call(origin: Origin, method: str, fn: Callable[..., Any], *args: Any,
         return fn(*args, **kwargs)
     except (InputError, PluginFault, KeyboardInterrupt):
         raise
-    except Exception as exc:  # noqa: BLE001 - any fault in plugin code is reported
+    except PLUGIN_ERRORS as exc:  # any fault in plugin code is reported
         raise fault(exc, origin, method, trial) from exc
 
 

@@ -26,7 +26,7 @@ from sitframe import __version__
 from sitframe.collect import Collected, collect_trajectories, collect_wander, concat_collected
 from sitframe.config import config_hash, to_toml
 from sitframe.contract import BoundaryError, call, check_data, fault, sensor_spec_mismatch
-from sitframe.errors import InputError, PluginError, PluginFault, TaskCancelled
+from sitframe.errors import PLUGIN_ERRORS, InputError, PluginError, PluginFault, TaskCancelled
 from sitframe.loop import (
     STAGE_BATCH,
     STAGE_CLUSTER,
@@ -284,7 +284,7 @@ class Experiment:
                 impl.function(*[kwargs[a] for a in impl.argnames])
             except (KeyboardInterrupt, TaskCancelled):
                 raise
-            except Exception as exc:  # noqa: BLE001 - reported below, naming the plugin
+            except PLUGIN_ERRORS as exc:  # reported below, naming the plugin
                 if first is None:
                     where = f"plugin {self.registry.describe_plugin(impl.plugin_name)}"
                     first = exc if isinstance(exc, InputError | PluginError) else fault(

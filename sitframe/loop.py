@@ -51,7 +51,7 @@ from sitframe.contract import (
     memberships_mismatch,
     sensor_spec_mismatch,
 )
-from sitframe.errors import InputError, PluginFault, TaskCancelled
+from sitframe.errors import PLUGIN_ERRORS, InputError, PluginFault, TaskCancelled
 from sitframe.metrics import collisions_per_1000, coverage, path_length
 from sitframe.records import (
     Context,
@@ -171,7 +171,7 @@ def step_hook_of(pm: pluggy.PluginManager) -> Callable[[StepRecord], Any] | None
             hook.sitframe_step(record=rec)
         except (KeyboardInterrupt, TaskCancelled, PluginFault):
             raise
-        except Exception as exc:  # noqa: BLE001 - an observer's fault is reported, not raw
+        except PLUGIN_ERRORS as exc:  # an observer's fault is reported, not raw
             name = blame(exc, impls)
             where = (f"plugin {info[name].describe() if name in info else name}"
                      if name else "an observer")
@@ -460,7 +460,7 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
                 ctx = None
     except (KeyboardInterrupt, TaskCancelled, PluginFault, InputError):
         raise  # (a plugin's InputError names the input it found wrong)
-    except Exception as exc:
+    except PLUGIN_ERRORS as exc:
         if step_at.origin is None and step_at.method == "step":
             raise  # the core's own arithmetic: a bug here, not the plugin's
         raise _loop_fault(exc, step_at, k, t, res, locals()) from exc
@@ -734,7 +734,7 @@ def _collect_plugin_data(result: TrialResult, components: list[tuple[str, Any]],
                               trial=k) from None
         except (KeyboardInterrupt, TaskCancelled, PluginFault):
             raise
-        except Exception as exc:  # noqa: BLE001 - an observer's fault is reported, not raw
+        except PLUGIN_ERRORS as exc:  # an observer's fault is reported, not raw
             raise fault(exc, where, "sitframe_trial_data", k) from exc
         if data:
             add(impl.plugin_name, where, data)

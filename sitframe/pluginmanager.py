@@ -27,7 +27,7 @@ from typing import Any
 import pluggy
 
 from sitframe import hookspecs
-from sitframe.errors import InputError, PluginError, did_you_mean
+from sitframe.errors import PLUGIN_ERRORS, InputError, PluginError, did_you_mean
 from sitframe.params import check_params
 
 #: Entry-point group (and pluggy project name).
@@ -169,7 +169,7 @@ def _load_entry_points(pm: pluggy.PluginManager, info: dict[str, PluginInfo]) ->
             pinfo = PluginInfo(name, "entry point", dist_name, dist_version)
             try:
                 plugin = ep.load()
-            except Exception as exc:  # noqa: BLE001 - any import failure is the plugin's
+            except PLUGIN_ERRORS as exc:  # any import failure is the plugin's
                 raise PluginError(
                     f"plugin {pinfo.describe()} failed to import ({ep.value}): "
                     f"{type(exc).__name__}: {exc}"
@@ -276,7 +276,7 @@ class Registry:
                 where = reg.describe_plugin(plugin_name)
                 try:
                     result = impl.function()
-                except Exception as exc:  # noqa: BLE001 - report any plugin fault
+                except PLUGIN_ERRORS as exc:  # report any plugin fault
                     raise PluginError(
                         f"plugin {where} raised in hook {hook_name}: "
                         f"{type(exc).__name__}: {exc}"
@@ -354,7 +354,7 @@ class Registry:
             raise InputError(f"{exc} ({kind} '{name}' of plugin "
                              f"{self.describe_plugin(entry.plugin)})", file=file,
                              key=key) from None
-        except Exception as exc:  # noqa: BLE001
+        except PLUGIN_ERRORS as exc:
             raise PluginError(
                 f"plugin {self.describe_plugin(entry.plugin)}: creating {kind} '{name}' "
                 f"failed: {type(exc).__name__}: {exc}"

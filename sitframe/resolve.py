@@ -26,7 +26,7 @@ from sitframe.contract import (
     sensor_geometry,
     sensor_spec_mismatch,
 )
-from sitframe.errors import InputError, PluginError, PluginFault
+from sitframe.errors import PLUGIN_ERRORS, InputError, PluginError, PluginFault
 from sitframe.pluginmanager import Registry
 from sitframe.records import RunContext, SensorSpec
 from sitframe.robot import RobotParams
@@ -91,7 +91,7 @@ class Resolved:
             spec = SensorSpec(*sensor_geometry(sensor), str(getattr(sensor, "unit", "m")))
         except BoundaryError as exc:
             raise PluginFault(exc.args[1], where=str(o), method=exc.args[0]) from None
-        except Exception as exc:  # noqa: BLE001 - a property that raises is the plugin's
+        except PLUGIN_ERRORS as exc:  # a property that raises is the plugin's
             raise fault(exc, o, "angles_deg") from exc
         interp = res._create("interpreter", "interpreter", res.config.interpreter, bind=False)
         c = call(res.origins["interpreter"], "n_situations", lambda: interp.n_situations)
@@ -150,7 +150,7 @@ class Resolved:
                              file=self.file, key=key) from None
         except (KeyboardInterrupt, PluginFault):
             raise
-        except Exception as exc:  # noqa: BLE001 - any other fault in plugin code
+        except PLUGIN_ERRORS as exc:  # any other fault in plugin code
             raise fault(exc, o, "bind") from exc
 
     def sensor(self) -> Any:

@@ -234,6 +234,12 @@ CASES: list[Fault] = [
     fault("reward-raises", reward("return 1 / 0 if self.now else 1.0"), 3,
           R, "__call__() in trial 1", "ZeroDivisionError: division by zero", cfg=REWARD,
           trial=1),
+    fault("reward-calls-sys-exit", reward("""
+              if self.now:
+                  import sys
+                  sys.exit("giving up")  # ended sitframe with status 1, no log status, no line
+              return 1.0"""), 3, R, "__call__() in trial 1", "SystemExit: giving up", cfg=REWARD,
+          trial=1),
     fault("reward-bind-raises", reward("return 1.0") + '''
 def _bind(self, run):
     raise RuntimeError("no robot for me")
@@ -563,6 +569,13 @@ def sitframe_rewards():
 def sitframe_reward():
     return []
 ''', 2, "p.py", "sitframe_reward", "the hooks are listed in sitframe.hookspecs"),
+    fault("hook-calls-sys-exit", '''
+import sys
+
+@hookimpl
+def sitframe_rewards():
+    sys.exit(1)
+''', 2, "p.py", "raised in hook sitframe_rewards: SystemExit: 1"),
     fault("hook-raises", '''
 @hookimpl
 def sitframe_behaviours():
