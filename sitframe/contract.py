@@ -121,6 +121,9 @@ def fault(exc: BaseException, origin: Origin | str, method: str, trial: int | No
     if isinstance(exc, PluginFault):
         return exc
     msg = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+    if isinstance(exc, ValueError) and "read-only" in str(exc):
+        msg += (" (the pose, readings and memberships sitframe hands over are read-only: "
+                "copy one to change it; return a new array from each read or memberships)")
     return PluginFault(msg, where=str(origin), method=method, trial=trial, iteration=iteration)
 
 
@@ -203,15 +206,22 @@ def memberships_mismatch(u: Any, c: int) -> str | None:
 
 
 def check_reading(reading: Any, d: int) -> None:
-    """Cheap per-iteration test: a (d,) array (values checked per trial, vectorised)."""
+    """Cheap per-iteration test: a (d,) array (values checked per trial, vectorised).
+
+    The reading is then made read-only: every later component gets it, and it is
+    logged, so one that changed it in place would change it for all of them.
+    """
     if reading.__class__ is not np.ndarray or reading.shape != (d,):
         raise BoundaryError(sensor_spec_mismatch(reading, d))
+    reading.flags.writeable = False
 
 
 def check_memberships(u: Any, c: int) -> None:
-    """Cheap per-iteration test: a (c,) array (values checked per trial, vectorised)."""
+    """Cheap per-iteration test: a (c,) array (values checked per trial, vectorised);
+    then made read-only, like the reading."""
     if u.__class__ is not np.ndarray or u.shape != (c,):
         raise BoundaryError(memberships_mismatch(u, c))
+    u.flags.writeable = False
 
 
 def check_proposal(p: Any) -> Proposal:

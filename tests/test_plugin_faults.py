@@ -279,6 +279,11 @@ def sitframe_rewards():
     fault("sensor-returns-list", sensor("return r.tolist()"), 2,
           S, "read()", "returned list, expected a numpy array of shape (8,)",
           add=SENSOR_ADD, fresh=True),
+    fault("sensor-turns-the-robot", sensor("""
+              if self.now:
+                  pose[2] += 0.1  # turned the robot unseen
+              return r"""), 3,
+          S, "read() in trial 1, iteration 0", "read-only", add=SENSOR_ADD, fresh=True, trial=1),
     fault("sensor-raises-in-trial-1", sensor("""
               if self.now:
                   raise IndexError("beam 9")
@@ -439,6 +444,12 @@ def sitframe_interpreters():
                   raise ValueError("no rule fires")
               return good()"""), 3,
           B, "propose() in trial 1", "ValueError: no rule fires", cfg=BEHAVIOUR, trial=1),
+    fault("behaviour-normalises-memberships-in-place", behaviour("""
+              if self.now:
+                  context.memberships[:] = 0.0  # was blamed on the interpreter
+              return good()"""), 3,
+          B, "propose() in trial 1, iteration 0", "read-only", "copy one to change it",
+          cfg=BEHAVIOUR, trial=1),
     fault("behaviour-learn-raises", behaviour("""
               if self.now:
                   raise RuntimeError("diverged")
