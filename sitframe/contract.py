@@ -175,8 +175,8 @@ def sensor_geometry(sensor: Any) -> tuple[str, np.ndarray, float]:
     return str(sensor.name), a.astype(np.float64), float(max_range)
 
 
-def sensor_spec_mismatch(reading: Any, d: int) -> str | None:
-    """Why ``reading`` is not a finite (d,) float array, or ``None`` if it is."""
+def sensor_spec_mismatch(reading: Any, d: int, max_range: float = math.inf) -> str | None:
+    """Why ``reading`` is not a (d,) float array of ranges in [0, max_range], or ``None``."""
     if not isinstance(reading, np.ndarray):
         return f"returned {type(reading).__name__}, expected a numpy array of shape ({d},)"
     if reading.shape != (d,):
@@ -187,6 +187,10 @@ def sensor_spec_mismatch(reading: Any, d: int) -> str | None:
     bad = ~np.isfinite(reading)
     if bad.any():
         return f"returned a non-finite value ({reading[bad][0]}) in beam {int(np.argmax(bad))}"
+    bad = (reading < 0) | (reading > max_range)
+    if bad.any():
+        return (f"returned {reading[bad][0]:g} in beam {int(np.argmax(bad))}, expected a range "
+                f"in [0, max_range = {max_range:g}]")
     return None
 
 

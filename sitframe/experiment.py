@@ -128,12 +128,11 @@ class Experiment:
                               n_samples=c.wander_samples, speed=c.speed,
                               rate_hz=c.rate_hz, params=self.res.robot))
         collected = concat_collected(parts)
-        why = sensor_spec_mismatch(collected.samples[0], self.res.run.sensor.dim) \
-            if len(collected.samples) else None
-        bad = ~np.isfinite(collected.samples).all(axis=1)
+        spec, X = self.res.run.sensor, collected.samples
+        why = sensor_spec_mismatch(X[0], spec.dim, spec.max_range) if len(X) else None
+        bad = ~np.isfinite(X).all(axis=1) | (X < 0).any(axis=1) | (X > spec.max_range).any(axis=1)
         if why is None and bad.any():
-            why = sensor_spec_mismatch(collected.samples[int(np.argmax(bad))],
-                                       self.res.run.sensor.dim)
+            why = sensor_spec_mismatch(X[int(np.argmax(bad))], spec.dim, spec.max_range)
         if why is not None:
             raise PluginFault(f"{why} (collect stage)", where=str(o), method="read")
         return collected

@@ -224,7 +224,7 @@ def simulate(
     env.track = SituationTracker.start(parts.interp, spec.learn, parts.components, res.origins,
                                        spec.index)  # None unless the situations evolve
     n = _run_loop(res, spec, parts, rec, env, step_hook, protocol)
-    arrays = rec.arrays(n, res.origins, spec.index)
+    arrays = rec.arrays(n, res.origins, spec.index, res.run.sensor.max_range)
     result = _trial_result(res, spec, world, parts, arrays, env)
     for ev_spec in evaluation_specs(spec, result.policies, result.situations.get("state")):
         attach_evaluation(result, ev_spec.world, simulate(res, ev_spec))
@@ -344,14 +344,15 @@ class Recorder:
         if rewards:
             self._rewards.append(tuple(rewards.values()))
 
-    def arrays(self, n: int, origins: dict[str, Origin], trial: int) -> dict[str, np.ndarray]:
+    def arrays(self, n: int, origins: dict[str, Origin], trial: int,
+               max_range: float = np.inf) -> dict[str, np.ndarray]:
         """The first ``n`` iterations' arrays (the final pose is the last of ``pose``).
 
-        Checks every reading, membership vector and weight first (vectorised,
-        :func:`_check_trial_values`).
+        Checks every reading (against the sensor's ``max_range``), membership
+        vector and weight first (vectorised, :func:`_check_trial_values`).
         """
         _check_trial_values(self.reading[:n], self.memberships[:n], self.weights[:n], origins,
-                            trial)
+                            trial, max_range)
         coll = np.zeros(n, dtype=bool)
         contact = np.full((n, 2), np.nan)
         for t, xy in self._contacts:
@@ -645,7 +646,7 @@ READING = "reading"
 def _nearest(reading: np.ndarray) -> float:
     """The smallest range of a reading; NaN here is the sensor's fault, found at once."""
     v = float(_min(reading))
-    if v != v:  # NaN
+    if not v >= 0.0:  # NaN, or a negative range
         raise BoundaryError(sensor_spec_mismatch(reading, reading.size) or "returned NaN")
     return v
 
@@ -663,7 +664,8 @@ def _loop_fault(exc: Exception, step_at: _Step, trial: int, t: int, res: Resolve
         c = res.run.n_situations
         for name in ("reading2", "reading"):
             r = scope.get(name)
-            if isinstance(r, np.ndarray) and (why := sensor_spec_mismatch(r, res.run.sensor.dim)):
+            if isinstance(r, np.ndarray) and (why := sensor_spec_mismatch(
+                    r, res.run.sensor.dim, res.run.sensor.max_range)):
                 return PluginFault(why, where=str(res.origins["sensor"]), method="read",
                                    trial=trial, iteration=t)
         for name in ("u2", "u"):
@@ -678,14 +680,14 @@ def _loop_fault(exc: Exception, step_at: _Step, trial: int, t: int, res: Resolve
 
 
 def _check_trial_values(readings: np.ndarray, u: np.ndarray, weights: np.ndarray,
-                        origins: dict[str, Origin], trial: int) -> None:
+                        origins: dict[str, Origin], trial: int, max_range: float) -> None:
     """Vectorised checks of every reading, membership vector and weight of a finished trial."""
     def nonfinite(x: np.ndarray) -> np.ndarray:
         return ~np.isfinite(x).all(axis=1)
 
     for values, bad, key, method, why in (
-            (readings, nonfinite(readings), "sensor", "read",
-             lambda r: sensor_spec_mismatch(r, readings.shape[1]) or "non-finite"),
+            (readings, nonfinite(readings) | (readings > max_range).any(axis=1), "sensor", "read",
+             lambda r: sensor_spec_mismatch(r, readings.shape[1], max_range) or "non-finite"),
             (u, nonfinite(u) | (u < 0).any(axis=1)
              | (np.abs(u.sum(axis=1) - 1.0) > MEMBERSHIP_SUM_TOL), "interpreter", "memberships",
              lambda m: memberships_mismatch(m, u.shape[1]) or "invalid"),

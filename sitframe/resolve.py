@@ -120,7 +120,7 @@ class Resolved:
         o = self.origins["sensor"]
         reading = call(o, "read", sensor.read, world, world.start.copy(),
                        np.random.default_rng(0))
-        why = sensor_spec_mismatch(reading, spec.dim)
+        why = sensor_spec_mismatch(reading, spec.dim, spec.max_range)
         if why is not None:
             raise PluginFault(why, where=str(o), method="read")
 

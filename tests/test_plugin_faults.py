@@ -276,6 +276,12 @@ def sitframe_rewards():
               return r"""), 3,
           S, "read() in trial 1", "non-finite value (nan) in beam 2", add=SENSOR_ADD,
           fresh=True, trial=1),
+    fault("sensor-negative-range-in-trial-1", sensor("return r - 5.0 if self.now else r"), 3,
+          S, "read() in trial 1, iteration 0", "in beam 0, expected a range in [0, max_range = 3]",
+          add=SENSOR_ADD, fresh=True, trial=1),  # was blamed on whatever used the reading
+    fault("sensor-beyond-max-range-in-trial-1", sensor("return r * 10 if self.now else r"), 3,
+          S, "read() in trial 1, iteration ", "expected a range in [0, max_range = 3]",
+          add=SENSOR_ADD, fresh=True, trial=1),  # was accepted
     fault("sensor-returns-list", sensor("return r.tolist()"), 2,
           S, "read()", "returned list, expected a numpy array of shape (8,)",
           add=SENSOR_ADD, fresh=True),
