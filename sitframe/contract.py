@@ -294,6 +294,12 @@ def check_policy(p: Any, c: int) -> LearnedPolicy | None:
         if o.rules.shape != (c,):
             raise BoundaryError(f"returned a policy whose '{out}' rules have shape "
                                 f"{o.rules.shape}, expected ({c},) (one rule per situation)")
+        for what, a, hint in (("actions", o.actions, ""),
+                              ("q", o.q, " (did rewards far too large overflow it?)")):
+            if a is not None and not np.isfinite(a).all():
+                raise BoundaryError(f"returned a policy whose '{out}' {what} hold "
+                                    f"{np.asarray(a)[~np.isfinite(a)][0]}, expected finite "
+                                    f"values{hint}")
     return p
 
 

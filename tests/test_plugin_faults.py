@@ -218,6 +218,7 @@ R = "reward 'bad' [behaviours.avoid.reward]"
 S = "sensor 'bad' [sensor]"
 In = "interpreter 'bad' [interpreter]"
 B = "behaviour 'bad' [behaviours.avoid]"
+FQ = "behaviour 'fuzzy-q' [behaviours.avoid]"
 A = "arbiter 'bad' [arbiter]"
 
 CASES: list[Fault] = [
@@ -465,6 +466,9 @@ def sitframe_interpreters():
           behaviour('return {"heading": 1} if self.k == 1 else good()', "policy", ""), 3,
           B, "policy() in trial 1", "returned dict, expected a sitframe.LearnedPolicy",
           cfg=BEHAVIOUR, trial=1),
+    fault("reward-huge-overflows-q", reward("return 1.7e308 if self.now else 1.0"), 3,
+          FQ, "policy() in trial 1", "'heading' q hold", "expected finite values", cfg=REWARD,
+          trial=1),  # the log kept an infinite Q table
     fault("behaviour-trial-data-empty-key",
           behaviour('return {"": 1} if self.k == 1 else good()', "trial_data", ""), 3,
           B, "trial_data() in trial 1", "expected a dict of non-empty string keys",
