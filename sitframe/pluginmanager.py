@@ -46,6 +46,10 @@ KINDS: dict[str, str] = {
 }
 
 
+#: The names of sitframe's hooks (:mod:`sitframe.hookspecs`).
+HOOKS = tuple(n for n in vars(hookspecs) if n.startswith("sitframe_"))
+
+
 @dataclass(frozen=True)
 class PluginInfo:
     """Where a registered plugin came from."""
@@ -131,6 +135,10 @@ def _register_checked(
         pm.register(plugin, name=name)
     except (pluggy.PluginValidationError, ValueError) as exc:
         raise PluginError(f"plugin {info.describe()} could not be registered: {exc}") from None
+    for hook in HOOKS:  # a hook function without @sitframe.hookimpl would never be called
+        if callable(getattr(plugin, hook, None)) and pm.parse_hookimpl_opts(plugin, hook) is None:
+            raise PluginError(f"plugin {info.describe()}: {hook} is not decorated with "
+                              "@sitframe.hookimpl, so it would never be called")
     pm.sitframe_info[name] = info  # type: ignore[attr-defined]
 
 

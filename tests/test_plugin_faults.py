@@ -590,6 +590,13 @@ def sitframe_rewards():
 def sitframe_reward():
     return []
 ''', 2, "p.py", "sitframe_reward", "the hooks are listed in sitframe.hookspecs"),
+    fault("hook-without-hookimpl", '''
+class Bad(ObstacleAvoidanceReward):
+    name = "bad"
+
+def sitframe_rewards():  # was never called: "unknown reward 'bad'"
+    return [Bad]
+''', 2, "p.py", "sitframe_rewards is not decorated with @sitframe.hookimpl", cfg=REWARD),
     fault("hook-calls-sys-exit", '''
 import sys
 
