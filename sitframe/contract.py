@@ -34,8 +34,11 @@ REQUIRED: dict[str, tuple[str, ...]] = {
     "reward": ("__call__",),
     "behaviour": ("reset", "propose"),
     "arbiter": ("combine",),
-    "protocol": ("episode_starts", "terminated"),
+    "protocol": ("episode_starts", "terminated", "table", "iterations"),
 }
+
+#: The members of :data:`REQUIRED` that are attributes (the rest are methods).
+ATTRIBUTES = ("angles_deg", "max_range", "n_situations", "table", "iterations")
 
 #: Why a run needs a method beyond the protocol (the ``needs`` of :func:`check_protocol`).
 NEEDED_BY: dict[str, str] = {
@@ -80,12 +83,12 @@ def check_protocol(obj: Any, origin: Origin, *, needs: tuple[str, ...] = ()) -> 
     if callable(getattr(obj, "policy", None)):
         needs += ("load_policy",)
     for member in REQUIRED[origin.kind] + needs:
-        if member in ("angles_deg", "max_range", "n_situations"):
+        if member in ATTRIBUTES:
             try:
                 getattr(obj, member)
             except AttributeError:
-                raise PluginError(f"{origin}: has no attribute '{member}' (the {origin.kind} "
-                                  f"protocol in sitframe.components requires it)") from None
+                raise PluginError(f"{origin}: has no attribute '{member}' (sitframe.components "
+                                  f"requires it of a {origin.kind})") from None
             except PLUGIN_ERRORS as exc:  # a property that raises is the plugin's
                 raise PluginFault(f"{type(exc).__name__}: {exc}", where=str(origin),
                                   method=member) from None
@@ -94,10 +97,18 @@ def check_protocol(obj: Any, origin: Origin, *, needs: tuple[str, ...] = ()) -> 
             why = NEEDED_BY.get(member) if member in needs else None
             raise PluginError(f"{origin}: has no method '{member}' (" + (
                 f"needed: {why}" if why else
-                f"the {origin.kind} protocol in sitframe.components requires it") + ")")
+                f"sitframe.components requires it of a {origin.kind}") + ")")
     for member in LIFECYCLE:
         if hasattr(obj, member) and not callable(getattr(obj, member)):
             raise PluginError(f"{origin}: '{member}' is not a method")
+    if origin.kind == "protocol":
+        it, table = obj.iterations, obj.table
+        if isinstance(it, bool) or not isinstance(it, int | np.integer) or it < 1:
+            raise PluginError(f"{origin}: iterations is {it!r}, expected an integer >= 1 (the "
+                              "episodes' iteration limit)")
+        if not isinstance(table, str) or not table:
+            raise PluginError(f"{origin}: table is {table!r}, expected the name of the config "
+                              "table of its parameters")
 
 
 def call(origin: Origin, method: str, fn: Callable[..., Any], *args: Any,
@@ -301,6 +312,44 @@ def check_policy(p: Any, c: int) -> LearnedPolicy | None:
                                     f"{np.asarray(a)[~np.isfinite(a)][0]}, expected finite "
                                     f"values{hint}")
     return p
+
+
+def check_episode_starts(out: Any, n_max: float, world: Any,
+                         radius: float) -> tuple[np.ndarray, np.ndarray | None]:
+    """A protocol's ``episode_starts``: ``(starts, goals)``, ``n`` (1 to ``n_max``) finite
+    start poses (n, 3) where the robot (``radius``) fits in ``world``, and ``None`` or
+    ``n`` goals (x, y, radius > 0) in free space."""
+    if not isinstance(out, tuple | list) or len(out) != 2:
+        raise BoundaryError(f"returned {type(out).__name__}, expected a tuple (starts, goals)")
+    try:
+        s = np.asarray(out[0], dtype=float)
+        g = None if out[1] is None else np.asarray(out[1], dtype=float)
+    except (TypeError, ValueError):
+        raise BoundaryError("returned starts or goals that are not arrays of numbers") from None
+    n = len(s) if s.ndim else 0
+    if s.shape != (n, 3) or not 1 <= n <= n_max or (g is not None and g.shape != (n, 3)):
+        raise BoundaryError(f"returned starts of shape {s.shape} and goals of shape "
+                            f"{None if g is None else g.shape}; expected (n, 3) each (goals may "
+                            "be None), n >= 1 (n = 1: episodic is False)")
+    for what, a, r in (("start", s, radius), ("goal", g, 0.0)):
+        if a is None:
+            continue
+        ok = np.isfinite(a).all(axis=1)
+        ok[ok] = world.is_free(a[ok, :2], r) & ((a[ok, 2] > 0) if what == "goal" else True)
+        if not ok.all():
+            e = int(np.argmin(ok))
+            raise BoundaryError(f"returned {what} {e} = {a[e].tolist()}, expected finite x, y in "
+                                f"free space of world '{world.name}'" + (
+                                    f" for the robot (radius {r:g} m), heading [rad]"
+                                    if what == "start" else ", radius > 0 [m]"))
+    return s, g
+
+
+def check_flag(v: Any) -> bool:
+    """A ``bool`` (or numpy bool) returned by plugin code, e.g. a protocol's ``terminated``."""
+    if v.__class__ is bool or isinstance(v, np.bool_):
+        return bool(v)
+    raise BoundaryError(f"returned {type(v).__name__} {v!r:.60}, expected True or False")
 
 
 def check_data(d: Any, what: str) -> dict[str, Any]:

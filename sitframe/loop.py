@@ -42,6 +42,8 @@ from sitframe.contract import (
     call,
     check_combined,
     check_data,
+    check_episode_starts,
+    check_flag,
     check_memberships,
     check_policy,
     check_proposal,
@@ -455,7 +457,8 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
                 step_at = at_step
                 step_hook(StepRecord(k, tr, proposals, weights, rewards))
             ctx = ctx2
-            if at_end is not None and (step_at := at_end) and protocol.terminated(ctx):
+            if at_end is not None and (step_at := at_end) and \
+                    check_flag(protocol.terminated(ctx)):
                 n_done = t + 1
                 break
             if chain is not None and chain.over(ctx, t + 1, spec.iterations):
@@ -511,8 +514,10 @@ class _TrainingEpisodes:
     seed), drawn again whenever a batch is used up.
     """
 
-    def __init__(self, proto: Any, world: World, seed: int, robot: RobotParams) -> None:
+    def __init__(self, proto: Any, world: World, seed: int, robot: RobotParams,
+                 origin: Origin, trial: int) -> None:
         self.proto, self.world, self.robot = proto, world, robot
+        self.origin, self.trial = origin, trial
         self.rng = np.random.default_rng(np.random.SeedSequence(seed % 2**64, spawn_key=(2,)))
         self.first: list[int] = [0]
         self.goals: list[tuple[float, float, float]] = []
@@ -521,9 +526,12 @@ class _TrainingEpisodes:
 
     def _pairs(self) -> Iterator[tuple[np.ndarray, Goal | None]]:
         while True:
-            starts, goals = self.proto.episode_starts(self.world, self.rng, self.robot)
-            for e, start in enumerate(np.asarray(starts, dtype=float)):
-                g = None if goals is None else np.asarray(goals[e], dtype=float)
+            starts, goals = _checked(self.origin, "episode_starts", check_episode_starts,
+                                     lambda: self.proto.episode_starts(self.world, self.rng,
+                                                                       self.robot),
+                                     self.trial, np.inf, self.world, self.robot.radius)
+            for e, start in enumerate(starts):
+                g = None if goals is None else goals[e]
                 self.goals.append((np.nan, np.nan, np.nan) if g is None else tuple(g))
                 yield start.copy(), None if g is None else Goal(g[:2], float(g[2]))
 
@@ -532,7 +540,8 @@ class _TrainingEpisodes:
         terminated or timed out (never at the trial's own end)."""
         if t >= limit:
             return False
-        done = bool(self.proto.terminated(ctx))
+        done = _checked(self.origin, "terminated", check_flag, lambda: self.proto.terminated(ctx),
+                        self.trial)
         if done or t - self.first[-1] >= int(self.proto.iterations):
             self.reached.append(done)
             self.first.append(t)
@@ -556,7 +565,8 @@ def _training_episodes(res: Resolved, spec: TrialSpec, world: World) -> _Trainin
     proto = res.protocol(str(spec.protocol))
     if not getattr(proto, "train_in_episodes", False):
         return None
-    return _TrainingEpisodes(proto, world, spec.seed, res.robot)
+    return _TrainingEpisodes(proto, world, spec.seed, res.robot, res.origins[proto.table],
+                             spec.index)
 
 
 def run_batch(res: Resolved, spec: TrialSpec, *,
@@ -583,16 +593,10 @@ def run_batch(res: Resolved, spec: TrialSpec, *,
     episodic = bool(getattr(proto, "episodic", True))
     ss = np.random.SeedSequence(spec.seed % 2**64)
     rng = np.random.default_rng(ss.spawn(1)[0])
-    starts, goals = call(o, "episode_starts", proto.episode_starts, world, rng, res.robot,
-                         trial=k)
-    starts = np.asarray(starts, dtype=float)
+    starts, goals = _checked(o, "episode_starts", check_episode_starts,
+                             lambda: proto.episode_starts(world, rng, res.robot), k,
+                             np.inf if episodic else 1, world, res.robot.radius)
     n = len(starts)
-    if starts.shape != (n, 3) or n < 1 or (goals is not None and np.shape(goals) != (n, 3)) \
-            or (n > 1 and not episodic):
-        raise PluginFault(f"returned starts of shape {starts.shape} and goals of shape "
-                          f"{None if goals is None else np.shape(goals)}; expected (n, 3) "
-                          "each (goals may be None), n >= 1 (n = 1: episodic is False)",
-                          where=str(o), method="episode_starts", trial=k)
     seeds = np.random.SeedSequence(spec.seed % 2**64, spawn_key=(1,)).generate_state(
         n, np.uint64) if episodic else [spec.seed]
     score = getattr(proto, "score_episode", None)
@@ -608,9 +612,18 @@ def run_batch(res: Resolved, spec: TrialSpec, *,
             o, "score_episode", check_data, lambda r=r, e=e: score(
                 r.arrays, starts[e], None if goals is None else goals[e], res.robot), k,
             "per-episode figures"))
+    for e, f in enumerate(figures):
+        if f.keys() != figures[0].keys():
+            raise PluginFault(f"returned {sorted(f)} for episode {e} but {sorted(figures[0])} "
+                              "for episode 0; expected the same keys for every episode",
+                              where=str(o), method="score_episode", trial=k)
     per_ep = {key: np.asarray([f[key] for f in figures]) for key in figures[0]}
     scores = _checked(o, "aggregate", check_data, lambda: proto.aggregate(per_ep), k,
                       "the batch's scores") if hasattr(proto, "aggregate") else {}
+    if clash := sorted(set(scores) & set(EVAL_KEYS)):
+        raise PluginFault(f"returned {clash}, which the core measures itself (one of "
+                          f"{', '.join(EVAL_KEYS)}); expected other names", where=str(o),
+                          method="aggregate", trial=k)
     arrays = {key: np.concatenate([p.arrays[key] for p in parts]) for key in parts[0].arrays}
     episodes: dict[str, Any] = {}
     if episodic:
