@@ -45,6 +45,8 @@ NEEDED_BY: dict[str, str] = {
     "learn": "the config gives it a reward to learn from",
     "load_policy": "it has policy() or policy_from: the evaluate stage, sitframe evaluate "
                    "and policy_from freeze it with a learned policy",
+    "events": "it is evolving (evolving = True): the core drains its events() after each "
+              "learning iteration",
     "policy": "it learns from a reward and the run has an evaluate stage, which evaluates "
               "what policy() returns, frozen",
 }
@@ -82,6 +84,8 @@ def check_protocol(obj: Any, origin: Origin, *, needs: tuple[str, ...] = ()) -> 
     """
     if callable(getattr(obj, "policy", None)):
         needs += ("load_policy",)
+    if getattr(obj, "evolving", False):
+        needs += ("events",)
     for member in REQUIRED[origin.kind] + needs:
         if member in ATTRIBUTES:
             try:
@@ -131,7 +135,8 @@ def fault(exc: BaseException, origin: Origin | str, method: str, trial: int | No
     """The :class:`PluginFault` for ``exc`` raised by ``origin.method``."""
     if isinstance(exc, PluginFault):
         return exc
-    msg = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+    msg = str(exc) if isinstance(exc, BoundaryError) else \
+        f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
     if isinstance(exc, ValueError) and "read-only" in str(exc):
         msg += (" (the pose, readings and memberships sitframe hands over are read-only: "
                 "copy one to change it; return a new array from each read or memberships)")

@@ -395,6 +395,30 @@ def sitframe_sensors():
                   raise FloatingPointError("overflow")
               return u"""), 3,
           In, "memberships() in trial 1", "FloatingPointError: overflow", cfg=INTERP, trial=1),
+    fault("evolving-interpreter-event-names-no-situation", '''
+from sitframe.plugins.evolving import EvolvingInterpreter
+from sitframe.situations import SituationEvent
+
+class Bad(EvolvingInterpreter):  # was blamed on fuzzy-q's situations_changed (an IndexError)
+    name = "bad"
+
+    def events(self):
+        return [SituationEvent("prune", 99, removed=(99,))]
+
+@hookimpl
+def sitframe_interpreters():
+    return [Bad]
+''', 3, In, "events() in trial 0", "'prune' event naming situation 99, expected ids 0 .. 47",
+          cfg=INTERP, trial=0),
+    fault("evolving-interpreter-without-events", '''
+class Bad(FCMInterpreter):  # was a TypeError in the first learning trial
+    name = "bad"
+    evolving = True
+
+@hookimpl
+def sitframe_interpreters():
+    return [Bad]
+''', 2, In, "has no method 'events' (needed: it is evolving", cfg=INTERP),
     fault("interpreter-fit-raises", '''
 class Bad(FCMInterpreter):
     name = "bad"
