@@ -23,7 +23,7 @@ from sitframe.config import (
     validate_config,
 )
 from sitframe.errors import InputError
-from sitframe.logged import BEST_TRIAL_RULE, best_of, check_state, logged_policy
+from sitframe.logged import BEST_TRIAL_RULE, best_of, check_policy, check_state, logged_policy
 from sitframe.logs import Log, open_log
 from sitframe.loop import (
     EVAL_KEYS,
@@ -122,7 +122,10 @@ def evaluate_log(
         cfg["arbiter"] = {**params, "component": arbiter}
     res = Resolved.build(cfg, registry, source)
     res.world(world, key="--world")
-    check_state(res, state, log_path)
+    check_state(res, state, log_path, log.sensor)
+    for label in set(policies) & set(res.config.behaviours):
+        check_policy(res, label, policies[label], log_path,
+                     f"trials/{trial:04d}/behaviours/{label}")
     # the run's protocol with the episodes asked for, or one frozen run of ``iterations``
     name = res.protocol_name(default=None) if goal_episodes else DEFAULT_PROTOCOL
     if name is None:

@@ -95,7 +95,7 @@ def prepare_resume(
         logged_code != code_fingerprint(exp.info.plugins)
     if log.has("cluster/state"):
         kwargs["interpreter_state"] = log.interpreter_state()
-        check_state(exp.res, kwargs["interpreter_state"], p)
+        check_state(exp.res, kwargs["interpreter_state"], p, log.sensor)
     have = set(log.trial_indices())
     kwargs["skip"] = frozenset(have)
     missing = [k for k in range(exp.info.n_trials) if k not in have] \
