@@ -233,7 +233,7 @@ def check_reading(reading: Any, d: int) -> None:
     """
     if reading.__class__ is not np.ndarray or reading.shape != (d,):
         raise BoundaryError(sensor_spec_mismatch(reading, d))
-    reading.flags.writeable = False
+    reading.setflags(write=False)
 
 
 def check_memberships(u: Any, c: int) -> None:
@@ -241,7 +241,7 @@ def check_memberships(u: Any, c: int) -> None:
     then made read-only, like the reading."""
     if u.__class__ is not np.ndarray or u.shape != (c,):
         raise BoundaryError(memberships_mismatch(u, c))
-    u.flags.writeable = False
+    u.setflags(write=False)
 
 
 def check_proposal(p: Any) -> Proposal:

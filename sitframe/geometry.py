@@ -304,11 +304,17 @@ def raycast(
     return out
 
 
+_finite = math.isfinite
+
+
 def _check_rays(segments: Any, x: float, y: float, ang: np.ndarray, max_range: float,
                 radius: float = 0.0) -> None:
     """Refuse, in words, what a sensor plugin may pass :func:`cast_rays` or :func:`rim_ranges`
     wrong (a few scalar tests: they run in the loop). A NaN origin read ``max_range`` on
     every ray and a negative range gave negative distances."""
+    if segments.__class__ is SegmentSet and ang.ndim == 1 and _finite(x) and _finite(y) \
+            and 0.0 < max_range < math.inf and 0.0 <= radius < math.inf:
+        return
     if segments.__class__ is not SegmentSet:
         raise TypeError(f"segments: expected world.segment_set (a SegmentSet), got "
                         f"{type(segments).__name__}")

@@ -419,7 +419,7 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
         for t in range(spec.iterations):
             if ctx is None:  # the trial's (or a training episode's) first reading
                 step_at = at_read
-                pose.flags.writeable = False
+                pose.setflags(write=False)
                 reading = sensor.read(world, pose, rng)
                 check_reading(reading, d)
                 step_at = at_u
@@ -436,7 +436,7 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
                           default_speed if prop.speed_m_s is None else prop.speed_m_s)
             out = step_robot(world, pose, cmd, robot, rng)
             pose = out.pose
-            pose.flags.writeable = False  # the robot's own: the sensor must not move it
+            pose.setflags(write=False)  # the robot's own: the sensor must not move it
             step_at = at_read
             reading2 = sensor.read(world, pose, rng)
             check_reading(reading2, d)
