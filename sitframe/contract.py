@@ -17,6 +17,7 @@ measurable in the loop (``benchmarks/bench_trial.py``).
 
 from __future__ import annotations
 
+import inspect
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -53,6 +54,25 @@ NEEDED_BY: dict[str, str] = {
 
 #: Optional lifecycle methods any component may define (called when present).
 LIFECYCLE = ("bind", "trial_start", "trial_end")
+
+#: The arguments sitframe passes each method it calls on a component of each kind (besides
+#: :data:`LIFECYCLE`'s one, ``run`` or ``trial``), checked against the method's signature.
+CALLS: dict[str, dict[str, tuple[str, ...]]] = {
+    "sensor": {"read": ("world", "pose", "rng")},
+    "interpreter": {"fit": ("X", "rng"), "memberships": ("reading",), "state": (),
+                    "load_state": ("state",), "events": (), "observe_errors": ("errors",)},
+    "reward": {"__call__": ("transition",)},
+    "behaviour": {"reset": ("rng", "n_situations", "iterations"), "propose": ("context",),
+                  "learn": ("transition", "reward"), "policy": (), "load_policy": ("policy",),
+                  "trial_data": (), "situations_changed": ("event",), "situation_errors": ()},
+    "arbiter": {"combine": ("context", "proposals"), "reset": ("rng", "n_situations",
+                                                              "iterations"),
+                "learn": ("transition", "reward"), "policy": (), "load_policy": ("policy",),
+                "trial_data": (), "situations_changed": ("event",), "situation_errors": ()},
+    "protocol": {"episode_starts": ("world", "rng", "robot"), "terminated": ("context",),
+                 "score_episode": ("arrays", "start", "goal", "robot"),
+                 "aggregate": ("figures",), "check_world": ("world",)},
+}
 
 #: Real scalar types accepted for a heading, speed, activation or reward.
 _REAL = (int, float, np.integer, np.floating)
@@ -105,6 +125,7 @@ def check_protocol(obj: Any, origin: Origin, *, needs: tuple[str, ...] = ()) -> 
     for member in LIFECYCLE:
         if hasattr(obj, member) and not callable(getattr(obj, member)):
             raise PluginError(f"{origin}: '{member}' is not a method")
+    _check_signatures(obj, origin)
     if origin.kind == "protocol":
         it, table = obj.iterations, obj.table
         if isinstance(it, bool) or not isinstance(it, int | np.integer) or it < 1:
@@ -113,6 +134,28 @@ def check_protocol(obj: Any, origin: Origin, *, needs: tuple[str, ...] = ()) -> 
         if not isinstance(table, str) or not table:
             raise PluginError(f"{origin}: table is {table!r}, expected the name of the config "
                               "table of its parameters")
+
+
+def _check_signatures(obj: Any, origin: Origin) -> None:
+    """A :class:`PluginError` for a method sitframe calls that cannot take its arguments."""
+    calls = {**CALLS[origin.kind], "bind": ("run",), "trial_start": ("trial",),
+             "trial_end": ("trial",)}
+    for method, args in calls.items():
+        fn = getattr(obj, method, None)
+        if not callable(fn):
+            continue
+        try:
+            sig = inspect.signature(fn)
+        except (TypeError, ValueError):  # (a builtin without one)
+            continue
+        try:
+            sig.bind(*args)
+        except TypeError:
+            sig = sig.replace(parameters=[q.replace(annotation=q.empty)
+                                          for q in sig.parameters.values()],
+                              return_annotation=sig.empty)
+            raise PluginError(f"{origin}: {method}{sig} cannot be called as {method}("
+                              f"{', '.join(args)}), as sitframe calls it") from None
 
 
 def call(origin: Origin, method: str, fn: Callable[..., Any], *args: Any,

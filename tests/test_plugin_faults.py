@@ -508,6 +508,18 @@ class Bad:
 def sitframe_behaviours():
     return [Bad]
 ''', 2, B, "has no method 'propose'", cfg=BEHAVIOUR_PLAIN),
+    fault("behaviour-reset-without-iterations", '''
+class Bad(FuzzyQBehaviour):  # was a TypeError in trial 0 (exit 3, a failed log)
+    name = "bad"
+
+    def reset(self, rng, n_situations):
+        super().reset(rng, n_situations, 100)
+
+@hookimpl
+def sitframe_behaviours():
+    return [Bad]
+''', 2, B, "reset(rng, n_situations) cannot be called as reset(rng, n_situations, iterations)",
+          cfg=BEHAVIOUR),
     fault("behaviour-with-reward-but-no-learn", '''
 class Bad:
     name = "bad"
