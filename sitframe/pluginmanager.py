@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import importlib.metadata
 import importlib.util
+import inspect
 import os
 import sys
 from collections.abc import Iterable
@@ -45,6 +46,9 @@ KINDS: dict[str, str] = {
     "protocol": "sitframe_protocols",
 }
 
+
+#: What to say of a registered instance (a hook returns factories: classes).
+_INSTANCE = "; the hook must return the class, not an instance"
 
 #: The names of sitframe's hooks (:mod:`sitframe.hookspecs`).
 HOOKS = tuple(n for n in vars(hookspecs) if n.startswith("sitframe_"))
@@ -301,7 +305,8 @@ class Registry:
                     if not isinstance(name, str) or not name or not callable(factory):
                         raise PluginError(
                             f"plugin {where}: hook {hook_name} returned {factory!r}, which is "
-                            "not a callable with a non-empty string attribute 'name'"
+                            "not a callable with a non-empty string attribute 'name' (its name "
+                            f"is {name!r}{'' if callable(factory) else _INSTANCE})"
                         )
                     if name in reg.entries[kind]:
                         other = reg.describe_plugin(reg.entries[kind][name].plugin)
@@ -359,8 +364,11 @@ class Registry:
         except InputError as exc:
             raise exc.at(file=file, key_prefix=key) from None
         except (ValueError, TypeError) as exc:
+            f = entry.factory  # an instance where a class belongs: its __call__ was called
+            hint = "" if isinstance(f, type) or inspect.isroutine(f) or hasattr(f, "func") \
+                else f"{_INSTANCE} ({type(f).__name__}() was registered)"
             raise InputError(f"{exc} ({kind} '{name}' of plugin "
-                             f"{self.describe_plugin(entry.plugin)})", file=file,
+                             f"{self.describe_plugin(entry.plugin)}{hint})", file=file,
                              key=key) from None
         except PLUGIN_ERRORS as exc:
             raise PluginError(

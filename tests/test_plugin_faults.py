@@ -621,6 +621,27 @@ class Bad(ObstacleAvoidanceReward):
 def sitframe_rewards():
     return Bad
 ''', 2, "p.py", "hook sitframe_rewards must return a list", "got type", cfg=REWARD),
+    fault("hook-returns-an-instance", '''
+class Bad(ObstacleAvoidanceReward):
+    name = "bad"
+
+@hookimpl
+def sitframe_rewards():
+    return [Bad()]
+''', 2, "fault.toml: behaviours.avoid.reward:", "__call__() missing 1 required positional",
+          "the hook must return the class, not an instance (Bad() was registered)", cfg=REWARD),
+    fault("factory-positional-only", '''
+class Bad(ObstacleAvoidanceReward):
+    name = "bad"
+
+    def __init__(self, collision, /):  # was "unknown parameter ...; accepted: " (nothing)
+        super().__init__(collision=collision)
+
+@hookimpl
+def sitframe_rewards():
+    return [Bad]
+''', 2, "fault.toml: behaviours.avoid.reward.collision:", "'collision' is a positional-only "
+          "parameter of 'bad'", cfg={**REWARD, "p = 5": "p = 5\nreward_params = {collision = 1}"}),
     fault("hook-name-misspelt", '''
 @hookimpl
 def sitframe_reward():
