@@ -23,7 +23,14 @@ from sitframe.config import (
     validate_config,
 )
 from sitframe.errors import InputError
-from sitframe.logged import BEST_TRIAL_RULE, best_of, check_policy, check_state, logged_policy
+from sitframe.logged import (
+    BEST_TRIAL_RULE,
+    best_of,
+    check_policy,
+    check_state,
+    logged_policy,
+    plugins_of,
+)
 from sitframe.logs import Log, open_log
 from sitframe.loop import (
     EVAL_KEYS,
@@ -113,14 +120,16 @@ def evaluate_log(
         registry.get("arbiter", arbiter, key="--arbiter")
     source = log_path
     if goal_episodes:
-        res0 = Resolved.build(cfg, registry, log_path)
+        with plugins_of(log, log_path, plugins_dirs):
+            res0 = Resolved.build(cfg, registry, log_path)
         if res0.protocol_name(default=None) is None:
             cfg, policies, source = _fusion_config(cfg, policies, list(pinned), fusion,
                                                    log_path)
     if arbiter is not None:
         params = cfg["arbiter"] if cfg["arbiter"].get("component") == arbiter else {}
         cfg["arbiter"] = {**params, "component": arbiter}
-    res = Resolved.build(cfg, registry, source)
+    with plugins_of(log, log_path, plugins_dirs):
+        res = Resolved.build(cfg, registry, source)
     res.world(world, key="--world")
     check_state(res, state, log_path, log.sensor)
     for label in set(policies) & set(res.config.behaviours):

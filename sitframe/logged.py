@@ -9,6 +9,11 @@ fit a config's interpreter.
 
 from __future__ import annotations
 
+import importlib.metadata
+import os
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -60,6 +65,28 @@ def _fits(comp: Any, origin: Origin, method: str, value: Any, what: str, path: s
         raise InputError(f"{what}: {why}", file=path, key=key) from None
     except PLUGIN_ERRORS as exc:  # any other fault is the plugin's
         raise PluginError(str(fault(exc, origin, method))) from exc
+
+
+@contextmanager
+def plugins_of(log: Log, path: str, plugins_dirs: Iterable[str | os.PathLike[str]] = ()
+               ) -> Iterator[None]:
+    """Add to an "unknown <kind>" error raised inside the block which of the plugins that
+    wrote ``log`` are not loaded now (neither an entry point nor a file of ``plugins_dirs``;
+    a log of a run with ``--plugins-dir`` names its files)."""
+    try:
+        yield
+    except InputError as exc:
+        if not exc.message.startswith("unknown "):
+            raise
+        loaded = {ep.name for ep in importlib.metadata.entry_points(group="sitframe")} | {
+            f.stem for d in plugins_dirs for f in Path(d).glob("*.py")}
+        gone = [f"{q['name']} ({q.get('file') or q.get('distribution')})" for q in log.plugins
+                if q.get("name") not in loaded and q.get("origin") != "registered"]
+        if not gone:
+            raise
+        raise InputError(f"{exc.message}; the log was written with plugins not loaded now: "
+                         f"{', '.join(gone)} (pass --plugins-dir DIR, or install them)",
+                         file=exc.file or path, key=exc.key) from None
 
 
 def best_trial(log: Log) -> int:

@@ -374,7 +374,7 @@ def sitframe_sensors():
 '''
 
 
-def test_evaluate_refuses_a_log_whose_sensor_plugin_changed(tmp_path, capsys):
+def test_evaluate_names_a_missing_or_changed_sensor_plugin(tmp_path, capsys):
     plug = tmp_path / "plug"
     plug.mkdir()
     (plug / "six.py").write_text(SIX_BEAMS)
@@ -382,6 +382,11 @@ def test_evaluate_refuses_a_log_whose_sensor_plugin_changed(tmp_path, capsys):
         '\n[sensor]\ncomponent = "six"\n\n[plugins]\ndirs = ["plug"]\n'
     _cfg, log = run_config(tmp_path, text, "a.h5", "--workers", "1")
     capsys.readouterr()
+    # without its plugin: the error says which plugin the log was written with
+    assert main(["evaluate", str(log), "--world", "novel-1", "--iterations", "10"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown sensor 'six'" in err and "the log was written with plugins not loaded " \
+        "now: six (" in err and "six.py)" in err, err
     (plug / "six.py").write_text(SIX_BEAMS.replace("BEAMS = 6", "BEAMS = 7"))
     # was blamed on the interpreter (a shape error in memberships), exit 3
     assert main(["--plugins-dir", str(plug), "evaluate", str(log), "--world", "novel-1",
