@@ -654,6 +654,13 @@ class Bad(ObstacleAvoidanceReward):
 def sitframe_rewards():  # was never called: "unknown reward 'bad'"
     return [Bad]
 ''', 2, "p.py", "sitframe_rewards is not decorated with @sitframe.hookimpl", cfg=REWARD),
+    fault("hooks-on-a-class", '''
+class Observer:  # its hooks were silently never called
+    @hookimpl
+    def sitframe_step(self, record):
+        pass
+''', 2, "p.py", "class Observer implements sitframe_step, but a plugin module's hooks are its "
+          "functions"),
     fault("hook-calls-sys-exit", '''
 import sys
 
