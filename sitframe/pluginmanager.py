@@ -202,15 +202,19 @@ def load_plugins_dir(pm: pluggy.PluginManager, folder: str | os.PathLike[str]) -
     """Import every ``*.py`` file in ``folder`` and register it as a plugin.
 
     The plugin's name is ``"<stem>"`` (prefixed with ``dir:`` if it clashes
-    with an entry-point plugin). Returns the registered names.
+    with an entry-point plugin). A file already loaded is skipped (a folder
+    named twice, by ``--plugins-dir`` and the config's ``[plugins] dirs``).
+    Returns the registered names.
     """
     path = Path(folder)
     if not path.is_dir():
         raise InputError(f"plugins directory does not exist or is not a folder: {path}",
                          key="plugins_dir")
     names = []
+    info: dict[str, PluginInfo] = pm.sitframe_info  # type: ignore[attr-defined]
+    loaded = {Path(i.file).resolve() for i in info.values() if i.file}
     for file in sorted(path.glob("*.py")):
-        if file.name.startswith("_"):
+        if file.name.startswith("_") or file.resolve() in loaded:  # (a folder named twice)
             continue
         name = file.stem if pm.get_plugin(file.stem) is None else f"dir:{file.stem}"
         module = _import_file(file, name)
