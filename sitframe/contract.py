@@ -393,6 +393,17 @@ def check_episode_starts(out: Any, n_max: float, world: Any,
     return s, g
 
 
+def check_n_situations(c: Any, unknown_ok: bool = False) -> int | None:
+    """An interpreter's ``n_situations``: a positive integer (``None`` too if ``unknown_ok``:
+    before ``fit``, e.g. ``c = "auto"``)."""
+    if c is None and unknown_ok:
+        return None
+    if isinstance(c, bool) or not isinstance(c, int | np.integer) or c < 1:
+        raise BoundaryError(f"n_situations is {c!r}, expected a positive integer" + (
+            "" if unknown_ok else " once the situations are fitted or loaded"))
+    return int(c)
+
+
 def check_flag(v: Any) -> bool:
     """A ``bool`` (or numpy bool) returned by plugin code, e.g. a protocol's ``terminated``."""
     if v.__class__ is bool or isinstance(v, np.bool_):

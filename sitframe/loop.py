@@ -45,6 +45,7 @@ from sitframe.contract import (
     check_episode_starts,
     check_flag,
     check_memberships,
+    check_n_situations,
     check_policy,
     check_proposal,
     check_reading,
@@ -260,7 +261,8 @@ class _TrialParts:
             sensor = res.sensor()
             interp = res.interpreter()
         call(og["interpreter"], "load_state", interp.load_state, spec.interpreter_state, trial=k)
-        c = call(og["interpreter"], "n_situations", lambda: int(interp.n_situations), trial=k)
+        c = call(og["interpreter"], "n_situations",
+                 lambda: check_n_situations(interp.n_situations), trial=k)
         with _in_trial(k):
             behaviours = res.behaviours()
             arbiter = res.arbiter()

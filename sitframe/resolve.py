@@ -21,6 +21,7 @@ from sitframe.contract import (
     BoundaryError,
     Origin,
     call,
+    check_n_situations,
     check_protocol,
     fault,
     sensor_geometry,
@@ -95,9 +96,11 @@ class Resolved:
             raise fault(exc, o, "angles_deg") from exc
         interp = res._create("interpreter", "interpreter", res.config.interpreter, bind=False)
         c = call(res.origins["interpreter"], "n_situations", lambda: interp.n_situations)
-        if c is not None and (isinstance(c, bool) or not isinstance(c, int | np.integer) or c < 1):
-            raise PluginFault(f"n_situations is {c!r}, expected a positive integer",
-                              where=str(res.origins["interpreter"]), method="n_situations")
+        try:
+            c = check_n_situations(c, unknown_ok=True)
+        except BoundaryError as exc:
+            raise PluginFault(str(exc), where=str(res.origins["interpreter"]),
+                              method="n_situations") from None
         e = res.config.experiment
         loaded = {n: res.world(n, "experiment.world" if n == e.world else "worlds")
                   for n in dict.fromkeys([*res.config.worlds(), *worlds])}

@@ -451,6 +451,16 @@ class Bad(FCMInterpreter):
 def sitframe_interpreters():
     return [Bad]
 ''', 2, In, "n_situations()", "expected a positive integer", cfg=INTERP),
+    fault("interpreter-n-situations-never-known", '''
+class Bad(FCMInterpreter):  # was "int() argument must be ... not 'NoneType'"
+    name = "bad"
+    n_situations = None
+
+@hookimpl
+def sitframe_interpreters():
+    return [Bad]
+''', 3, In, "n_situations() in trial 0", "n_situations is None, expected a positive integer "
+          "once the situations are fitted or loaded", cfg=INTERP, trial=0),
     # -- behaviours: propose returns a sitframe.Proposal with a finite heading
     fault("behaviour-propose-returns-none", behaviour("return None if self.now else good()"), 3,
           B, "propose() in trial 1, iteration 0", "returned NoneType None", cfg=BEHAVIOUR,
