@@ -22,7 +22,8 @@ from sitframe.config import (
     load_config,
     validate_config,
 )
-from sitframe.errors import InputError
+from sitframe.contract import BoundaryError, call, check_data
+from sitframe.errors import InputError, PluginFault
 from sitframe.logged import (
     BEST_TRIAL_RULE,
     best_of,
@@ -153,10 +154,22 @@ def evaluate_log(
     if goal_episodes:
         return {**out, "arbiter": res.config.arbiter.name, **batch_scores(result)}
     out.update({key: result.summary[key] for key in EVAL_KEYS})
-    for _label, (_beh, reward) in res.behaviours().items():
+    return {**out, **_reward_metrics(res, result.arrays)}
+
+
+def _reward_metrics(res: Resolved, arrays: dict[str, np.ndarray]) -> dict[str, Any]:
+    """What the rewards' optional ``metrics(arrays)`` make of an evaluation (a fault in one
+    is the reward's, not the log's)."""
+    out: dict[str, Any] = {}
+    for label, (_beh, reward) in res.behaviours().items():
         metrics = getattr(reward, "metrics", None)
         if metrics is not None:
-            out.update(metrics(result.arrays))
+            o = res.origins[f"behaviours.{label}.reward"]
+            try:
+                out.update(check_data(call(o, "metrics", metrics, arrays),
+                                      "figures of the evaluation"))
+            except BoundaryError as exc:
+                raise PluginFault(str(exc), where=str(o), method="metrics") from None
     return out
 
 

@@ -394,3 +394,38 @@ def test_evaluate_names_a_missing_or_changed_sensor_plugin(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "a.h5: sensor: its situations were fitted on readings of " \
         "sensor 'six' (6 beams" in err and "now has 7" in err, err
+
+
+MEASURING_REWARD = '''
+from sitframe import hookimpl
+from sitframe.plugins.rewards import ObstacleAvoidanceReward
+
+
+class Measuring(ObstacleAvoidanceReward):
+    name = "measuring"
+
+    def metrics(self, arrays):
+        return {"band": arrays["no-such-array"]}
+
+
+@hookimpl
+def sitframe_rewards():
+    return [Measuring]
+'''
+
+
+def test_a_reward_metrics_fault_in_evaluate_names_the_reward(tmp_path, capsys):
+    plug = tmp_path / "plug"
+    plug.mkdir()
+    (plug / "measuring.py").write_text(MEASURING_REWARD)
+    text = small_config(trials=1, iterations=40, c=4, fcm_trials=2, eval_iterations=10).replace(
+        'reward = "obstacle-avoidance"', 'reward = "measuring"') + \
+        '\n[plugins]\ndirs = ["plug"]\n'
+    _cfg, log = run_config(tmp_path, text, "a.h5", "--workers", "1")
+    capsys.readouterr()
+    # was "a.h5: the log's contents are damaged or not laid out as a sitframe log (KeyError...)"
+    assert main(["--plugins-dir", str(plug), "evaluate", str(log), "--world", "novel-1",
+                 "--iterations", "10"]) == 3
+    err = capsys.readouterr().err
+    assert "reward 'measuring' [behaviours.avoid.reward]: metrics(): KeyError: 'no-such-array'" \
+        in err and err.count("\n") == 1, err
