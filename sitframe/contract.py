@@ -446,7 +446,7 @@ def _unloggable(v: Any) -> str | None:
     try:
         a = np.asarray(v)
     except (TypeError, ValueError):
-        return f"a {type(v).__name__} that is no rectangular array"
+        return f"{type(v).__name__} that is no rectangular array"
     if a.dtype.kind not in "biufc":
-        return f"a {type(v).__name__} of dtype {a.dtype}"
+        return f"{type(v).__name__} of dtype {a.dtype}"
     return None

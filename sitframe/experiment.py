@@ -279,8 +279,12 @@ class Experiment:
                 # (the logger runs last) record it
                 kwargs["status"] = "failed"
                 self.info.extra.setdefault("failure", str(first))
+            trial = kwargs.get("trial") if hook_name == "sitframe_trial_end" else None
+            before = dict(trial.plugin_data) if trial is not None else {}
             try:
                 impl.function(*[kwargs[a] for a in impl.argnames])
+                if trial is not None:
+                    _check_plugin_data(trial.plugin_data, before, impl.plugin_name)
             except (KeyboardInterrupt, TaskCancelled):
                 raise
             except PLUGIN_ERRORS as exc:  # reported below, naming the plugin
@@ -384,6 +388,24 @@ class _Runs:
             if isinstance(exc, PluginFault):
                 self.runs[i][0].info.extra["failure"] = str(exc)
             self.finish(i, status)
+
+
+def _check_plugin_data(data: dict[str, Any], before: dict[str, Any], plugin: str) -> None:
+    """What an observer's ``sitframe_trial_end`` did to ``trial.plugin_data``: only its own
+    entry, loggable (:func:`check_data`); else the entries are put back (the logger, which
+    runs last, writes the trial as it was) and a :class:`BoundaryError` says why."""
+    try:
+        for key in set(data) | set(before):
+            if data.get(key) is before.get(key):
+                continue
+            if key != plugin:
+                raise BoundaryError(f"changed trial.plugin_data['{key}'], which is not its own "
+                                    f"(its own is trial.plugin_data['{plugin}'])")
+            check_data(data.get(key), f"trial.plugin_data['{plugin}']")
+    except BoundaryError:
+        data.clear()
+        data.update(before)
+        raise
 
 
 def drive(runs: list[tuple[Experiment, RunPlan]], executor: Any) -> list[RunResult]:

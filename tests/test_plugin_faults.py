@@ -603,7 +603,7 @@ def sitframe_trial_data(trial):
 @hookimpl
 def sitframe_trial_data(trial):  # was blamed on the HDF5 logger, which could not write it
     return {"n": 1} if trial.index == 0 else {"names": np.array(["a", "b"])}
-''', 3, "p.py", "sitframe_trial_data() in trial 1", "key 'names': a ndarray of dtype <U1",
+''', 3, "p.py", "sitframe_trial_data() in trial 1", "key 'names': ndarray of dtype <U1",
           trial=1),
     fault("interpreter-state-ragged", '''
 class Bad(FCMInterpreter):
@@ -615,7 +615,7 @@ class Bad(FCMInterpreter):
 @hookimpl
 def sitframe_interpreters():
     return [Bad]
-''', 3, In, "state()", "key 'history': a list that is no rectangular array", cfg=INTERP,
+''', 3, In, "state()", "key 'history': list that is no rectangular array", cfg=INTERP,
           fresh=True),
     fault("observer-trial-data-raises", '''
 @hookimpl
@@ -753,6 +753,13 @@ def sitframe_stage_end(run, stage, data):
     if stage == "cluster":
         raise RuntimeError("no display for the centres")
 ''', 3, "p.py", "sitframe_stage_end()", "RuntimeError: no display", fresh=True),
+    fault("observer-trial-end-overwrites-another-plugins-data", '''
+@hookimpl
+def sitframe_trial_end(run, trial):  # was silently logged in place of the other's
+    if trial.index == 1:
+        trial.plugin_data["hdf5-logger"] = {"x": 1}
+''', 3, "p.py", "sitframe_trial_end() in trial 1", "changed trial.plugin_data['hdf5-logger'], "
+          "which is not its own (its own is trial.plugin_data['p'])", trial=1, kept=2),
     fault("observer-run-start-raises", '''
 @hookimpl
 def sitframe_run_start(run):
