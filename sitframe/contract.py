@@ -427,6 +427,20 @@ def check_data(d: Any, what: str) -> dict[str, Any]:
     return d
 
 
+def check_trial_data(d: Any, iterations: int) -> dict[str, Any]:
+    """A behaviour's ``trial_data()``: :func:`check_data`, and the scalars the summary reads,
+    ``converged`` a bool and ``convergence_iteration`` an integer in [-1, iterations)."""
+    d = check_data(d, "trial data")
+    c = d.get("converged", False)
+    if c.__class__ is not bool and not isinstance(c, np.bool_):
+        raise BoundaryError(f"returned converged = {c!r:.40}, expected True or False")
+    it = d.get("convergence_iteration", -1)
+    if isinstance(it, bool) or not isinstance(it, int | np.integer) or not -1 <= it < iterations:
+        raise BoundaryError(f"returned convergence_iteration = {it!r:.40}, expected an integer "
+                            f"in [-1, {iterations}) (-1: not converged)")
+    return d
+
+
 #: Scalar types the log stores as attributes.
 _SCALAR = (bool, int, float, str, np.integer, np.floating, np.bool_)
 

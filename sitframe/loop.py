@@ -50,6 +50,7 @@ from sitframe.contract import (
     check_proposal,
     check_reading,
     check_reward,
+    check_trial_data,
     fault,
     memberships_mismatch,
     sensor_spec_mismatch,
@@ -486,7 +487,8 @@ def _trial_result(res: Resolved, spec: TrialSpec, world: World, parts: _TrialPar
         learned.append(("arbiter", parts.arbiter, og["arbiter"]))
     for lb, b, o in learned:
         if hasattr(b, "trial_data"):
-            bdata[lb] = _checked(o, "trial_data", check_data, b.trial_data, k, "trial data")
+            bdata[lb] = _checked(o, "trial_data", check_trial_data, b.trial_data, k,
+                                 spec.iterations)
         if hasattr(b, "policy"):
             pol = _checked(o, "policy", lambda p: check_policy(p, c), b.policy, k)
             if pol is not None:
