@@ -209,6 +209,8 @@ CASES = [
          "experiment.world", "unknown world 'narnia'", "training"),
     case("world-missing-file-in-config", RUN, "nope.toml", "world file not found",
          "training", c__toml=_cfg("seed = 3", 'seed = 3\nworld = "nope.toml"')),
+    case("run-out-empty", ["run", "{D}/small.toml", "--out", ""], "--out",
+         "expected the path of the log to write, got ''"),  # wrote logs/small.h5 instead
     case("run-trials-zero", "run {D}/small.toml --trials 0", "--trials", "[1, "),
     case("policy-from-missing-log", RUN, "missing.h5: log file not found",
          c__toml=_cfg("p = 5", "p = 5\npolicy_from = {log = 'missing.h5'}")),
