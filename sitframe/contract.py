@@ -429,15 +429,16 @@ def check_data(d: Any, what: str) -> dict[str, Any]:
 
 def check_trial_data(d: Any, iterations: int) -> dict[str, Any]:
     """A behaviour's ``trial_data()``: :func:`check_data`, and the scalars the summary reads,
-    ``converged`` a bool and ``convergence_iteration`` an integer in [-1, iterations)."""
+    ``converged`` a bool and ``convergence_iteration`` an integer in [-1, iterations] (the
+    number of iterations it took, -1 if it did not converge)."""
     d = check_data(d, "trial data")
     c = d.get("converged", False)
     if c.__class__ is not bool and not isinstance(c, np.bool_):
         raise BoundaryError(f"returned converged = {c!r:.40}, expected True or False")
     it = d.get("convergence_iteration", -1)
-    if isinstance(it, bool) or not isinstance(it, int | np.integer) or not -1 <= it < iterations:
+    if isinstance(it, bool) or not isinstance(it, int | np.integer) or not -1 <= it <= iterations:
         raise BoundaryError(f"returned convergence_iteration = {it!r:.40}, expected an integer "
-                            f"in [-1, {iterations}) (-1: not converged)")
+                            f"in [-1, {iterations}] (-1: not converged)")
     return d
 
 

@@ -511,7 +511,7 @@ def sitframe_interpreters():
           behaviour('return {**good(), "convergence_iteration": "late"} if self.k == 1 else good()',
                     "trial_data", ""), 3,
           B, "trial_data() in trial 1", "convergence_iteration = 'late', expected an integer in "
-          "[-1, 30)", cfg=BEHAVIOUR, trial=1),
+          "[-1, 30]", cfg=BEHAVIOUR, trial=1),
     fault("behaviour-missing-propose", '''
 class Bad:
     name = "bad"
