@@ -344,6 +344,9 @@ def _prepare_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
         val = getattr(args, key)
         if val is not None:  # (paths on the command line are relative to the working folder)
             e[key] = _abspath(val) if key in ("world", "clusters_from") else val
+    if args.out is not None and not args.out.strip():  # (was the default path, silently)
+        raise InputError(f"expected the path of the log to write, got {args.out!r}",
+                         key="--out")
     out = args.out or str(Path("logs") / f"{e['name']}.h5")
     make_prerequisites(cfg, base_dir,
                        executor_for=partial(make_executor, args.workers, args.scheduler),

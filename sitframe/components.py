@@ -58,7 +58,7 @@ class Sensor(Protocol):
     def read(self, world: World, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Return the (d,) reading (metres) for ``pose`` = (x [m], y [m], theta [rad]).
 
-        Must be a float array of exactly ``len(angles_deg)`` finite values
+        Must be a float array of exactly ``len(angles_deg)`` ranges in [0, max_range]
         (checked). The run logs readings as ``reading`` with this geometry
         (:class:`sitframe.records.SensorSpec`), whatever the sensor.
         """

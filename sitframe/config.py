@@ -323,6 +323,8 @@ def validate_config(raw: dict[str, Any], *, file: str | None = None) -> dict[str
                 table["component"] = _at(P.string, "component", table["component"], file, section)
             else:
                 table["component"] = DEFAULTS[section]["component"]
+            _check_meta(table, file, section, ("reward", "reward_params")
+                        if section == "arbiter" else ())
             cfg[section] = table
         elif section == "robot":
             cfg["robot"] = _validate_robot(value, file)
@@ -377,6 +379,24 @@ def _validate_robot(value: dict[str, Any], file: str | None) -> dict[str, Any]:
     return dict(value)
 
 
+def _check_meta(table: dict[str, Any], file: str | None, key: str,
+                takes: tuple[str, ...]) -> None:
+    """The reserved keys (:data:`META_KEYS`) of component table ``key``, which ``takes`` some."""
+    for k in META_KEYS[1:]:
+        if k in table and k not in takes:
+            who = "behaviours" if k == "policy_from" else "behaviours and the arbiter"
+            raise InputError(f"the {key} table takes no '{k}' (only {who} do)", file=file,
+                             key=f"{key}.{k}")
+    if "reward" in table:
+        _at(P.string, "reward", table["reward"], file, key)
+    if "reward_params" in table:
+        if not isinstance(table["reward_params"], dict):
+            raise InputError("expected a table", file=file, key=f"{key}.reward_params")
+        if "reward" not in table:
+            raise InputError("reward_params without a reward: name the reward they are for "
+                             "(reward = \"...\")", file=file, key=f"{key}.reward_params")
+
+
 def _validate_behaviours(value: dict[str, Any], file: str | None) -> dict[str, Any]:
     out = {}
     for label, table in value.items():
@@ -391,10 +411,7 @@ def _validate_behaviours(value: dict[str, Any], file: str | None) -> dict[str, A
                              file=file, key=key)
         t = dict(table)
         _at(P.string, "component", t["component"], file, key)
-        if "reward" in t:
-            _at(P.string, "reward", t["reward"], file, key)
-        if "reward_params" in t and not isinstance(t["reward_params"], dict):
-            raise InputError("expected a table", file=file, key=f"{key}.reward_params")
+        _check_meta(t, file, key, META_KEYS)
         if "policy_from" in t:
             pf = t["policy_from"]
             if not isinstance(pf, dict) or "log" not in pf:

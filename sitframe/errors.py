@@ -63,6 +63,10 @@ class TaskCancelled(SitframeError):
     """Raised inside a worker's task when the main process cancels the run."""
 
 
+#: What plugin code may raise that is reported as the plugin's fault: any Exception, and
+#: SystemExit (a plugin calling ``sys.exit()`` would otherwise end sitframe without a word).
+PLUGIN_ERRORS = (Exception, SystemExit)
+
 #: Exit status of the CLI when plugin code failed during a run (2 is bad input).
 PLUGIN_FAULT_EXIT = 3
 

@@ -22,8 +22,16 @@ from sitframe.config import (
     load_config,
     validate_config,
 )
-from sitframe.errors import InputError
-from sitframe.logged import BEST_TRIAL_RULE, best_of, check_state, logged_policy
+from sitframe.contract import BoundaryError, call, check_data
+from sitframe.errors import InputError, PluginFault
+from sitframe.logged import (
+    BEST_TRIAL_RULE,
+    best_of,
+    check_policy,
+    check_state,
+    logged_policy,
+    plugins_of,
+)
 from sitframe.logs import Log, open_log
 from sitframe.loop import (
     EVAL_KEYS,
@@ -113,16 +121,21 @@ def evaluate_log(
         registry.get("arbiter", arbiter, key="--arbiter")
     source = log_path
     if goal_episodes:
-        res0 = Resolved.build(cfg, registry, log_path)
+        with plugins_of(log, log_path, plugins_dirs):
+            res0 = Resolved.build(cfg, registry, log_path)
         if res0.protocol_name(default=None) is None:
             cfg, policies, source = _fusion_config(cfg, policies, list(pinned), fusion,
                                                    log_path)
     if arbiter is not None:
         params = cfg["arbiter"] if cfg["arbiter"].get("component") == arbiter else {}
         cfg["arbiter"] = {**params, "component": arbiter}
-    res = Resolved.build(cfg, registry, source)
+    with plugins_of(log, log_path, plugins_dirs):
+        res = Resolved.build(cfg, registry, source)
     res.world(world, key="--world")
-    check_state(res, state, log_path)
+    check_state(res, state, log_path, log.sensor)
+    for label in set(policies) & set(res.config.behaviours):
+        check_policy(res, label, policies[label], log_path,
+                     f"trials/{trial:04d}/behaviours/{label}")
     # the run's protocol with the episodes asked for, or one frozen run of ``iterations``
     name = res.protocol_name(default=None) if goal_episodes else DEFAULT_PROTOCOL
     if name is None:
@@ -141,10 +154,22 @@ def evaluate_log(
     if goal_episodes:
         return {**out, "arbiter": res.config.arbiter.name, **batch_scores(result)}
     out.update({key: result.summary[key] for key in EVAL_KEYS})
-    for _label, (_beh, reward) in res.behaviours().items():
+    return {**out, **_reward_metrics(res, result.arrays)}
+
+
+def _reward_metrics(res: Resolved, arrays: dict[str, np.ndarray]) -> dict[str, Any]:
+    """What the rewards' optional ``metrics(arrays)`` make of an evaluation (a fault in one
+    is the reward's, not the log's)."""
+    out: dict[str, Any] = {}
+    for label, (_beh, reward) in res.behaviours().items():
         metrics = getattr(reward, "metrics", None)
         if metrics is not None:
-            out.update(metrics(result.arrays))
+            o = res.origins[f"behaviours.{label}.reward"]
+            try:
+                out.update(check_data(call(o, "metrics", metrics, arrays),
+                                      "figures of the evaluation"))
+            except BoundaryError as exc:
+                raise PluginFault(str(exc), where=str(o), method="metrics") from None
     return out
 
 

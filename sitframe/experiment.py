@@ -26,7 +26,7 @@ from sitframe import __version__
 from sitframe.collect import Collected, collect_trajectories, collect_wander, concat_collected
 from sitframe.config import config_hash, to_toml
 from sitframe.contract import BoundaryError, call, check_data, fault, sensor_spec_mismatch
-from sitframe.errors import InputError, PluginError, PluginFault, TaskCancelled
+from sitframe.errors import PLUGIN_ERRORS, InputError, PluginError, PluginFault, TaskCancelled
 from sitframe.loop import (
     STAGE_BATCH,
     STAGE_CLUSTER,
@@ -128,12 +128,11 @@ class Experiment:
                               n_samples=c.wander_samples, speed=c.speed,
                               rate_hz=c.rate_hz, params=self.res.robot))
         collected = concat_collected(parts)
-        why = sensor_spec_mismatch(collected.samples[0], self.res.run.sensor.dim) \
-            if len(collected.samples) else None
-        bad = ~np.isfinite(collected.samples).all(axis=1)
+        spec, X = self.res.run.sensor, collected.samples
+        why = sensor_spec_mismatch(X[0], spec.dim, spec.max_range) if len(X) else None
+        bad = ~np.isfinite(X).all(axis=1) | (X < 0).any(axis=1) | (X > spec.max_range).any(axis=1)
         if why is None and bad.any():
-            why = sensor_spec_mismatch(collected.samples[int(np.argmax(bad))],
-                                       self.res.run.sensor.dim)
+            why = sensor_spec_mismatch(X[int(np.argmax(bad))], spec.dim, spec.max_range)
         if why is not None:
             raise PluginFault(f"{why} (collect stage)", where=str(o), method="read")
         return collected
@@ -280,11 +279,15 @@ class Experiment:
                 # (the logger runs last) record it
                 kwargs["status"] = "failed"
                 self.info.extra.setdefault("failure", str(first))
+            trial = kwargs.get("trial") if hook_name == "sitframe_trial_end" else None
+            before = dict(trial.plugin_data) if trial is not None else {}
             try:
                 impl.function(*[kwargs[a] for a in impl.argnames])
+                if trial is not None:
+                    _check_plugin_data(trial.plugin_data, before, impl.plugin_name)
             except (KeyboardInterrupt, TaskCancelled):
                 raise
-            except Exception as exc:  # noqa: BLE001 - reported below, naming the plugin
+            except PLUGIN_ERRORS as exc:  # reported below, naming the plugin
                 if first is None:
                     where = f"plugin {self.registry.describe_plugin(impl.plugin_name)}"
                     first = exc if isinstance(exc, InputError | PluginError) else fault(
@@ -385,6 +388,24 @@ class _Runs:
             if isinstance(exc, PluginFault):
                 self.runs[i][0].info.extra["failure"] = str(exc)
             self.finish(i, status)
+
+
+def _check_plugin_data(data: dict[str, Any], before: dict[str, Any], plugin: str) -> None:
+    """What an observer's ``sitframe_trial_end`` did to ``trial.plugin_data``: only its own
+    entry, loggable (:func:`check_data`); else the entries are put back (the logger, which
+    runs last, writes the trial as it was) and a :class:`BoundaryError` says why."""
+    try:
+        for key in set(data) | set(before):
+            if data.get(key) is before.get(key):
+                continue
+            if key != plugin:
+                raise BoundaryError(f"changed trial.plugin_data['{key}'], which is not its own "
+                                    f"(its own is trial.plugin_data['{plugin}'])")
+            check_data(data.get(key), f"trial.plugin_data['{plugin}']")
+    except BoundaryError:
+        data.clear()
+        data.update(before)
+        raise
 
 
 def drive(runs: list[tuple[Experiment, RunPlan]], executor: Any) -> list[RunResult]:

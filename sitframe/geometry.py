@@ -21,6 +21,9 @@ with a different algorithm (plain Python loops, ``tests/geometry_reference.py``)
 
 from __future__ import annotations
 
+import math
+from typing import Any
+
 import numpy as np
 
 from sitframe.kernels import kernels
@@ -301,6 +304,30 @@ def raycast(
     return out
 
 
+_finite = math.isfinite
+
+
+def _check_rays(segments: Any, x: float, y: float, ang: np.ndarray, max_range: float,
+                radius: float = 0.0) -> None:
+    """Refuse, in words, what a sensor plugin may pass :func:`cast_rays` or :func:`rim_ranges`
+    wrong (a few scalar tests: they run in the loop). A NaN origin read ``max_range`` on
+    every ray and a negative range gave negative distances."""
+    if segments.__class__ is SegmentSet and ang.ndim == 1 and _finite(x) and _finite(y) \
+            and 0.0 < max_range < math.inf and 0.0 <= radius < math.inf:
+        return
+    if segments.__class__ is not SegmentSet:
+        raise TypeError(f"segments: expected world.segment_set (a SegmentSet), got "
+                        f"{type(segments).__name__}")
+    if ang.ndim != 1:
+        raise ValueError(f"angles_rad: expected a 1-D array of ray directions [rad], got shape "
+                         f"{ang.shape}")
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise ValueError(f"x, y: expected a finite ray origin [m], got ({x!r}, {y!r})")
+    if not (0.0 < max_range < math.inf and 0.0 <= radius < math.inf):
+        raise ValueError(f"max_range = {max_range!r}, radius = {radius!r}: expected a finite "
+                         "max_range > 0 and radius >= 0 [m]")
+
+
 def cast_rays(segments: SegmentSet, x: float, y: float, angles_rad: np.ndarray,
               max_range: float) -> np.ndarray:
     """Fast ray casting from one point, for sensors in the control loop.
@@ -326,6 +353,7 @@ def cast_rays(segments: SegmentSet, x: float, y: float, angles_rad: np.ndarray,
         (n,) distances [m] in ``[0, max_range]``.
     """
     ang = np.asarray(angles_rad, dtype=np.float64)
+    _check_rays(segments, x, y, ang, max_range)
     if segments.n == 0:
         return np.full(ang.shape[0], float(max_range))
     k = kernels()
@@ -372,6 +400,7 @@ def rim_ranges(segments: SegmentSet, x: float, y: float, angles_rad: np.ndarray,
         (n,) readings [m] in ``[-radius, max_range]`` (``[0, max_range]`` with ``clip``).
     """
     ang = np.asarray(angles_rad, dtype=np.float64)
+    _check_rays(segments, x, y, ang, max_range, radius)
     if not group >= 1 or ang.shape[0] % group:
         raise ValueError(f"rim_ranges: {ang.shape[0]} rays do not make groups of {group!r}; "
                          "expected a positive group size that divides the number of rays")

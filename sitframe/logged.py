@@ -9,25 +9,84 @@ fit a config's interpreter.
 
 from __future__ import annotations
 
+import importlib.metadata
+import os
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from sitframe.clustering import average_ranks
-from sitframe.errors import InputError
+from sitframe.contract import Origin, fault
+from sitframe.errors import PLUGIN_ERRORS, InputError, PluginError
 from sitframe.logs import Log
-from sitframe.records import LearnedPolicy, summary_key
+from sitframe.records import LearnedPolicy, SensorSpec, summary_key
 from sitframe.resolve import Resolved
 
 
-def check_state(res: Resolved, state: dict[str, Any], path: str) -> None:
-    """Load a logged interpreter state into a fresh interpreter (InputError if it does not fit)."""
+def check_state(res: Resolved, state: dict[str, Any], path: str,
+                sensor: SensorSpec | None = None) -> None:
+    """Load a logged interpreter state into a fresh interpreter (InputError if it does not fit).
+
+    ``sensor``: the geometry of the sensor whose readings the state was fitted on (a
+    log's :attr:`Log.sensor`), which the run's sensor must still have.
+    """
+    now = res.run.sensor
+    if sensor is not None and ((now.name, now.dim, now.max_range) != (
+            sensor.name, sensor.dim, sensor.max_range)
+            or not np.array_equal(now.angles_deg, sensor.angles_deg)):
+        raise InputError(f"its situations were fitted on readings of sensor '{sensor.name}' "
+                         f"({sensor.dim} beams at {sensor.angles_deg.tolist()} deg, max range "
+                         f"{sensor.max_range:g}), but the sensor '{now.name}' now has {now.dim} "
+                         f"at {now.angles_deg.tolist()} deg, max range {now.max_range:g} (did "
+                         "its plugin change?)", file=path, key="sensor")
+    _fits(res.interpreter(), res.origins["interpreter"], "load_state", state,
+          "its situations do not fit this config's interpreter", path, "cluster/state")
+
+
+def check_policy(res: Resolved, label: str, policy: LearnedPolicy, path: str,
+                 key: str = "") -> None:
+    """Load a logged policy into a fresh behaviour ``label`` (InputError at ``key``, default
+    its ``policy_from``, if it does not fit), so that a mismatch is found before the run
+    starts, not in its first trial."""
+    _fits(res.behaviours()[label][0], res.origins[f"behaviours.{label}"], "load_policy", policy,
+          f"its policy does not fit behaviour '{label}'", path,
+          key or f"behaviours.{label}.policy_from")
+
+
+def _fits(comp: Any, origin: Origin, method: str, value: Any, what: str, path: str,
+          key: str) -> None:
     try:
-        res.interpreter().load_state(state)
+        getattr(comp, method)(value)
     except (ValueError, KeyError, TypeError) as exc:
         why = f"missing {exc}" if isinstance(exc, KeyError) else exc
-        raise InputError(f"its situations do not fit this config's interpreter: {why}",
-                         file=path, key="cluster/state") from None
+        raise InputError(f"{what}: {why}", file=path, key=key) from None
+    except PLUGIN_ERRORS as exc:  # any other fault is the plugin's
+        raise PluginError(str(fault(exc, origin, method))) from exc
+
+
+@contextmanager
+def plugins_of(log: Log, path: str, plugins_dirs: Iterable[str | os.PathLike[str]] = ()
+               ) -> Iterator[None]:
+    """Add to an "unknown <kind>" error raised inside the block which of the plugins that
+    wrote ``log`` are not loaded now (neither an entry point nor a file of ``plugins_dirs``;
+    a log of a run with ``--plugins-dir`` names its files)."""
+    try:
+        yield
+    except InputError as exc:
+        if not exc.message.startswith("unknown "):
+            raise
+        loaded = {ep.name for ep in importlib.metadata.entry_points(group="sitframe")} | {
+            f.stem for d in plugins_dirs for f in Path(d).glob("*.py")}
+        gone = [f"{q['name']} ({q.get('file') or q.get('distribution')})" for q in log.plugins
+                if q.get("name") not in loaded and q.get("origin") != "registered"]
+        if not gone:
+            raise
+        raise InputError(f"{exc.message}; the log was written with plugins not loaded now: "
+                         f"{', '.join(gone)} (pass --plugins-dir DIR, or install them)",
+                         file=exc.file or path, key=exc.key) from None
 
 
 def best_trial(log: Log) -> int:

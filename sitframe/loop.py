@@ -42,16 +42,20 @@ from sitframe.contract import (
     call,
     check_combined,
     check_data,
+    check_episode_starts,
+    check_flag,
     check_memberships,
+    check_n_situations,
     check_policy,
     check_proposal,
     check_reading,
     check_reward,
+    check_trial_data,
     fault,
     memberships_mismatch,
     sensor_spec_mismatch,
 )
-from sitframe.errors import InputError, PluginFault, TaskCancelled
+from sitframe.errors import PLUGIN_ERRORS, InputError, PluginFault, TaskCancelled
 from sitframe.metrics import collisions_per_1000, coverage, path_length
 from sitframe.records import (
     Context,
@@ -171,7 +175,7 @@ def step_hook_of(pm: pluggy.PluginManager) -> Callable[[StepRecord], Any] | None
             hook.sitframe_step(record=rec)
         except (KeyboardInterrupt, TaskCancelled, PluginFault):
             raise
-        except Exception as exc:  # noqa: BLE001 - an observer's fault is reported, not raw
+        except PLUGIN_ERRORS as exc:  # an observer's fault is reported, not raw
             name = blame(exc, impls)
             where = (f"plugin {info[name].describe() if name in info else name}"
                      if name else "an observer")
@@ -224,7 +228,7 @@ def simulate(
     env.track = SituationTracker.start(parts.interp, spec.learn, parts.components, res.origins,
                                        spec.index)  # None unless the situations evolve
     n = _run_loop(res, spec, parts, rec, env, step_hook, protocol)
-    arrays = rec.arrays(n, res.origins, spec.index)
+    arrays = rec.arrays(n, res.origins, spec.index, res.run.sensor.max_range)
     result = _trial_result(res, spec, world, parts, arrays, env)
     for ev_spec in evaluation_specs(spec, result.policies, result.situations.get("state")):
         attach_evaluation(result, ev_spec.world, simulate(res, ev_spec))
@@ -258,7 +262,8 @@ class _TrialParts:
             sensor = res.sensor()
             interp = res.interpreter()
         call(og["interpreter"], "load_state", interp.load_state, spec.interpreter_state, trial=k)
-        c = call(og["interpreter"], "n_situations", lambda: int(interp.n_situations), trial=k)
+        c = call(og["interpreter"], "n_situations",
+                 lambda: check_n_situations(interp.n_situations), trial=k)
         with _in_trial(k):
             behaviours = res.behaviours()
             arbiter = res.arbiter()
@@ -269,7 +274,7 @@ class _TrialParts:
             if label in spec.policies:
                 call(o, "load_policy", beh.load_policy, spec.policies[label], trial=k)
             call(o, "reset", beh.reset, rng, c, L, trial=k)
-        if "arbiter" in spec.policies and hasattr(arbiter, "load_policy"):
+        if "arbiter" in spec.policies:  # (an arbiter with policy() has load_policy)
             call(og["arbiter"], "load_policy", arbiter.load_policy, spec.policies["arbiter"],
                  trial=k)
         if hasattr(arbiter, "reset"):
@@ -344,14 +349,15 @@ class Recorder:
         if rewards:
             self._rewards.append(tuple(rewards.values()))
 
-    def arrays(self, n: int, origins: dict[str, Origin], trial: int) -> dict[str, np.ndarray]:
+    def arrays(self, n: int, origins: dict[str, Origin], trial: int,
+               max_range: float = np.inf) -> dict[str, np.ndarray]:
         """The first ``n`` iterations' arrays (the final pose is the last of ``pose``).
 
-        Checks every reading, membership vector and weight first (vectorised,
-        :func:`_check_trial_values`).
+        Checks every reading (against the sensor's ``max_range``), membership
+        vector and weight first (vectorised, :func:`_check_trial_values`).
         """
         _check_trial_values(self.reading[:n], self.memberships[:n], self.weights[:n], origins,
-                            trial)
+                            trial, max_range)
         coll = np.zeros(n, dtype=bool)
         contact = np.full((n, 2), np.nan)
         for t, xy in self._contacts:
@@ -416,6 +422,7 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
         for t in range(spec.iterations):
             if ctx is None:  # the trial's (or a training episode's) first reading
                 step_at = at_read
+                pose.setflags(write=False)
                 reading = sensor.read(world, pose, rng)
                 check_reading(reading, d)
                 step_at = at_u
@@ -426,12 +433,13 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
             for lb, beh, step_at in at_propose:  # noqa: B007 - step_at names the caller on a fault
                 proposals[lb] = check_proposal(beh.propose(ctx))
             step_at = at_combine
-            prop, weights = check_combined(arbiter.combine(ctx, proposals), n_labels)
+            prop, weights = check_combined(arbiter.combine(ctx, proposals), n_labels, proposals)
             step_at = at_core
             cmd = Command(prop.heading_deg,
                           default_speed if prop.speed_m_s is None else prop.speed_m_s)
             out = step_robot(world, pose, cmd, robot, rng)
             pose = out.pose
+            pose.setflags(write=False)  # the robot's own: the sensor must not move it
             step_at = at_read
             reading2 = sensor.read(world, pose, rng)
             check_reading(reading2, d)
@@ -452,7 +460,8 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
                 step_at = at_step
                 step_hook(StepRecord(k, tr, proposals, weights, rewards))
             ctx = ctx2
-            if at_end is not None and (step_at := at_end) and protocol.terminated(ctx):
+            if at_end is not None and (step_at := at_end) and \
+                    check_flag(protocol.terminated(ctx)):
                 n_done = t + 1
                 break
             if chain is not None and chain.over(ctx, t + 1, spec.iterations):
@@ -460,7 +469,7 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
                 ctx = None
     except (KeyboardInterrupt, TaskCancelled, PluginFault, InputError):
         raise  # (a plugin's InputError names the input it found wrong)
-    except Exception as exc:
+    except PLUGIN_ERRORS as exc:
         if step_at.origin is None and step_at.method == "step":
             raise  # the core's own arithmetic: a bug here, not the plugin's
         raise _loop_fault(exc, step_at, k, t, res, locals()) from exc
@@ -478,7 +487,8 @@ def _trial_result(res: Resolved, spec: TrialSpec, world: World, parts: _TrialPar
         learned.append(("arbiter", parts.arbiter, og["arbiter"]))
     for lb, b, o in learned:
         if hasattr(b, "trial_data"):
-            bdata[lb] = _checked(o, "trial_data", check_data, b.trial_data, k, "trial data")
+            bdata[lb] = _checked(o, "trial_data", check_trial_data, b.trial_data, k,
+                                 spec.iterations)
         if hasattr(b, "policy"):
             pol = _checked(o, "policy", lambda p: check_policy(p, c), b.policy, k)
             if pol is not None:
@@ -508,8 +518,10 @@ class _TrainingEpisodes:
     seed), drawn again whenever a batch is used up.
     """
 
-    def __init__(self, proto: Any, world: World, seed: int, robot: RobotParams) -> None:
+    def __init__(self, proto: Any, world: World, seed: int, robot: RobotParams,
+                 origin: Origin, trial: int) -> None:
         self.proto, self.world, self.robot = proto, world, robot
+        self.origin, self.trial = origin, trial
         self.rng = np.random.default_rng(np.random.SeedSequence(seed % 2**64, spawn_key=(2,)))
         self.first: list[int] = [0]
         self.goals: list[tuple[float, float, float]] = []
@@ -518,9 +530,12 @@ class _TrainingEpisodes:
 
     def _pairs(self) -> Iterator[tuple[np.ndarray, Goal | None]]:
         while True:
-            starts, goals = self.proto.episode_starts(self.world, self.rng, self.robot)
-            for e, start in enumerate(np.asarray(starts, dtype=float)):
-                g = None if goals is None else np.asarray(goals[e], dtype=float)
+            starts, goals = _checked(self.origin, "episode_starts", check_episode_starts,
+                                     lambda: self.proto.episode_starts(self.world, self.rng,
+                                                                       self.robot),
+                                     self.trial, np.inf, self.world, self.robot.radius)
+            for e, start in enumerate(starts):
+                g = None if goals is None else goals[e]
                 self.goals.append((np.nan, np.nan, np.nan) if g is None else tuple(g))
                 yield start.copy(), None if g is None else Goal(g[:2], float(g[2]))
 
@@ -529,7 +544,8 @@ class _TrainingEpisodes:
         terminated or timed out (never at the trial's own end)."""
         if t >= limit:
             return False
-        done = bool(self.proto.terminated(ctx))
+        done = _checked(self.origin, "terminated", check_flag, lambda: self.proto.terminated(ctx),
+                        self.trial)
         if done or t - self.first[-1] >= int(self.proto.iterations):
             self.reached.append(done)
             self.first.append(t)
@@ -553,7 +569,8 @@ def _training_episodes(res: Resolved, spec: TrialSpec, world: World) -> _Trainin
     proto = res.protocol(str(spec.protocol))
     if not getattr(proto, "train_in_episodes", False):
         return None
-    return _TrainingEpisodes(proto, world, spec.seed, res.robot)
+    return _TrainingEpisodes(proto, world, spec.seed, res.robot, res.origins[proto.table],
+                             spec.index)
 
 
 def run_batch(res: Resolved, spec: TrialSpec, *,
@@ -580,16 +597,10 @@ def run_batch(res: Resolved, spec: TrialSpec, *,
     episodic = bool(getattr(proto, "episodic", True))
     ss = np.random.SeedSequence(spec.seed % 2**64)
     rng = np.random.default_rng(ss.spawn(1)[0])
-    starts, goals = call(o, "episode_starts", proto.episode_starts, world, rng, res.robot,
-                         trial=k)
-    starts = np.asarray(starts, dtype=float)
+    starts, goals = _checked(o, "episode_starts", check_episode_starts,
+                             lambda: proto.episode_starts(world, rng, res.robot), k,
+                             np.inf if episodic else 1, world, res.robot.radius)
     n = len(starts)
-    if starts.shape != (n, 3) or n < 1 or (goals is not None and np.shape(goals) != (n, 3)) \
-            or (n > 1 and not episodic):
-        raise PluginFault(f"returned starts of shape {starts.shape} and goals of shape "
-                          f"{None if goals is None else np.shape(goals)}; expected (n, 3) "
-                          "each (goals may be None), n >= 1 (n = 1: episodic is False)",
-                          where=str(o), method="episode_starts", trial=k)
     seeds = np.random.SeedSequence(spec.seed % 2**64, spawn_key=(1,)).generate_state(
         n, np.uint64) if episodic else [spec.seed]
     score = getattr(proto, "score_episode", None)
@@ -605,9 +616,18 @@ def run_batch(res: Resolved, spec: TrialSpec, *,
             o, "score_episode", check_data, lambda r=r, e=e: score(
                 r.arrays, starts[e], None if goals is None else goals[e], res.robot), k,
             "per-episode figures"))
+    for e, f in enumerate(figures):
+        if f.keys() != figures[0].keys():
+            raise PluginFault(f"returned {sorted(f)} for episode {e} but {sorted(figures[0])} "
+                              "for episode 0; expected the same keys for every episode",
+                              where=str(o), method="score_episode", trial=k)
     per_ep = {key: np.asarray([f[key] for f in figures]) for key in figures[0]}
     scores = _checked(o, "aggregate", check_data, lambda: proto.aggregate(per_ep), k,
                       "the batch's scores") if hasattr(proto, "aggregate") else {}
+    if clash := sorted(set(scores) & set(EVAL_KEYS)):
+        raise PluginFault(f"returned {clash}, which the core measures itself (one of "
+                          f"{', '.join(EVAL_KEYS)}); expected other names", where=str(o),
+                          method="aggregate", trial=k)
     arrays = {key: np.concatenate([p.arrays[key] for p in parts]) for key in parts[0].arrays}
     episodes: dict[str, Any] = {}
     if episodic:
@@ -643,7 +663,7 @@ READING = "reading"
 def _nearest(reading: np.ndarray) -> float:
     """The smallest range of a reading; NaN here is the sensor's fault, found at once."""
     v = float(_min(reading))
-    if v != v:  # NaN
+    if not v >= 0.0:  # NaN, or a negative range
         raise BoundaryError(sensor_spec_mismatch(reading, reading.size) or "returned NaN")
     return v
 
@@ -661,7 +681,8 @@ def _loop_fault(exc: Exception, step_at: _Step, trial: int, t: int, res: Resolve
         c = res.run.n_situations
         for name in ("reading2", "reading"):
             r = scope.get(name)
-            if isinstance(r, np.ndarray) and (why := sensor_spec_mismatch(r, res.run.sensor.dim)):
+            if isinstance(r, np.ndarray) and (why := sensor_spec_mismatch(
+                    r, res.run.sensor.dim, res.run.sensor.max_range)):
                 return PluginFault(why, where=str(res.origins["sensor"]), method="read",
                                    trial=trial, iteration=t)
         for name in ("u2", "u"):
@@ -676,14 +697,14 @@ def _loop_fault(exc: Exception, step_at: _Step, trial: int, t: int, res: Resolve
 
 
 def _check_trial_values(readings: np.ndarray, u: np.ndarray, weights: np.ndarray,
-                        origins: dict[str, Origin], trial: int) -> None:
+                        origins: dict[str, Origin], trial: int, max_range: float) -> None:
     """Vectorised checks of every reading, membership vector and weight of a finished trial."""
     def nonfinite(x: np.ndarray) -> np.ndarray:
         return ~np.isfinite(x).all(axis=1)
 
     for values, bad, key, method, why in (
-            (readings, nonfinite(readings), "sensor", "read",
-             lambda r: sensor_spec_mismatch(r, readings.shape[1]) or "non-finite"),
+            (readings, nonfinite(readings) | (readings > max_range).any(axis=1), "sensor", "read",
+             lambda r: sensor_spec_mismatch(r, readings.shape[1], max_range) or "non-finite"),
             (u, nonfinite(u) | (u < 0).any(axis=1)
              | (np.abs(u.sum(axis=1) - 1.0) > MEMBERSHIP_SUM_TOL), "interpreter", "memberships",
              lambda m: memberships_mismatch(m, u.shape[1]) or "invalid"),
@@ -734,7 +755,7 @@ def _collect_plugin_data(result: TrialResult, components: list[tuple[str, Any]],
                               trial=k) from None
         except (KeyboardInterrupt, TaskCancelled, PluginFault):
             raise
-        except Exception as exc:  # noqa: BLE001 - an observer's fault is reported, not raw
+        except PLUGIN_ERRORS as exc:  # an observer's fault is reported, not raw
             raise fault(exc, where, "sitframe_trial_data", k) from exc
         if data:
             add(impl.plugin_name, where, data)

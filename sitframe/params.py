@@ -172,9 +172,18 @@ def check_params(
     names, var_kw = accepted_params(factory)
     if var_kw:
         return
+    try:
+        positional = {q.name for q in inspect.signature(factory).parameters.values()
+                      if q.kind is q.POSITIONAL_ONLY}
+    except (TypeError, ValueError):
+        positional = set()
     for pname in params:
         if pname not in names:
             where = f"{key}.{pname}" if key else pname
+            if pname in positional:
+                raise InputError(f"'{pname}' is a positional-only parameter of "
+                                 f"'{getattr(factory, 'name', factory)}', which sitframe cannot "
+                                 "pass: it passes a table's keys by keyword", file=file, key=where)
             raise InputError(
                 f"unknown parameter '{pname}'{did_you_mean(pname, names)} for "
                 f"'{getattr(factory, 'name', factory)}'; accepted: {', '.join(sorted(names))}",

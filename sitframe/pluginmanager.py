@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import importlib.metadata
 import importlib.util
+import inspect
 import os
 import sys
 from collections.abc import Iterable
@@ -27,7 +28,7 @@ from typing import Any
 import pluggy
 
 from sitframe import hookspecs
-from sitframe.errors import InputError, PluginError, did_you_mean
+from sitframe.errors import PLUGIN_ERRORS, InputError, PluginError, did_you_mean
 from sitframe.params import check_params
 
 #: Entry-point group (and pluggy project name).
@@ -44,6 +45,13 @@ KINDS: dict[str, str] = {
     "arbiter": "sitframe_arbiters",
     "protocol": "sitframe_protocols",
 }
+
+
+#: What to say of a registered instance (a hook returns factories: classes).
+_INSTANCE = "; the hook must return the class, not an instance"
+
+#: The names of sitframe's hooks (:mod:`sitframe.hookspecs`).
+HOOKS = tuple(n for n in vars(hookspecs) if n.startswith("sitframe_"))
 
 
 @dataclass(frozen=True)
@@ -131,6 +139,19 @@ def _register_checked(
         pm.register(plugin, name=name)
     except (pluggy.PluginValidationError, ValueError) as exc:
         raise PluginError(f"plugin {info.describe()} could not be registered: {exc}") from None
+    for hook in HOOKS:  # a hook function without @sitframe.hookimpl would never be called
+        if callable(getattr(plugin, hook, None)) and pm.parse_hookimpl_opts(plugin, hook) is None:
+            raise PluginError(f"plugin {info.describe()}: {hook} is not decorated with "
+                              "@sitframe.hookimpl, so it would never be called")
+    for cls in vars(plugin).values() if isinstance(plugin, ModuleType) else ():
+        # hooks on a class of the module: the module is registered, never the class
+        hooks = [h for h in HOOKS if isinstance(cls, type) and cls.__module__ ==
+                 plugin.__name__ and hasattr(getattr(cls, h, None), f"{GROUP}_impl")]
+        if hooks:
+            raise PluginError(f"plugin {info.describe()}: class {cls.__name__} implements "
+                              f"{', '.join(hooks)}, but a plugin module's hooks are its "
+                              "functions: sitframe never calls a class's (make them module "
+                              "functions)")
     pm.sitframe_info[name] = info  # type: ignore[attr-defined]
 
 
@@ -169,7 +190,7 @@ def _load_entry_points(pm: pluggy.PluginManager, info: dict[str, PluginInfo]) ->
             pinfo = PluginInfo(name, "entry point", dist_name, dist_version)
             try:
                 plugin = ep.load()
-            except Exception as exc:  # noqa: BLE001 - any import failure is the plugin's
+            except PLUGIN_ERRORS as exc:  # any import failure is the plugin's
                 raise PluginError(
                     f"plugin {pinfo.describe()} failed to import ({ep.value}): "
                     f"{type(exc).__name__}: {exc}"
@@ -181,15 +202,19 @@ def load_plugins_dir(pm: pluggy.PluginManager, folder: str | os.PathLike[str]) -
     """Import every ``*.py`` file in ``folder`` and register it as a plugin.
 
     The plugin's name is ``"<stem>"`` (prefixed with ``dir:`` if it clashes
-    with an entry-point plugin). Returns the registered names.
+    with an entry-point plugin). A file already loaded is skipped (a folder
+    named twice, by ``--plugins-dir`` and the config's ``[plugins] dirs``).
+    Returns the registered names.
     """
     path = Path(folder)
     if not path.is_dir():
         raise InputError(f"plugins directory does not exist or is not a folder: {path}",
                          key="plugins_dir")
     names = []
+    info: dict[str, PluginInfo] = pm.sitframe_info  # type: ignore[attr-defined]
+    loaded = {Path(i.file).resolve() for i in info.values() if i.file}
     for file in sorted(path.glob("*.py")):
-        if file.name.startswith("_"):
+        if file.name.startswith("_") or file.resolve() in loaded:  # (a folder named twice)
             continue
         name = file.stem if pm.get_plugin(file.stem) is None else f"dir:{file.stem}"
         module = _import_file(file, name)
@@ -276,7 +301,7 @@ class Registry:
                 where = reg.describe_plugin(plugin_name)
                 try:
                     result = impl.function()
-                except Exception as exc:  # noqa: BLE001 - report any plugin fault
+                except PLUGIN_ERRORS as exc:  # report any plugin fault
                     raise PluginError(
                         f"plugin {where} raised in hook {hook_name}: "
                         f"{type(exc).__name__}: {exc}"
@@ -293,7 +318,8 @@ class Registry:
                     if not isinstance(name, str) or not name or not callable(factory):
                         raise PluginError(
                             f"plugin {where}: hook {hook_name} returned {factory!r}, which is "
-                            "not a callable with a non-empty string attribute 'name'"
+                            "not a callable with a non-empty string attribute 'name' (its name "
+                            f"is {name!r}{'' if callable(factory) else _INSTANCE})"
                         )
                     if name in reg.entries[kind]:
                         other = reg.describe_plugin(reg.entries[kind][name].plugin)
@@ -351,10 +377,13 @@ class Registry:
         except InputError as exc:
             raise exc.at(file=file, key_prefix=key) from None
         except (ValueError, TypeError) as exc:
+            f = entry.factory  # an instance where a class belongs: its __call__ was called
+            hint = "" if isinstance(f, type) or inspect.isroutine(f) or hasattr(f, "func") \
+                else f"{_INSTANCE} ({type(f).__name__}() was registered)"
             raise InputError(f"{exc} ({kind} '{name}' of plugin "
-                             f"{self.describe_plugin(entry.plugin)})", file=file,
+                             f"{self.describe_plugin(entry.plugin)}{hint})", file=file,
                              key=key) from None
-        except Exception as exc:  # noqa: BLE001
+        except PLUGIN_ERRORS as exc:
             raise PluginError(
                 f"plugin {self.describe_plugin(entry.plugin)}: creating {kind} '{name}' "
                 f"failed: {type(exc).__name__}: {exc}"

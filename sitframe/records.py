@@ -355,6 +355,7 @@ class PolicyOutput:
             raise ValueError(f"PolicyOutput.q must be (c, A) = ({r.size}, {a.size}), got "
                              f"{np.shape(self.q)}")
         object.__setattr__(self, "actions", a)
+        object.__setattr__(self, "rules", r)
 
     def values(self) -> np.ndarray:
         """(c,) the action value of each situation's rule."""
@@ -378,6 +379,13 @@ class LearnedPolicy:
     """
 
     outputs: dict[str, PolicyOutput]
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.outputs, dict) or not all(
+                isinstance(k, str) and k and "/" not in k and isinstance(o, PolicyOutput)
+                for k, o in self.outputs.items()):
+            raise TypeError(f"LearnedPolicy.outputs must be a dict of output names (non-empty, "
+                            f"no '/') to PolicyOutput, got {self.outputs!r:.80}")
 
     def rules(self) -> dict[str, np.ndarray]:
         """Output -> (c,) action indices (the form ``policy_from`` loads)."""

@@ -17,8 +17,17 @@ from typing import Any
 import numpy as np
 
 from sitframe.config import DEFAULT_PROTOCOL, Component, Config
-from sitframe.contract import Origin, call, check_protocol, fault, sensor_spec_mismatch
-from sitframe.errors import InputError, PluginError, PluginFault
+from sitframe.contract import (
+    BoundaryError,
+    Origin,
+    call,
+    check_n_situations,
+    check_protocol,
+    fault,
+    sensor_geometry,
+    sensor_spec_mismatch,
+)
+from sitframe.errors import PLUGIN_ERRORS, InputError, PluginError, PluginFault
 from sitframe.pluginmanager import Registry
 from sitframe.records import RunContext, SensorSpec
 from sitframe.robot import RobotParams
@@ -79,14 +88,19 @@ class Resolved:
         res = cls(cfg, registry, file, robot, base_dir=base_dir)
         sensor = res._create("sensor", "sensor", res.config.sensor, bind=False)
         o = res.origins["sensor"]
-        spec = call(o, "angles_deg", lambda: SensorSpec(
-            str(sensor.name), np.asarray(sensor.angles_deg, dtype=np.float64).reshape(-1),
-            float(sensor.max_range), str(getattr(sensor, "unit", "m"))))
+        try:
+            spec = SensorSpec(*sensor_geometry(sensor), str(getattr(sensor, "unit", "m")))
+        except BoundaryError as exc:
+            raise PluginFault(exc.args[1], where=str(o), method=exc.args[0]) from None
+        except PLUGIN_ERRORS as exc:  # a property that raises is the plugin's
+            raise fault(exc, o, "angles_deg") from exc
         interp = res._create("interpreter", "interpreter", res.config.interpreter, bind=False)
         c = call(res.origins["interpreter"], "n_situations", lambda: interp.n_situations)
-        if c is not None and (isinstance(c, bool) or not isinstance(c, int | np.integer) or c < 1):
-            raise PluginFault(f"n_situations is {c!r}, expected a positive integer",
-                              where=str(res.origins["interpreter"]), method="n_situations")
+        try:
+            c = check_n_situations(c, unknown_ok=True)
+        except BoundaryError as exc:
+            raise PluginFault(str(exc), where=str(res.origins["interpreter"]),
+                              method="n_situations") from None
         e = res.config.experiment
         loaded = {n: res.world(n, "experiment.world" if n == e.world else "worlds")
                   for n in dict.fromkeys([*res.config.worlds(), *worlds])}
@@ -109,7 +123,7 @@ class Resolved:
         o = self.origins["sensor"]
         reading = call(o, "read", sensor.read, world, world.start.copy(),
                        np.random.default_rng(0))
-        why = sensor_spec_mismatch(reading, spec.dim)
+        why = sensor_spec_mismatch(reading, spec.dim, spec.max_range)
         if why is not None:
             raise PluginFault(why, where=str(o), method="read")
 
@@ -139,7 +153,7 @@ class Resolved:
                              file=self.file, key=key) from None
         except (KeyboardInterrupt, PluginFault):
             raise
-        except Exception as exc:  # noqa: BLE001 - any other fault in plugin code
+        except PLUGIN_ERRORS as exc:  # any other fault in plugin code
             raise fault(exc, o, "bind") from exc
 
     def sensor(self) -> Any:
@@ -150,8 +164,13 @@ class Resolved:
 
     def arbiter(self) -> Any:
         table = self.config.arbiter
-        return self._create("arbiter", "arbiter", table,
-                            needs=("learn",) if table.reward is not None else ())
+        return self._create("arbiter", "arbiter", table, needs=self._learner_needs(table))
+
+    def _learner_needs(self, table: Component) -> tuple[str, ...]:
+        """What a behaviour's or the arbiter's table makes it need (``learn``, ``policy``)."""
+        if table.reward is None:
+            return ()
+        return ("learn", "policy") if "evaluate" in self.config.experiment.stages else ("learn",)
 
     def arbiter_reward(self) -> Any | None:
         """The reward the arbiter learns from (``[arbiter] reward = ...``), or ``None``."""
@@ -169,7 +188,7 @@ class Resolved:
         out = {}
         for label, table in self.config.behaviours.items():
             key = f"behaviours.{label}"
-            needs = (("learn",) if table.reward is not None else ()) + \
+            needs = self._learner_needs(table) + \
                 (("load_policy",) if table.policy_from is not None else ())
             out[label] = (self._create("behaviour", key, table, needs=needs),
                           self._reward(key, table))

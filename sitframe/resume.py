@@ -26,6 +26,7 @@ from typing import Any
 
 from sitframe.config import validate_config
 from sitframe.errors import InputError
+from sitframe.logged import plugins_of
 from sitframe.logs import code_fingerprint, open_log
 from sitframe.prepare import check_state, prepare_experiment
 
@@ -79,9 +80,10 @@ def prepare_resume(
         raise InputError(f"the logged config loads plugin code from {cfg['plugins']['dirs']}; "
                          "resuming never runs code that only a log names: pass --plugins-dir "
                          "DIR for each folder you trust", file=p, key="config.plugins.dirs")
-    exp, kwargs = prepare_experiment(cfg, source=source, base_dir=base_dir, out=p,
-                                     plugins_dirs=plugins_dirs, progress=progress,
-                                     config_plugins=False)
+    with plugins_of(log, p, plugins_dirs):
+        exp, kwargs = prepare_experiment(cfg, source=source, base_dir=base_dir, out=p,
+                                         plugins_dirs=plugins_dirs, progress=progress,
+                                         config_plugins=False)
     logged_hash = str(log.attrs.get("config_hash", ""))
     if exp.info.config_hash != logged_hash:
         raise InputError("this sitframe resolves the logged config differently (config hash "
@@ -95,7 +97,7 @@ def prepare_resume(
         logged_code != code_fingerprint(exp.info.plugins)
     if log.has("cluster/state"):
         kwargs["interpreter_state"] = log.interpreter_state()
-        check_state(exp.res, kwargs["interpreter_state"], p)
+        check_state(exp.res, kwargs["interpreter_state"], p, log.sensor)
     have = set(log.trial_indices())
     kwargs["skip"] = frozenset(have)
     missing = [k for k in range(exp.info.n_trials) if k not in have] \

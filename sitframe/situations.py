@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from sitframe.contract import call
+from sitframe.contract import BoundaryError, call
 
 #: Event kinds, and their codes in the log (``events/kind``).
 KINDS = ("create", "split", "merge", "prune")
@@ -139,7 +139,9 @@ class SituationTracker:
             if hasattr(comp, "situation_errors"):
                 errors.append(via(key, "situation_errors", comp.situation_errors))
         tracker = cls(interpreter, follow, errors)
-        tracker.events = via("interpreter", "events", interpreter.events)
+        c = int(interpreter.n_situations)
+        tracker.events = via("interpreter", "events", lambda: checked_events(interpreter.events(),
+                                                                             c))
         if tracker.observe is not None:
             tracker.observe = via("interpreter", "observe_errors", tracker.observe)
         return tracker
@@ -158,9 +160,6 @@ class SituationTracker:
         if not events:
             return
         for ev in events:
-            if not isinstance(ev, SituationEvent):
-                raise TypeError(f"events() returned a {type(ev).__name__}, expected "
-                                "sitframe.situations.SituationEvent")
             self.log.append((iteration, ev))
             for follow in self.followers:
                 follow(ev)
@@ -170,6 +169,26 @@ class SituationTracker:
         state = self.interp.state()
         alive = int(np.asarray(state.get("ids", state.get("centers", []))).shape[0])
         return {"state": state, "events": history_arrays(self.log, pose, d), "count": alive}
+
+
+def checked_events(events: Any, c: int) -> list[SituationEvent]:
+    """An interpreter's ``events()``: ``None`` or an iterable of :class:`SituationEvent` whose
+    ids (``id``, ``parents``, ``removed``) are in ``0 .. c - 1`` (BoundaryError if not)."""
+    if events is None:
+        return []
+    if isinstance(events, SituationEvent) or not hasattr(events, "__iter__"):
+        raise BoundaryError(f"returned {type(events).__name__}, expected a list of "
+                            "sitframe.situations.SituationEvent")
+    out = list(events)
+    for ev in out:
+        if not isinstance(ev, SituationEvent):
+            raise BoundaryError(f"returned a {type(ev).__name__} {ev!r:.60} in its list, "
+                                "expected sitframe.situations.SituationEvent")
+        for i in (ev.id, *ev.parents, *ev.removed):
+            if isinstance(i, bool) or not isinstance(i, int | np.integer) or not 0 <= i < c:
+                raise BoundaryError(f"returned a '{ev.kind}' event naming situation {i!r}, "
+                                    f"expected ids 0 .. {c - 1} (n_situations is the capacity)")
+    return out
 
 
 def history_arrays(log: list[tuple[int, SituationEvent]], pose: np.ndarray,

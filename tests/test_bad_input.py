@@ -179,6 +179,14 @@ CASES = [
     case("config-unknown-reward-param", RUN, "c.toml: behaviours.avoid.reward.colision:",
          "did you mean 'collision'",
          c__toml=_cfg("p = 5", "p = 5\nreward_params = {colision = -30}")),
+    case("regression-arbiter-reward-params-not-a-table", RUN, "c.toml: arbiter.reward_params:",
+         "expected a table", c__toml=SMALL + "\n[arbiter]\nreward_params = 3\n"),  # traceback
+    case("regression-reward-params-without-reward", RUN,  # were silently ignored
+         "c.toml: arbiter.reward_params:", "reward_params without a reward",
+         c__toml=SMALL + "\n[arbiter]\ncomponent = 'single'\nreward_params = {collision = 1}\n"),
+    case("regression-policy-from-in-the-sensor-table", RUN, "c.toml: sensor.policy_from:",
+         "the sensor table takes no 'policy_from' (only behaviours do)",
+         c__toml=SMALL + "\n[sensor]\npolicy_from = {log = 'x.h5'}\n"),
     case("config-missing-file", "run nope.toml", "nope.toml: config file not found"),
     case("preset-unknown", "run obstacle-avoid", "unknown experiment 'obstacle-avoid'",
          "did you mean 'obstacle-avoidance", "available presets:", "speed"),
@@ -201,6 +209,8 @@ CASES = [
          "experiment.world", "unknown world 'narnia'", "training"),
     case("world-missing-file-in-config", RUN, "nope.toml", "world file not found",
          "training", c__toml=_cfg("seed = 3", 'seed = 3\nworld = "nope.toml"')),
+    case("run-out-empty", ["run", "{D}/small.toml", "--out", ""], "--out",
+         "expected the path of the log to write, got ''"),  # wrote logs/small.h5 instead
     case("run-trials-zero", "run {D}/small.toml --trials 0", "--trials", "[1, "),
     case("policy-from-missing-log", RUN, "missing.h5: log file not found",
          c__toml=_cfg("p = 5", "p = 5\npolicy_from = {log = 'missing.h5'}")),

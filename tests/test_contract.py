@@ -172,9 +172,12 @@ def test_policy_from_refuses_a_policy_learned_with_other_actions(tmp_path, capsy
     text = small_config(trials=1, iterations=60).replace(
         'p = 5', f'p = 5\nheadings = [90, 0, -90]\npolicy_from = {{log = "{log}", trial = 0}}')
     (tmp_path / "b.toml").write_text(text)
-    assert main(["run", str(tmp_path / "b.toml"), "--out", str(tmp_path / "b.h5")]) != 0
+    # found when the run is set up (it was a failed log, in its first trial): exit 2, no log
+    assert main(["run", str(tmp_path / "b.toml"), "--out", str(tmp_path / "b.h5")]) == 2
     err = capsys.readouterr().err
     assert "differ from this behaviour's headings" in err and err.count("\n") == 1
+    assert "a.h5: behaviours.avoid.policy_from: its policy does not fit behaviour 'avoid'" in err
+    assert not (tmp_path / "b.h5").exists()
 
 
 def test_crisp_q_executes_the_dominant_rule_alone(tmp_path, capsys):
@@ -235,6 +238,8 @@ class Learner:
 
     def reset(self, rng, n_situations, iterations):
         self.score = np.zeros((n_situations, self.k))
+        if getattr(self, "frozen", None) is not None:  # evaluated as it learned
+            self.score[np.arange(n_situations), self.frozen] = 1.0
 
     def combine(self, ctx, proposals):
         s = int(ctx.memberships.argmax())
@@ -250,6 +255,9 @@ class Learner:
     def policy(self):
         return LearnedPolicy({"weight": PolicyOutput(np.arange(self.k, dtype=float),
                                                      self.score.argmax(axis=1))})
+
+    def load_policy(self, policy):
+        self.frozen = policy.outputs["weight"].rules
 
 
 @hookimpl
@@ -340,3 +348,84 @@ def test_sensor_spec_and_plugin_data_are_in_the_log_attributes(tmp_path, capsys)
     spec = json.loads(lg.attrs["sensor"])
     assert spec["dim"] == 8 and spec["angles_deg"][0] == 90.0 and spec["max_range"] == 3.0
     assert lg.failure is None and lg.complete
+
+
+SIX_BEAMS = '''
+import numpy as np
+from sitframe import hookimpl
+from sitframe.plugins.sonar import SonarRing
+
+
+class Six(SonarRing):
+    name = "six"
+    BEAMS = 6
+
+    def __init__(self, **kw):
+        super().__init__(**kw)
+        self.angles_deg = self.angles_deg[: self.BEAMS]
+
+    def read(self, world, pose, rng):
+        return super().read(world, pose, rng)[: self.BEAMS]
+
+
+@hookimpl
+def sitframe_sensors():
+    return [Six]
+'''
+
+
+def test_evaluate_names_a_missing_or_changed_sensor_plugin(tmp_path, capsys):
+    plug = tmp_path / "plug"
+    plug.mkdir()
+    (plug / "six.py").write_text(SIX_BEAMS)
+    text = small_config(trials=1, iterations=40, c=4, fcm_trials=2) + \
+        '\n[sensor]\ncomponent = "six"\n\n[plugins]\ndirs = ["plug"]\n'
+    _cfg, log = run_config(tmp_path, text, "a.h5", "--workers", "1")
+    capsys.readouterr()
+    # without its plugin: the error says which plugin the log was written with
+    assert main(["evaluate", str(log), "--world", "novel-1", "--iterations", "10"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown sensor 'six'" in err and "the log was written with plugins not loaded " \
+        "now: six (" in err and "six.py)" in err, err
+    (plug / "six.py").write_text(SIX_BEAMS.replace("BEAMS = 6", "BEAMS = 7"))
+    # was blamed on the interpreter (a shape error in memberships), exit 3
+    assert main(["--plugins-dir", str(plug), "evaluate", str(log), "--world", "novel-1",
+                 "--iterations", "10"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "a.h5: sensor: its situations were fitted on readings of " \
+        "sensor 'six' (6 beams" in err and "now has 7" in err, err
+
+
+MEASURING_REWARD = '''
+from sitframe import hookimpl
+from sitframe.plugins.rewards import ObstacleAvoidanceReward
+
+
+class Measuring(ObstacleAvoidanceReward):
+    name = "measuring"
+
+    def metrics(self, arrays):
+        return {"band": arrays["no-such-array"]}
+
+
+@hookimpl
+def sitframe_rewards():
+    return [Measuring]
+'''
+
+
+def test_a_reward_metrics_fault_in_evaluate_names_the_reward(tmp_path, capsys):
+    plug = tmp_path / "plug"
+    plug.mkdir()
+    (plug / "measuring.py").write_text(MEASURING_REWARD)
+    text = small_config(trials=1, iterations=40, c=4, fcm_trials=2, eval_iterations=10).replace(
+        'reward = "obstacle-avoidance"', 'reward = "measuring"') + \
+        '\n[plugins]\ndirs = ["plug"]\n'
+    _cfg, log = run_config(tmp_path, text, "a.h5", "--workers", "1")
+    capsys.readouterr()
+    # was "a.h5: the log's contents are damaged or not laid out as a sitframe log (KeyError...)"
+    assert main(["--plugins-dir", str(plug), "evaluate", str(log), "--world", "novel-1",
+                 "--iterations", "10"]) == 3
+    err = capsys.readouterr().err
+    assert "reward 'measuring' [behaviours.avoid.reward]: metrics(): KeyError: 'no-such-array'" \
+        in err and err.count("\n") == 1, err

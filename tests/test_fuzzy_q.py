@@ -236,3 +236,13 @@ def test_crisp_q_acts_and_learns_on_the_dominant_situation():
     # V(s') of the dominant next situation (row 1: 0.3), not the blend 0.8 * 0.3
     c.learn(transition(1, [0.9, 0.1], [0.2, 0.8]), 0.0)
     assert lr.q[0, r0] == pytest.approx(0.3 * 0.9 * 0.3)
+
+
+def test_a_learned_policy_is_built_of_policy_outputs():  # was an AttributeError at logging
+    from sitframe import LearnedPolicy, PolicyOutput
+
+    with pytest.raises(TypeError, match="dict of output names .* to PolicyOutput"):
+        LearnedPolicy({"heading": {"actions": [0.0], "rules": [0]}})
+    with pytest.raises(TypeError, match="no '/'"):
+        LearnedPolicy({"a/b": PolicyOutput([0.0], [0])})
+    assert isinstance(PolicyOutput([0.0, 1.0], [1, 0]).rules, np.ndarray)  # (a list was kept)

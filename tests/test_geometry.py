@@ -464,3 +464,21 @@ def test_many_origins_cast_as_one_next_to_max_range() -> None:
         for i, (ox, oy) in enumerate(xy):
             assert np.array_equal(many[i], g.cast_rays(s, ox, oy, ang[i], max_range)), max_range
         assert 0.0 < many[0, 0] < max_range  # the wall is within range, and hit
+
+
+@pytest.mark.parametrize("args, error, match", [  # a sensor plugin's mistakes: each was a
+    # silently wrong reading (every ray at max_range, negative distances) or an AttributeError
+    ((math.nan, 1.0, [0.0], 2.0), ValueError, "x, y: expected a finite ray origin"),
+    ((1.0, 1.0, [0.0], -2.0), ValueError, "expected a finite max_range > 0"),
+    ((1.0, 1.0, np.zeros((2, 2)), 2.0), ValueError, "angles_rad: expected a 1-D array"),
+])
+def test_cast_rays_and_rim_ranges_refuse_what_a_sensor_gets_wrong(args, error, match):
+    from sitframe import cast_rays, load_world, rim_ranges
+
+    segs = load_world("training").segment_set
+    with pytest.raises(error, match=match):
+        cast_rays(segs, *args)
+    with pytest.raises(error, match=match):
+        rim_ranges(segs, *args, 0.1)
+    with pytest.raises(TypeError, match="expected world.segment_set"):
+        cast_rays(np.zeros((3, 4)), 1.0, 1.0, [0.0], 2.0)

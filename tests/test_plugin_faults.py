@@ -218,6 +218,7 @@ R = "reward 'bad' [behaviours.avoid.reward]"
 S = "sensor 'bad' [sensor]"
 In = "interpreter 'bad' [interpreter]"
 B = "behaviour 'bad' [behaviours.avoid]"
+FQ = "behaviour 'fuzzy-q' [behaviours.avoid]"
 A = "arbiter 'bad' [arbiter]"
 
 CASES: list[Fault] = [
@@ -233,6 +234,12 @@ CASES: list[Fault] = [
           R, "__call__() in trial 0", "returned bool", cfg=REWARD, trial=0),
     fault("reward-raises", reward("return 1 / 0 if self.now else 1.0"), 3,
           R, "__call__() in trial 1", "ZeroDivisionError: division by zero", cfg=REWARD,
+          trial=1),
+    fault("reward-calls-sys-exit", reward("""
+              if self.now:
+                  import sys
+                  sys.exit("giving up")  # ended sitframe with status 1, no log status, no line
+              return 1.0"""), 3, R, "__call__() in trial 1", "SystemExit: giving up", cfg=REWARD,
           trial=1),
     fault("reward-bind-raises", reward("return 1.0") + '''
 def _bind(self, run):
@@ -270,9 +277,20 @@ def sitframe_rewards():
               return r"""), 3,
           S, "read() in trial 1", "non-finite value (nan) in beam 2", add=SENSOR_ADD,
           fresh=True, trial=1),
+    fault("sensor-negative-range-in-trial-1", sensor("return r - 5.0 if self.now else r"), 3,
+          S, "read() in trial 1, iteration 0", "in beam 0, expected a range in [0, max_range = 3]",
+          add=SENSOR_ADD, fresh=True, trial=1),  # was blamed on whatever used the reading
+    fault("sensor-beyond-max-range-in-trial-1", sensor("return r * 10 if self.now else r"), 3,
+          S, "read() in trial 1, iteration ", "expected a range in [0, max_range = 3]",
+          add=SENSOR_ADD, fresh=True, trial=1),  # was accepted
     fault("sensor-returns-list", sensor("return r.tolist()"), 2,
           S, "read()", "returned list, expected a numpy array of shape (8,)",
           add=SENSOR_ADD, fresh=True),
+    fault("sensor-turns-the-robot", sensor("""
+              if self.now:
+                  pose[2] += 0.1  # turned the robot unseen
+              return r"""), 3,
+          S, "read() in trial 1, iteration 0", "read-only", add=SENSOR_ADD, fresh=True, trial=1),
     fault("sensor-raises-in-trial-1", sensor("""
               if self.now:
                   raise IndexError("beam 9")
@@ -317,6 +335,33 @@ class Bad:
 def sitframe_sensors():
     return [Bad]
 ''', 2, S, "has no attribute 'angles_deg'", add=SENSOR_ADD, fresh=True),
+    fault("sensor-angles-nan", '''
+class Bad(SonarRing):
+    name = "bad"
+
+    def __init__(self, **kw):
+        super().__init__(**kw)
+        self.angles_deg = self.angles_deg.copy()
+        self.angles_deg[3] = math.nan  # was a traceback once the run was over
+
+@hookimpl
+def sitframe_sensors():
+    return [Bad]
+''', 2, S, "angles_deg()", "angles_deg holds nan, expected a non-empty 1-D array",
+          add=SENSOR_ADD, fresh=True),
+    fault("sensor-max-range-negative", '''
+class Bad(SonarRing):
+    name = "bad"
+
+    def __init__(self, **kw):
+        super().__init__(**kw)
+        self.max_range = -3.0  # was blamed on whatever used the readings
+
+@hookimpl
+def sitframe_sensors():
+    return [Bad]
+''', 2, S, "max_range()", "max_range is -3.0, expected a finite number > 0",
+          add=SENSOR_ADD, fresh=True),
     fault("sensor-property-raises", '''
 class Bad(SonarRing):
     name = "bad"
@@ -350,6 +395,30 @@ def sitframe_sensors():
                   raise FloatingPointError("overflow")
               return u"""), 3,
           In, "memberships() in trial 1", "FloatingPointError: overflow", cfg=INTERP, trial=1),
+    fault("evolving-interpreter-event-names-no-situation", '''
+from sitframe.plugins.evolving import EvolvingInterpreter
+from sitframe.situations import SituationEvent
+
+class Bad(EvolvingInterpreter):  # was blamed on fuzzy-q's situations_changed (an IndexError)
+    name = "bad"
+
+    def events(self):
+        return [SituationEvent("prune", 99, removed=(99,))]
+
+@hookimpl
+def sitframe_interpreters():
+    return [Bad]
+''', 3, In, "events() in trial 0", "'prune' event naming situation 99, expected ids 0 .. 47",
+          cfg=INTERP, trial=0),
+    fault("evolving-interpreter-without-events", '''
+class Bad(FCMInterpreter):  # was a TypeError in the first learning trial
+    name = "bad"
+    evolving = True
+
+@hookimpl
+def sitframe_interpreters():
+    return [Bad]
+''', 2, In, "has no method 'events' (needed: it is evolving", cfg=INTERP),
     fault("interpreter-fit-raises", '''
 class Bad(FCMInterpreter):
     name = "bad"
@@ -382,6 +451,16 @@ class Bad(FCMInterpreter):
 def sitframe_interpreters():
     return [Bad]
 ''', 2, In, "n_situations()", "expected a positive integer", cfg=INTERP),
+    fault("interpreter-n-situations-never-known", '''
+class Bad(FCMInterpreter):  # was "int() argument must be ... not 'NoneType'"
+    name = "bad"
+    n_situations = None
+
+@hookimpl
+def sitframe_interpreters():
+    return [Bad]
+''', 3, In, "n_situations() in trial 0", "n_situations is None, expected a positive integer "
+          "once the situations are fitted or loaded", cfg=INTERP, trial=0),
     # -- behaviours: propose returns a sitframe.Proposal with a finite heading
     fault("behaviour-propose-returns-none", behaviour("return None if self.now else good()"), 3,
           B, "propose() in trial 1, iteration 0", "returned NoneType None", cfg=BEHAVIOUR,
@@ -406,6 +485,12 @@ def sitframe_interpreters():
                   raise ValueError("no rule fires")
               return good()"""), 3,
           B, "propose() in trial 1", "ValueError: no rule fires", cfg=BEHAVIOUR, trial=1),
+    fault("behaviour-normalises-memberships-in-place", behaviour("""
+              if self.now:
+                  context.memberships[:] = 0.0  # was blamed on the interpreter
+              return good()"""), 3,
+          B, "propose() in trial 1, iteration 0", "read-only", "copy one to change it",
+          cfg=BEHAVIOUR, trial=1),
     fault("behaviour-learn-raises", behaviour("""
               if self.now:
                   raise RuntimeError("diverged")
@@ -415,10 +500,18 @@ def sitframe_interpreters():
           behaviour('return {"heading": 1} if self.k == 1 else good()', "policy", ""), 3,
           B, "policy() in trial 1", "returned dict, expected a sitframe.LearnedPolicy",
           cfg=BEHAVIOUR, trial=1),
+    fault("reward-huge-overflows-q", reward("return 1.7e308 if self.now else 1.0"), 3,
+          FQ, "policy() in trial 1", "'heading' q hold", "expected finite values", cfg=REWARD,
+          trial=1),  # the log kept an infinite Q table
     fault("behaviour-trial-data-empty-key",
           behaviour('return {"": 1} if self.k == 1 else good()', "trial_data", ""), 3,
           B, "trial_data() in trial 1", "expected a dict of non-empty string keys",
           cfg=BEHAVIOUR, trial=1),
+    fault("behaviour-convergence-iteration-not-an-integer",  # was a traceback (summary)
+          behaviour('return {**good(), "convergence_iteration": "late"} if self.k == 1 else good()',
+                    "trial_data", ""), 3,
+          B, "trial_data() in trial 1", "convergence_iteration = 'late', expected an integer in "
+          "[-1, 30]", cfg=BEHAVIOUR, trial=1),
     fault("behaviour-missing-propose", '''
 class Bad:
     name = "bad"
@@ -430,6 +523,18 @@ class Bad:
 def sitframe_behaviours():
     return [Bad]
 ''', 2, B, "has no method 'propose'", cfg=BEHAVIOUR_PLAIN),
+    fault("behaviour-reset-without-iterations", '''
+class Bad(FuzzyQBehaviour):  # was a TypeError in trial 0 (exit 3, a failed log)
+    name = "bad"
+
+    def reset(self, rng, n_situations):
+        super().reset(rng, n_situations, 100)
+
+@hookimpl
+def sitframe_behaviours():
+    return [Bad]
+''', 2, B, "reset(rng, n_situations) cannot be called as reset(rng, n_situations, iterations)",
+          cfg=BEHAVIOUR),
     fault("behaviour-with-reward-but-no-learn", '''
 class Bad:
     name = "bad"
@@ -444,6 +549,26 @@ class Bad:
 def sitframe_behaviours():
     return [Bad]
 ''', 2, B, "has no method 'learn'", cfg=BEHAVIOUR_PLAIN),
+    fault("behaviour-learns-without-policy", '''
+class Bad(FuzzyQBehaviour):  # its evaluations used to run a fresh, unlearned instance
+    name = "bad"
+    policy = None
+
+@hookimpl
+def sitframe_behaviours():
+    return [Bad]
+''', 2, B, "has no method 'policy' (needed: it learns from a reward and the run has an "
+          "evaluate stage", cfg={**BEHAVIOUR, '"learn"]': '"learn", "evaluate"]'},
+          add='\n[evaluate]\nworlds = ["novel-1"]\n'),
+    fault("behaviour-policy-without-load-policy", '''
+class Bad(FuzzyQBehaviour):  # was a traceback (AttributeError) at the first evaluation
+    name = "bad"
+    load_policy = None
+
+@hookimpl
+def sitframe_behaviours():
+    return [Bad]
+''', 2, B, "has no method 'load_policy' (needed: it has policy() or policy_from", cfg=BEHAVIOUR),
     # -- arbiters: combine returns (Proposal, (k,) weights); rules checked at bind
     fault("arbiter-raises", arbiter("""
               if self.now:
@@ -454,6 +579,10 @@ def sitframe_behaviours():
           arbiter("return (good[0], np.ones(3)) if self.now else good"), 3,
           A, "combine() in trial 1", "weights of shape (3,), expected (1,)", add=ARBITER_ADD,
           trial=1),
+    fault("arbiter-empties-the-proposals",  # was a traceback when the trial was logged
+          arbiter("proposals.clear()\nreturn good"), 3,
+          A, "combine() in trial 0, iteration 0", "changed the proposals it was given: 0 left of 1",
+          add=ARBITER_ADD, trial=0),
     fault("arbiter-returns-a-proposal-only",
           arbiter("return good[0] if self.now else good"), 3,
           A, "combine() in trial 1", "returned Proposal, expected a tuple (Proposal, weights",
@@ -475,6 +604,24 @@ def sitframe_trial_data(trial):
     return {"n": 1} if trial.index == 0 else [1, 2]
 ''', 3, "p.py", "sitframe_trial_data() in trial 1", "returned list, expected a dict",
           trial=1),
+    fault("observer-trial-data-holds-objects", '''
+@hookimpl
+def sitframe_trial_data(trial):  # was blamed on the HDF5 logger, which could not write it
+    return {"n": 1} if trial.index == 0 else {"names": np.array(["a", "b"])}
+''', 3, "p.py", "sitframe_trial_data() in trial 1", "key 'names': ndarray of dtype <U1",
+          trial=1),
+    fault("interpreter-state-ragged", '''
+class Bad(FCMInterpreter):
+    name = "bad"
+
+    def state(self):
+        return {**super().state(), "history": [[1.0], [1.0, 2.0]]}
+
+@hookimpl
+def sitframe_interpreters():
+    return [Bad]
+''', 3, In, "state()", "key 'history': list that is no rectangular array", cfg=INTERP,
+          fresh=True),
     fault("observer-trial-data-raises", '''
 @hookimpl
 def sitframe_trial_data(trial):
@@ -489,11 +636,53 @@ class Bad(ObstacleAvoidanceReward):
 def sitframe_rewards():
     return Bad
 ''', 2, "p.py", "hook sitframe_rewards must return a list", "got type", cfg=REWARD),
+    fault("hook-returns-an-instance", '''
+class Bad(ObstacleAvoidanceReward):
+    name = "bad"
+
+@hookimpl
+def sitframe_rewards():
+    return [Bad()]
+''', 2, "fault.toml: behaviours.avoid.reward:", "__call__() missing 1 required positional",
+          "the hook must return the class, not an instance (Bad() was registered)", cfg=REWARD),
+    fault("factory-positional-only", '''
+class Bad(ObstacleAvoidanceReward):
+    name = "bad"
+
+    def __init__(self, collision, /):  # was "unknown parameter ...; accepted: " (nothing)
+        super().__init__(collision=collision)
+
+@hookimpl
+def sitframe_rewards():
+    return [Bad]
+''', 2, "fault.toml: behaviours.avoid.reward.collision:", "'collision' is a positional-only "
+          "parameter of 'bad'", cfg={**REWARD, "p = 5": "p = 5\nreward_params = {collision = 1}"}),
     fault("hook-name-misspelt", '''
 @hookimpl
 def sitframe_reward():
     return []
 ''', 2, "p.py", "sitframe_reward", "the hooks are listed in sitframe.hookspecs"),
+    fault("hook-without-hookimpl", '''
+class Bad(ObstacleAvoidanceReward):
+    name = "bad"
+
+def sitframe_rewards():  # was never called: "unknown reward 'bad'"
+    return [Bad]
+''', 2, "p.py", "sitframe_rewards is not decorated with @sitframe.hookimpl", cfg=REWARD),
+    fault("hooks-on-a-class", '''
+class Observer:  # its hooks were silently never called
+    @hookimpl
+    def sitframe_step(self, record):
+        pass
+''', 2, "p.py", "class Observer implements sitframe_step, but a plugin module's hooks are its "
+          "functions"),
+    fault("hook-calls-sys-exit", '''
+import sys
+
+@hookimpl
+def sitframe_rewards():
+    sys.exit(1)
+''', 2, "p.py", "raised in hook sitframe_rewards: SystemExit: 1"),
     fault("hook-raises", '''
 @hookimpl
 def sitframe_behaviours():
@@ -569,6 +758,13 @@ def sitframe_stage_end(run, stage, data):
     if stage == "cluster":
         raise RuntimeError("no display for the centres")
 ''', 3, "p.py", "sitframe_stage_end()", "RuntimeError: no display", fresh=True),
+    fault("observer-trial-end-overwrites-another-plugins-data", '''
+@hookimpl
+def sitframe_trial_end(run, trial):  # was silently logged in place of the other's
+    if trial.index == 1:
+        trial.plugin_data["hdf5-logger"] = {"x": 1}
+''', 3, "p.py", "sitframe_trial_end() in trial 1", "changed trial.plugin_data['hdf5-logger'], "
+          "which is not its own (its own is trial.plugin_data['p'])", trial=1, kept=2),
     fault("observer-run-start-raises", '''
 @hookimpl
 def sitframe_run_start(run):

@@ -87,6 +87,15 @@ def test_plugins_dir(tmp_path):
     assert pm.sitframe_info["myreward"].file == str(tmp_path / "myreward.py")
 
 
+def test_a_plugins_dir_named_twice_loads_once(tmp_path, monkeypatch):
+    # --plugins-dir plug and [plugins] dirs = ["plug"]: was "reward name 'cautious' is
+    # registered by two plugins: myreward (...) and dir:myreward (...)"
+    (tmp_path / "myreward.py").write_text(THIRD_PARTY)
+    monkeypatch.chdir(tmp_path)
+    pm = get_plugin_manager(autoload=False, plugins_dirs=[tmp_path, "."])
+    assert Registry.collect(pm).names("reward") == ["cautious"]
+
+
 def test_plugins_dir_syntax_error_names_file_and_line(tmp_path):
     (tmp_path / "broken.py").write_text("x = 1\ndef oops(:\n")
     with pytest.raises(PluginError, match=r"broken\.py:2: syntax error"):

@@ -9,7 +9,7 @@ import pytest
 
 from sitframe import Proposal, hookimpl
 from sitframe.config import validate_config
-from sitframe.errors import InputError, PluginFault
+from sitframe.errors import InputError, PluginError, PluginFault
 from sitframe.experiment import Experiment
 from sitframe.loop import TrialSpec, simulate
 from sitframe.pluginmanager import get_plugin_manager
@@ -122,3 +122,38 @@ def test_an_unknown_protocol_lists_the_available_ones():
     with pytest.raises(InputError,
                        match="unknown protocol 'nope'.*available: frozen, goal-episodes, laps"):
         experiment().res.protocol("nope")
+
+
+@pytest.mark.parametrize("attr, value, match", [  # each was a traceback, a silently wrong
+    # batch (starts in a wall, a truthy string ending every episode, the core's collisions
+    # replaced) or a missing table found only once the run was under way
+    ("episode_starts", lambda self, world, rng, robot: np.tile(world.start, (3, 1)),
+     "expected a tuple \\(starts, goals\\)"),
+    ("episode_starts", lambda self, world, rng, robot: (np.array([[0.0, 0.0, 0.0]]), None),
+     "start 0 = \\[0.0, 0.0, 0.0\\], expected finite x, y in free space of world 'training'"),
+    ("episode_starts", lambda self, world, rng, robot: (np.array([world.start]),
+                                                        np.array([[1.0, 1.0, np.nan]])),
+     "goal 0 = \\[1.0, 1.0, nan\\], expected finite x, y in free space"),
+    ("terminated", lambda self, context: "no", "terminated.*returned str 'no', expected True"),
+    ("score_episode", lambda self, arrays, *a, n=[]: {f"steps{len(n.append(0) or n)}": 1},
+     "score_episode.*expected the same keys for every episode"),
+    ("aggregate", lambda self, figures: {"collisions": 0.0},
+     "aggregate.*\\['collisions'\\], which the core measures itself"),
+])
+def test_a_protocol_breaking_the_contract_is_one_fault(monkeypatch, attr, value, match):
+    monkeypatch.setattr(Laps, attr, value)
+    with pytest.raises(PluginFault, match=match):
+        experiment().run(interpreter_state=STATE)
+
+
+@pytest.mark.parametrize("attr, value, match", [
+    ("table", None, "table is None, expected the name of the config table"),
+    ("__init__", lambda self, **kw: None, "has no attribute 'iterations'"),
+    ("__init__", lambda self, **kw: setattr(self, "iterations", 2.5),
+     "iterations is 2.5, expected an integer >= 1"),
+])
+def test_a_protocol_without_its_table_or_iterations_is_found_at_setup(monkeypatch, attr, value,
+                                                                       match):
+    monkeypatch.setattr(Laps, attr, value)
+    with pytest.raises(PluginError, match=match):
+        experiment()
