@@ -32,8 +32,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 #: The built-in plugin modules a learning trial needs (loaded by module, so a
-#: revision without a newer entry point still runs).
-PLUGINS = ("sonar", "fcm_interpreter", "fuzzy_q", "rewards", "arbiters")
+#: revision without a newer entry point still runs; one a revision does not have
+#: yet, such as the evaluation protocols', is skipped).
+PLUGINS = ("sonar", "fcm_interpreter", "fuzzy_q", "rewards", "arbiters", "frozen_evaluation")
 
 
 def _time_trials(iterations: int, repeats: int, config: str = "obstacle-avoidance"
@@ -48,7 +49,12 @@ def _time_trials(iterations: int, repeats: int, config: str = "obstacle-avoidanc
     except ImportError:  # a revision from before Experiment moved (--against)
         from sitframe.scheduler import Experiment
 
-    mods = [importlib.import_module(f"sitframe.plugins.{m}") for m in PLUGINS]
+    mods = []
+    for m in PLUGINS:
+        try:
+            mods.append(importlib.import_module(f"sitframe.plugins.{m}"))
+        except ModuleNotFoundError:  # an older revision (--against) without it
+            pass
     cfg, source, _ = load_config(config)
     cfg["experiment"].update(trials=1, iterations=iterations, stages=["collect", "cluster"])
     cfg = validate_config(cfg, file=source)
