@@ -27,7 +27,7 @@ from sitframe.errors import InputError, PluginFault
 from sitframe.logged import (
     BEST_TRIAL_RULE,
     best_of,
-    check_policy,
+    check_logged_policy,
     check_state,
     logged_policy,
     plugins_of,
@@ -120,21 +120,19 @@ def evaluate_log(
     if arbiter is not None:
         registry.get("arbiter", arbiter, key="--arbiter")
     source = log_path
-    if goal_episodes:
-        with plugins_of(log, log_path, plugins_dirs):
-            res0 = Resolved.build(cfg, registry, log_path)
-        if res0.protocol_name(default=None) is None:
+    with plugins_of(log, log_path, plugins_dirs):
+        if goal_episodes and Resolved.build(cfg, registry, log_path).protocol_name(
+                default=None) is None:
             cfg, policies, source = _fusion_config(cfg, policies, list(pinned), fusion,
                                                    log_path)
-    if arbiter is not None:
-        params = cfg["arbiter"] if cfg["arbiter"].get("component") == arbiter else {}
-        cfg["arbiter"] = {**params, "component": arbiter}
-    with plugins_of(log, log_path, plugins_dirs):
+        if arbiter is not None:
+            params = cfg["arbiter"] if cfg["arbiter"].get("component") == arbiter else {}
+            cfg["arbiter"] = {**params, "component": arbiter}
         res = Resolved.build(cfg, registry, source)
     res.world(world, key="--world")
     check_state(res, state, log_path, log.sensor)
     for label in set(policies) & set(res.config.behaviours):
-        check_policy(res, label, policies[label], log_path,
+        check_logged_policy(res, label, policies[label], log_path,
                      f"trials/{trial:04d}/behaviours/{label}")
     # the run's protocol with the episodes asked for, or one frozen run of ``iterations``
     name = res.protocol_name(default=None) if goal_episodes else DEFAULT_PROTOCOL

@@ -46,7 +46,7 @@ def check_state(res: Resolved, state: dict[str, Any], path: str,
           "its situations do not fit this config's interpreter", path, "cluster/state")
 
 
-def check_policy(res: Resolved, label: str, policy: LearnedPolicy, path: str,
+def check_logged_policy(res: Resolved, label: str, policy: LearnedPolicy, path: str,
                  key: str = "") -> None:
     """Load a logged policy into a fresh behaviour ``label`` (InputError at ``key``, default
     its ``policy_from``, if it does not fit), so that a mismatch is found before the run

@@ -143,10 +143,11 @@ def _register_checked(
         if callable(getattr(plugin, hook, None)) and pm.parse_hookimpl_opts(plugin, hook) is None:
             raise PluginError(f"plugin {info.describe()}: {hook} is not decorated with "
                               "@sitframe.hookimpl, so it would never be called")
-    for cls in vars(plugin).values() if isinstance(plugin, ModuleType) else ():
-        # hooks on a class of the module: the module is registered, never the class
-        hooks = [h for h in HOOKS if isinstance(cls, type) and cls.__module__ ==
-                 plugin.__name__ and hasattr(getattr(cls, h, None), f"{GROUP}_impl")]
+    # hooks on a class of the module: the module is registered, never the class
+    classes = [c for c in vars(plugin).values() if isinstance(c, type)
+               and c.__module__ == plugin.__name__] if isinstance(plugin, ModuleType) else []
+    for cls in classes:
+        hooks = [h for h in HOOKS if hasattr(getattr(cls, h, None), f"{GROUP}_impl")]
         if hooks:
             raise PluginError(f"plugin {info.describe()}: class {cls.__name__} implements "
                               f"{', '.join(hooks)}, but a plugin module's hooks are its "

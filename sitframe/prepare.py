@@ -31,7 +31,7 @@ from sitframe.config import config_hash, load_config, to_toml, validate_config
 from sitframe.errors import InputError, note
 from sitframe.evaluation import select_trial, selection_rule
 from sitframe.experiment import Experiment
-from sitframe.logged import best_trial, check_policy, check_state, logged_policy
+from sitframe.logged import best_trial, check_logged_policy, check_state, logged_policy
 from sitframe.logs import Log, lock_log, open_log, unlock_log
 from sitframe.records import LearnedPolicy
 
@@ -131,7 +131,7 @@ def prepare_experiment(
         if policy is None:
             raise InputError(f"behaviour '{src_label}' of trial {trial.index} has no learned "
                              "policy (no policy/... datasets)", file=path, key="trials")
-        check_policy(exp.res, label, policy, path)
+        check_logged_policy(exp.res, label, policy, path)
         policies[label] = policy
         inputs[f"policy_from/{label}"] = fingerprint(
             {f"{kind}/{out}": getattr(o, kind) for out, o in policy.outputs.items()
