@@ -98,10 +98,16 @@ from typing import Any
 
 import numpy as np
 
-from sitframe import MembershipFunction, SituationEvent, hookimpl
+from sitframe import MembershipFunction, SituationEvent, accumulate_errors, hookimpl, online_update
 from sitframe import params as P
 
 from .fcm_interpreter import FCMInterpreter
+
+_min = np.minimum.reduce  # (the ufunc's own reduce: ndarray.min adds a Python layer)
+try:  # np.einsum without ``optimize`` is this C function behind a Python layer (~3 us)
+    from numpy._core.multiarray import c_einsum as _einsum
+except ImportError:  # pragma: no cover - numpy < 2
+    _einsum = np.einsum
 
 #: Most ids a trial may use (the loop logs (L, capacity) memberships).
 MAX_CAPACITY = 256
@@ -171,10 +177,11 @@ class EvolvingInterpreter(FCMInterpreter):
             self._set_prototypes(np.zeros((0, x.size)), self.ids, np.zeros(0), self.next_id)
         self.t += 1
         diff = self.Fa - x  # (the alive prototypes, kept contiguous: this is the hot loop)
-        d2 = np.einsum("ij,ij->i", diff, diff)
-        if not self.frozen and self._growing() and self._cover(x, d2):
+        d2 = _einsum("ij,ij->i", diff, diff)
+        if not self.frozen and (self.grow_until == 0 or self.t <= self.grow_until) \
+                and self._cover(x, d2):
             diff = self.Fa - x
-            d2 = np.einsum("ij,ij->i", diff, diff)
+            d2 = _einsum("ij,ij->i", diff, diff)
         ids = self.ids
         u = self._u.from_d2(d2)
         out = np.zeros(self.capacity)
@@ -183,9 +190,7 @@ class EvolvingInterpreter(FCMInterpreter):
             self.x_prev, self.x_last = self.x_last, x
             self.last_win[ids[int(u.argmax())]] = self.t
             if self.adapt:
-                um = u ** self.m
-                self.Na += um
-                self.Fa -= (um / self.Na)[:, None] * diff
+                online_update(self.Fa, self.Na, diff, u ** self.m)
             if self.t % self.check_every == 0:
                 self._checks()
         return out
@@ -198,11 +203,7 @@ class EvolvingInterpreter(FCMInterpreter):
         """
         if self.frozen or self.x_prev is None:
             return
-        hit = errors > 0
-        e = np.where(hit, errors, 0.0)  # (whole rows: adding 0 leaves a row as it was,
-        self.err_sum += e               #  and is cheaper than indexing the rows hit)
-        self.err_n += hit
-        self.err_x += e[:, None] * self.x_prev
+        accumulate_errors(errors, self.x_prev, self.err_sum, self.err_n, self.err_x)
 
     def events(self) -> list[SituationEvent]:
         """The structural events since the last call (oldest first)."""
@@ -314,7 +315,7 @@ class EvolvingInterpreter(FCMInterpreter):
         """Count poorly covered readings (``d2``: squared distances to the alive prototypes);
         create a situation after ``create_after`` in a row. Returns whether one was made."""
         if d2.size:
-            if d2.min() <= self.create_d2:
+            if _min(d2) <= self.create_d2:
                 if self.streak:
                     self.streak = 0
                     self.streak_sum[:] = 0.0

@@ -50,11 +50,12 @@ _PUBLIC: dict[str, str] = {
     "point_segment_distance": "geometry", "min_distance": "geometry",
     # situations and learning building blocks
     "fcm": "fcm", "memberships": "fcm", "MembershipFunction": "fcm",
+    "online_update": "fcm",
     "cluster_trials": "clustering", "sweep_c": "clustering", "TaskMap": "clustering",
     "describe_prototype": "clustering",
     "SituationFCS": "fuzzy", "FuzzyQLearner": "learning", "QLearningParams": "learning",
     "greedy_actions": "learning", "softmax_choice": "learning",
-    "SituationEvent": "situations",
+    "SituationEvent": "situations", "accumulate_errors": "situations",
     # metrics that know no behaviour (for evaluation protocols)
     "path_length": "metrics", "heading_change_per_m": "metrics", "spl": "metrics",
     # logs

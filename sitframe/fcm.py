@@ -63,6 +63,7 @@ __all__ = [
     "fcm",
     "init_centers_from_data",
     "memberships",
+    "online_update",
     "partition_measures",
     "validity",
 ]
@@ -503,6 +504,32 @@ class MembershipFunction:
         w **= self.p
         w /= _sum(w)
         return w
+
+
+def online_update(centers: np.ndarray, evidence: np.ndarray, diff: np.ndarray,
+                  um: np.ndarray) -> None:
+    """The incremental FCM centre update for one reading, in place.
+
+    The batch update ``v_i = sum_j u_ij^m x_j / sum_j u_ij^m`` taken one reading
+    at a time: ``N_i += u_i^m``, ``v_i -= (u_i^m / N_i) (v_i - x)``.
+
+    Parameters
+    ----------
+    centers : ndarray, shape (c, d)
+        Prototypes ``v_i``, C-contiguous float64, updated in place.
+    evidence : ndarray, shape (c,)
+        Accumulated ``N_i`` (readings' worth of membership), updated in place.
+    diff : ndarray, shape (c, d)
+        ``centers - x`` for the reading ``x``.
+    um : ndarray, shape (c,)
+        The reading's memberships raised to m.
+    """
+    kern = kernels()
+    if kern is not None:  # (same arithmetic, compiled)
+        kern.fcm_online_update(centers, evidence, diff, um)
+        return
+    evidence += um
+    centers -= (um / evidence)[:, None] * diff
 
 
 @_ignore_underflow

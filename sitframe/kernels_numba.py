@@ -522,6 +522,31 @@ def label_strengths(onehot: np.ndarray, u: np.ndarray,
     return _pairwise_sum(out, n)
 
 
+@njit(**_JIT)
+def fcm_online_update(centers: np.ndarray, evidence: np.ndarray, diff: np.ndarray,
+                      um: np.ndarray) -> None:  # pragma: no cover - compiled
+    """``evidence += um; centers -= (um / evidence)[:, None] * diff`` in place."""
+    c, d = centers.shape
+    for i in range(c):
+        evidence[i] += um[i]
+        r = um[i] / evidence[i]
+        for j in range(d):
+            centers[i, j] -= r * diff[i, j]
+
+
+@njit(**_JIT)
+def accumulate_errors(errors: np.ndarray, x: np.ndarray, total: np.ndarray, count: np.ndarray,
+                      weighted: np.ndarray) -> None:  # pragma: no cover - compiled
+    """Where ``errors > 0``: ``total += errors``, ``count += 1``, ``weighted += errors * x``."""
+    for i in range(errors.size):
+        e = errors[i]
+        if e > 0.0:
+            total[i] += e
+            count[i] += 1.0
+            for j in range(x.size):
+                weighted[i, j] += e * x[j]
+
+
 def _warm() -> None:
     """Load (or, the first time, compile) every kernel now, with the types the loop uses.
 
@@ -556,6 +581,8 @@ def _warm() -> None:
     fcm_ratios(one, 1e-9, out)
     normalize(out)
     label_strengths(np.ones((2, 2)), one, out)
+    fcm_online_update(np.ones((2, 2)), np.ones(2), two, one)
+    accumulate_errors(one, one, np.ones(2), np.ones(2), np.ones((2, 2)))
 
 
 announce_compilation(Path(__file__))

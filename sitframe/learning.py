@@ -238,11 +238,11 @@ class FuzzyQLearner:
         self.n_changes = 0
         self.updates = np.zeros(c, dtype=np.int64)
         self._visits: dict[tuple[int, int], int] = {}  # (rule, action) -> updates (alpha_visits)
-        self._rows = np.arange(c)
         #: (c,) absolute TD error of each rule updated by the last :meth:`update` (0 elsewhere),
         #: kept only once ``track_td`` is set (an evolving interpreter asks for them).
         self.td_abs = np.zeros(c)
         self.track_td = False
+        self._vmax: np.ndarray | None = None
         #: Rows merged away or pruned by :meth:`situations_changed` (left out of ``min_updates``).
         self.removed = np.zeros(c, dtype=bool)
         # Records: one row per rule-base change (snapshots) and per iteration.
@@ -296,6 +296,7 @@ class FuzzyQLearner:
             if self.track_td:
                 self._monitor(u_before, reward, u_after, collided)
             return False
+        self._vmax = None  # (q changes below)
         prm = self.params
         q = self.q
         # Scalar Python: usually one or two rules are active, and a handful of numpy
@@ -339,15 +340,19 @@ class FuzzyQLearner:
         where the frozen rule base fits the task badly (it may split there).
         """
         prm = self.params
-        self.td_abs[:] = 0.0
-        active = np.flatnonzero(u_before >= prm.activation) if prm.activation > 0 else self._rows
-        if active.size == 0:
+        td = self.td_abs
+        td.fill(0.0)
+        act = prm.activation  # (scalar Python, as in update: one or two rules are active)
+        active = (u_before >= act).nonzero()[0].tolist() if act > 0 else range(td.size)
+        if not active:
             return
-        v_next = 0.0 if (collided and prm.terminal_on_collision) else \
-            float(u_after @ self.q.max(axis=1))
-        cur = self.q[active, self.rule_base[active]]
-        w = u_before[active] if prm.update == "thesis" else 1.0
-        self.td_abs[active] = np.abs(w * reward + prm.gamma * w * v_next - cur)
+        if self._vmax is None:  # (the frozen rules' max Q per row; reset when rows change)
+            self._vmax = np.maximum.reduce(self.q, axis=1)
+        v_next = 0.0 if (collided and prm.terminal_on_collision) else float(u_after @ self._vmax)
+        q, rules, gamma, thesis = self.q, self.rule_base, prm.gamma, prm.update == "thesis"
+        for i in active:
+            w = u_before.item(i) if thesis else 1.0
+            td[i] = abs(w * reward + gamma * w * v_next - q.item(i, rules.item(i)))
 
     def _change(self, iteration: int) -> None:
         self.since_change = 0
@@ -395,6 +400,7 @@ class FuzzyQLearner:
         * ``prune``: the row is reset and marked removed.
         """
         self._evolving = True
+        self._vmax = None
         q0 = float(self.params.q_init_value)
         i = int(event.id)
         touched = {i, *(int(j) for j in event.parents)}  # (their learning rates start anew)

@@ -44,6 +44,9 @@ from typing import Any
 import numpy as np
 
 from sitframe.contract import BoundaryError, call
+from sitframe.kernels import kernels
+
+_min, _max = np.minimum.reduce, np.maximum.reduce
 
 #: Event kinds, and their codes in the log (``events/kind``).
 KINDS = ("create", "split", "merge", "prune")
@@ -130,6 +133,7 @@ class SituationTracker:
         def via(key: str, method: str, fn: Any) -> Any:
             return lambda *a: call(origins[key], method, fn, *a, trial=trial)
 
+        c = int(interpreter.n_situations)
         follow, errors = [], []
         for key, comp in components:
             if not (key.startswith("behaviours.") or key == "arbiter") or key.endswith(".reward"):
@@ -137,9 +141,9 @@ class SituationTracker:
             if hasattr(comp, "situations_changed"):
                 follow.append(via(key, "situations_changed", comp.situations_changed))
             if hasattr(comp, "situation_errors"):
-                errors.append(via(key, "situation_errors", comp.situation_errors))
+                errors.append(via(key, "situation_errors",
+                                  lambda f=comp.situation_errors: checked_errors(f(), c)))
         tracker = cls(interpreter, follow, errors)
-        c = int(interpreter.n_situations)
         tracker.events = via("interpreter", "events", lambda: checked_events(interpreter.events(),
                                                                              c))
         if tracker.observe is not None:
@@ -171,6 +175,23 @@ class SituationTracker:
         return {"state": state, "events": history_arrays(self.log, pose, d), "count": alive}
 
 
+def checked_errors(errors: Any, c: int) -> np.ndarray | None:
+    """A learner's ``situation_errors()``: ``None`` or a (c,) float64 array of finite values
+    >= 0 (BoundaryError if not; a cheap test, run every iteration)."""
+    if errors is None:
+        return None
+    if errors.__class__ is not np.ndarray or errors.shape != (c,) or errors.dtype != np.float64 \
+            or not (_min(errors) >= 0.0 and _max(errors) < np.inf):
+        shape = getattr(errors, "shape", None)
+        what = f"an array of shape {shape} and dtype {errors.dtype}" if shape is not None \
+            else type(errors).__name__
+        if shape == (c,) and errors.dtype == np.float64:
+            what = f"values {np.asarray(errors).tolist()}"
+        raise BoundaryError(f"returned {what}, expected None or a ({c},) float64 array of "
+                            "finite absolute TD errors >= 0 (0 where the update touched nothing)")
+    return errors
+
+
 def checked_events(events: Any, c: int) -> list[SituationEvent]:
     """An interpreter's ``events()``: ``None`` or an iterable of :class:`SituationEvent` whose
     ids (``id``, ``parents``, ``removed``) are in ``0 .. c - 1`` (BoundaryError if not)."""
@@ -189,6 +210,37 @@ def checked_events(events: Any, c: int) -> list[SituationEvent]:
                 raise BoundaryError(f"returned a '{ev.kind}' event naming situation {i!r}, "
                                     f"expected ids 0 .. {c - 1} (n_situations is the capacity)")
     return out
+
+
+def accumulate_errors(errors: np.ndarray, x: np.ndarray, total: np.ndarray, count: np.ndarray,
+                      weighted: np.ndarray) -> None:
+    """Add one update's TD errors to per-situation statistics, in place.
+
+    For the situations with ``errors > 0`` (the rows the update touched):
+    ``total += errors``, ``count += 1`` and ``weighted += errors * x``, so that
+    ``total / count`` is their mean absolute TD error and ``weighted / total``
+    the error-weighted mean reading (where a split would go).
+
+    Parameters
+    ----------
+    errors : ndarray, shape (c,)
+        Absolute TD errors of the update (0 where it updated nothing).
+    x : ndarray, shape (d,)
+        The reading (features) the update acted on.
+    total, count : ndarray, shape (c,)
+        Float64 sums of errors and numbers of updates, updated in place.
+    weighted : ndarray, shape (c, d)
+        C-contiguous float64 sums of ``errors * x``, updated in place.
+    """
+    kern = kernels()
+    if kern is not None:  # (same arithmetic, compiled)
+        kern.accumulate_errors(errors, x, total, count, weighted)
+        return
+    hit = errors > 0
+    e = np.where(hit, errors, 0.0)  # (whole rows: adding 0 leaves a row as it was)
+    total += e
+    count += hit
+    weighted += e[:, None] * x
 
 
 def history_arrays(log: list[tuple[int, SituationEvent]], pose: np.ndarray,

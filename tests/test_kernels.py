@@ -8,6 +8,7 @@ a preset's logs must not depend on whether numba is installed.
 from __future__ import annotations
 
 import math
+import unittest.mock as mock
 
 import numpy as np
 import pytest
@@ -16,9 +17,10 @@ from hypothesis import strategies as st
 
 from sitframe import geometry as geo
 from sitframe import kernels
-from sitframe.fcm import MembershipFunction
+from sitframe.fcm import MembershipFunction, online_update
 from sitframe.fuzzy import SituationFCS
 from sitframe.robot import Command, RobotParams, step_robot
+from sitframe.situations import accumulate_errors
 from sitframe.world import World, parse_world
 
 pytest.importorskip("numba")
@@ -256,3 +258,30 @@ def test_the_first_run_after_an_install_says_why_it_waits(tmp_path, monkeypatch)
     assert numba_cache.compile_pending(src)
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "elsewhere"))
     assert not numba_cache.compile_pending(src)  # a cache elsewhere is not claimed either way
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), c=st.sampled_from([1, 2, 12, 48]),
+       d=st.sampled_from([3, 8]))
+def test_evolving_updates_are_bit_identical(seed: int, c: int, d: int) -> None:
+    """The evolving interpreter's prototype update and TD-error statistics, compiled and numpy."""
+    rng = np.random.default_rng(seed)
+    arrays = [rng.uniform(-2.0, 2.0, (c, d)), rng.uniform(1.0, 200.0, c),
+              rng.uniform(0.0, 5.0, c), rng.integers(0, 50, c).astype(float),
+              rng.uniform(-9.0, 9.0, (c, d))]
+    steps = [(rng.uniform(-2.0, 2.0, d), rng.dirichlet(np.ones(c)) ** 1.2,
+              np.where(rng.random(c) < 0.2, rng.uniform(0.0, 3.0, c), 0.0)) for _ in range(30)]
+
+    def run() -> list[np.ndarray]:
+        F, N, total, count, weighted = (a.copy() for a in arrays)
+        for x, um, errors in steps:
+            online_update(F, N, F - x, um)
+            accumulate_errors(errors, x, total, count, weighted)
+        return [F, N, total, count, weighted]
+
+    assert kernels.kernels() is K
+    fast = run()
+    with mock.patch.object(kernels, "_LOADED", [None]):
+        slow = run()
+    assert all(np.array_equal(a, b) for a, b in zip(fast, slow, strict=True))
+    assert not np.array_equal(fast[0], arrays[0]) and not np.array_equal(fast[2], arrays[2])

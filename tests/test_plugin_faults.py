@@ -120,6 +120,7 @@ REWARD = {'reward = "obstacle-avoidance"': 'reward = "bad"'}
 BEHAVIOUR = {'component = "fuzzy-q"': 'component = "bad"'}
 BEHAVIOUR_PLAIN = {**BEHAVIOUR, "p = 5\n": ""}  # a behaviour without fuzzy-q's parameters
 INTERP = {'component = "fcm"': 'component = "bad"'}
+EVOLVING_BEHAVIOUR = {**BEHAVIOUR, 'component = "fcm"': 'component = "evolving"'}
 SENSOR_ADD = '\n[sensor]\ncomponent = "bad"\n'
 ARBITER_ADD = '\n[arbiter]\ncomponent = "bad"\n'
 
@@ -410,6 +411,14 @@ def sitframe_interpreters():
     return [Bad]
 ''', 3, In, "events() in trial 0", "'prune' event naming situation 99, expected ids 0 .. 47",
           cfg=INTERP, trial=0),
+    fault("evolving-behaviour-situation-errors-negative",
+          behaviour("e = good()\nreturn e - 1.0 if self.now else e", "situation_errors", ""),
+          3, B, "situation_errors() in trial 1", "expected None or a (48,) float64 array of "
+          "finite absolute TD errors >= 0", cfg=EVOLVING_BEHAVIOUR, trial=1),
+    fault("evolving-behaviour-situation-errors-list",
+          behaviour("e = good()\nreturn e.tolist() if self.now else e", "situation_errors", ""),
+          3, B, "situation_errors() in trial 1", "returned list", cfg=EVOLVING_BEHAVIOUR,
+          trial=1),
     fault("evolving-interpreter-without-events", '''
 class Bad(FCMInterpreter):  # was a TypeError in the first learning trial
     name = "bad"
