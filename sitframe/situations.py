@@ -43,7 +43,8 @@ from typing import Any
 
 import numpy as np
 
-from sitframe.contract import BoundaryError, call
+from sitframe.contract import BoundaryError, fault
+from sitframe.errors import PLUGIN_ERRORS, InputError, PluginFault
 from sitframe.kernels import kernels
 
 _min, _max = np.minimum.reduce, np.maximum.reduce
@@ -105,17 +106,22 @@ class SituationTracker:
     interpreter
         The trial's interpreter (``evolving = True``).
     followers
-        Each component's ``situations_changed`` (wrapped to name it on a fault).
+        ``(origin, situations_changed)`` of each component that follows the events.
     error_sources
-        The learning behaviours' ``situation_errors`` methods.
+        ``(origin, situation_errors)`` of each learning behaviour that reports TD errors.
+    origin, trial
+        The interpreter's origin and the trial's index (to name a plugin on a fault).
     """
 
-    def __init__(self, interpreter: Any, followers: list[Any], error_sources: list[Any]) -> None:
+    def __init__(self, interpreter: Any, followers: list[tuple[Any, Any]],
+                 error_sources: list[tuple[Any, Any]], origin: Any = "interpreter",
+                 trial: int | None = None) -> None:
         self.interp = interpreter
-        self.events = interpreter.events
+        self.c = int(interpreter.n_situations)
         self.followers = followers
         self.observe = getattr(interpreter, "observe_errors", None) if error_sources else None
         self.error_sources = error_sources
+        self.origin, self.trial = origin, trial
         self.log: list[tuple[int, SituationEvent]] = []
 
     @classmethod
@@ -129,44 +135,46 @@ class SituationTracker:
         """
         if not (learning and getattr(interpreter, "evolving", False)):
             return None
-
-        def via(key: str, method: str, fn: Any) -> Any:
-            return lambda *a: call(origins[key], method, fn, *a, trial=trial)
-
-        c = int(interpreter.n_situations)
         follow, errors = [], []
         for key, comp in components:
             if not (key.startswith("behaviours.") or key == "arbiter") or key.endswith(".reward"):
                 continue
             if hasattr(comp, "situations_changed"):
-                follow.append(via(key, "situations_changed", comp.situations_changed))
+                follow.append((origins[key], comp.situations_changed))
             if hasattr(comp, "situation_errors"):
-                errors.append(via(key, "situation_errors",
-                                  lambda f=comp.situation_errors: checked_errors(f(), c)))
-        tracker = cls(interpreter, follow, errors)
-        tracker.events = via("interpreter", "events", lambda: checked_events(interpreter.events(),
-                                                                             c))
-        if tracker.observe is not None:
-            tracker.observe = via("interpreter", "observe_errors", tracker.observe)
-        return tracker
+                errors.append((origins[key], comp.situation_errors))
+        return cls(interpreter, follow, errors, origins["interpreter"], trial)
 
     def step(self, iteration: int) -> None:
-        """After iteration ``iteration``'s learning: pass TD errors on, deliver the events."""
-        if self.observe is not None:
-            errs = None
-            for src in self.error_sources:
-                e = src()
-                if e is not None:
-                    errs = e if errs is None else errs + e
-            if errs is not None:
-                self.observe(errs)
-        events = self.events()
-        if not events:
-            return
-        for ev in events:
-            self.log.append((iteration, ev))
-            for follow in self.followers:
-                follow(ev)
+        """After iteration ``iteration``'s learning: pass TD errors on, deliver the events.
+
+        One ``try`` for all the plugin calls (this runs every iteration): a raise,
+        or a value outside the contract, is reported at the plugin and method it
+        came from.
+        """
+        origin, method = self.origin, "observe_errors"
+        try:
+            if self.observe is not None:
+                errs = None
+                method = "situation_errors"
+                for origin, src in self.error_sources:  # noqa: B007 - names the caller
+                    e = checked_errors(src(), self.c)
+                    if e is not None:
+                        errs = e if errs is None else errs + e
+                if errs is not None:
+                    origin, method = self.origin, "observe_errors"
+                    self.observe(errs)
+            origin, method = self.origin, "events"
+            events = checked_events(self.interp.events(), self.c)
+            method = "situations_changed"
+            for ev in events:
+                self.log.append((iteration, ev))
+                for origin, follow in self.followers:  # noqa: B007 - names the caller
+                    follow(ev)
+        except (InputError, PluginFault, KeyboardInterrupt):
+            raise
+        except PLUGIN_ERRORS as exc:  # any fault in plugin code is reported
+            raise fault(exc, origin, method, self.trial) from exc
 
     def finish(self, pose: np.ndarray, d: int) -> dict[str, Any]:
         """The trial's situations for the log: final state, events and count."""

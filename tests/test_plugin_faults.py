@@ -419,6 +419,27 @@ def sitframe_interpreters():
           behaviour("e = good()\nreturn e.tolist() if self.now else e", "situation_errors", ""),
           3, B, "situation_errors() in trial 1", "returned list", cfg=EVOLVING_BEHAVIOUR,
           trial=1),
+    fault("evolving-behaviour-situations-changed-raises",
+          behaviour("if self.now:\n    raise RuntimeError('no row for ' + str(event.id))\ngood()",
+                    "situations_changed", "event"),
+          3, B, "situations_changed() in trial 1", "RuntimeError: no row for",
+          cfg={**EVOLVING_BEHAVIOUR, "c = 4\n": "c = 4\ncreate_distance = 0.01\n"}, trial=1),
+    fault("evolving-interpreter-observe-errors-raises", '''
+from sitframe.plugins.evolving import EvolvingInterpreter
+
+class Bad(InTrial1, EvolvingInterpreter):
+    name = "bad"
+
+    def observe_errors(self, errors):
+        if self.now:
+            raise ValueError("errors of shape " + str(errors.shape))
+        super().observe_errors(errors)
+
+@hookimpl
+def sitframe_interpreters():
+    return [Bad]
+''', 3, In, "observe_errors() in trial 1", "ValueError: errors of shape (48,)", cfg=INTERP,
+          trial=1),
     fault("evolving-interpreter-without-events", '''
 class Bad(FCMInterpreter):  # was a TypeError in the first learning trial
     name = "bad"
