@@ -382,7 +382,7 @@ class EvolvingInterpreter(FCMInterpreter):
             return
         F = self.F[ids]
         d2 = ((F[:, None, :] - F[None, :, :]) ** 2).sum(axis=2)
-        d2[np.tril_indices(ids.size)] = np.inf
+        d2[np.tri(ids.size, dtype=bool)] = np.inf  # (each pair once, not with itself)
         a, b = np.unravel_index(int(d2.argmin()), d2.shape)
         if d2[a, b] >= self.merge_d2:
             return
@@ -417,7 +417,7 @@ class EvolvingInterpreter(FCMInterpreter):
             return
         mean = self.err_sum[ok] / self.err_n[ok]
         j = int(mean.argmax())
-        if mean[j] <= self.split_ratio * float(np.median(mean)):
+        if mean[j] <= self.split_ratio * _median(mean):
             return
         i = int(ok[j])
         at = self.err_x[i] / self.err_sum[i]
@@ -434,6 +434,14 @@ class EvolvingInterpreter(FCMInterpreter):
         self._compact()
         self.err_sum[i] = self.err_n[i] = 0.0
         self.err_x[i] = 0.0
+
+
+def _median(a: np.ndarray) -> float:
+    """``float(np.median(a))`` of a 1-d array without NaN, bit for bit, without its Python layers
+    (the mean of the two middle values is ``(a + b) / 2``, as ``np.mean`` computes it)."""
+    s = np.sort(a)
+    h = s.size // 2
+    return float(s[h]) if s.size % 2 else float((s[h - 1] + s[h]) / 2.0)
 
 
 def _signature() -> inspect.Signature:

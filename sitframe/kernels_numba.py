@@ -547,6 +547,16 @@ def accumulate_errors(errors: np.ndarray, x: np.ndarray, total: np.ndarray, coun
                 weighted[i, j] += e * x[j]
 
 
+@njit(**_JIT)
+def finite_nonnegative(a: np.ndarray) -> bool:  # pragma: no cover - compiled
+    """Whether every value of the 1-d ``a`` is finite and >= 0 (``0 <= a < inf``)."""
+    for i in range(a.size):
+        v = a[i]
+        if not (0.0 <= v < np.inf):
+            return False
+    return True
+
+
 def _warm() -> None:
     """Load (or, the first time, compile) every kernel now, with the types the loop uses.
 
@@ -583,6 +593,7 @@ def _warm() -> None:
     label_strengths(np.ones((2, 2)), one, out)
     fcm_online_update(np.ones((2, 2)), np.ones(2), two, one)
     accumulate_errors(one, one, np.ones(2), np.ones(2), np.ones((2, 2)))
+    finite_nonnegative(one)
 
 
 announce_compilation(Path(__file__))

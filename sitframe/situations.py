@@ -47,7 +47,16 @@ from sitframe.contract import BoundaryError, fault
 from sitframe.errors import PLUGIN_ERRORS, InputError, PluginFault
 from sitframe.kernels import kernels
 
-_min, _max = np.minimum.reduce, np.maximum.reduce
+_F64 = np.dtype(np.float64)
+
+
+def _finite_nonnegative(a: np.ndarray) -> bool:
+    """Whether every value of the 1-d float64 ``a`` is finite and >= 0."""
+    kern = kernels()
+    if kern is not None:  # (one compiled pass instead of two reductions)
+        return bool(kern.finite_nonnegative(a))
+    return bool(np.minimum.reduce(a) >= 0.0 and np.maximum.reduce(a) < np.inf)
+
 
 #: Event kinds, and their codes in the log (``events/kind``).
 KINDS = ("create", "split", "merge", "prune")
@@ -188,8 +197,8 @@ def checked_errors(errors: Any, c: int) -> np.ndarray | None:
     >= 0 (BoundaryError if not; a cheap test, run every iteration)."""
     if errors is None:
         return None
-    if errors.__class__ is not np.ndarray or errors.shape != (c,) or errors.dtype != np.float64 \
-            or not (_min(errors) >= 0.0 and _max(errors) < np.inf):
+    if errors.__class__ is not np.ndarray or errors.shape != (c,) or errors.dtype is not _F64 \
+            or not _finite_nonnegative(errors):
         shape = getattr(errors, "shape", None)
         what = f"an array of shape {shape} and dtype {errors.dtype}" if shape is not None \
             else type(errors).__name__

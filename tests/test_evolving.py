@@ -240,3 +240,13 @@ def test_a_sweep_starts_online_runs_from_no_situations(tmp_path) -> None:
                  "--workers", "1"]) == 0
     (log,) = (tmp_path / "o").glob("*.h5")
     assert open_log(str(log)).trial(0).situations["count"] >= 1
+
+
+def test_split_median_is_numpys() -> None:
+    """The split test's median (a hand-written one, for speed) is numpy's, bit for bit."""
+    from sitframe.plugins.evolving import _median
+
+    rng = np.random.default_rng(5)
+    for n in range(1, 60):
+        a = rng.random(n) * rng.lognormal(0.0, 3.0, n)
+        assert _median(a) == float(np.median(a))
