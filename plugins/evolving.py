@@ -98,16 +98,19 @@ from typing import Any
 
 import numpy as np
 
-from sitframe import MembershipFunction, SituationEvent, accumulate_errors, hookimpl, online_update
+from sitframe import (
+    MembershipFunction,
+    SituationEvent,
+    accumulate_errors,
+    hookimpl,
+    online_update,
+    row_sq_norms,
+)
 from sitframe import params as P
 
 from .fcm_interpreter import FCMInterpreter
 
 _min = np.minimum.reduce  # (the ufunc's own reduce: ndarray.min adds a Python layer)
-try:  # np.einsum without ``optimize`` is this C function behind a Python layer (~3 us)
-    from numpy._core.multiarray import c_einsum as _einsum
-except ImportError:  # pragma: no cover - numpy < 2
-    _einsum = np.einsum
 
 #: Most ids a trial may use (the loop logs (L, capacity) memberships).
 MAX_CAPACITY = 256
@@ -177,18 +180,19 @@ class EvolvingInterpreter(FCMInterpreter):
             self._set_prototypes(np.zeros((0, x.size)), self.ids, np.zeros(0), self.next_id)
         self.t += 1
         diff = self.Fa - x  # (the alive prototypes, kept contiguous: this is the hot loop)
-        d2 = _einsum("ij,ij->i", diff, diff)
-        if not self.frozen and (self.grow_until == 0 or self.t <= self.grow_until) \
-                and self._cover(x, d2):
+        d2 = row_sq_norms(diff)
+        if not self.frozen and (self.grow_until == 0 or self.t <= self.grow_until) and (
+                self.streak or not d2.size or _min(d2) > self.create_d2) and self._cover(x, d2):
             diff = self.Fa - x
-            d2 = _einsum("ij,ij->i", diff, diff)
+            d2 = row_sq_norms(diff)
         ids = self.ids
         u = self._u.from_d2(d2)
         out = np.zeros(self.capacity)
         out[ids] = u
         if not self.frozen:
             self.x_prev, self.x_last = self.x_last, x
-            self.last_win[ids[int(u.argmax())]] = self.t
+            if self.prune_after:  # (only pruning asks when a situation last won)
+                self.last_win[ids[int(u.argmax())]] = self.t
             if self.adapt:
                 online_update(self.Fa, self.Na, diff, u ** self.m)
             if self.t % self.check_every == 0:
@@ -356,7 +360,7 @@ class EvolvingInterpreter(FCMInterpreter):
         if ids.size == 0:
             return (), np.zeros(0)
         diff = self.F[ids] - at
-        u = self._u.from_d2(np.einsum("ij,ij->i", diff, diff))
+        u = self._u.from_d2(row_sq_norms(diff))
         keep = u >= 1e-3
         return tuple(int(i) for i in ids[keep]), u[keep] / u[keep].sum()
 

@@ -50,7 +50,7 @@ _PUBLIC: dict[str, str] = {
     "point_segment_distance": "geometry", "min_distance": "geometry",
     # situations and learning building blocks
     "fcm": "fcm", "memberships": "fcm", "MembershipFunction": "fcm",
-    "online_update": "fcm",
+    "online_update": "fcm", "row_sq_norms": "fcm",
     "cluster_trials": "clustering", "sweep_c": "clustering", "TaskMap": "clustering",
     "describe_prototype": "clustering",
     "SituationFCS": "fuzzy", "FuzzyQLearner": "learning", "QLearningParams": "learning",

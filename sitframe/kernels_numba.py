@@ -557,6 +557,20 @@ def finite_nonnegative(a: np.ndarray) -> bool:  # pragma: no cover - compiled
     return True
 
 
+@njit(**_JIT)
+def frozen_td(u: np.ndarray, activation: float, thesis: bool, reward: float, gamma: float,
+              v_next: float, q: np.ndarray, rules: np.ndarray,
+              td: np.ndarray) -> None:  # pragma: no cover - compiled
+    """``td[i] = |w r + gamma w V' - Q[i, rules[i]]|`` where ``u[i] >= activation`` (``w =
+    u[i]`` if ``thesis`` else 1), 0 elsewhere: the TD errors a frozen rule base would get."""
+    for i in range(u.size):
+        if u[i] >= activation:
+            w = u[i] if thesis else 1.0
+            td[i] = abs(w * reward + gamma * w * v_next - q[i, rules[i]])
+        else:
+            td[i] = 0.0
+
+
 def _warm() -> None:
     """Load (or, the first time, compile) every kernel now, with the types the loop uses.
 
@@ -594,6 +608,9 @@ def _warm() -> None:
     fcm_online_update(np.ones((2, 2)), np.ones(2), two, one)
     accumulate_errors(one, one, np.ones(2), np.ones(2), np.ones((2, 2)))
     finite_nonnegative(one)
+    ro = np.ones(2)
+    ro.setflags(write=False)  # (memberships reach the learner read-only)
+    frozen_td(ro, 0.3, True, -1.0, 0.9, 0.5, two, np.zeros(2, dtype=np.intp), out)
 
 
 announce_compilation(Path(__file__))

@@ -43,6 +43,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from sitframe import params as P
+from sitframe.kernels import kernels
 
 if TYPE_CHECKING:
     from sitframe.situations import SituationEvent
@@ -340,17 +341,19 @@ class FuzzyQLearner:
         where the frozen rule base fits the task badly (it may split there).
         """
         prm = self.params
-        td = self.td_abs
-        td.fill(0.0)
-        act = prm.activation  # (scalar Python, as in update: one or two rules are active)
-        active = (u_before >= act).nonzero()[0].tolist() if act > 0 else range(td.size)
-        if not active:
-            return
         if self._vmax is None:  # (the frozen rules' max Q per row; reset when rows change)
             self._vmax = np.maximum.reduce(self.q, axis=1)
         v_next = 0.0 if (collided and prm.terminal_on_collision) else float(u_after @ self._vmax)
-        q, rules, gamma, thesis = self.q, self.rule_base, prm.gamma, prm.update == "thesis"
-        for i in active:
+        act = prm.activation if prm.activation > 0 else -np.inf  # (0: every rule)
+        thesis, td = prm.update == "thesis", self.td_abs
+        kern = kernels()
+        if kern is not None:  # (same arithmetic, compiled)
+            kern.frozen_td(u_before, act, thesis, float(reward), prm.gamma, v_next, self.q,
+                           self.rule_base, td)
+            return
+        td.fill(0.0)
+        q, rules, gamma = self.q, self.rule_base, prm.gamma
+        for i in (u_before >= act).nonzero()[0].tolist():
             w = u_before.item(i) if thesis else 1.0
             td[i] = abs(w * reward + gamma * w * v_next - q.item(i, rules.item(i)))
 

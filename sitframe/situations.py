@@ -174,7 +174,10 @@ class SituationTracker:
                     origin, method = self.origin, "observe_errors"
                     self.observe(errs)
             origin, method = self.origin, "events"
-            events = checked_events(self.interp.events(), self.c)
+            events = self.interp.events()
+            if events.__class__ is list and not events:  # (most iterations change nothing)
+                return
+            events = checked_events(events, self.c)
             method = "situations_changed"
             for ev in events:
                 self.log.append((iteration, ev))

@@ -19,6 +19,7 @@ from sitframe import geometry as geo
 from sitframe import kernels
 from sitframe.fcm import MembershipFunction, online_update
 from sitframe.fuzzy import SituationFCS
+from sitframe.learning import FuzzyQLearner, QLearningParams
 from sitframe.robot import Command, RobotParams, step_robot
 from sitframe.situations import accumulate_errors
 from sitframe.world import World, parse_world
@@ -285,3 +286,30 @@ def test_evolving_updates_are_bit_identical(seed: int, c: int, d: int) -> None:
         slow = run()
     assert all(np.array_equal(a, b) for a, b in zip(fast, slow, strict=True))
     assert not np.array_equal(fast[0], arrays[0]) and not np.array_equal(fast[2], arrays[2])
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), activation=st.sampled_from([0.0, 0.3]),
+       update=st.sampled_from(["thesis", "standard"]), collided=st.booleans())
+def test_frozen_rule_td_errors_are_bit_identical(seed: int, activation: float, update: str,
+                                                 collided: bool) -> None:
+    """The TD errors a converged learner reports to an evolving interpreter, compiled and numpy."""
+    rng = np.random.default_rng(seed)
+    params = QLearningParams(activation=activation, update=update, terminal_on_collision=True)
+    lr = FuzzyQLearner(12, 7, params, rng, 100)
+    lr.q = rng.normal(size=(12, 7))
+    lr.converged_at, lr.track_td = 1, True
+    u0, u1 = rng.dirichlet(np.full(12, 0.3)), rng.dirichlet(np.full(12, 0.3))
+    u0.setflags(write=False)
+    reward = float(rng.normal())
+
+    def td() -> np.ndarray:
+        lr._vmax = None
+        lr.update(u0, reward, u1, collided, 5)
+        return lr.td_abs.copy()
+
+    fast = td()
+    with mock.patch.object(kernels, "_LOADED", [None]):
+        slow = td()
+    assert np.array_equal(fast, slow)
+    assert (fast > 0).sum() == (u0 >= activation).sum() if activation else (fast > 0).all()
