@@ -12,6 +12,8 @@ Config (``[interpreter]``)::
     c = 8          # number of situations, or "auto" (chosen from the validity measures)
     auto_cs = [4, 6, 8, 10, 12, 14, 16, 18, 20]   # candidates for c = "auto"
     auto_trials = 10                                # FCM restarts per candidate
+    auto_rule = "cardinality"  # or "rf" (below)
+    auto_knee = 2.0            # "cardinality": how near the plateau counts as on it
     m = 1.2        # fuzziness (membership exponent 2/(m-1) = 10)
     trials = 50    # FCM restarts
     sweep = []     # optional list of c values for the validity-vs-c sweep (Fig. 4.5)
@@ -31,15 +33,39 @@ and adds ``feature_centers``, which the memberships use.
 c (Fig. 4.5) and at the learned behaviour. Most measures cannot choose c on
 their own: the partition coefficient and the normalised index fall and the
 partition entropy rises with c for any data, and the objective J_m always
-falls. The relative fuzziness R_f (the share of fuzzy to non-fuzzy
-memberships, Eq. 4.10) does not drift with c: it is smallest where the data
-falls into the crispest groups. The rule: run the c sweep over ``auto_cs``
-(``auto_trials`` restarts each, one trial chosen per c as usual), keep the c
-whose chosen trial has no empty cluster (``min_card > 0``), and take the one
-with the smallest R_f (ties, e.g. several perfectly crisp partitions: the
-largest minimum hard tendency ``min_ht``, then the smaller c); then cluster with that c and
+falls. Sonar readings form a continuum, not separate groups, so no index of
+compactness or crispness has a stable optimum on them either (sitframe's
+first rule, the smallest relative fuzziness R_f, picked anything from 6 to
+20 from one run seed to the next: README, "Situations").
+
+The rule (``auto_rule = "cardinality"``, the default) reads the **minimum
+cardinality** (Eq. 4.8: the readings of the smallest situation) against c.
+While c is small, every added prototype carves the readings into smaller
+groups and the smallest situation shrinks with it. Once every distinct
+configuration of the readings (a rare one too: a corner, a touching beam)
+has a situation of its own, the smallest situation stops shrinking: more
+prototypes only subdivide the common situations, thinning each rule's
+share of the learning updates. The rule takes the smallest c at which the
+minimum cardinality has come down to that plateau and stays there: the
+first c in ``auto_cs`` from which on every minimum cardinality is at most
+``auto_knee`` (2) times the plateau's, the median minimum cardinality over
+the larger half of ``auto_cs``. ("Stays": one unlucky clustering that
+isolates a few readings early must not end the search.) Candidates with an
+empty cluster do not count. On the
+obstacle-avoidance readings the plateau starts at c = 10-12, which is where
+the fixed-c sweep's frozen rule bases collide least (README). On data made
+of a few well-separated groups the minimum cardinality has no plateau (it
+keeps falling once the groups are split); for such data
+``auto_rule = "rf"`` takes the crispest partition instead: the c whose
+partition has the smallest R_f (Eq. 4.9) and no empty cluster (ties, e.g.
+several perfectly crisp partitions: the largest minimum hard tendency
+``min_ht``, then the smaller c).
+
+Either way the sweep runs over ``auto_cs`` (``auto_trials`` restarts each,
+one trial chosen per c as usual), then the chosen c is clustered with
 ``trials`` restarts as for a fixed c. The sweep is logged (``auto_cs``,
-``auto_rf``, ``auto_c``). Until ``fit`` has run, ``n_situations`` is ``None``.
+``auto_min_card``, ``auto_rf``, ``auto_c``). Until ``fit`` has run,
+``n_situations`` is ``None``.
 """
 
 from __future__ import annotations
@@ -53,6 +79,7 @@ from sitframe import MembershipFunction, TaskMap, cluster_trials, hookimpl, swee
 from sitframe import params as P
 
 TRANSFORMS = ("range", "log", "inverse")
+AUTO_RULES = ("cardinality", "rf")
 #: Upper bounds of the counts (beyond them the clustering's arrays do not fit in memory).
 MAX_TRIALS = 10_000
 MAX_ITER = 1_000_000
@@ -76,6 +103,8 @@ class FCMInterpreter:
         offset: float = 0.1,
         auto_cs: list[int] = (4, 6, 8, 10, 12, 14, 16, 18, 20),  # type: ignore[assignment]
         auto_trials: int = 10,
+        auto_rule: str = "cardinality",
+        auto_knee: float = 2.0,
     ) -> None:
         # (upper bounds keep the trials' arrays in memory; c is bounded by the samples)
         self.auto = isinstance(c, str)
@@ -88,6 +117,8 @@ class FCMInterpreter:
             raise ValueError(f"auto_cs = {list(auto_cs)}: expected distinct integers >= 2")
         self.auto_trials = int(P.number("auto_trials", auto_trials, lo=1, hi=MAX_TRIALS,
                                         integer=True))
+        self.auto_rule = P.choice("auto_rule", auto_rule, AUTO_RULES)
+        self.auto_knee = float(P.number("auto_knee", auto_knee, lo=1.0))
         self.m = float(P.number("m", m, lo=1.0, lo_open=True))
         self.trials = int(P.number("trials", trials, lo=1, hi=MAX_TRIALS, integer=True))
         self.tol = float(P.number("tol", tol, lo=0.0, lo_open=True))
@@ -155,20 +186,29 @@ class FCMInterpreter:
         return out
 
     def choose_c(self, X: np.ndarray, rng: np.random.Generator) -> dict[str, Any]:
-        """The ``c = "auto"`` rule (module docstring): the smallest R_f over ``auto_cs``."""
+        """The ``c = "auto"`` rule (module docstring) over ``auto_cs``."""
         cs = sorted(c for c in self.auto_cs if c <= len(X))
         if not cs:
             raise ValueError(f"auto_cs {self.auto_cs}: every candidate exceeds the {len(X)} "
                              "collected samples")
         sw = sweep_c(self.features(X), cs, n_trials=self.auto_trials, m=self.m, tol=self.tol,
                      max_iter=self.max_iter, seed=rng)
-        rf = np.where(sw.measures["min_card"] > 0, sw.measures["rf"], np.inf)
-        if not np.isfinite(rf).any():
+        card = np.asarray(sw.measures["min_card"], float)
+        ok = card > 0
+        if self.auto_rule == "rf":
             rf = np.asarray(sw.measures["rf"], float)
-        tied = np.isclose(rf, rf.min())  # (e.g. several perfectly crisp partitions, R_f = 0)
-        best = int(np.argmax(np.where(tied, sw.measures["min_ht"], -np.inf)))
+            rf = np.where(ok, rf, np.inf) if ok.any() else rf
+            tied = np.isclose(rf, rf.min())  # (e.g. several perfectly crisp partitions)
+            best = int(np.argmax(np.where(tied, sw.measures["min_ht"], -np.inf)))
+        elif ok.any():
+            plateau = float(np.median(card[ok][ok.sum() // 2:]))
+            near = ok & (card <= self.auto_knee * plateau)
+            stays = np.logical_and.accumulate((near | ~ok)[::-1])[::-1]  # (and every larger c)
+            best = int(np.argmax(near & stays)) if (near & stays).any() else int(np.argmax(near))
+        else:  # (every candidate has an empty cluster: the fewest situations)
+            best = 0
         return {"auto_c": int(sw.cs[best]), "auto_cs": np.asarray(sw.cs),
-                "auto_rf": np.asarray(sw.measures["rf"], float)}
+                "auto_min_card": card, "auto_rf": np.asarray(sw.measures["rf"], float)}
 
     def memberships(self, reading: np.ndarray) -> np.ndarray:
         if self.transform == "range":

@@ -215,11 +215,12 @@ def test_online_run_logs_history_and_evaluates_own_situations(tmp_path, capsys) 
         assert im.n_frames == 3
 
 
-def test_auto_c_picks_the_crispest_partition_and_loads_any_c() -> None:
+def test_auto_c_rf_picks_the_crispest_partition_and_loads_any_c() -> None:
     rng = np.random.default_rng(1)
     centres = np.array([[0.3, 0.3], [2.5, 0.4], [1.2, 2.6]])
     X = np.concatenate([c + 0.05 * rng.standard_normal((60, 2)) for c in centres])
-    fcm = FCMInterpreter(c="auto", auto_cs=[2, 3, 4, 5], auto_trials=3, trials=3)
+    fcm = FCMInterpreter(c="auto", auto_cs=[2, 3, 4, 5], auto_trials=3, trials=3,
+                         auto_rule="rf")
     assert fcm.n_situations is None
     out = fcm.fit(X, np.random.default_rng(0))
     assert out["auto_c"] == 3 == fcm.n_situations and out["auto_rf"].shape == (4,)
@@ -228,6 +229,29 @@ def test_auto_c_picks_the_crispest_partition_and_loads_any_c() -> None:
     assert again.n_situations == 3
     with pytest.raises(ValueError, match="auto"):
         FCMInterpreter(c="many")
+    with pytest.raises(ValueError, match="auto_rule"):
+        FCMInterpreter(c="auto", auto_rule="xb")
+
+
+def test_auto_c_cardinality_stops_where_the_smallest_situation_stops_shrinking() -> None:
+    """A continuum of common readings (a uniform square) and, just off one corner, a rare
+    group (40 of 1000 readings): while c is small the square's situations absorb it and the
+    smallest situation shrinks with c; from the c that gives the rare group a situation of
+    its own, the smallest situation is that group (until the square's are smaller still).
+    The rule takes that first c."""
+    rng = np.random.default_rng(3)
+    X = np.concatenate([rng.uniform(0.0, 1.0, (960, 2)),
+                        np.array([1.25, 1.25]) + 0.02 * rng.standard_normal((40, 2))])
+    fcm = FCMInterpreter(c="auto", auto_cs=[2, 3, 4, 6, 8, 12, 16, 24, 32], auto_trials=3,
+                         trials=3)
+    out = fcm.fit(X, np.random.default_rng(0))
+    card = out["auto_min_card"]
+    own = out["auto_cs"][card == 40]  # the rare group is the smallest situation
+    assert own.size >= 3 and card[0] > 80
+    assert out["auto_c"] == own[0] == fcm.n_situations
+    rf = FCMInterpreter(c="auto", auto_cs=[2, 3, 4, 6, 8, 12, 16, 24, 32], auto_trials=3,
+                        trials=3, auto_rule="rf").fit(X, np.random.default_rng(0))
+    assert rf["auto_min_card"].tolist() == card.tolist()  # (the same sweep, another rule)
 
 
 def test_a_sweep_starts_online_runs_from_no_situations(tmp_path) -> None:
