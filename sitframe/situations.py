@@ -196,20 +196,27 @@ class SituationTracker:
 
 
 def checked_errors(errors: Any, c: int) -> np.ndarray | None:
-    """A learner's ``situation_errors()``: ``None`` or a (c,) float64 array of finite values
-    >= 0 (BoundaryError if not; a cheap test, run every iteration)."""
+    """A learner's ``situation_errors()``: ``None`` or a (c,) array of finite values >= 0
+    (BoundaryError if not), as float64. A cheap test on the usual float64 array: it runs
+    every iteration."""
     if errors is None:
         return None
-    if errors.__class__ is not np.ndarray or errors.shape != (c,) or errors.dtype is not _F64 \
-            or not _finite_nonnegative(errors):
-        shape = getattr(errors, "shape", None)
-        what = f"an array of shape {shape} and dtype {errors.dtype}" if shape is not None \
+    if errors.__class__ is np.ndarray and errors.shape == (c,) and errors.dtype is _F64 \
+            and _finite_nonnegative(errors):
+        return errors
+    shape, dtype = getattr(errors, "shape", None), getattr(errors, "dtype", None)
+    if isinstance(errors, np.ndarray) and shape == (c,) and (
+            np.issubdtype(dtype, np.floating) or np.issubdtype(dtype, np.integer)):
+        a = errors.astype(np.float64)
+        bad = np.flatnonzero(~(np.isfinite(a) & (a >= 0.0)))
+        if not bad.size:
+            return a
+        what = f"a TD error of {float(a[bad[0]])} for situation {int(bad[0])}"
+    else:
+        what = f"an array of shape {shape} and dtype {dtype}" if shape is not None \
             else type(errors).__name__
-        if shape == (c,) and errors.dtype == np.float64:
-            what = f"values {np.asarray(errors).tolist()}"
-        raise BoundaryError(f"returned {what}, expected None or a ({c},) float64 array of "
-                            "finite absolute TD errors >= 0 (0 where the update touched nothing)")
-    return errors
+    raise BoundaryError(f"returned {what}, expected None or a ({c},) array of finite "
+                        "absolute TD errors >= 0 (0 where the update touched nothing)")
 
 
 def checked_events(events: Any, c: int) -> list[SituationEvent]:

@@ -413,8 +413,9 @@ def sitframe_interpreters():
           cfg=INTERP, trial=0),
     fault("evolving-behaviour-situation-errors-negative",
           behaviour("e = good()\nreturn e - 1.0 if self.now else e", "situation_errors", ""),
-          3, B, "situation_errors() in trial 1", "expected None or a (48,) float64 array of "
-          "finite absolute TD errors >= 0", cfg=EVOLVING_BEHAVIOUR, trial=1),
+          3, B, "situation_errors() in trial 1", "returned a TD error of -1.0 for situation 0, "
+          "expected None or a (48,) array of finite absolute TD errors >= 0",
+          cfg=EVOLVING_BEHAVIOUR, trial=1),
     fault("evolving-behaviour-situation-errors-list",
           behaviour("e = good()\nreturn e.tolist() if self.now else e", "situation_errors", ""),
           3, B, "situation_errors() in trial 1", "returned list", cfg=EVOLVING_BEHAVIOUR,
