@@ -194,7 +194,11 @@ class Behaviour(Protocol):
 
     def situation_errors(self) -> np.ndarray | None:
         """Optional. (c,) absolute TD errors the last ``learn`` attributed to each situation
-        (0 where nothing was updated); an evolving interpreter splits where they stay large."""
+        (0 where nothing was updated); an evolving interpreter splits where they stay large.
+
+        Called after ``learn`` in every learning iteration of a run whose interpreter is
+        evolving. ``None`` means no errors this time. Anything but ``None`` or a (c,)
+        numeric array of finite values >= 0 is a fault of this behaviour."""
         ...
 
     def load_policy(self, policy: LearnedPolicy) -> None:
