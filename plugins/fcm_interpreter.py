@@ -64,8 +64,9 @@ several perfectly crisp partitions: the largest minimum hard tendency
 Either way the sweep runs over ``auto_cs`` (``auto_trials`` restarts each,
 one trial chosen per c as usual), then the chosen c is clustered with
 ``trials`` restarts as for a fixed c. The sweep is logged (``auto_cs``,
-``auto_min_card``, ``auto_rf``, ``auto_c``). Until ``fit`` has run,
-``n_situations`` is ``None``.
+``auto_min_card``, ``auto_rf``, ``auto_rule``, ``auto_plateau``,
+``auto_knee``, ``auto_c``) and ``sitframe analyse`` draws it
+(``auto_c.png``). Until ``fit`` has run, ``n_situations`` is ``None``.
 """
 
 from __future__ import annotations
@@ -195,20 +196,22 @@ class FCMInterpreter:
                      max_iter=self.max_iter, seed=rng)
         card = np.asarray(sw.measures["min_card"], float)
         ok = card > 0
+        plateau = float(np.median(card[ok][ok.sum() // 2:])) if ok.any() else 0.0
         if self.auto_rule == "rf":
             rf = np.asarray(sw.measures["rf"], float)
             rf = np.where(ok, rf, np.inf) if ok.any() else rf
             tied = np.isclose(rf, rf.min())  # (e.g. several perfectly crisp partitions)
             best = int(np.argmax(np.where(tied, sw.measures["min_ht"], -np.inf)))
         elif ok.any():
-            plateau = float(np.median(card[ok][ok.sum() // 2:]))
             near = ok & (card <= self.auto_knee * plateau)
             stays = np.logical_and.accumulate((near | ~ok)[::-1])[::-1]  # (and every larger c)
             best = int(np.argmax(near & stays)) if (near & stays).any() else int(np.argmax(near))
         else:  # (every candidate has an empty cluster: the fewest situations)
             best = 0
         return {"auto_c": int(sw.cs[best]), "auto_cs": np.asarray(sw.cs),
-                "auto_min_card": card, "auto_rf": np.asarray(sw.measures["rf"], float)}
+                "auto_min_card": card, "auto_rf": np.asarray(sw.measures["rf"], float),
+                "auto_rule": self.auto_rule, "auto_plateau": plateau,
+                "auto_knee": self.auto_knee}
 
     def memberships(self, reading: np.ndarray) -> np.ndarray:
         if self.transform == "range":

@@ -274,3 +274,21 @@ def test_split_median_is_numpys() -> None:
     for n in range(1, 60):
         a = rng.random(n) * rng.lognormal(0.0, 3.0, n)
         assert _median(a) == float(np.median(a))
+
+
+def test_auto_c_run_logs_its_sweep_and_the_report_draws_it(tmp_path) -> None:
+    """An off-line run with c = "auto": the run logs the sweep the rule read, the situations
+    are the chosen c, and the report shows the sweep with the choice marked."""
+    from sitframe.analysis import analyse
+
+    cfg = small_config(trials=1, iterations=60, eval_iterations=20).replace(
+        "c = 6", 'c = "auto"\nauto_cs = [2, 3, 4, 5]\nauto_trials = 2')
+    _cfg, out = run_config(tmp_path, cfg, "auto.h5")
+    log = open_log(str(out))
+    st = log.stage("cluster")
+    assert int(st["auto_c"]) in (2, 3, 4, 5) and np.asarray(st["auto_min_card"]).shape == (4,)
+    assert float(st["auto_plateau"]) > 0 and float(st["auto_knee"]) == 2.0
+    assert np.asarray(log.interpreter_state()["centers"]).shape[0] == int(st["auto_c"])
+    rep = analyse(out, tmp_path / "report", dpi=40)
+    assert "auto_c.png" in {name for _sec, name, _cap in rep.files}
+    assert (tmp_path / "report" / "auto_c.png").stat().st_size > 0

@@ -18,7 +18,8 @@ from matplotlib.figure import Figure
 from sitframe.clustering import ClusteringTrials, SweepResult, describe_prototype
 from sitframe.fcm import MEASURE_DIRECTIONS
 
-__all__ = ["OKABE_ITO", "plot_measures_by_c", "plot_measures_by_trial", "plot_prototypes"]
+__all__ = ["OKABE_ITO", "plot_auto_c", "plot_measures_by_c", "plot_measures_by_trial",
+           "plot_prototypes"]
 
 #: Okabe-Ito palette (colour-blind safe).
 OKABE_ITO: dict[str, str] = {
@@ -253,3 +254,56 @@ def plot_measures_by_c(sweep: SweepResult, *, units: str = "m") -> Figure:
                           f"Validity of the chosen partition vs. number of clusters "
                           f"(m = {sweep.m:g}, {sweep.n_trials} trials per c)",
                           legend=bool(fb.any()))
+
+
+def plot_auto_c(cs: np.ndarray, min_card: np.ndarray, rf: np.ndarray, chosen: int, *,
+                plateau: float | None = None, knee: float | None = None,
+                rule: str = "cardinality") -> Figure:
+    """How ``c = "auto"`` chose c: the sweep's minimum cardinality and R_f against c.
+
+    Parameters
+    ----------
+    cs : ndarray, shape (k,)
+        The candidate numbers of situations.
+    min_card, rf : ndarray, shape (k,)
+        Minimum cardinality (readings of the smallest situation, Eq. 4.8) and relative
+        fuzziness (Eq. 4.9) of each candidate's chosen partition.
+    chosen : int
+        The c the rule took (marked).
+    plateau, knee : float, optional
+        The ``"cardinality"`` rule's plateau and factor: the band up to ``knee *
+        plateau`` is shaded.
+    rule : str
+        ``"cardinality"`` or ``"rf"``: the panel the rule read comes first.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    order = np.argsort(cs)
+    cs, panels = np.asarray(cs)[order], {
+        "cardinality": (np.asarray(min_card, float)[order],
+                        "Minimum cardinality\n(readings of the smallest situation)"),
+        "rf": (np.asarray(rf, float)[order], "Relative fuzziness $R_f$")}
+    keys = ["cardinality", "rf"] if rule == "cardinality" else ["rf", "cardinality"]
+    fig = Figure(figsize=(7.2, 2.6), layout="constrained")
+    for ax, key in zip(fig.subplots(1, 2), keys, strict=True):
+        v, label = panels[key]
+        v = np.where(np.isfinite(v), v, np.nan)
+        ax.plot(cs, v, "o-", ms=3, lw=1.0, color=OKABE_ITO["bluish_green"])
+        at = np.flatnonzero(cs == chosen)
+        if at.size:
+            ax.plot(cs[at], v[at], "o", ms=8, mfc="none", mew=1.5,
+                    color=OKABE_ITO["vermillion"], label=f"chosen c = {chosen}")
+        if key == "cardinality" and plateau is not None and knee is not None and plateau > 0:
+            ax.axhspan(0, knee * plateau, color=OKABE_ITO["sky_blue"], alpha=0.25, lw=0,
+                       label=f"plateau band (<= {knee:g} x {plateau:g})")
+            ax.set_ylim(bottom=0)
+        ax.set_xlabel("Number of situations $c$", fontsize=_FONT)
+        ax.set_ylabel(label, fontsize=_FONT)
+        ax.set_xticks(cs[:: max(1, math.ceil(cs.size / 10))])
+        ax.tick_params(labelsize=_FONT - 1)
+        ax.grid(lw=0.3, alpha=0.5)
+        ax.legend(fontsize=_FONT - 1, frameon=False)
+    fig.suptitle(f'c = "auto" (rule "{rule}"): the sweep it chose c from', fontsize=_FONT + 1)
+    return fig

@@ -293,6 +293,17 @@ def _clustering_section(W: _Writer, lg: Log, rep: AnalysisReport, CP: Any) -> No
                      f"Validity measures of the {ct.n_trials} FCM trials, chosen trial "
                      f"{ct.chosen} marked (Fig. 5.1)",
                      lambda: CP.plot_measures_by_trial(ct, units=units))
+        st = lg.stage("cluster")
+        if "auto_c" in st and "auto_min_card" in st:
+            W.figure(sec, "auto_c.png",
+                     f'How c = "auto" chose c = {int(st["auto_c"])}: the minimum cardinality '
+                     "and R_f of the sweep over c (the rule in plugins/fcm_interpreter.py)",
+                     lambda: CP.plot_auto_c(
+                         np.asarray(st["auto_cs"]), np.asarray(st["auto_min_card"]),
+                         np.asarray(st["auto_rf"]), int(st["auto_c"]),
+                         plateau=float(st.get("auto_plateau", np.nan)),
+                         knee=float(st.get("auto_knee", np.nan)),
+                         rule=str(st.get("auto_rule", "cardinality"))))
         sw = R.sweep_result(lg)
         if sw is not None:
             W.figure(sec, "measures_by_c.png",
