@@ -407,7 +407,8 @@ def _prepare_points(sweep: Sweep, plugins_dirs: tuple[str, ...]) -> list[Point]:
 # ---------------------------------------------------------------------------
 
 
-def run_sweep(sweep: Sweep, executor: Any, *, progress: bool = False) -> dict[str, Any]:
+def run_sweep(sweep: Sweep, executor: Any, *, progress: bool = False,
+              reuse: bool = False) -> dict[str, Any]:
     """Run every point's stages and trials through ``executor`` (one run lifecycle,
     :func:`sitframe.experiment.drive`, for all points at once).
 
@@ -415,12 +416,16 @@ def run_sweep(sweep: Sweep, executor: Any, *, progress: bool = False) -> dict[st
     finish; this process holds every point log's lock for the whole sweep.
     Ctrl-C (or SIGTERM) cancels pending work, marks unfinished points
     ``aborted`` and re-raises. ``progress`` shows the progress plugin's bar
-    over all points' trials.
+    over all points' trials. ``reuse`` keeps a point's existing log instead
+    of running the point again when the log is complete and was made by the
+    point's config (the same config hash, as for a run's prerequisites; the
+    code that made it is not compared), and says so on stderr.
 
     Returns
     -------
     dict
-        ``{"name", "out", "wall_seconds", "points": [summary row per point]}``.
+        ``{"name", "out", "wall_seconds", "points": [summary row per point],
+        "reused": [names of the points whose logs were kept]}``.
     """
     from sitframe.experiment import RunPlan, drive
     from sitframe.logs import lock_log
@@ -428,13 +433,33 @@ def run_sweep(sweep: Sweep, executor: Any, *, progress: bool = False) -> dict[st
     t0 = time.perf_counter()
     for pt in sweep.points:  # one writer per log: refuse before any point writes anything
         lock_log(pt.log)
-    for pt in sweep.points:
+    kept = [pt.name for pt in sweep.points if reuse and _reusable(pt)]
+    if kept:
+        note(f"reusing {len(kept)} of {len(sweep.points)} points' logs in {sweep.out} "
+             "(complete, made by the same config): " + ", ".join(kept))
+    todo = [pt for pt in sweep.points if pt.name not in kept]
+    for pt in todo:
         pt.experiment.info.extra["progress"] = progress
         pt.experiment.info.extra["progress_group"] = f"sweep {sweep.name}"
-    drive([(pt.experiment, RunPlan.of(pt.run_kwargs)) for pt in sweep.points], executor)
+    drive([(pt.experiment, RunPlan.of(pt.run_kwargs)) for pt in todo], executor)
     rows = [summarise_point(pt) for pt in sweep.points]
     return {"name": sweep.name, "out": str(sweep.out), "keys": list(sweep.grid),
-            "wall_seconds": round(time.perf_counter() - t0, 3), "points": rows}
+            "wall_seconds": round(time.perf_counter() - t0, 3), "points": rows,
+            "reused": kept}
+
+
+def _reusable(pt: Point) -> bool:
+    """Whether the point's log exists, is complete and was made by the point's config."""
+    from sitframe.logs import open_log
+
+    if not pt.log.exists():
+        return False
+    try:
+        log = open_log(pt.log)
+    except InputError:
+        return False  # (not a readable log: the run replaces it or refuses, as without reuse)
+    return log.complete and str(log.attrs.get("config_hash", "")) == \
+        pt.experiment.info.config_hash
 
 
 # ---------------------------------------------------------------------------
@@ -697,6 +722,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="folder for the logs and summary (default [sweep] out, else "
                         "logs/sweeps/<name>)")
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
+    parser.add_argument("--reuse", action="store_true",
+                        help="keep a point's log that is complete and was made by the same "
+                        "config instead of running the point again (e.g. after adding a value "
+                        "to the grid); the code that made it is not compared")
     add_parallel_arguments(parser)
 
 
@@ -716,8 +745,8 @@ def main(args: argparse.Namespace) -> int:
     executor = make_executor(args.workers, args.scheduler, total)
     failed = True
     try:
-        result = run_sweep(sweep, executor,
-                           progress=not args.json and sys.stderr.isatty())
+        result = run_sweep(sweep, executor, progress=not args.json and sys.stderr.isatty(),
+                           reuse=args.reuse)
         failed = False
     finally:
         executor.shutdown(cancel=failed)

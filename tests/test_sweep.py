@@ -86,6 +86,39 @@ def test_sweep_json_and_one_worker(swept, tmp_path, capsys):
         assert compare_logs(out / f"{name}.h5", out1 / f"{name}.h5") == []
 
 
+def test_reuse_keeps_complete_logs_of_the_same_config_and_runs_the_rest(swept, tmp_path,
+                                                                         capsys):
+    """Adding a grid value with --reuse runs only the new point, and says which logs it
+    kept; a log of another config (here: another trial count) is run again."""
+    import shutil
+
+    d, out = swept
+    out2 = tmp_path / "reuse"
+    shutil.copytree(out, out2)
+    before = {p.name: p.stat().st_mtime_ns for p in out2.glob("*.h5")}
+    (d / "more.toml").write_text(SWEEP.replace('"interpreter.c" = [4, 5]',
+                                               '"interpreter.c" = [4, 5, 6]'))
+    capsys.readouterr()
+    assert main(["sweep", str(d / "more.toml"), "--out", str(out2), "--workers", "2",
+                 "--json", "--reuse"]) == 0
+    cap = capsys.readouterr()
+    doc = json.loads(cap.out)
+    assert len(doc["points"]) == 6 and "reusing 0 of" not in cap.err
+    assert sorted(doc["reused"]) == sorted(n.removesuffix(".h5") for n in before)
+    assert "reusing 4 of 6 points' logs" in cap.err  # (said, not silent)
+    for name, t in before.items():
+        assert (out2 / name).stat().st_mtime_ns == t, f"{name} was rewritten"
+    new = open_log(out2 / "update=thesis_c=6.h5")
+    assert new.status == "complete" and new.config["interpreter"]["c"] == 6
+    # the same file, another trial count: nothing is reused
+    (d / "more3.toml").write_text(SWEEP.replace("trials = 2", "trials = 3"))
+    assert main(["sweep", str(d / "more3.toml"), "--out", str(out2), "--workers", "2",
+                 "--json", "--reuse"]) == 0
+    cap = capsys.readouterr()
+    assert json.loads(cap.out)["reused"] == [] and "reusing" not in cap.err
+    assert open_log(out2 / "update=thesis_c=4.h5").trial_indices() == [0, 1, 2]
+
+
 def test_seed_axis_gives_tables_pooled_over_seeds(swept, tmp_path, capsys):
     d, _out = swept
     (d / "seeds.toml").write_text(SWEEP.replace('"interpreter.c" = [4, 5]',
