@@ -181,7 +181,7 @@ class EvolvingInterpreter(FCMInterpreter):
         self.t += 1
         diff = self.Fa - x  # (the alive prototypes, kept contiguous: this is the hot loop)
         d2 = row_sq_norms(diff)
-        if not self.frozen and (self.grow_until == 0 or self.t <= self.grow_until) and (
+        if not self.frozen and self._growing() and (
                 self.streak or not d2.size or _min(d2) > self.create_d2) and self._cover(x, d2):
             diff = self.Fa - x
             d2 = row_sq_norms(diff)
