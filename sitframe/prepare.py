@@ -32,7 +32,7 @@ from sitframe.errors import InputError, note
 from sitframe.evaluation import select_trial, selection_rule
 from sitframe.experiment import Experiment
 from sitframe.logged import best_trial, check_logged_policy, check_state, logged_policy
-from sitframe.logs import Log, lock_log, open_log, unlock_log
+from sitframe.logs import Log, code_fingerprint, lock_log, open_log, unlock_log
 from sitframe.records import LearnedPolicy
 
 
@@ -193,8 +193,10 @@ def make_prerequisites(cfg: dict[str, Any], base_dir: str = ".", *,
                              key=key)
         pcfg, psource, pbase = load_config(name)
         if Path(path).exists():
-            _check_reusable(path, pcfg, experiment, key)
-            say(f"reusing {path}: a complete log of '{experiment}' (same config)")
+            same_code = _check_reusable(path, pcfg, experiment, key)
+            say(f"reusing {path}: a complete log of '{experiment}' (same config" + (
+                ")" if same_code else "; made by other code than this: remove it to remake "
+                "it with this code)"))
             continue
         made += make_prerequisites(pcfg, pbase, executor_for=executor_for,
                                    plugins_dirs=plugins_dirs, progress=progress, say=say,
@@ -216,8 +218,11 @@ def make_prerequisites(cfg: dict[str, Any], base_dir: str = ".", *,
     return made
 
 
-def _check_reusable(path: str, cfg: dict[str, Any], experiment: str, key: str) -> None:
-    """An existing prerequisite log: complete, and made by the prerequisite's own config."""
+def _check_reusable(path: str, cfg: dict[str, Any], experiment: str, key: str) -> bool:
+    """An existing prerequisite log: complete, and made by the prerequisite's own config.
+
+    Returns whether this code made it (the log's ``code_hash`` against the
+    sources now, with the plugins the log names)."""
     log = open_log(path)
     if not log.complete:
         raise InputError(f"the prerequisite log is not complete (status {log.status}); finish "
@@ -227,6 +232,7 @@ def _check_reusable(path: str, cfg: dict[str, Any], experiment: str, key: str) -
         raise InputError(f"exists but was not made by '{experiment}' as it is now (another "
                          "config); remove it to remake it, or name the config that made it",
                          file=path, key=key)
+    return str(log.attrs.get("code_hash", "")) == code_fingerprint(log.plugins)
 
 
 def check_out(out: str, inputs: dict[str, str]) -> None:

@@ -418,8 +418,11 @@ def run_sweep(sweep: Sweep, executor: Any, *, progress: bool = False,
     ``aborted`` and re-raises. ``progress`` shows the progress plugin's bar
     over all points' trials. ``reuse`` keeps a point's existing log instead
     of running the point again when the log is complete and was made by the
-    point's config (the same config hash, as for a run's prerequisites; the
-    code that made it is not compared), and says so on stderr.
+    point's config (the same config hash, as for a run's prerequisites) and
+    by the same code (the log's ``code_hash``: sitframe, its plugins and
+    loose plugin files), and says so on stderr. A log of the same config
+    made by other code is run again, and said: a grid whose points came
+    from two versions of a plugin would compare the versions, not the grid.
 
     Returns
     -------
@@ -433,10 +436,16 @@ def run_sweep(sweep: Sweep, executor: Any, *, progress: bool = False,
     t0 = time.perf_counter()
     for pt in sweep.points:  # one writer per log: refuse before any point writes anything
         lock_log(pt.log)
-    kept = [pt.name for pt in sweep.points if reuse and _reusable(pt)]
+    found = {pt.name: _reusable(pt) for pt in sweep.points} if reuse else {}
+    kept = [name for name, how in found.items() if how == "same"]
     if kept:
         note(f"reusing {len(kept)} of {len(sweep.points)} points' logs in {sweep.out} "
-             "(complete, made by the same config): " + ", ".join(kept))
+             "(complete, made by the same config and code): " + ", ".join(kept))
+    stale = [name for name, how in found.items() if how == "code"]
+    if stale:
+        note(f"not reusing {len(stale)} of {len(sweep.points)} points' logs, complete and of "
+             "the same config but made by other code (code hash differs); running them "
+             "again: " + ", ".join(stale))
     todo = [pt for pt in sweep.points if pt.name not in kept]
     for pt in todo:
         pt.experiment.info.extra["progress"] = progress
@@ -448,18 +457,23 @@ def run_sweep(sweep: Sweep, executor: Any, *, progress: bool = False,
             "reused": kept}
 
 
-def _reusable(pt: Point) -> bool:
-    """Whether the point's log exists, is complete and was made by the point's config."""
-    from sitframe.logs import open_log
+def _reusable(pt: Point) -> str:
+    """``"same"`` if the point's log is complete and was made by the point's config and this
+    code, ``"code"`` if only the code differs, else ``""``."""
+    from sitframe.logs import code_fingerprint, open_log
 
     if not pt.log.exists():
-        return False
+        return ""
     try:
         log = open_log(pt.log)
     except InputError:
-        return False  # (not a readable log: the run replaces it or refuses, as without reuse)
-    return log.complete and str(log.attrs.get("config_hash", "")) == \
-        pt.experiment.info.config_hash
+        return ""  # (not a readable log: the run replaces it or refuses, as without reuse)
+    if not log.complete or str(log.attrs.get("config_hash", "")) != \
+            pt.experiment.info.config_hash:
+        return ""
+    info = pt.experiment.info
+    code = info.extra.setdefault("code_hash", code_fingerprint(info.plugins))
+    return "same" if str(log.attrs.get("code_hash", "")) == code else "code"
 
 
 # ---------------------------------------------------------------------------

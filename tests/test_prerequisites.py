@@ -57,7 +57,14 @@ def test_missing_prerequisite_is_made_first_then_reused(folder, capsys):
     assert main(["run", "dependent.toml", "--json"]) == 0
     err = capsys.readouterr().err
     assert "reusing logs/base.h5: a complete log of 'base.toml' (same config)" in err
-    assert "not found" not in err
+    assert "not found" not in err and "other code" not in err
+    import h5py  # a log of the same config made by other code: reused, and said so
+
+    with h5py.File(folder / "logs/base.h5", "r+") as f:
+        f.attrs["code_hash"] = "0" * 64
+    assert main(["run", "dependent.toml", "--json"]) == 0
+    err = capsys.readouterr().err
+    assert "(same config; made by other code than this: remove it to remake it" in err
 
 
 def test_prerequisite_made_by_another_config_is_refused(folder, capsys):

@@ -117,6 +117,19 @@ def test_reuse_keeps_complete_logs_of_the_same_config_and_runs_the_rest(swept, t
     cap = capsys.readouterr()
     assert json.loads(cap.out)["reused"] == [] and "reusing" not in cap.err
     assert open_log(out2 / "update=thesis_c=4.h5").trial_indices() == [0, 1, 2]
+    # the same config made by other code (a plugin edited since): run again, and said
+    import h5py
+
+    with h5py.File(out2 / "update=thesis_c=4.h5", "r+") as f:
+        f.attrs["code_hash"] = "0" * 64
+    assert main(["sweep", str(d / "more3.toml"), "--out", str(out2), "--workers", "2",
+                 "--json", "--reuse"]) == 0
+    cap = capsys.readouterr()
+    assert sorted(json.loads(cap.out)["reused"]) == ["update=standard_c=4",
+                                                     "update=standard_c=5",
+                                                     "update=thesis_c=5"]
+    assert "not reusing 1 of 4 points' logs" in cap.err and "update=thesis_c=4" in cap.err
+    assert open_log(out2 / "update=thesis_c=4.h5").attrs["code_hash"] != "0" * 64
 
 
 def test_seed_axis_gives_tables_pooled_over_seeds(swept, tmp_path, capsys):
