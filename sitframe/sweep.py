@@ -436,7 +436,8 @@ def run_sweep(sweep: Sweep, executor: Any, *, progress: bool = False,
     t0 = time.perf_counter()
     for pt in sweep.points:  # one writer per log: refuse before any point writes anything
         lock_log(pt.log)
-    found = {pt.name: _reusable(pt) for pt in sweep.points} if reuse else {}
+    codes: dict[str, str] = {}  # (one source fingerprint per plugin list, not per point)
+    found = {pt.name: _reusable(pt, codes) for pt in sweep.points} if reuse else {}
     kept = [name for name, how in found.items() if how == "same"]
     if kept:
         note(f"reusing {len(kept)} of {len(sweep.points)} points' logs in {sweep.out} "
@@ -457,9 +458,10 @@ def run_sweep(sweep: Sweep, executor: Any, *, progress: bool = False,
             "reused": kept}
 
 
-def _reusable(pt: Point) -> str:
+def _reusable(pt: Point, codes: dict[str, str]) -> str:
     """``"same"`` if the point's log is complete and was made by the point's config and this
-    code, ``"code"`` if only the code differs, else ``""``."""
+    code, ``"code"`` if only the code differs, else ``""``. ``codes`` caches the code
+    fingerprint by plugin list."""
     from sitframe.logs import code_fingerprint, open_log
 
     if not pt.log.exists():
@@ -472,7 +474,10 @@ def _reusable(pt: Point) -> str:
             pt.experiment.info.config_hash:
         return ""
     info = pt.experiment.info
-    code = info.extra.setdefault("code_hash", code_fingerprint(info.plugins))
+    key = json.dumps(info.plugins, sort_keys=True)
+    if key not in codes:
+        codes[key] = code_fingerprint(info.plugins)
+    code = info.extra.setdefault("code_hash", codes[key])
     return "same" if str(log.attrs.get("code_hash", "")) == code else "code"
 
 
@@ -738,8 +743,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
     parser.add_argument("--reuse", action="store_true",
                         help="keep a point's log that is complete and was made by the same "
-                        "config instead of running the point again (e.g. after adding a value "
-                        "to the grid); the code that made it is not compared")
+                        "config and the same code instead of running the point again (e.g. "
+                        "after adding a value to the grid)")
     add_parallel_arguments(parser)
 
 
