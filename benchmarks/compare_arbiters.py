@@ -4,7 +4,8 @@ For each world and seed, every arbiter runs the same ``--episodes`` random
 start/goal pairs (``sitframe evaluate LOG --world W --goal-episodes N --seed
 S``: the pairs depend only on the world and the seed). Prints, per arbiter and
 world, the median over seeds (IQR, worst) of success, collision-free success
-(episodes without a collision), SPL, the mean time to the goal and the heading
+(episodes without a collision), SPL against the straight line and against
+the shortest path the robot's disc can drive, the mean time to the goal and the heading
 change per metre, as a Markdown table; ``--json`` writes every batch's scores;
 ``--figure`` draws one typical pair per arbiter in ``--figure-world``.
 
@@ -28,7 +29,8 @@ from typing import Any
 import numpy as np
 
 WORLDS = ("goal", "novel-1", "novel-2", "multi-room", "u-trap")
-KEYS = ("success_rate", "collision_free_rate", "spl", "mean_time_s", "heading_change_per_m")
+KEYS = ("success_rate", "collision_free_rate", "spl", "spl_shortest", "mean_time_s",
+        "heading_change_per_m")
 
 
 _LOADED: dict[tuple[str, int, str | None], Any] = {}
@@ -98,8 +100,8 @@ def select_trial(log: str, episodes: int = 100, seed: int = 1000, workers: int =
 
 def table(rows: list[dict[str, Any]], arbiters: list[str], worlds: list[str]) -> str:
     """Markdown: median (IQR) [worst] over seeds, per world and arbiter."""
-    lines = ["| world | arbiter | success | collision-free | SPL | time to goal [s] | "
-             "heading change [deg/m] |", "|---|---|---|---|---|---|---|"]
+    lines = ["| world | arbiter | success | collision-free | SPL | SPL (shortest path) | "
+             "time to goal [s] | heading change [deg/m] |", "|---|---|---|---|---|---|---|---|"]
     for w in worlds:
         for a in arbiters:
             sel = [r for r in rows if r["world"] == w and r["arbiter"] == a]

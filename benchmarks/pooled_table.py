@@ -31,7 +31,8 @@ from sitframe.resolve import Resolved
 
 BAD = 10.0  # collisions per 1000 iterations that make an evaluation "bad"
 BAND_BAD = 0.5  # a wall-following evaluation in the band less than half the time
-GOAL = ("success_rate", "collision_free_rate", "spl", "mean_time_s", "heading_change_per_m")
+GOAL = ("success_rate", "collision_free_rate", "spl", "spl_shortest", "mean_time_s",
+        "heading_change_per_m")
 
 
 def _miq(x: np.ndarray, whole: bool = False) -> str:

@@ -29,13 +29,21 @@ Start/goal pairs (``[goal] pairs``):
 Per episode: ``success``, ``iterations``, ``collisions``, ``path_length_m``
 (robot centre), ``straight_m`` (straight-line distance from the start to the
 *edge* of the goal disc, the shortest possible successful path ignoring
-obstacles, used by SPL), ``time_s`` (iterations x control period, 1.5 s),
-``heading_change_per_m`` (total |heading change| per metre, path smoothness).
+obstacles, used by ``spl``), ``shortest_m`` (the same for the shortest path
+the robot's disc can drive, around walls and through doors:
+:func:`sitframe.paths.shortest_path_length` minus the goal radius; ``inf``
+when the goal cannot be reached; used by ``spl_shortest``), ``time_s``
+(iterations x control period, 1.5 s), ``heading_change_per_m`` (total
+|heading change| per metre, path smoothness).
 
 Aggregates over a batch (:meth:`GoalEpisodes.aggregate`): ``episodes``,
 ``success_rate``, ``collisions_per_episode``, ``collision_free_rate``
 (fraction of episodes without a collision), ``spl``
-(:func:`sitframe.metrics.spl`), ``mean_time_s`` (mean time of the
+(:func:`sitframe.metrics.spl` against the straight line, as in logs before
+``spl_shortest`` existed), ``spl_shortest`` (SPL as Anderson et al. 2018
+define it, against the shortest path: the straight line passes through the
+walls of a multi-room world, so there ``spl`` charges a detour no robot can
+avoid), ``mean_time_s`` (mean time of the
 *successful* episodes; NaN if none), ``heading_change_per_m`` (pooled: total
 heading change over total path length of all episodes),
 ``mean_path_length_m``.
@@ -56,6 +64,7 @@ from sitframe import (
     heading_change_per_m,
     hookimpl,
     path_length,
+    shortest_path_length,
     spl,
 )
 from sitframe import params as P
@@ -64,7 +73,8 @@ PAIR_MODES = ("random", "world")
 TRAIN_MODES = ("world", "episodes")
 #: Aggregate keys of a batch (``evaluate --goal-episodes --json``, ``eval/<world>/...``).
 AGGREGATE_KEYS = ("episodes", "success_rate", "collisions_per_episode", "collision_free_rate",
-                  "spl", "mean_time_s", "heading_change_per_m", "mean_path_length_m")
+                  "spl", "spl_shortest", "mean_time_s", "heading_change_per_m",
+                  "mean_path_length_m")
 
 
 def goal_pairs(
@@ -169,6 +179,7 @@ class GoalEpisodes:
     def episode_starts(self, world: World, rng: np.random.Generator,
                        robot: RobotParams) -> tuple[np.ndarray, np.ndarray]:
         """The ``episodes`` start poses (n, 3) and goals (n, 3: x, y, radius) in ``world``."""
+        self._world = world  # (score_episode measures the shortest path in it)
         if self.pairs == "world":
             return world_pairs(world, self.episodes)
         return goal_pairs(world, self.episodes, rng, min_distance=self.min_distance,
@@ -191,12 +202,15 @@ class GoalEpisodes:
         it = int(arrays["collision"].size)
         reached = math.hypot(pose[-1, 0] - goal[0], pose[-1, 1] - goal[1]) <= goal[2]
         straight = max(math.hypot(goal[0] - start[0], goal[1] - start[1]) - goal[2], 0.0)
+        shortest = max(shortest_path_length(self._world, start[:2], goal[:2],
+                                            radius=robot.radius) - goal[2], 0.0)
         return {
             "success": bool(reached),
             "iterations": it,
             "collisions": int(arrays["collision"].sum()),
             "path_length_m": path_length(pose[:, :2]),
             "straight_m": straight,
+            "shortest_m": shortest,
             "time_s": it * float(robot.control_period_s),
             "heading_change_per_m": heading_change_per_m(pose[:, 2], pose[:, :2]),
         }
@@ -216,6 +230,7 @@ class GoalEpisodes:
             "collisions_per_episode": float(coll.mean()) if n else nan,
             "collision_free_rate": float((coll == 0).mean()) if n else nan,
             "spl": spl(success, ep["straight_m"], path),
+            "spl_shortest": spl(success, ep["shortest_m"], path),
             "mean_time_s": float(time_s[success].mean()) if success.any() else nan,
             "heading_change_per_m": float(total_turn / path.sum()) if path.sum() > 0 else nan,
             "mean_path_length_m": float(path.mean()) if n else nan,

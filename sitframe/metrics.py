@@ -55,14 +55,28 @@ def heading_change_per_m(theta: np.ndarray, xy: np.ndarray) -> float:
     return float(np.degrees(np.abs(dtheta).sum()) / length) if length > 0 else float("nan")
 
 
-def spl(success: np.ndarray, straight: np.ndarray, path: np.ndarray) -> float:
-    """Success weighted by path length: mean of ``S * l / max(p, l)`` over episodes."""
+def spl(success: np.ndarray, reference: np.ndarray, path: np.ndarray) -> float:
+    """Success weighted by path length: mean of ``S * l / max(p, l)`` over episodes.
+
+    Parameters
+    ----------
+    success
+        (n,) whether each episode reached the goal.
+    reference
+        (n,) the reference length ``l`` [m]: the shortest path (Anderson et al.
+        2018), or the straight line; ``inf`` (the goal cannot be reached)
+        counts 0, as every failure does.
+    path
+        (n,) the path driven ``p`` [m].
+    """
     success = np.asarray(success, dtype=float)
-    straight = np.asarray(straight, dtype=float)
+    ref = np.asarray(reference, dtype=float)
     path = np.asarray(path, dtype=float)
     if success.size == 0:
         return float("nan")
-    return float(np.mean(success * straight / np.maximum(path, straight)))
+    reachable = np.isfinite(ref)
+    ref = np.where(reachable, ref, 0.0)
+    return float(np.mean(np.where(reachable, success * ref / np.maximum(path, ref), 0.0)))
 
 
 def frontal_between_prototypes(pose: np.ndarray, collision: np.ndarray, contact: np.ndarray,

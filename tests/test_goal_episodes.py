@@ -302,3 +302,13 @@ def test_a_bad_selection_table_is_one_line(tmp_path, oa3_log, capsys, table, whe
     assert main(["run", str(path), "--out", str(tmp_path / "bad.h5")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and where in err[0] and what in err[0], err
+
+
+def test_spl_shortest_measures_against_the_path_round_walls():
+    res = goal_only({"episodes": 4, "timeout": 40})
+    r = simulate(res, spec(world="multi-room", protocol="goal-episodes"))
+    e, agg = r.episodes, batch_scores(r)
+    # the shortest path a disc can drive is never shorter than the straight line
+    assert np.all(e["shortest_m"] >= e["straight_m"] - 1e-9)
+    assert agg["spl_shortest"] >= agg["spl"]
+    assert 0.0 <= agg["spl_shortest"] <= agg["success_rate"]

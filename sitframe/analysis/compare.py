@@ -57,7 +57,8 @@ __all__ = ["Comparison", "MetricResult", "compare_logs", "compare_sweep", "trial
 #: Confidence level of the intervals and resamples of the bootstrap.
 LEVEL, RESAMPLES, ALPHA = 0.95, 2000, 0.05
 _GOAL = {"success_rate": "success rate", "collision_free_rate": "collision-free episodes",
-         "spl": "SPL", "mean_time_s": "mean time to goal [s]",
+         "spl": "SPL", "spl_shortest": "SPL (shortest path)",
+         "mean_time_s": "mean time to goal [s]",
          "heading_change_per_m": "heading change [deg/m]"}
 
 

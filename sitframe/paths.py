@@ -1,0 +1,152 @@
+"""Shortest collision-free paths of a disc in a world (the reference length of SPL).
+
+SPL (Anderson et al. 2018, *On Evaluation of Embodied Navigation Agents*)
+weights each success by ``l / max(p, l)``, where ``l`` is the length of the
+*shortest path* from the start to the goal that the agent could drive.
+Behind a wall or through a door that is longer than the straight line, so
+:func:`shortest_path_length` computes it for the robot's disc:
+
+1. If the straight segment keeps the disc clear of every wall and obstacle
+   edge (:func:`segment_clear`), that is the shortest path: exact.
+2. Otherwise the shortest path is made of straight pieces and arcs of the
+   disc's radius around the corners it turns (the ends of walls, the
+   corners of obstacles). Each arc is replaced by its circumscribed polygon:
+   ``ARC_POINTS`` points around every vertex of the world's edges, at
+   ``radius / cos(pi / ARC_POINTS)`` from it (the polygon's sides then touch
+   the circle, never cut it); the points where the disc is free, with the
+   start and the goal, form a visibility graph (an edge wherever the disc
+   can move straight), searched by Dijkstra (``scipy.sparse.csgraph``).
+   The result is the length of a path the disc can drive; it exceeds the
+   true shortest one only on its arcs, by at most
+   ``tan(pi/12) / (pi/12) - 1`` = 2.3 % of their length (about 1 cm for a
+   U-turn around the end of a thin wall with the Pioneer's 0.15 m radius).
+
+The graph of a world is built once per radius (a few tenths of a second)
+and kept while the world object lives.
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from sitframe import geometry as geo
+from sitframe.world import World
+
+#: Points of the polygon that stands in for the disc's arc around each vertex.
+ARC_POINTS = 12
+_GRAPHS: weakref.WeakKeyDictionary[World, dict[float, _Graph]] = weakref.WeakKeyDictionary()
+_CHUNK = 4096  # moves checked per vectorised segment_clear call (memory: CHUNK x edges)
+
+
+def segment_clear(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> np.ndarray:
+    """Whether a disc of ``radius`` moved straight from ``a`` to each ``b`` touches no edge.
+
+    Parameters
+    ----------
+    world
+        The world (its wall and obstacle edges).
+    a
+        (2,) start of the move [m].
+    b
+        (k, 2) ends of the moves [m].
+    radius
+        Disc radius [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        (k,) bool: the distance from each segment ``a``-``b`` to every edge is at
+        least ``radius`` (two segments are ``0`` apart when they cross, else
+        the least distance from an endpoint of one to the other).
+    """
+    b = np.asarray(b, dtype=np.float64).reshape(-1, 2)
+    a = np.broadcast_to(np.asarray(a, dtype=np.float64).reshape(2), b.shape)
+    return np.concatenate([_clear_moves(world, a[c:c + _CHUNK], b[c:c + _CHUNK], radius)
+                           for c in range(0, b.shape[0], _CHUNK)] or [np.ones(0, bool)])
+
+class _Graph:
+    """The arc points of a world for a disc and which of them see each other."""
+
+    def __init__(self, world: World, radius: float) -> None:
+        verts = np.unique(np.vstack([world.segments[:, :2], world.segments[:, 2:]]), axis=0)
+        ang = 2 * math.pi * np.arange(ARC_POINTS) / ARC_POINTS
+        ring = (radius / math.cos(math.pi / ARC_POINTS) * (1 + 1e-9)
+                * np.stack([np.cos(ang), np.sin(ang)], axis=1))
+        pts = (verts[:, None, :] + ring[None]).reshape(-1, 2)
+        self.nodes = pts[world.is_free(pts, radius)]
+        n = self.nodes.shape[0]
+        iu, ju = np.triu_indices(n, k=1)
+        ok = np.zeros(iu.size, dtype=bool)
+        for c0 in range(0, iu.size, _CHUNK):
+            sl = slice(c0, c0 + _CHUNK)
+            ok[sl] = _clear_moves(world, self.nodes[iu[sl]], self.nodes[ju[sl]], radius)
+        lengths = np.zeros((n, n))
+        d = np.hypot(*(self.nodes[iu[ok]] - self.nodes[ju[ok]]).T)
+        lengths[iu[ok], ju[ok]] = d
+        lengths[ju[ok], iu[ok]] = d
+        #: (n, n) shortest path between every two arc points (inf: not connected)
+        self.between = dijkstra(csr_matrix(lengths), directed=True)
+
+def _clear_moves(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> np.ndarray:
+    """(k,) whether the disc moved straight from each ``a`` (k, 2) to ``b`` (k, 2) is clear."""
+    moves = np.hstack([a, b])
+    edges = world.segments
+    if edges.shape[0] == 0 or moves.shape[0] == 0:
+        return np.ones(moves.shape[0], dtype=bool)
+    crossed = geo.segments_intersect(moves, edges).any(axis=1)
+    k = moves.shape[0]
+    ends = geo.point_segment_distance(np.vstack([a, b]), edges).min(axis=1)
+    d = np.minimum(ends[:k], ends[k:])
+    e_pts = np.vstack([edges[:, :2], edges[:, 2:]])
+    d = np.minimum(d, geo.point_segment_distance(e_pts, moves).min(axis=0))
+    return ~crossed & (d >= radius * (1 - 1e-9))
+
+
+def _graph(world: World, radius: float) -> _Graph:
+    memo = _GRAPHS.setdefault(world, {})
+    if float(radius) not in memo:
+        memo[float(radius)] = _Graph(world, float(radius))
+    return memo[float(radius)]
+
+
+def shortest_path_length(world: World, start: np.ndarray, goal: np.ndarray, *,
+                         radius: float) -> float:
+    """Length [m] of the shortest path of a disc from ``start`` to ``goal`` (module docstring).
+
+    Parameters
+    ----------
+    world
+        The world.
+    start, goal
+        (2,) disc centres [m]; both should be free for the disc.
+    radius
+        Disc radius [m] (the robot's).
+
+    Returns
+    -------
+    float
+        The length [m]: exact when the straight line is clear, else within
+        2.3 % of each arc the path turns; ``inf`` when no free path joins them.
+
+    Raises
+    ------
+    ValueError
+        ``radius`` is not a positive number.
+    """
+    if not radius > 0:
+        raise ValueError(f"radius must be > 0 metres (the disc's), got {radius!r}")
+    a = np.asarray(start, dtype=np.float64).reshape(2)
+    b = np.asarray(goal, dtype=np.float64).reshape(2)
+    if segment_clear(world, a, b[None], radius)[0]:
+        return float(math.hypot(*(b - a)))
+    g = _graph(world, radius)
+    if g.nodes.shape[0] == 0:
+        return math.inf
+    da, db = (np.where(segment_clear(world, p, g.nodes, radius), np.hypot(*(g.nodes - p).T),
+                       np.inf) for p in (a, b))
+    return float((da[:, None] + g.between + db[None, :]).min())
