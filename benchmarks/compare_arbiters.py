@@ -61,9 +61,10 @@ def _load(log: str, trial: int, arbiter: str | None) -> Any:
 
 
 def _batch(log: str, trial: int, arbiter: str | None, world: str, seed: int,
-           episodes: int) -> Any:
+           episodes: int, step_hook: Any = None) -> Any:
     """One batch of goal episodes, exactly as ``sitframe evaluate LOG --world W --trial K
-    --goal-episodes N --seed S [--arbiter A]`` runs it."""
+    --goal-episodes N --seed S [--arbiter A]`` runs it (``step_hook`` sees every
+    iteration's :class:`sitframe.records.StepRecord`)."""
     from sitframe.loop import STAGE_BATCH, TrialSpec, simulate, stage_seed
     from sitframe.resolve import Resolved
 
@@ -73,7 +74,7 @@ def _batch(log: str, trial: int, arbiter: str | None, world: str, seed: int,
     spec = TrialSpec(index=trial, seed=stage_seed(seed, STAGE_BATCH, 0), world=world,
                      iterations=int(cfg["goal"]["timeout"]), learn=False,
                      interpreter_state=state, policies=policies, protocol="goal-episodes")
-    return simulate(res, spec)
+    return simulate(res, spec, step_hook=step_hook)
 
 
 def _evaluate(task: tuple[str, str, int, str | None, str, int, int]) -> dict[str, Any]:
