@@ -95,12 +95,16 @@ def goal_pairs(
     (starts, goals)
         ``starts`` (n, 3): x [m], y [m], theta [rad]; ``goals`` (n, 3): x [m],
         y [m], radius [m]. Both positions are free for a disc of
-        ``robot_radius + margin``; they are at least ``min_distance`` apart.
+        ``robot_radius + margin``; they are at least ``min_distance`` apart,
+        and a path of the ``robot_radius`` disc joins them
+        (:func:`sitframe.paths.shortest_path_length` is finite): in a world of
+        separate rooms a pair in two of them would fail every controller, and
+        count as its failure.
 
     Raises
     ------
     InputError
-        ``goal.min_distance``: no pair that far apart found in ``max_tries``.
+        ``goal.min_distance``: no such pair found in ``max_tries``.
     """
     starts = np.empty((n, 3))
     goals = np.empty((n, 3))
@@ -108,12 +112,13 @@ def goal_pairs(
         for _ in range(max_tries):
             s = world.random_free_pose(rng, robot_radius, margin=margin)
             g = world.random_free_pose(rng, robot_radius, margin=margin)
-            if math.hypot(g[0] - s[0], g[1] - s[1]) >= min_distance:
+            if math.hypot(g[0] - s[0], g[1] - s[1]) >= min_distance and math.isfinite(
+                    shortest_path_length(world, s[:2], g[:2], radius=robot_radius)):
                 break
         else:
-            raise InputError(f"found no start and goal {min_distance:g} m apart in world "
-                             f"'{world.name}' in {max_tries} tries; expected a smaller "
-                             "min_distance or a larger world", key="goal.min_distance")
+            raise InputError(f"found no start and goal {min_distance:g} m apart and joined by a "
+                             f"free path in world '{world.name}' in {max_tries} tries; expected "
+                             "a smaller min_distance or a larger world", key="goal.min_distance")
         starts[e] = s
         goals[e] = (g[0], g[1], goal_radius)
     return starts, goals

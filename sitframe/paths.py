@@ -40,6 +40,9 @@ from sitframe.world import World
 #: Points of the polygon that stands in for the disc's arc around each vertex.
 ARC_POINTS = 12
 _GRAPHS: weakref.WeakKeyDictionary[World, dict[float, _Graph]] = weakref.WeakKeyDictionary()
+_QUERIES: weakref.WeakKeyDictionary[World, dict[tuple[float, ...], float]] = (
+    weakref.WeakKeyDictionary())
+_MAX_QUERIES = 4096  # answers kept per world (a goal pair is asked when drawn, then scored)
 _CHUNK = 4096  # moves checked per vectorised segment_clear call (memory: CHUNK x edges)
 
 
@@ -142,6 +145,17 @@ def shortest_path_length(world: World, start: np.ndarray, goal: np.ndarray, *,
         raise ValueError(f"radius must be > 0 metres (the disc's), got {radius!r}")
     a = np.asarray(start, dtype=np.float64).reshape(2)
     b = np.asarray(goal, dtype=np.float64).reshape(2)
+    key = (float(radius), *a.tolist(), *b.tolist())
+    answers = _QUERIES.setdefault(world, {})
+    if key not in answers:
+        if len(answers) >= _MAX_QUERIES:
+            answers.clear()
+        answers[key] = _shortest(world, a, b, float(radius))
+    return answers[key]
+
+
+def _shortest(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> float:
+    """:func:`shortest_path_length`, computed (the arguments checked)."""
     if segment_clear(world, a, b[None], radius)[0]:
         return float(math.hypot(*(b - a)))
     g = _graph(world, radius)

@@ -312,3 +312,19 @@ def test_spl_shortest_measures_against_the_path_round_walls():
     assert np.all(e["shortest_m"] >= e["straight_m"] - 1e-9)
     assert agg["spl_shortest"] >= agg["spl"]
     assert 0.0 <= agg["spl_shortest"] <= agg["success_rate"]
+
+
+def test_random_pairs_are_joined_by_a_path_in_a_world_of_separate_rooms():
+    from sitframe.paths import shortest_path_length
+
+    # two 4 m x 4 m rooms side by side with no door: a pair across the wall is no test
+    text = ('name = "apart"\ndescription = "two rooms, no door"\n[robot]\nstart = [1, 1, 0]\n'
+            "[[walls]]\npoints = [[0, 0], [8.2, 0], [8.2, 4], [0, 4], [0, 0]]\n"
+            "[[walls]]\npoints = [[4.1, 0], [4.1, 4]]\n")
+    w = parse_world(text)
+    s, g = goal_pairs(w, 30, np.random.default_rng(0), min_distance=2.0)
+    assert np.all((s[:, 0] < 4.1) == (g[:, 0] < 4.1))  # both in the same room
+    assert all(math.isfinite(shortest_path_length(w, a[:2], b[:2], radius=0.15))
+               for a, b in zip(s, g, strict=True))
+    with pytest.raises(InputError, match="joined by a free path"):
+        goal_pairs(w, 1, np.random.default_rng(0), min_distance=5.0, max_tries=50)
