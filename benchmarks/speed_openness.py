@@ -4,7 +4,8 @@ Run::
 
     python benchmarks/speed_openness.py logs/sweeps/speed logs/obstacle-avoidance.h5
 
-Reads every log in the sweep folder (all trials pooled) and the log the
+Reads every log in the sweep folder, or every log a glob matches (all
+trials pooled), and the log the
 situations came from (the speed preset's ``clusters_from``). Prints:
 
 1. **Convergence**: converged trials, median [IQR] of the iterations (trials
@@ -54,7 +55,9 @@ def _pooled(folder: str, behaviour: str) -> tuple[np.ndarray, dict[str, np.ndarr
     and final Q (``speed`` (trials, c), ``updates`` (trials, c), ``q`` (trials, c, 3));
     the evaluations' commanded speeds and readings (one array per evaluation)."""
     conv, speeds, updates, qs, cmd, reading = [], [], [], [], [], []
-    for f in sorted(Path(folder).glob("*.h5")):
+    files = sorted(Path(folder).glob("*.h5")) if Path(folder).is_dir() else \
+        sorted(Path().glob(folder))
+    for f in files:
         lg = open_log(f)
         for k in lg.trial_indices():
             tr = lg.trial(k)
@@ -127,7 +130,8 @@ def per_iteration(cmd: list, reading: list, offset: float, angles: np.ndarray) -
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("folder", help="a sweep's output folder (its *.h5 logs are pooled)")
+    ap.add_argument("folder", help="a sweep's output folder (its *.h5 logs are pooled), or a "
+                    "glob of logs relative to here, e.g. 'logs/sweeps/S/activation=0.3_seed=?.h5'")
     ap.add_argument("situations", help="the log the situations came from (clusters_from)")
     ap.add_argument("--behaviour", default="avoid")
     args = ap.parse_args()
