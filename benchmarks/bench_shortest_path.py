@@ -62,6 +62,7 @@ def main() -> None:
         for _ in range(args.repeats):
             for label, fn in (("straight", straight), ("shortest", shipped)):
                 ge.shortest_path_length = fn
+                paths._QUERIES.clear()  # each batch of a run draws new pairs: no answer kept
                 t0 = time.perf_counter()
                 simulate(res, spec)
                 times[label].append(time.perf_counter() - t0)

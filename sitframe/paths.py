@@ -34,7 +34,6 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from sitframe import geometry as geo
 from sitframe.world import World
 
 #: Points of the polygon that stands in for the disc's arc around each vertex.
@@ -96,19 +95,35 @@ class _Graph:
         self.between = dijkstra(csr_matrix(lengths), directed=True)
 
 def _clear_moves(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> np.ndarray:
-    """(k,) whether the disc moved straight from each ``a`` (k, 2) to ``b`` (k, 2) is clear."""
-    moves = np.hstack([a, b])
-    edges = world.segments
-    if edges.shape[0] == 0 or moves.shape[0] == 0:
-        return np.ones(moves.shape[0], dtype=bool)
-    crossed = geo.segments_intersect(moves, edges).any(axis=1)
-    k = moves.shape[0]
-    ends = geo.point_segment_distance(np.vstack([a, b]), edges).min(axis=1)
-    d = np.minimum(ends[:k], ends[k:])
-    e_pts = np.vstack([edges[:, :2], edges[:, 2:]])
-    d = np.minimum(d, geo.point_segment_distance(e_pts, moves).min(axis=0))
-    return ~crossed & (d >= radius * (1 - 1e-9))
+    """(k,) whether the disc moved straight from each ``a`` (k, 2) to ``b`` (k, 2) is clear.
 
+    Clear: no edge crosses the move, and no endpoint of either lies within
+    ``radius`` of the other segment (which covers every touch as well).
+    """
+    e = world.segments
+    if e.shape[0] == 0 or a.shape[0] == 0:
+        return np.ones(a.shape[0], dtype=bool)
+    px, py, qx, qy = a[:, :1], a[:, 1:], b[:, :1], b[:, 1:]  # moves as (k, 1) columns
+    ax, ay, bx, by = e[:, 0], e[:, 1], e[:, 2], e[:, 3]  # edges as (E,) rows
+    d1 = (bx - ax) * (py - ay) - (by - ay) * (px - ax)
+    d2 = (bx - ax) * (qy - ay) - (by - ay) * (qx - ax)
+    d3 = (qx - px) * (ay - py) - (qy - py) * (ax - px)
+    d4 = (qx - px) * (by - py) - (qy - py) * (bx - px)
+    crossed = ((d1 * d2) < 0) & ((d3 * d4) < 0)
+    r2 = (radius * (1 - 1e-9)) ** 2
+    near = (_d2(px, py, ax, ay, bx, by) < r2) | (_d2(qx, qy, ax, ay, bx, by) < r2) \
+        | (_d2(ax, ay, px, py, qx, qy) < r2) | (_d2(bx, by, px, py, qx, qy) < r2)
+    return ~(crossed | near).any(axis=1)
+
+
+def _d2(x: np.ndarray, y: np.ndarray, x0: np.ndarray, y0: np.ndarray, x1: np.ndarray,
+        y1: np.ndarray) -> np.ndarray:
+    """Squared distance from points (x, y) to segments (x0, y0)-(x1, y1), broadcast."""
+    ex, ey = x1 - x0, y1 - y0
+    len2 = ex * ex + ey * ey
+    t = np.clip(((x - x0) * ex + (y - y0) * ey) / np.where(len2 > 0, len2, 1.0), 0.0, 1.0)
+    dx, dy = x - x0 - t * ex, y - y0 - t * ey
+    return dx * dx + dy * dy
 
 def _graph(world: World, radius: float) -> _Graph:
     memo = _GRAPHS.setdefault(world, {})

@@ -88,3 +88,18 @@ def test_bad_radius_is_a_value_error():
     for r in (0.0, -1.0, float("nan")):
         with pytest.raises(ValueError, match="radius must be > 0"):
             shortest_path_length(w, [1, 1], [2, 2], radius=r)
+
+
+@pytest.mark.parametrize("name", ["goal", "multi-room", "u-trap"])
+def test_segment_clear_agrees_with_dense_sampling(name):
+    w = load_world(name)
+    rng = np.random.default_rng(5)
+    x0, y0, x1, y1 = w.bounds
+    a = rng.uniform((x0, y0), (x1, y1), size=(60, 2))
+    b = a + rng.normal(0.0, 1.5, size=(60, 2))
+    for p, q in zip(a, b, strict=True):
+        t = np.linspace(0.0, 1.0, int(np.hypot(*(q - p)) / 0.002) + 2)[:, None]
+        least = float(w.clearance(p * (1 - t) + q * t).min())
+        if abs(least - R) < 0.003:  # too close to call at this sampling
+            continue
+        assert segment_clear(w, p, q[None], R)[0] == (least >= R), (name, p, q, least)
