@@ -34,6 +34,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
+from sitframe import geometry as geo
 from sitframe.world import World
 
 #: Points of the polygon that stands in for the disc's arc around each vertex.
@@ -42,7 +43,7 @@ _GRAPHS: weakref.WeakKeyDictionary[World, dict[float, _Graph]] = weakref.WeakKey
 _QUERIES: weakref.WeakKeyDictionary[World, dict[tuple[float, ...], float]] = (
     weakref.WeakKeyDictionary())
 _MAX_QUERIES = 4096  # answers kept per world (a goal pair is asked when drawn, then scored)
-_CHUNK = 4096  # moves checked per vectorised segment_clear call (memory: CHUNK x edges)
+_CHUNK = 4096  # moves checked per vectorised call (memory: CHUNK x edges)
 
 
 def segment_clear(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> np.ndarray:
@@ -67,9 +68,9 @@ def segment_clear(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> 
         the least distance from an endpoint of one to the other).
     """
     b = np.asarray(b, dtype=np.float64).reshape(-1, 2)
-    a = np.broadcast_to(np.asarray(a, dtype=np.float64).reshape(2), b.shape)
-    return np.concatenate([_clear_moves(world, a[c:c + _CHUNK], b[c:c + _CHUNK], radius)
-                           for c in range(0, b.shape[0], _CHUNK)] or [np.ones(0, bool)])
+    return _clear_moves(world, np.broadcast_to(np.asarray(a, dtype=np.float64).reshape(2),
+                                               b.shape), b, radius)
+
 
 class _Graph:
     """The arc points of a world for a disc and which of them see each other."""
@@ -83,10 +84,7 @@ class _Graph:
         self.nodes = pts[world.is_free(pts, radius)]
         n = self.nodes.shape[0]
         iu, ju = np.triu_indices(n, k=1)
-        ok = np.zeros(iu.size, dtype=bool)
-        for c0 in range(0, iu.size, _CHUNK):
-            sl = slice(c0, c0 + _CHUNK)
-            ok[sl] = _clear_moves(world, self.nodes[iu[sl]], self.nodes[ju[sl]], radius)
+        ok = _clear_moves(world, self.nodes[iu], self.nodes[ju], radius)
         lengths = np.zeros((n, n))
         d = np.hypot(*(self.nodes[iu[ok]] - self.nodes[ju[ok]]).T)
         lengths[iu[ok], ju[ok]] = d
@@ -94,12 +92,22 @@ class _Graph:
         #: (n, n) shortest path between every two arc points (inf: not connected)
         self.between = dijkstra(csr_matrix(lengths), directed=True)
 
+
 def _clear_moves(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> np.ndarray:
     """(k,) whether the disc moved straight from each ``a`` (k, 2) to ``b`` (k, 2) is clear.
 
     Clear: no edge crosses the move, and no endpoint of either lies within
     ``radius`` of the other segment (which covers every touch as well).
+    Checked ``_CHUNK`` moves at a time (memory: chunk x edges).
     """
+    if world.segments.shape[0] == 0 or a.shape[0] <= _CHUNK:
+        return _clear_chunk(world, a, b, radius)
+    return np.concatenate([_clear_chunk(world, a[c:c + _CHUNK], b[c:c + _CHUNK], radius)
+                           for c in range(0, a.shape[0], _CHUNK)])
+
+
+def _clear_chunk(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> np.ndarray:
+    """:func:`_clear_moves` for one chunk."""
     e = world.segments
     if e.shape[0] == 0 or a.shape[0] == 0:
         return np.ones(a.shape[0], dtype=bool)
@@ -110,20 +118,13 @@ def _clear_moves(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> n
     d3 = (qx - px) * (ay - py) - (qy - py) * (ax - px)
     d4 = (qx - px) * (by - py) - (qy - py) * (bx - px)
     crossed = ((d1 * d2) < 0) & ((d3 * d4) < 0)
-    r2 = (radius * (1 - 1e-9)) ** 2
-    near = (_d2(px, py, ax, ay, bx, by) < r2) | (_d2(qx, qy, ax, ay, bx, by) < r2) \
-        | (_d2(ax, ay, px, py, qx, qy) < r2) | (_d2(bx, by, px, py, qx, qy) < r2)
+    k, r = a.shape[0], radius * (1 - 1e-9)
+    ends = geo.point_segment_distance(np.vstack([a, b]), world.segment_set)  # (2k, E)
+    near = (ends[:k] < r) | (ends[k:] < r)
+    corners = geo.point_segment_distance(np.vstack([e[:, :2], e[:, 2:]]), np.hstack([a, b]))
+    near |= ((corners[:e.shape[0]] < r) | (corners[e.shape[0]:] < r)).T  # (E, k) -> (k, E)
     return ~(crossed | near).any(axis=1)
 
-
-def _d2(x: np.ndarray, y: np.ndarray, x0: np.ndarray, y0: np.ndarray, x1: np.ndarray,
-        y1: np.ndarray) -> np.ndarray:
-    """Squared distance from points (x, y) to segments (x0, y0)-(x1, y1), broadcast."""
-    ex, ey = x1 - x0, y1 - y0
-    len2 = ex * ex + ey * ey
-    t = np.clip(((x - x0) * ex + (y - y0) * ey) / np.where(len2 > 0, len2, 1.0), 0.0, 1.0)
-    dx, dy = x - x0 - t * ex, y - y0 - t * ey
-    return dx * dx + dy * dy
 
 def _graph(world: World, radius: float) -> _Graph:
     memo = _GRAPHS.setdefault(world, {})
