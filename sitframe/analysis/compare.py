@@ -200,7 +200,7 @@ def trial_metrics(summary: np.ndarray) -> dict[str, tuple[str, str, np.ndarray]]
             out[cov] = (f"{w}: coverage (evaluation)", "median", col(cov))
         for k, lab in _GOAL.items():
             if (key := summary_key("eval", w, k, sep=".")) in names:
-                out[key] = (f"{w}: goal {lab}", "median", col(key))
+                out[key] = (f"{w}: {lab} (goal episodes)", "median", col(key))
     return out
 
 
