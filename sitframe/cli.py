@@ -48,7 +48,14 @@ from typing import Any
 
 from sitframe import __version__
 from sitframe import params as P
-from sitframe.errors import PLUGIN_FAULT_EXIT, InputError, PluginError, PluginFault, note
+from sitframe.errors import (
+    PLUGIN_FAULT_EXIT,
+    InputError,
+    PluginError,
+    PluginFault,
+    forget_notes,
+    note,
+)
 
 # start-up time: this module is imported whenever the command line builds its parser
 # (``sitframe --help`` and every command), so what only one command needs is imported
@@ -144,6 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     from sitframe.logs import unlock_log
 
     args = None
+    forget_notes()
     try:
         with terminate_as_interrupt():
             args = build_parser().parse_args(argv)

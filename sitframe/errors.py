@@ -110,9 +110,24 @@ def _fault(message: str, where: str, method: str, trial: int | None,
     return PluginFault(message, where=where, method=method, trial=trial, iteration=iteration)
 
 
+_SAID: set[str] = set()
+
+
 def note(message: str) -> None:
-    """One line on stderr saying what a command chose to do for the user (not an error)."""
-    print(f"sitframe: note: {message}", file=sys.stderr)
+    """One line on stderr saying what a command chose to do for the user (not an error).
+
+    Each message is said once per command (a sweep whose twenty points make the
+    same choice says it once, not twenty times); :func:`sitframe.cli.main` starts
+    every command afresh with :func:`forget_notes`.
+    """
+    if message not in _SAID:
+        _SAID.add(message)
+        print(f"sitframe: note: {message}", file=sys.stderr)
+
+
+def forget_notes() -> None:
+    """Let :func:`note` say again what it has said (at the start of a command)."""
+    _SAID.clear()
 
 
 def did_you_mean(word: str, choices: Iterable[str]) -> str:

@@ -326,6 +326,23 @@ def test_6_replacing_a_complete_log_is_said_in_one_line(base, tmp_path, capsys):
     err = ok(capsys, ["run", base.with_suffix(".toml"), "--out", out, "--workers", "1", "--json"])
     assert err.strip().splitlines() == [f"sitframe: note: {out}: replacing the existing log "
                                         "(status complete)"]
+    # a note is said once per command, and every command says its own
+    err = ok(capsys, ["run", base.with_suffix(".toml"), "--out", out, "--workers", "1", "--json"])
+    assert err.strip().splitlines() == [f"sitframe: note: {out}: replacing the existing log "
+                                        "(status complete)"]
+
+
+def test_6_a_note_is_said_once_per_command(capsys):
+    from sitframe.errors import forget_notes, note
+    forget_notes()
+    for _ in range(3):  # (a sweep's points making the same choice)
+        note("policy_from: trial 3 of x.h5")
+    note("another choice")
+    assert capsys.readouterr().err.splitlines() == ["sitframe: note: policy_from: trial 3 of x.h5",
+                                                    "sitframe: note: another choice"]
+    forget_notes()
+    note("another choice")
+    assert capsys.readouterr().err == "sitframe: note: another choice\n"
 
 
 # ----------------------------------------------------------------------------- 7, 8, 9 security
