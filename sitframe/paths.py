@@ -100,7 +100,7 @@ def _clear_moves(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> n
     ``radius`` of the other segment (which covers every touch as well).
     Checked ``_CHUNK`` moves at a time (memory: chunk x edges).
     """
-    if world.segments.shape[0] == 0 or a.shape[0] <= _CHUNK:
+    if a.shape[0] <= _CHUNK:
         return _clear_chunk(world, a, b, radius)
     return np.concatenate([_clear_chunk(world, a[c:c + _CHUNK], b[c:c + _CHUNK], radius)
                            for c in range(0, a.shape[0], _CHUNK)])
@@ -113,11 +113,8 @@ def _clear_chunk(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> n
         return np.ones(a.shape[0], dtype=bool)
     px, py, qx, qy = a[:, :1], a[:, 1:], b[:, :1], b[:, 1:]  # moves as (k, 1) columns
     ax, ay, bx, by = e[:, 0], e[:, 1], e[:, 2], e[:, 3]  # edges as (E,) rows
-    d1 = (bx - ax) * (py - ay) - (by - ay) * (px - ax)
-    d2 = (bx - ax) * (qy - ay) - (by - ay) * (qx - ax)
-    d3 = (qx - px) * (ay - py) - (qy - py) * (ax - px)
-    d4 = (qx - px) * (by - py) - (qy - py) * (bx - px)
-    crossed = ((d1 * d2) < 0) & ((d3 * d4) < 0)
+    crossed = ((geo._orient(ax, ay, bx, by, px, py) * geo._orient(ax, ay, bx, by, qx, qy)) < 0) \
+        & ((geo._orient(px, py, qx, qy, ax, ay) * geo._orient(px, py, qx, qy, bx, by)) < 0)
     k, r = a.shape[0], radius * (1 - 1e-9)
     ends = geo.point_segment_distance(np.vstack([a, b]), world.segment_set)  # (2k, E)
     near = (ends[:k] < r) | (ends[k:] < r)
