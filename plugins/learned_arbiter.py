@@ -68,12 +68,25 @@ far in the episode:
    a cost of passing close to obstacles.
 
 A new episode (the goal moved) starts a new ``d_best``.
+
+``distance`` says what ``d`` is. ``"straight"`` (default): the straight
+line, which a wall between the robot and the goal does not lengthen, so at
+the floor of a U pocket with the goal behind it the robot is as close as it
+can get, and every step out of the pocket is charged as a step away.
+``"path"``: the length of the shortest path the robot's disc could drive to
+the goal (:class:`sitframe.PathDistance`, around walls and through doors; the
+reward PointNav agents are trained with, Savva et al. 2019, *Habitat*), so
+leaving a pocket or heading for a door is progress. The reward is the
+simulator's, used only while learning: the map never reaches the arbiter,
+whose state (and stall flag) still measures the straight line, as a robot
+with odometry and a goal position can. Where the path is undefined (the
+disc touching a wall) the last defined distance stands in.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from itertools import combinations
 from typing import Any
 
@@ -84,9 +97,11 @@ from sitframe import (
     FuzzyQLearner,
     InputError,
     LearnedPolicy,
+    PathDistance,
     PolicyOutput,
     Proposal,
     QLearningParams,
+    RobotParams,
     RunContext,
     Transition,
     hookimpl,
@@ -95,6 +110,8 @@ from sitframe import params as P
 
 from .arbiters import _label_index
 
+#: What the reward's ``d`` measures (module docstring).
+DISTANCES = ("straight", "path")
 #: Names of the goal-bearing sectors for 4 and 8 sectors (others: ``s0``, ``s1``, ...).
 SECTOR_NAMES = {1: ("any",), 2: ("ahead", "behind"), 4: ("ahead", "left", "behind", "right"),
                 8: ("ahead", "ahead_left", "left", "behind_left", "behind", "behind_right",
@@ -122,8 +139,9 @@ def goal_sector(ctx: Context, sectors: int) -> int:
 class _Progress:
     """The episode's best distance to the goal and when it last improved."""
 
-    def __init__(self, margin: float) -> None:
-        self.margin = margin
+    def __init__(self, margin: float,
+                 distance: Callable[[Context], float] = _goal_distance) -> None:
+        self.margin, self.distance = margin, distance
         self.goal: tuple[float, float] | None = None
         self.best = math.inf
         self.since = 0
@@ -132,7 +150,7 @@ class _Progress:
         """Update with ``ctx``; return the best distance *before* it."""
         assert ctx.goal is not None
         key = (float(ctx.goal.position[0]), float(ctx.goal.position[1]))
-        d = _goal_distance(ctx)
+        d = self.distance(ctx)
         if key != self.goal or ctx.iteration == 0:
             self.goal, self.best, self.since = key, d, 0
             return d
@@ -154,7 +172,8 @@ class GoalProgressReward:
 
     def __init__(self, *, progress: float = 100.0, time: float = -1.0,
                  collision: float = -50.0, goal: float = 50.0, near: float = 0.0,
-                 near_cost: float = 0.0, signed: bool = False) -> None:
+                 near_cost: float = 0.0, signed: bool = False,
+                 distance: str = "straight") -> None:
         self.progress = P.number("progress", progress, lo=0.0)
         self.signed = P.boolean("signed", signed)
         self.near = P.number("near", near, lo=0.0)
@@ -162,24 +181,57 @@ class GoalProgressReward:
         self.time = P.number("time", time)
         self.collision = P.number("collision", collision)
         self.goal = P.number("goal", goal)
-        self._track = _Progress(0.0)
+        self.distance = P.choice("distance", distance, DISTANCES)
+        self._radius = RobotParams().radius  # (bind gives the run's)
+        self._field: PathDistance | None = None
+        self._memo: dict[tuple[float, ...], float] = {}  # this step's and the last one's
+        self._last = math.inf
+        self._track = self._new_track()
+
+    def _new_track(self) -> _Progress:
+        return _Progress(0.0, _goal_distance if self.distance == "straight" else self._path)
+
+    def bind(self, run: RunContext) -> None:
+        self._radius = float(run.robot.radius)
 
     def trial_start(self, trial: Any) -> None:
-        self._track = _Progress(0.0)
+        self._field, self._memo, self._last = None, {}, math.inf
+        self._track = self._new_track()
+
+    def _path(self, ctx: Context) -> float:
+        """Shortest-path distance [m] to the goal (the last defined one where it is not)."""
+        assert ctx.goal is not None
+        goal = (float(ctx.goal.position[0]), float(ctx.goal.position[1]))
+        key = (*goal, float(ctx.pose[0]), float(ctx.pose[1]))
+        if key in self._memo:
+            self._memo[key] = d = self._memo.pop(key)  # (now the newest)
+            return d
+        f = self._field
+        if f is None or f.world is not ctx.world or tuple(f.goal) != goal:
+            f = self._field = PathDistance(ctx.world, np.asarray(goal), self._radius)
+            self._last = math.inf
+        d = f(ctx.pose[:2])
+        if not math.isfinite(d):
+            d = self._last if math.isfinite(self._last) else _goal_distance(ctx)
+        if len(self._memo) >= 2:
+            del self._memo[next(iter(self._memo))]  # the oldest
+        self._memo[key], self._last = d, d
+        return d
 
     def __call__(self, tr: Transition) -> float:
+        d0 = self._track.distance(tr.before)  # (before the next pose: see _path's memo)
         if self._track.goal is None or tr.before.iteration == 0:
             self._track.observe(tr.before)
         if tr.outcome.collided:
             self._track.observe(tr.after)
             return self.collision
         best = self._track.observe(tr.after)
-        d = _goal_distance(tr.after)
         assert tr.after.goal is not None
-        if d <= tr.after.goal.radius:
+        if _goal_distance(tr.after) <= tr.after.goal.radius:
             return self.goal
         close = self.near_cost * max(0.0, self.near - tr.after.nearest)
-        gain = _goal_distance(tr.before) - d if self.signed else max(0.0, best - d)
+        d = self._track.distance(tr.after)
+        gain = d0 - d if self.signed else max(0.0, best - d)
         return self.progress * gain + self.time - close
 
 

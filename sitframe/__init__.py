@@ -58,7 +58,7 @@ _PUBLIC: dict[str, str] = {
     "SituationEvent": "situations", "accumulate_errors": "situations",
     # metrics that know no behaviour (for evaluation protocols)
     "path_length": "metrics", "heading_change_per_m": "metrics", "spl": "metrics",
-    "shortest_path_length": "paths",
+    "shortest_path_length": "paths", "PathDistance": "paths",
     # logs
     "open_log": "logs", "LogWriter": "logs",
 }

@@ -22,7 +22,10 @@ Behind a wall or through a door that is longer than the straight line, so
    U-turn around the end of a thin wall with the Pioneer's 0.15 m radius).
 
 The graph of a world is built once per radius (a few tenths of a second)
-and kept while the world object lives.
+and kept while the world object lives. :class:`PathDistance` keeps one
+goal's distances to every arc point, so the shortest-path distance from any
+point to that goal (a reward's potential, once per step) costs one
+visibility check of the point instead of a graph search.
 """
 
 from __future__ import annotations
@@ -165,6 +168,54 @@ def shortest_path_length(world: World, start: np.ndarray, goal: np.ndarray, *,
             answers.clear()
         answers[key] = _shortest(world, a, b, float(radius))
     return answers[key]
+
+
+class PathDistance:
+    """Shortest-path distance [m] of a disc from any point to one goal (module docstring).
+
+    Parameters
+    ----------
+    world
+        The world.
+    goal
+        (2,) the goal's centre [m].
+    radius
+        Disc radius [m] (the robot's), > 0.
+
+    Calling it with a point ``(2,)`` [m] returns the length of the shortest
+    path of the disc from there to ``goal``: the straight line when it is
+    clear, else through the arc points (within 2.3 % of each arc turned);
+    ``inf`` when none joins them (no path, or the point or the goal is not
+    free for the disc, e.g. in contact with a wall).
+
+    Raises
+    ------
+    ValueError
+        ``radius`` is not a positive number.
+    """
+
+    def __init__(self, world: World, goal: np.ndarray, radius: float) -> None:
+        if not radius > 0:
+            raise ValueError(f"radius must be > 0 metres (the disc's), got {radius!r}")
+        self.world, self.radius = world, float(radius)
+        self.goal = np.asarray(goal, dtype=np.float64).reshape(2)
+        g = _graph(world, self.radius)
+        self.nodes = g.nodes
+        db = np.where(segment_clear(world, self.goal, g.nodes, self.radius),
+                      np.hypot(*(g.nodes - self.goal).T), np.inf)
+        #: (n,) shortest path from each arc point to the goal [m]
+        self.to_goal = (g.between + db[None, :]).min(axis=1) if g.nodes.shape[0] else db
+        self._targets = np.vstack([self.goal[None], g.nodes])
+
+    def __call__(self, point: np.ndarray) -> float:
+        p = np.asarray(point, dtype=np.float64).reshape(2)
+        ok = _clear_moves(self.world, np.broadcast_to(p, self._targets.shape), self._targets,
+                          self.radius)
+        if ok[0]:
+            return float(math.hypot(*(self.goal - p)))
+        if not ok[1:].any():
+            return math.inf
+        return float((np.hypot(*(self.nodes[ok[1:]] - p).T) + self.to_goal[ok[1:]]).min())
 
 
 def _shortest(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> float:

@@ -253,8 +253,10 @@ def check_key(key: str, cfg: dict[str, Any], registry: Any, *, file: str | None 
     """Check that dotted ``key`` names a setting of ``cfg`` (the resolved base config).
 
     Core sections accept their known keys; component tables (sensor,
-    interpreter, arbiter, behaviours.LABEL and its reward_params) accept
-    ``component`` and the parameters the component's factory accepts.
+    interpreter, arbiter, behaviours.LABEL) accept ``component`` and the
+    parameters the component's factory accepts; the arbiter's and a
+    behaviour's also the core's keys (reward, reward_params, policy_from)
+    and each parameter of their reward (``reward_params.NAME``).
 
     Raises
     ------
@@ -284,27 +286,24 @@ def check_key(key: str, cfg: dict[str, Any], registry: Any, *, file: str | None 
     if key in ("sensor", "interpreter", "arbiter") or (
             sec == "behaviours" and len(parts) == 2 and parts[1] in cfg["behaviours"]):
         return  # a whole component table per value; each point's config is validated
-    if sec in ("sensor", "interpreter", "arbiter"):
-        names, var_kw = params_of(sec, cfg[sec]["component"])
-        valid = {"component"} | names
-        if len(parts) != 2 or (parts[1] not in valid and not var_kw):
-            fail(valid, f"{sec}.", ".".join(parts[1:]))
-        return
-    if sec == "behaviours":
-        labels = list(cfg["behaviours"])
-        if len(parts) < 3 or parts[1] not in labels:
-            fail([f"{lb}.component" for lb in labels], "behaviours.", ".".join(parts[1:]))
-        label = parts[1]
-        table = cfg["behaviours"][label]
-        names, var_kw = params_of("behaviour", table["component"])
-        valid = set(META_KEYS) | names
-        if parts[2] == "reward_params":
-            rnames, rvar = params_of("reward", table.get("reward", ""))
-            if len(parts) != 4 or (parts[3] not in rnames and not rvar):
-                fail(rnames, f"behaviours.{label}.reward_params.", ".".join(parts[3:]))
+    if sec in ("sensor", "interpreter", "arbiter", "behaviours"):
+        if sec == "behaviours":
+            labels = list(cfg["behaviours"])
+            if len(parts) < 3 or parts[1] not in labels:
+                fail([f"{lb}.component" for lb in labels], "behaviours.", ".".join(parts[1:]))
+            kind, table, prefix, rest = ("behaviour", cfg["behaviours"][parts[1]],
+                                         f"behaviours.{parts[1]}.", parts[2:])
+        else:
+            kind, table, prefix, rest = sec, cfg[sec], f"{sec}.", parts[1:]
+        names, var_kw = params_of(kind, table["component"])
+        meta = set(META_KEYS) if kind in ("behaviour", "arbiter") else {"component"}
+        if rest[0] == "reward_params" and "reward_params" in meta and len(rest) > 1:
+            rnames, rvar = params_of("reward", table.get("reward") or "")
+            if len(rest) != 2 or (rest[1] not in rnames and not rvar):
+                fail(rnames, f"{prefix}reward_params.", ".".join(rest[1:]))
             return
-        if len(parts) != 3 or (parts[2] not in valid and not var_kw):
-            fail(valid, f"behaviours.{label}.", ".".join(parts[2:]))
+        if len(rest) != 1 or (rest[0] not in meta | names and not var_kw):
+            fail(meta | names, prefix, ".".join(rest))
         return
     if sec == "robot":
         valid, _ = accepted_params(RobotParams)

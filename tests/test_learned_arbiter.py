@@ -80,6 +80,25 @@ def test_signed_reward_pays_every_step_towards_the_goal_and_charges_every_step_a
         GoalProgressReward(signed="yes")
 
 
+def test_path_reward_pays_leaving_a_pocket_whose_floor_hides_the_goal():
+    """At the floor of u-trap's first pocket (opening to -x) with the goal just behind the
+    floor, a step back out of the pocket is a step away by the straight line but progress
+    along the shortest path; the reward's distance = "path" pays it, "straight" charges it."""
+    trap, ok = load_world("u-trap"), SimpleNamespace(collided=False)
+
+    def at(x: float, it: int = 1) -> Context:
+        return Context(it, np.array([x, 4.0, 0.0]), np.full(8, 1.0), np.ones(1), 1.0, trap,
+                       Goal(np.array([6.5, 4.0]), 0.3))
+
+    for distance, sign in (("straight", -1), ("path", 1)):
+        r = GoalProgressReward(progress=100, time=0, signed=True, distance=distance)
+        r(Transition(at(4.8, it=0), None, ok, at(5.0)))  # type: ignore[arg-type]
+        gain = r(Transition(at(5.0), None, ok, at(4.5)))  # type: ignore[arg-type]
+        assert 30 < sign * gain <= 50  # 0.5 m, along or at an angle to the path out
+    with pytest.raises(InputError, match="distance"):
+        GoalProgressReward(distance="manhattan")
+
+
 def test_weights_follow_the_rules_and_policy_round_trips():
     arb = FuzzyQArbiter(actions=[{"avoid": 1}, {"goal": 1}, {"avoid": 1, "goal": 3}],
                         stall_iterations=0)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sitframe.metrics import spl
-from sitframe.paths import segment_clear, shortest_path_length
+from sitframe.paths import PathDistance, segment_clear, shortest_path_length
 from sitframe.world import load_world, parse_world
 
 ROOM = """name = "t"
@@ -103,3 +103,24 @@ def test_segment_clear_agrees_with_dense_sampling(name):
         if abs(least - R) < 0.003:  # too close to call at this sampling
             continue
         assert segment_clear(w, p, q[None], R)[0] == (least >= R), (name, p, q, least)
+
+
+@pytest.mark.parametrize("name", ["goal-training", "u-trap", "multi-room"])
+def test_path_distance_field_agrees_with_the_graph_search(name):
+    w = load_world(name)
+    rng = np.random.default_rng(3)
+    goal = w.random_free_pose(rng, R, margin=0.3)[:2]
+    field = PathDistance(w, goal, R)
+    for _ in range(40):
+        p = w.random_free_pose(rng, R, margin=0.0)[:2]
+        assert field(p) == pytest.approx(shortest_path_length(w, p, goal, radius=R), rel=1e-12)
+
+
+def test_path_distance_round_a_wall_is_inf_in_contact_and_checks_its_radius():
+    w = parse_world(WALL)
+    field = PathDistance(w, np.array([8.0, 4.0]), R)
+    assert around_the_wall_end(R) <= field([2.0, 4.0]) <= around_the_wall_end(R) * 1.023
+    assert field([7.0, 4.0]) == pytest.approx(1.0)  # in sight: the straight line
+    assert math.isinf(field([5.1, 3.0]))  # the disc would overlap the wall
+    with pytest.raises(ValueError, match="radius"):
+        PathDistance(w, np.array([8.0, 4.0]), 0.0)

@@ -297,3 +297,22 @@ def test_a_run_that_learned_nothing_shows_no_convergence_count():
         assert (row["convergence_rate"] == 0.0) is learned
         md = markdown_table({"points": [{"point": "all", **row}], "keys": []})
         assert md.splitlines()[2].startswith(cell)
+
+
+def test_the_arbiters_reward_parameters_are_sweep_keys():
+    """``arbiter.reward_params.NAME`` names one parameter of the arbiter's reward, as
+    ``behaviours.LABEL.reward_params.NAME`` does a behaviour's; a misspelt one is refused."""
+    from sitframe.config import load_config
+    from sitframe.errors import InputError
+    from sitframe.pluginmanager import Registry, get_plugin_manager
+    from sitframe.sweep import check_key
+
+    cfg = load_config("goal-finding-learned")[0]
+    reg = Registry.collect(get_plugin_manager())
+    for key in ("arbiter.reward_params.distance", "arbiter.reward_params", "arbiter.gamma",
+                "behaviours.avoid.policy_from"):
+        check_key(key, cfg, reg)
+    with pytest.raises(InputError, match=r"did you mean 'arbiter.reward_params.distance'"):
+        check_key("arbiter.reward_params.distanse", cfg, reg)
+    with pytest.raises(InputError, match="not a setting"):
+        check_key("interpreter.reward_params", cfg, reg)
