@@ -7,9 +7,11 @@ arbitration in goal episodes twice on the same pairs: as learned, and with
 every stalled rule set to one weighting (``--action``, an index into the
 arbiter's ``actions``; the preset's 2 is wall following alone, Bug2's "follow
 the boundary when stuck"). It bounds what learning the stalled contexts
-better could give with these frozen behaviours. Prints, per mode, the median
-(mean, worst) over trials of success, collision-free success and SPL against
-the shortest path.
+better could give with these frozen behaviours. ``--contexts all`` sets every
+rule instead (``--action 0``: goal seeking alone wherever the safety hand-over
+leaves the arbiter a choice, the straightest these behaviours drive; the
+ceiling of SPL). Prints, per mode, the median (mean, worst) over trials of
+success, collision-free success and SPL against the shortest path.
 
 Usage (where the log and its prerequisite logs are)::
 
@@ -29,8 +31,9 @@ KEYS = ("success_rate", "collision_free_rate", "spl_shortest")
 
 
 def _run(log: str, world: str, trial: int, episodes: int, seed: int,
-         action: int | None) -> dict[str, Any]:
-    """One trial's goal batch, its stalled rules set to ``action`` (None: as learned)."""
+         action: int | None, every: bool) -> dict[str, Any]:
+    """One trial's goal batch, its stalled rules (``every``: all rules) set to ``action``
+    (None: as learned)."""
     import sitframe.plugins.learned_arbiter as la
     from sitframe.evaluation import evaluate_log
 
@@ -40,7 +43,7 @@ def _run(log: str, world: str, trial: int, episodes: int, seed: int,
         load(self, policy)
         c = self.fixed.size // len(self.contexts)
         for j, name in enumerate(self.contexts):
-            if name.endswith("_stalled") and action is not None:
+            if (every or name.endswith("_stalled")) and action is not None:
                 self.fixed[j * c:(j + 1) * c] = action
 
     la.FuzzyQArbiter.load_policy = load_policy
@@ -59,16 +62,19 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0, help="the pairs' seed")
     ap.add_argument("--action", type=int, default=2,
                     help="index of the weighting every stalled rule gets (preset: 2 = follow)")
+    ap.add_argument("--contexts", choices=("stalled", "all"), default="stalled",
+                    help="which rules get --action: the stalled contexts' or every one")
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
     from sitframe.logs import open_log
 
     trials = open_log(args.log).trial_indices()
     with ProcessPoolExecutor(args.workers) as pool:
-        runs = {mode: [pool.submit(_run, args.log, args.world, k, args.episodes, args.seed, a)
-                       for k in trials]
-                for mode, a in (("as learned", None), (f"stalled -> action {args.action}",
-                                                       args.action))}
+        every = args.contexts == "all"
+        runs = {mode: [pool.submit(_run, args.log, args.world, k, args.episodes, args.seed, a,
+                                   every) for k in trials]
+                for mode, a in (("as learned", None),
+                                (f"{args.contexts} -> action {args.action}", args.action))}
         print(f"{args.world}, {len(trials)} trials x {args.episodes} pairs (seed {args.seed}): "
               "median (mean, worst) over trials")
         for mode, futs in runs.items():
