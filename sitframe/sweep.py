@@ -64,7 +64,8 @@ import re
 import sys
 import time
 import tomllib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -72,7 +73,7 @@ from typing import Any
 
 import numpy as np
 
-from sitframe.config import DEFAULTS, META_KEYS, load_config, validate_config
+from sitframe.config import DEFAULTS, META_KEYS, Component, load_config, validate_config
 from sitframe.errors import InputError, did_you_mean, note
 from sitframe.params import accepted_params, known_keys
 from sitframe.records import summary_key
@@ -128,7 +129,9 @@ def load_sweep(path: str, *, out: str | None = None, plugins_dirs: tuple[str, ..
 
     Nothing is written, unless ``prerequisites(base_cfg, base_dir)`` is given: it
     is called before the points are prepared, to make the logs the base config
-    builds on (:func:`sitframe.prepare.make_prerequisites`). Raises
+    builds on (:func:`sitframe.prepare.make_prerequisites`), and after every
+    point's config and component parameters were checked, so a bad value in
+    the grid is reported before anything is made. Raises
     :class:`InputError` (file, key, suggestion) for anything wrong.
     """
     p = Path(path)
@@ -153,6 +156,7 @@ def load_sweep(path: str, *, out: str | None = None, plugins_dirs: tuple[str, ..
     desc = head.get("description", "")
     sweep = Sweep(name, str(p), head["base"], base_cfg, base_source, base_dir, fixed,
                   dict(grid), out_dir, desc if isinstance(desc, str) else "")
+    _check_points(sweep, plugins)
     if prerequisites is not None:
         prerequisites(base_cfg, base_dir)
     sweep.points = _prepare_points(sweep, plugins_dirs)
@@ -373,27 +377,58 @@ def point_names(grid: dict[str, list[Any]], *, file: str | None = None
     return out
 
 
-def _prepare_points(sweep: Sweep, plugins_dirs: tuple[str, ...]) -> list[Point]:
-    from sitframe.prepare import prepare_experiment
-
-    points = []
+def _point_configs(sweep: Sweep) -> Iterator[tuple[str, dict[str, Any], dict[str, Any], str]]:
+    """Each point's name, grid values, config (unvalidated) and where its errors point."""
     for name, values in point_names(sweep.grid, file=sweep.file):
         cfg = copy.deepcopy(sweep.base_cfg)
         for key, val in {**sweep.fixed, **values}.items():
             _set(cfg, key, val)
         cfg["experiment"]["name"] = f"{sweep.name}/{name}"
+        yield name, values, cfg, f"{sweep.file} (point {name})"
+
+
+@contextmanager
+def _at_point(sweep: Sweep, name: str, where: str) -> Iterator[None]:
+    """Report a point's InputError at the sweep file, ``point NAME: key``."""
+    try:
+        yield
+    except InputError as exc:
+        if exc.file == where:
+            raise InputError(exc.message, file=sweep.file,
+                             key=f"point {name}: {exc.key}" if exc.key else
+                             f"point {name}") from None
+        raise
+
+
+def _check_points(sweep: Sweep, registry: Any) -> None:
+    """Validate every point's config and create its components (their parameters checked),
+    cheaply and before any prerequisite run is made."""
+    for name, _values, cfg, where in _point_configs(sweep):
+        with _at_point(sweep, name, where):
+            cfg = validate_config(cfg, file=where)
+            tables = [("sensor", "sensor", cfg["sensor"]),
+                      ("interpreter", "interpreter", cfg["interpreter"]),
+                      ("arbiter", "arbiter", cfg["arbiter"]),
+                      *[("behaviour", f"behaviours.{lb}", t)
+                        for lb, t in cfg["behaviours"].items()]]
+            for kind, key, table in tables:
+                c = Component.of(table)
+                registry.create(kind, c.name, c.params, file=where, key=key)
+                if c.reward is not None:
+                    registry.create("reward", c.reward, c.reward_params, file=where,
+                                    key=f"{key}.reward_params")
+
+
+def _prepare_points(sweep: Sweep, plugins_dirs: tuple[str, ...]) -> list[Point]:
+    from sitframe.prepare import prepare_experiment
+
+    points = []
+    for name, values, cfg, where in _point_configs(sweep):
         log = sweep.out / f"{name}.h5"
-        where = f"{sweep.file} (point {name})"
-        try:
+        with _at_point(sweep, name, where):
             cfg = validate_config(cfg, file=where)
             exp, kwargs = prepare_experiment(cfg, source=where, base_dir=sweep.base_dir,
                                              out=str(log), plugins_dirs=plugins_dirs)
-        except InputError as exc:
-            if exc.file == where:
-                raise InputError(exc.message, file=sweep.file,
-                                 key=f"point {name}: {exc.key}" if exc.key else
-                                 f"point {name}") from None
-            raise
         # Relative paths in the config resolve from the base config's folder
         # (``run --resume`` on a point's log relies on this).
         exp.info.extra["source"] = sweep.base_source

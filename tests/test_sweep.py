@@ -316,3 +316,23 @@ def test_the_arbiters_reward_parameters_are_sweep_keys():
         check_key("arbiter.reward_params.distanse", cfg, reg)
     with pytest.raises(InputError, match="not a setting"):
         check_key("interpreter.reward_params", cfg, reg)
+
+
+@pytest.mark.parametrize(("grid", "pattern"), [
+    ('"arbiter.reward_params.distance" = ["paths"]',
+     r"point distance=paths: arbiter.reward_params.distance: expected one of 'straight', "
+     r"'path', got 'paths'"),
+    ('"behaviours.avoid.p" = [-1]', r"point p=-1: behaviours.avoid.p: "),
+])
+def test_a_bad_point_value_is_refused_before_the_prerequisites_are_made(tmp_path, grid, pattern):
+    """A grid value a component refuses is reported (one located line) before the base's
+    prerequisite runs are made, not after them."""
+    from sitframe.errors import InputError
+    from sitframe.sweep import load_sweep
+
+    f = tmp_path / "s.toml"
+    f.write_text(f'[sweep]\nbase = "goal-finding-learned"\n[grid]\n{grid}\n')
+    made = []
+    with pytest.raises(InputError, match=pattern) as exc:
+        load_sweep(str(f), prerequisites=lambda cfg, base_dir: made.append(cfg))
+    assert made == [] and "\n" not in str(exc.value)
