@@ -80,7 +80,9 @@ leaving a pocket or heading for a door is progress. The reward is the
 simulator's, used only while learning: the map never reaches the arbiter,
 whose state (and stall flag) still measures the straight line, as a robot
 with odometry and a goal position can. Where the path is undefined (the
-disc touching a wall) the last defined distance stands in.
+disc touching a wall) the last defined distance stands in; a goal no path
+of the disc reaches (e.g. a world's ``[goal]`` too close to a wall) is an
+error, not a reward that never pays.
 """
 
 from __future__ import annotations
@@ -212,6 +214,12 @@ class GoalProgressReward:
             self._last = math.inf
         d = f(ctx.pose[:2])
         if not math.isfinite(d):
+            if not np.isfinite(f.to_goal).any():  # no progress could ever be measured
+                raise InputError(
+                    f"reward_params.distance = \"path\": no free path of the robot's disc "
+                    f"(radius {self._radius:g} m) leads to the goal at ({goal[0]:g}, {goal[1]:g}) "
+                    f"in world '{ctx.world.name}'; expected a goal the robot can reach, or "
+                    "distance = \"straight\"", file=ctx.world.source, key="goal")
             d = self._last if math.isfinite(self._last) else _goal_distance(ctx)
         if len(self._memo) >= 2:
             del self._memo[next(iter(self._memo))]  # the oldest

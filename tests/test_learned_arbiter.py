@@ -193,3 +193,18 @@ def test_learned_arbitration_runs_frozen_in_goal_episodes(learned):
     r = simulate(exp.res, spec)
     assert r.summary["eval/goal/episodes"] == 3
     assert set(r.episodes["success"].tolist()) <= {True, False}
+
+
+def test_path_reward_refuses_a_goal_the_robot_cannot_reach():
+    """A goal inside the disc's clearance of a wall has no path: an error naming the
+    option, not a progress term that silently never pays."""
+    trap, ok = load_world("u-trap"), SimpleNamespace(collided=False)
+    goal = Goal(np.array([5.45, 4.0]), 0.3)  # 5 cm behind trap 1's floor wall (x = 5.4)
+
+    def at(x: float, it: int = 1) -> Context:
+        return Context(it, np.array([x, 6.5, 0.0]), np.full(8, 1.0), np.ones(1), 1.0, trap,
+                       goal)
+
+    r = GoalProgressReward(signed=True, distance="path")
+    with pytest.raises(InputError, match=r"distance = \"path\": no free path .* 'u-trap'"):
+        r(Transition(at(1.0, it=0), None, ok, at(1.2)))  # type: ignore[arg-type]
