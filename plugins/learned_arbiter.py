@@ -186,7 +186,7 @@ class GoalProgressReward:
         self.distance = P.choice("distance", distance, DISTANCES)
         self._radius = RobotParams().radius  # (bind gives the run's)
         self._field: PathDistance | None = None
-        self._memo: dict[tuple[float, ...], float] = {}  # this step's and the last one's
+        self._key: tuple[float, ...] = ()  # goal and pose of the last path distance
         self._last = math.inf
         self._track = self._new_track()
 
@@ -197,7 +197,7 @@ class GoalProgressReward:
         self._radius = float(run.robot.radius)
 
     def trial_start(self, trial: Any) -> None:
-        self._field, self._memo, self._last = None, {}, math.inf
+        self._field, self._key, self._last = None, (), math.inf
         self._track = self._new_track()
 
     def _path(self, ctx: Context) -> float:
@@ -205,9 +205,8 @@ class GoalProgressReward:
         assert ctx.goal is not None
         goal = (float(ctx.goal.position[0]), float(ctx.goal.position[1]))
         key = (*goal, float(ctx.pose[0]), float(ctx.pose[1]))
-        if key in self._memo:
-            self._memo[key] = d = self._memo.pop(key)  # (now the newest)
-            return d
+        if key == self._key:
+            return self._last
         f = self._field
         if f is None or f.world is not ctx.world or tuple(f.goal) != goal:
             f = self._field = PathDistance(ctx.world, np.asarray(goal), self._radius)
@@ -221,13 +220,11 @@ class GoalProgressReward:
                     f"in world '{ctx.world.name}'; expected a goal the robot can reach, or "
                     "distance = \"straight\"", file=ctx.world.source, key="goal")
             d = self._last if math.isfinite(self._last) else _goal_distance(ctx)
-        if len(self._memo) >= 2:
-            del self._memo[next(iter(self._memo))]  # the oldest
-        self._memo[key], self._last = d, d
+        self._key, self._last = key, d
         return d
 
     def __call__(self, tr: Transition) -> float:
-        d0 = self._track.distance(tr.before)  # (before the next pose: see _path's memo)
+        d0 = self._track.distance(tr.before)  # (first: _path keeps the last pose's answer)
         if self._track.goal is None or tr.before.iteration == 0:
             self._track.observe(tr.before)
         if tr.outcome.collided:

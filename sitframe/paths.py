@@ -170,6 +170,11 @@ def shortest_path_length(world: World, start: np.ndarray, goal: np.ndarray, *,
     return answers[key]
 
 
+def _in_sight(world: World, p: np.ndarray, nodes: np.ndarray, radius: float) -> np.ndarray:
+    """(n,) straight distance [m] from ``p`` to each node the disc reaches straight, else inf."""
+    return np.where(segment_clear(world, p, nodes, radius), np.hypot(*(nodes - p).T), np.inf)
+
+
 class PathDistance:
     """Shortest-path distance [m] of a disc from any point to one goal (module docstring).
 
@@ -201,8 +206,7 @@ class PathDistance:
         self.goal = np.asarray(goal, dtype=np.float64).reshape(2)
         g = _graph(world, self.radius)
         self.nodes = g.nodes
-        db = np.where(segment_clear(world, self.goal, g.nodes, self.radius),
-                      np.hypot(*(g.nodes - self.goal).T), np.inf)
+        db = _in_sight(world, self.goal, g.nodes, self.radius)
         #: (n,) shortest path from each arc point to the goal [m]
         self.to_goal = (g.between + db[None, :]).min(axis=1) if g.nodes.shape[0] else db
         self._targets = np.vstack([self.goal[None], g.nodes])
@@ -225,6 +229,5 @@ def _shortest(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> floa
     g = _graph(world, radius)
     if g.nodes.shape[0] == 0:
         return math.inf
-    da, db = (np.where(segment_clear(world, p, g.nodes, radius), np.hypot(*(g.nodes - p).T),
-                       np.inf) for p in (a, b))
+    da, db = (_in_sight(world, p, g.nodes, radius) for p in (a, b))
     return float((da[:, None] + g.between + db[None, :]).min())
