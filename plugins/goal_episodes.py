@@ -87,8 +87,17 @@ def goal_pairs(
     robot_radius: float = 0.15,
     margin: float = 0.1,
     max_tries: int = 1000,
+    detour_share: float = 0.0,
+    detour_ratio: float = 1.25,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Draw ``n`` random start/goal pairs in ``world``.
+
+    A share ``detour_share`` of the pairs (each pair drawn so with that
+    probability) must be *detour* pairs: the shortest path of the robot's disc
+    at least ``detour_ratio`` times the straight start-goal distance, a goal
+    behind a wall or inside a pocket, where a straight-line goal seeker meets
+    a local minimum. With ``detour_share = 0`` (default) no extra random
+    number is drawn: the pairs are those of a run without the option.
 
     Returns
     -------
@@ -104,18 +113,29 @@ def goal_pairs(
     Raises
     ------
     InputError
-        ``goal.min_distance``: no such pair found in ``max_tries``.
+        ``goal.min_distance`` (``goal.train_detour`` for a detour pair): no such
+        pair found in ``max_tries``.
     """
     starts = np.empty((n, 3))
     goals = np.empty((n, 3))
     for e in range(n):
+        detour = detour_share > 0 and rng.random() < detour_share
         for _ in range(max_tries):
             s = world.random_free_pose(rng, robot_radius, margin=margin)
             g = world.random_free_pose(rng, robot_radius, margin=margin)
-            if math.hypot(g[0] - s[0], g[1] - s[1]) >= min_distance and math.isfinite(
-                    shortest_path_length(world, s[:2], g[:2], radius=robot_radius)):
+            straight = math.hypot(g[0] - s[0], g[1] - s[1])
+            if straight < min_distance:
+                continue
+            path = shortest_path_length(world, s[:2], g[:2], radius=robot_radius)
+            if math.isfinite(path) and (not detour or path >= detour_ratio * straight):
                 break
         else:
+            if detour:
+                raise InputError(f"found no start and goal {min_distance:g} m apart whose "
+                                 f"shortest path is {detour_ratio:g} x their distance in world "
+                                 f"'{world.name}' in {max_tries} tries; expected a smaller "
+                                 "detour_ratio or a world with walls between its places",
+                                 key="goal.train_detour")
             raise InputError(f"found no start and goal {min_distance:g} m apart and joined by a "
                              f"free path in world '{world.name}' in {max_tries} tries; expected "
                              "a smaller min_distance or a larger world", key="goal.min_distance")
@@ -159,6 +179,15 @@ class GoalEpisodes:
         goal when one ends, learning carried on across them
         (:attr:`train_in_episodes`; what a learned arbitration needs: many
         start/goal pairs).
+    train_detour
+        Share (0 to 1) of a learning trial's random pairs drawn as *detour*
+        pairs (:func:`goal_pairs`): a curriculum that puts the learner where a
+        reactive goal seeker gets stuck (behind a wall, in a pocket) more often
+        than uniform pairs do (a pocket may be a few per cent of a room's area,
+        and the rules for being stuck there go untrained). Default 0: uniform
+        pairs. The evaluation's pairs are never changed by it.
+    detour_ratio
+        Shortest path over straight distance a detour pair needs (default 1.25).
     """
 
     name = "goal-episodes"
@@ -166,7 +195,8 @@ class GoalEpisodes:
 
     def __init__(self, *, episodes: int = 50, timeout: int = 300, min_distance: float = 3.0,
                  pairs: str = "random", radius: float = 0.3, margin: float = 0.1,
-                 train: str = "world") -> None:
+                 train: str = "world", train_detour: float = 0.0,
+                 detour_ratio: float = 1.25) -> None:
         self.episodes = int(P.number("episodes", episodes, lo=1, hi=100_000, integer=True))
         self.iterations = int(P.number("timeout", timeout, lo=1, hi=10_000_000, integer=True))
         self.min_distance = P.number("min_distance", min_distance, lo=0.0)
@@ -174,6 +204,8 @@ class GoalEpisodes:
         self.radius = P.number("radius", radius, lo=0.0, lo_open=True)
         self.margin = P.number("margin", margin, lo=0.0)
         self.train_in_episodes = P.choice("train", train, TRAIN_MODES) == "episodes"
+        self.train_detour = P.number("train_detour", train_detour, lo=0.0, hi=1.0)
+        self.detour_ratio = P.number("detour_ratio", detour_ratio, lo=1.0, lo_open=True)
 
     def check_world(self, world: World) -> None:
         """Refuse, before anything runs, a world ``pairs = "world"`` cannot use."""
@@ -190,6 +222,18 @@ class GoalEpisodes:
         return goal_pairs(world, self.episodes, rng, min_distance=self.min_distance,
                           goal_radius=self.radius, robot_radius=robot.radius,
                           margin=self.margin)
+
+    def training_starts(self, world: World, rng: np.random.Generator,
+                        robot: RobotParams) -> tuple[np.ndarray, np.ndarray]:
+        """The pairs of a learning trial run in episodes: :meth:`episode_starts`'
+        with ``train_detour`` of them detour pairs."""
+        if self.pairs == "world" or not self.train_detour:
+            return self.episode_starts(world, rng, robot)
+        self._world = world
+        return goal_pairs(world, self.episodes, rng, min_distance=self.min_distance,
+                          goal_radius=self.radius, robot_radius=robot.radius,
+                          margin=self.margin, detour_share=self.train_detour,
+                          detour_ratio=self.detour_ratio)
 
     def terminated(self, context: Context) -> bool:
         """Whether the robot's centre is within the goal disc."""

@@ -265,7 +265,11 @@ class EvaluationProtocol(Protocol):
     An optional ``check_world(world)`` raises :class:`sitframe.errors.InputError`
     for a world the protocol cannot use, before anything runs. A parameter
     ``episodes`` (episodes per batch) is what ``sitframe evaluate LOG
-    --goal-episodes N`` sets. :meth:`score_episode`, :meth:`aggregate` are optional;
+    --goal-episodes N`` sets. A protocol with a true ``train_in_episodes`` attribute
+    makes each learning trial a chain of its episodes; an optional
+    ``training_starts(world, rng, robot)`` (as :meth:`episode_starts`) then draws
+    the training pairs instead (a curriculum). :meth:`score_episode`,
+    :meth:`aggregate` are optional;
     ``episodic = False`` (*continuing*): a batch is one run on its own seed, not logged per episode.
     """
 

@@ -41,7 +41,8 @@ thesis's Table A.1):
 ``[goal]``
     ``episodes``, ``timeout``, ``min_distance``, ``worlds``, ``pairs``
     (``"random"`` or ``"world"``), ``radius``, ``margin``, optionally ``train``
-    (``"world"`` or ``"episodes"``: how a learning trial runs): the parameters of
+    (``"world"`` or ``"episodes"``: how a learning trial runs), ``train_detour`` and
+    ``detour_ratio`` (a share of detour pairs in training): the parameters of
     the ``goal-episodes`` evaluation protocol (``plugins/goal_episodes.py``)
     that a goal run's evaluate stage uses.
 ``[prerequisites]``
@@ -122,8 +123,8 @@ DEFAULT_PROTOCOL = "frozen"  # the evaluation protocol of a run whose components
 #: config's text, and so its hash, stays what it was before they existed).
 OPTIONAL_SECTIONS = ("prerequisites",)
 #: Optional keys without defaults, for the same reason (checked by the component that reads
-#: them: ``goal.train`` by the goal-episodes protocol).
-OPTIONAL_KEYS = {"goal": {"train"}}
+#: them: ``goal.train...`` by the goal-episodes protocol).
+OPTIONAL_KEYS = {"goal": {"train", "train_detour", "detour_ratio"}}
 
 _CORE_KEYS = {s: set(v) for s, v in DEFAULTS.items() if s not in ("behaviours",)}
 

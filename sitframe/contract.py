@@ -69,7 +69,8 @@ CALLS: dict[str, dict[str, tuple[str, ...]]] = {
                                                               "iterations"),
                 "learn": ("transition", "reward"), "policy": (), "load_policy": ("policy",),
                 "trial_data": (), "situations_changed": ("event",), "situation_errors": ()},
-    "protocol": {"episode_starts": ("world", "rng", "robot"), "terminated": ("context",),
+    "protocol": {"episode_starts": ("world", "rng", "robot"),
+                 "training_starts": ("world", "rng", "robot"), "terminated": ("context",),
                  "score_episode": ("arrays", "start", "goal", "robot"),
                  "aggregate": ("figures",), "check_world": ("world",)},
 }

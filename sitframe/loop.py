@@ -514,8 +514,10 @@ class _TrainingEpisodes:
     its goal, and when the protocol's ``terminated`` holds or the episode has
     lasted the protocol's ``iterations``, it is put at the next start with the
     next goal; learning carries on across episodes. The pairs come from
-    ``episode_starts`` with a Generator of their own (seeded by the trial's
-    seed), drawn again whenever a batch is used up.
+    ``episode_starts`` (or the protocol's optional ``training_starts``, same
+    arguments and result, when it draws training pairs otherwise, e.g. a
+    curriculum) with a Generator of their own (seeded by the trial's seed),
+    drawn again whenever a batch is used up.
     """
 
     def __init__(self, proto: Any, world: World, seed: int, robot: RobotParams,
@@ -529,10 +531,11 @@ class _TrainingEpisodes:
         self.pairs = self._pairs()
 
     def _pairs(self) -> Iterator[tuple[np.ndarray, Goal | None]]:
+        method = "training_starts" if hasattr(self.proto, "training_starts") else "episode_starts"
+        draw = getattr(self.proto, method)
         while True:
-            starts, goals = _checked(self.origin, "episode_starts", check_episode_starts,
-                                     lambda: self.proto.episode_starts(self.world, self.rng,
-                                                                       self.robot),
+            starts, goals = _checked(self.origin, method, check_episode_starts,
+                                     lambda: draw(self.world, self.rng, self.robot),
                                      self.trial, np.inf, self.world, self.robot.radius)
             for e, start in enumerate(starts):
                 g = None if goals is None else goals[e]

@@ -14,8 +14,16 @@ the HDF5 log, in trial order.
 Results are bit-identical to a serial run: a trial depends only on its
 :class:`~sitframe.loop.TrialSpec` (its seed is spawned from the run seed
 and its index) and on the config, never on which worker runs it or when.
-(Across *machines* this holds as long as they run the same versions of
-sitframe, numpy and the plugins.)
+Across *machines* it holds only for the same versions of sitframe, numpy and
+the plugins **and the same numpy SIMD targets** (:func:`arithmetic`): numpy
+picks its sin, cos, exp, log and power loops at run time by the CPU's
+features, and an AVX-512 loop differs from the AVX2 one in the last bit of
+some results; a closed loop of robot and learner carries such a bit into a
+different trajectory within a few hundred iterations. A log records both
+(``versions``: ``numpy``, ``numpy_simd``); ``--resume`` and a Dask cluster
+refuse to mix two arithmetics. ``NPY_DISABLE_CPU_FEATURES`` (numpy's, read
+at import) turns targets off, e.g. ``"X86_V4 AVX512_ICL AVX512_SPR"`` makes
+an AVX-512 machine compute as an AVX2 one.
 
 ``sitframe_step`` observers fire only in-process (:class:`SerialExecutor`,
 ``--workers 1``); with a pool they do not see iterations, and progress
@@ -61,6 +69,50 @@ if TYPE_CHECKING:
 
 #: Seconds to wait for a Dask scheduler before giving up.
 DASK_CONNECT_TIMEOUT = 5.0
+
+
+def numpy_simd() -> str:
+    """numpy's SIMD targets in this process: its baseline and the dispatch targets it uses.
+
+    E.g. ``"X86_V2 + X86_V3 X86_V4 AVX512_ICL"`` on an AVX-512 machine,
+    ``"X86_V2 + X86_V3"`` on an AVX2 one or under
+    ``NPY_DISABLE_CPU_FEATURES="X86_V4 AVX512_ICL AVX512_SPR"``. Two processes
+    with the same numpy version and the same value compute the same bits.
+    """
+    import numpy as np
+
+    umath = getattr(getattr(np, "_core", None), "_multiarray_umath", None) or \
+        np.core._multiarray_umath  # (numpy < 2)
+    found = getattr(umath, "__cpu_features__", {})
+    used = [f for f in getattr(umath, "__cpu_dispatch__", []) if found.get(f)]
+    return f"{' '.join(getattr(umath, '__cpu_baseline__', []))} + {' '.join(used) or '-'}"
+
+
+def arithmetic() -> str:
+    """What decides the bits of a trial beyond sitframe's own code: numpy's version and SIMD."""
+    import numpy as np
+
+    return f"numpy {np.__version__}, SIMD {numpy_simd()}"
+
+
+def arithmetic_hint(have: str, want: str) -> str:
+    """How to make a process with :func:`arithmetic` ``have`` compute as one with ``want``."""
+    if have.split(",")[0] != want.split(",")[0]:
+        return f"{want.split(',')[0]} there too"
+    extra = set(have.partition("+")[2].split()) - set(want.partition("+")[2].split()) - {"-"}
+    if not extra:
+        return "a machine whose CPU offers numpy the same SIMD targets"
+    return f'NPY_DISABLE_CPU_FEATURES="{" ".join(sorted(extra))}" set before numpy is imported'
+
+
+def check_same_arithmetic(here: str, workers: dict[str, str]) -> None:
+    """Refuse workers whose :func:`arithmetic` differs from this process's ``here``."""
+    other = {w: a for w, a in workers.items() if a != here}
+    if other:
+        w, a = sorted(other.items())[0]
+        raise InputError(f"worker {w} computes with {a}, this process with {here}: its trials "
+                         "would not be bit-identical to a serial run's; expected the same on "
+                         f"every worker (there: {arithmetic_hint(a, here)})", key="--scheduler")
 
 
 # ---------------------------------------------------------------------------
@@ -517,6 +569,11 @@ class DaskExecutor(PoolExecutor):
             msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             raise InputError(f"cannot reach the Dask scheduler at '{address}' within "
                              f"{timeout:g} s ({msg})", key="--scheduler") from None
+        try:
+            check_same_arithmetic(arithmetic(), self.client.run(arithmetic))
+        except InputError:
+            self.shutdown()
+            raise
         if scheme not in ("tls", "wss", "inproc"):
             print(f"sitframe: warning: --scheduler {address}: plain {scheme}; Dask unpickles "
                   "what it receives, so whoever can reach the scheduler can run code here and "
@@ -649,4 +706,5 @@ def compare_logs(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> list[s
 
 
 __all__ = ["DaskExecutor", "InOrder", "PoolExecutor", "ProcessExecutor", "SerialExecutor",
-           "TaskCancelled", "TrialPipeline", "compare_logs", "log_contents", "make_executor"]
+           "TaskCancelled", "TrialPipeline", "arithmetic", "check_same_arithmetic",
+           "compare_logs", "log_contents", "make_executor", "numpy_simd"]

@@ -15,7 +15,10 @@ resume is refused rather than mixing trials from two configurations. If the
 source of sitframe or of a plugin changed since the run started (root
 attribute ``code_hash``, see :func:`code_fingerprint`), the resume goes on
 but ``experiment.info.extra["code_changed"]`` is set and the CLI warns that
-the new trials may not match the logged ones.
+the new trials may not match the logged ones. Another numpy version or other
+numpy SIMD targets than the log records (``versions``; another CPU, see
+:mod:`sitframe.parallel`) is refused: the trials would differ in the last bits,
+then everywhere.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from sitframe.config import validate_config
 from sitframe.errors import InputError
 from sitframe.logged import plugins_of
 from sitframe.logs import code_fingerprint, open_log
+from sitframe.parallel import arithmetic, arithmetic_hint
 from sitframe.prepare import check_state, prepare_experiment
 
 
@@ -91,6 +95,7 @@ def prepare_resume(
                          "changed since the run); resuming would mix two configurations",
                          file=p, key="config_hash")
     _check_inputs(log, exp)
+    _check_arithmetic(log)
     exp.info.extra["resume"] = True
     logged_code = str(log.attrs.get("code_hash", ""))
     exp.info.extra["code_changed"] = bool(logged_code) and \
@@ -103,6 +108,21 @@ def prepare_resume(
     missing = [k for k in range(exp.info.n_trials) if k not in have] \
         if "learn" in exp.config.experiment.stages else []
     return exp, kwargs, missing
+
+
+def _check_arithmetic(log: Any) -> None:
+    """Refuse to resume with another numpy version or other numpy SIMD targets than the run
+    started with (logs that do not record them are resumed as before)."""
+    was = log.versions
+    if "numpy_simd" not in was:
+        return
+    then = f"numpy {was.get('numpy')}, SIMD {was['numpy_simd']}"
+    now = arithmetic()
+    if then != now:
+        raise InputError(f"the run started with {then}, this process has {now}: the new trials "
+                         "would not be bit-identical to what the run would have written; "
+                         f"expected the same ({arithmetic_hint(now, then)})", file=log.path,
+                         key="versions")
 
 
 def _check_inputs(log: Any, exp: Any) -> None:

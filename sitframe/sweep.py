@@ -73,7 +73,14 @@ from typing import Any
 
 import numpy as np
 
-from sitframe.config import DEFAULTS, META_KEYS, Component, load_config, validate_config
+from sitframe.config import (
+    DEFAULTS,
+    META_KEYS,
+    OPTIONAL_KEYS,
+    Component,
+    load_config,
+    validate_config,
+)
 from sitframe.errors import InputError, did_you_mean, note
 from sitframe.params import accepted_params, known_keys
 from sitframe.records import summary_key
@@ -312,7 +319,7 @@ def check_key(key: str, cfg: dict[str, Any], registry: Any, *, file: str | None 
     if sec == "robot":
         valid, _ = accepted_params(RobotParams)
     else:
-        valid = set(DEFAULTS[sec])
+        valid = set(DEFAULTS[sec]) | OPTIONAL_KEYS.get(sec, set())
     if len(parts) != 2 or parts[1] not in valid:
         fail(valid, f"{sec}.", ".".join(parts[1:]))
 

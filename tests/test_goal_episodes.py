@@ -328,3 +328,47 @@ def test_random_pairs_are_joined_by_a_path_in_a_world_of_separate_rooms():
                for a, b in zip(s, g, strict=True))
     with pytest.raises(InputError, match="joined by a free path"):
         goal_pairs(w, 1, np.random.default_rng(0), min_distance=5.0, max_tries=50)
+
+
+def test_detour_pairs_need_a_path_longer_than_the_straight_line():
+    from sitframe.paths import shortest_path_length
+
+    w = load_world("goal-training")
+
+    def ratios(s, g):
+        return np.array([shortest_path_length(w, a[:2], b[:2], radius=0.15)
+                         / math.hypot(*(b[:2] - a[:2])) for a, b in zip(s, g, strict=True)])
+
+    s, g = goal_pairs(w, 20, np.random.default_rng(1), detour_share=1.0, detour_ratio=1.3)
+    assert np.all(ratios(s, g) >= 1.3)
+    # uniform pairs in this room are mostly straight (a few per cent need a detour)
+    s0, g0 = goal_pairs(w, 20, np.random.default_rng(1))
+    assert np.mean(ratios(s0, g0) >= 1.3) < 0.5
+    # share 0 draws nothing extra: the pairs of a run without the option
+    s1, g1 = goal_pairs(w, 20, np.random.default_rng(1), detour_share=0.0, detour_ratio=1.3)
+    np.testing.assert_array_equal(s0, s1)
+    np.testing.assert_array_equal(g0, g1)
+    # an open room has no detour: one clear error naming the option
+    open_room = parse_world('name = "open"\ndescription = "empty"\n[robot]\nstart = [1, 1, 0]\n'
+                            "[[walls]]\npoints = [[0, 0], [6, 0], [6, 6], [0, 6], [0, 0]]\n")
+    with pytest.raises(InputError, match="detour") as err:
+        goal_pairs(open_room, 1, np.random.default_rng(0), detour_share=1.0, max_tries=30)
+    assert err.value.key == "goal.train_detour"
+
+
+def test_train_detour_changes_the_training_pairs_only():
+    from sitframe.robot import RobotParams
+
+    robot, w = RobotParams(), load_world("goal-training")
+    plain = GoalEpisodes(episodes=8, margin=0.3)
+    curric = GoalEpisodes(episodes=8, margin=0.3, train_detour=1.0, detour_ratio=1.3)
+    for a, b in zip(plain.episode_starts(w, np.random.default_rng(2), robot),
+                    curric.episode_starts(w, np.random.default_rng(2), robot), strict=True):
+        np.testing.assert_array_equal(a, b)   # evaluation pairs unchanged
+    s, g = curric.training_starts(w, np.random.default_rng(2), robot)
+    s0, _ = plain.training_starts(w, np.random.default_rng(2), robot)
+    assert not np.array_equal(s, s0)
+    with pytest.raises(InputError, match="train_detour"):
+        GoalEpisodes(train_detour=1.5)
+    with pytest.raises(InputError, match="detour_ratio"):
+        GoalEpisodes(detour_ratio=1.0)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from concurrent.futures.process import BrokenProcessPool
@@ -10,6 +11,7 @@ import pytest
 from helpers import run_config, run_json, small_config
 
 from sitframe.cli import main
+from sitframe.errors import InputError
 from sitframe.logs import open_log
 from sitframe.parallel import (
     ProcessExecutor,
@@ -120,3 +122,38 @@ def test_cancel_stops_running_tasks_promptly_and_workers_exit():
     assert all(not p.is_alive() for p in procs)
     for f in futures:  # (a worker still starting up is simply killed: BrokenProcessPool)
         assert f.cancelled() or isinstance(f.exception(), TaskCancelled | BrokenProcessPool)
+
+
+def test_arithmetic_names_numpy_and_its_simd_targets_and_follows_the_environment():
+    import subprocess
+
+    import numpy as np
+
+    from sitframe.parallel import arithmetic, numpy_simd
+
+    here = numpy_simd()
+    assert arithmetic() == f"numpy {np.__version__}, SIMD {here}"
+    used = here.partition("+")[2].split()
+    if used == ["-"]:
+        pytest.skip("numpy dispatches to no extra SIMD target on this CPU")
+    env = {**os.environ, "NPY_DISABLE_CPU_FEATURES": " ".join(used)}
+    off = subprocess.run([sys.executable, "-c", "from sitframe.parallel import numpy_simd; "
+                          "print(numpy_simd())"], env=env, capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert off == f"{here.partition('+')[0]}+ -"
+
+
+def test_workers_of_another_arithmetic_are_refused_with_the_fix():
+    from sitframe.parallel import check_same_arithmetic
+
+    avx2 = "numpy 2.4.6, SIMD X86_V2 + X86_V3"
+    avx512 = "numpy 2.4.6, SIMD X86_V2 + X86_V3 X86_V4 AVX512_ICL"
+    check_same_arithmetic(avx2, {"tcp://a:1": avx2, "tcp://b:1": avx2})
+    with pytest.raises(InputError, match='there: NPY_DISABLE_CPU_FEATURES="AVX512_ICL X86_V4"'):
+        check_same_arithmetic(avx2, {"tcp://a:1": avx2, "tcp://b:1": avx512})
+    with pytest.raises(InputError, match="same SIMD targets"):
+        check_same_arithmetic(avx512, {"tcp://a:1": avx2})
+    with pytest.raises(InputError, match="numpy 2.4.6 there too") as err:
+        check_same_arithmetic(avx2, {"tcp://a:1": "numpy 2.3.0, SIMD X86_V2 + X86_V3"})
+    assert err.value.key == "--scheduler" and "worker tcp://a:1 computes with numpy 2.3.0" in \
+        str(err.value)

@@ -283,3 +283,33 @@ def test_resume_api_and_the_records_a_log_may_lack_or_add(reference, tmp_path, c
         prepare_resume(out)
     assert e.value.file == str(out) and e.value.key == "config.experiment.iterations"
     assert e.value.message.startswith("the log's config is no longer valid: ")
+
+
+def test_resume_refuses_another_arithmetic(reference, tmp_path, capsys):
+    """Trials computed with other numpy SIMD loops (another CPU) never join a log: the last
+    bits of sin/cos/exp differ, and a closed loop turns them into other trajectories."""
+    import h5py
+
+    from sitframe.parallel import numpy_simd
+
+    _cfg, ref = reference
+    out = tmp_path / "simd.h5"
+    _unfinished_copy(ref, out)
+    with h5py.File(out, "a") as f:
+        versions = json.loads(f.attrs["versions"])
+        assert versions["numpy_simd"] == numpy_simd()  # recorded by the run
+        f.attrs["versions"] = json.dumps({**versions, "numpy_simd": numpy_simd() + " FUTURE"})
+    before = out.read_bytes()
+    capsys.readouterr()
+    assert main(["run", "--resume", str(out), "--json"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"sitframe: error: {out}: versions: the run "
+                                                   f"started with numpy {np.__version__}, SIMD")
+    assert "FUTURE" in err and "would not be bit-identical" in err
+    assert out.read_bytes() == before
+    # a log written before the key existed resumes as before
+    with h5py.File(out, "a") as f:
+        f.attrs["versions"] = json.dumps({k: v for k, v in versions.items()
+                                          if k != "numpy_simd"})
+    assert main(["run", "--resume", str(out), "--json"]) == 0
+    assert compare_logs(ref, out) == []

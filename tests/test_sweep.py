@@ -316,6 +316,11 @@ def test_the_arbiters_reward_parameters_are_sweep_keys():
         check_key("arbiter.reward_params.distanse", cfg, reg)
     with pytest.raises(InputError, match="not a setting"):
         check_key("interpreter.reward_params", cfg, reg)
+    # the [goal] table's optional keys (no default, so absent from most configs) too
+    for key in ("goal.train", "goal.train_detour", "goal.detour_ratio"):
+        check_key(key, cfg, reg)
+    with pytest.raises(InputError, match=r"did you mean 'goal.train_detour'"):
+        check_key("goal.train_detours", cfg, reg)
 
 
 @pytest.mark.parametrize(("grid", "pattern"), [
