@@ -543,7 +543,10 @@ class DaskExecutor(PoolExecutor):
 
     Every worker needs sitframe (and any third-party plugin packages)
     installed; loose ``--plugins-dir`` folders must exist at the same path on
-    the workers.
+    the workers. The workers connected when sitframe connects must compute
+    with this process's :func:`arithmetic` (else :class:`InputError`, naming
+    the setting that makes them match); a worker that joins later is not
+    asked.
 
     Parameters
     ----------

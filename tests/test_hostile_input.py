@@ -389,14 +389,31 @@ def test_9_scheduler_address_checks_and_plain_tcp_warning(tmp_path, capsys, monk
                      tmp_path / "x.h5"], "--scheduler:", "malformed")
 
     class FakeClient:
+        workers: dict[str, str] = {}
+        closed = 0
+
         def __init__(self, *a, **k):
             pass
+
+        def run(self, fn):  # what each connected worker's fn() returns
+            return dict(self.workers)
+
+        def close(self):
+            FakeClient.closed += 1
 
     monkeypatch.setattr(distributed, "Client", FakeClient)
     DaskExecutor("tcp://10.0.0.5:8786")
     assert "Dask unpickles" in capsys.readouterr().err
     DaskExecutor("tls://10.0.0.5:8786")
     assert capsys.readouterr().err == ""
+    # a worker whose numpy computes otherwise (another CPU) is refused, with the fix
+    from sitframe.errors import InputError
+    from sitframe.parallel import arithmetic
+
+    FakeClient.workers = {"tcp://10.0.0.6:1": arithmetic(), "tcp://10.0.0.7:1": "numpy 0.0"}
+    with pytest.raises(InputError, match=r"worker tcp://10.0.0.7:1 computes with numpy 0.0"):
+        DaskExecutor("tls://10.0.0.5:8786")
+    assert FakeClient.closed == 1  # the connection is not left open
 
 
 # ----------------------------------------------------------------------------- 10, 13 full disk
