@@ -33,6 +33,7 @@ from sitframe.evaluation import select_trial, selection_rule
 from sitframe.experiment import Experiment
 from sitframe.logged import best_trial, check_logged_policy, check_state, logged_policy
 from sitframe.logs import Log, code_fingerprint, lock_log, open_log, unlock_log
+from sitframe.parallel import arithmetic
 from sitframe.records import LearnedPolicy
 
 
@@ -193,10 +194,11 @@ def make_prerequisites(cfg: dict[str, Any], base_dir: str = ".", *,
                              key=key)
         pcfg, psource, pbase = load_config(name)
         if Path(path).exists():
-            same_code = _check_reusable(path, pcfg, experiment, key)
+            same_code, arith = _check_reusable(path, pcfg, experiment, key)
             say(f"reusing {path}: a complete log of '{experiment}' (same config" + (
-                ")" if same_code else "; made by other code than this: remove it to remake "
-                "it with this code)"))
+                "" if same_code else "; made by other code than this: remove it to remake "
+                "it with this code") + (f"; made with {arith}, not this process's "
+                                        f"{arithmetic()}" if arith else "") + ")")
             continue
         made += make_prerequisites(pcfg, pbase, executor_for=executor_for,
                                    plugins_dirs=plugins_dirs, progress=progress, say=say,
@@ -218,11 +220,15 @@ def make_prerequisites(cfg: dict[str, Any], base_dir: str = ".", *,
     return made
 
 
-def _check_reusable(path: str, cfg: dict[str, Any], experiment: str, key: str) -> bool:
+def _check_reusable(path: str, cfg: dict[str, Any], experiment: str,
+                    key: str) -> tuple[bool, str]:
     """An existing prerequisite log: complete, and made by the prerequisite's own config.
 
     Returns whether this code made it (the log's ``code_hash`` against the
-    sources now, with the plugins the log names)."""
+    sources now, with the plugins the log names), and the numpy arithmetic it
+    was made with when that differs from this process's (else ``""``: a log
+    made on another CPU is a valid input, but this process would remake
+    another one; :func:`sitframe.parallel.arithmetic`)."""
     log = open_log(path)
     if not log.complete:
         raise InputError(f"the prerequisite log is not complete (status {log.status}); finish "
@@ -232,7 +238,10 @@ def _check_reusable(path: str, cfg: dict[str, Any], experiment: str, key: str) -
         raise InputError(f"exists but was not made by '{experiment}' as it is now (another "
                          "config); remove it to remake it, or name the config that made it",
                          file=path, key=key)
-    return str(log.attrs.get("code_hash", "")) == code_fingerprint(log.plugins)
+    was = log.versions
+    arith = f"numpy {was.get('numpy')}, SIMD {was['numpy_simd']}" if "numpy_simd" in was else ""
+    return (str(log.attrs.get("code_hash", "")) == code_fingerprint(log.plugins),
+            "" if arith in ("", arithmetic()) else arith)
 
 
 def check_out(out: str, inputs: dict[str, str]) -> None:

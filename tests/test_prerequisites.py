@@ -65,6 +65,18 @@ def test_missing_prerequisite_is_made_first_then_reused(folder, capsys):
     assert main(["run", "dependent.toml", "--json"]) == 0
     err = capsys.readouterr().err
     assert "(same config; made by other code than this: remove it to remake it" in err
+    # made on a CPU whose numpy computes otherwise: a valid input, reused, and said so
+    import json
+
+    from sitframe.parallel import arithmetic
+
+    with h5py.File(folder / "logs/base.h5", "r+") as f:
+        v = json.loads(f.attrs["versions"])
+        f.attrs["versions"] = json.dumps({**v, "numpy_simd": "X86_V2 + OTHER"})
+    assert main(["run", "dependent.toml", "--json"]) == 0
+    err = capsys.readouterr().err
+    assert (f"; made with numpy {v['numpy']}, SIMD X86_V2 + OTHER, not this process's "
+            f"{arithmetic()})") in err
 
 
 def test_prerequisite_made_by_another_config_is_refused(folder, capsys):
