@@ -98,7 +98,7 @@ def arithmetic() -> str:
 def arithmetic_hint(have: str, want: str) -> str:
     """How to make a process with :func:`arithmetic` ``have`` compute as one with ``want``."""
     if have.split(",")[0] != want.split(",")[0]:
-        return f"{want.split(',')[0]} there too"
+        return want.split(",")[0]
     extra = set(have.partition("+")[2].split()) - set(want.partition("+")[2].split()) - {"-"}
     if not extra:
         return "a machine whose CPU offers numpy the same SIMD targets"
