@@ -531,7 +531,8 @@ class _TrainingEpisodes:
         self.pairs = self._pairs()
 
     def _pairs(self) -> Iterator[tuple[np.ndarray, Goal | None]]:
-        method = "training_starts" if hasattr(self.proto, "training_starts") else "episode_starts"
+        method = "training_starts" if callable(getattr(self.proto, "training_starts", None)) \
+            else "episode_starts"
         draw = getattr(self.proto, method)
         while True:
             starts, goals = _checked(self.origin, method, check_episode_starts,

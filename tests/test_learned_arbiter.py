@@ -208,3 +208,27 @@ def test_path_reward_refuses_a_goal_the_robot_cannot_reach():
     r = GoalProgressReward(signed=True, distance="path")
     with pytest.raises(InputError, match=r"distance = \"path\": no free path .* 'u-trap'"):
         r(Transition(at(1.0, it=0), None, ok, at(1.2)))  # type: ignore[arg-type]
+
+
+def test_train_detour_makes_the_training_episodes_detours_and_leaves_evaluation_alone(learned):
+    """``[goal] train_detour = 1``: every training pair needs a path ``detour_ratio`` times
+    the straight line (the curriculum reaches the loop through ``training_starts``)."""
+    from sitframe.paths import shortest_path_length
+
+    cfg = goal_run()
+    cfg["goal"].update(train_detour=1.0, detour_ratio=1.2)
+    exp = Experiment(validate_config(cfg))
+    (t,) = exp.run(interpreter_state=STATE).trials
+    first, goals, pose = t.episodes["learn/first_iteration"], t.episodes["learn/goal"], \
+        t.arrays["pose"]
+    assert len(first) >= 3
+    for f, g in zip(first, goals, strict=True):
+        s = pose[f, :2]
+        path = shortest_path_length(WORLD, s, g[:2], radius=0.15)
+        assert path >= 1.2 * math.hypot(*(g[:2] - s)) - 1e-9
+    _exp, plain = learned  # the uniform pairs of the same seed are mostly straight
+    straight = [shortest_path_length(WORLD, pose0[:2], g[:2], radius=0.15)
+                < 1.2 * math.hypot(*(g[:2] - pose0[:2]))
+                for pose0, g in zip(plain.arrays["pose"][plain.episodes["learn/first_iteration"]],
+                                    plain.episodes["learn/goal"], strict=True)]
+    assert np.mean(straight) > 0.5
