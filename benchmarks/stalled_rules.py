@@ -31,7 +31,7 @@ KEYS = ("success_rate", "collision_free_rate", "spl_shortest")
 
 
 def _run(log: str, world: str, trial: int, episodes: int, seed: int,
-         action: int | None, every: bool) -> dict[str, Any]:
+         action: int | None, every: bool, dirs: tuple[str, ...] = ()) -> dict[str, Any]:
     """One trial's goal batch, its stalled rules (``every``: all rules) set to ``action``
     (None: as learned)."""
     import sitframe.plugins.learned_arbiter as la
@@ -48,7 +48,8 @@ def _run(log: str, world: str, trial: int, episodes: int, seed: int,
 
     la.FuzzyQArbiter.load_policy = load_policy
     try:
-        out = evaluate_log(log, world=world, trial=trial, seed=seed, goal_episodes=episodes)
+        out = evaluate_log(log, world=world, trial=trial, seed=seed, goal_episodes=episodes,
+                           plugins_dirs=dirs)
     finally:
         la.FuzzyQArbiter.load_policy = load
     return {k: float(out[k]) for k in KEYS}
@@ -65,6 +66,8 @@ def main() -> None:
     ap.add_argument("--contexts", choices=("stalled", "all"), default="stalled",
                     help="which rules get --action: the stalled contexts' or every one")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--plugins-dir", action="append", default=[],
+                    help="plugin folder the log's run loaded (e.g. benchmarks/plugins)")
     args = ap.parse_args()
     from sitframe.logs import open_log
 
@@ -72,7 +75,7 @@ def main() -> None:
     with ProcessPoolExecutor(args.workers) as pool:
         every = args.contexts == "all"
         runs = {mode: [pool.submit(_run, args.log, args.world, k, args.episodes, args.seed, a,
-                                   every) for k in trials]
+                                   every, tuple(args.plugins_dir)) for k in trials]
                 for mode, a in (("as learned", None),
                                 (f"{args.contexts} -> action {args.action}", args.action))}
         print(f"{args.world}, {len(trials)} trials x {args.episodes} pairs (seed {args.seed}): "
