@@ -545,8 +545,9 @@ class DaskExecutor(PoolExecutor):
     installed; loose ``--plugins-dir`` folders must exist at the same path on
     the workers. The workers connected when sitframe connects must compute
     with this process's :func:`arithmetic` (else :class:`InputError`, naming
-    the setting that makes them match); a worker that joins later is not
-    asked.
+    the setting that makes them match), and every task checks its worker's
+    again before it runs (a worker that joined later), failing the run with
+    the same message rather than returning a trial of another arithmetic.
 
     Parameters
     ----------
@@ -572,8 +573,9 @@ class DaskExecutor(PoolExecutor):
             msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             raise InputError(f"cannot reach the Dask scheduler at '{address}' within "
                              f"{timeout:g} s ({msg})", key="--scheduler") from None
+        self.arithmetic = arithmetic()
         try:
-            check_same_arithmetic(arithmetic(), self.client.run(arithmetic))
+            check_same_arithmetic(self.arithmetic, self.client.run(arithmetic))
         except InputError:
             self.shutdown()
             raise
@@ -590,7 +592,7 @@ class DaskExecutor(PoolExecutor):
             return 1
 
     def submit(self, fn: Callable[..., Any], *args: Any) -> Any:
-        return self.client.submit(fn, *args, pure=False)
+        return self.client.submit(_same_arithmetic_task, self.arithmetic, fn, *args, pure=False)
 
     def wait_first(self, futures: Iterable[Any]) -> set[Any]:
         from distributed import as_completed
@@ -608,6 +610,18 @@ class DaskExecutor(PoolExecutor):
         client, self.client = self.client, None
         if client is not None:
             client.close()
+
+
+def _same_arithmetic_task(expected: str, fn: Callable[..., Any], *args: Any) -> Any:
+    """A Dask task: ``fn(*args)`` on a worker whose :func:`arithmetic` is ``expected``."""
+    try:
+        from distributed import get_worker
+
+        name = str(get_worker().address)
+    except (ImportError, ValueError):  # (not on a Dask worker)
+        name = f"pid {os.getpid()}"
+    check_same_arithmetic(expected, {name: arithmetic()})
+    return fn(*args)
 
 
 def _check_address(address: str) -> str:

@@ -157,3 +157,32 @@ def test_workers_of_another_arithmetic_are_refused_with_the_fix():
         check_same_arithmetic(avx2, {"tcp://a:1": "numpy 2.3.0, SIMD X86_V2 + X86_V3"})
     assert err.value.key == "--scheduler" and "worker tcp://a:1 computes with numpy 2.3.0" in \
         str(err.value)
+
+
+def test_a_dask_task_on_a_worker_of_another_arithmetic_fails_the_run_in_one_line(
+        serial_log, tmp_path, capsys, monkeypatch):
+    """A worker that joined after the connection check is caught by its first task."""
+    distributed = pytest.importorskip("distributed")
+    import sitframe.parallel as par
+
+    cfg, _ref = serial_log
+    real = par.DaskExecutor.__init__
+
+    def init(self, *a, **k):  # as if the workers had been asked before this one joined
+        real(self, *a, **k)
+        self.arithmetic = "numpy 0.0, SIMD X86_V2 + -"
+
+    monkeypatch.setattr(par.DaskExecutor, "__init__", init)
+    out = tmp_path / "mixed.h5"
+    capsys.readouterr()
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                  protocol="tcp", host="127.0.0.1",
+                                  dashboard_address=None) as cluster:
+        code = main(["run", str(cfg), "--out", str(out), "--scheduler",
+                     cluster.scheduler_address])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    errors = [ln for ln in err.splitlines() if "error" in ln]
+    assert len(errors) == 1 and errors[0].startswith("sitframe: error: --scheduler: worker tcp://")
+    assert "this process with numpy 0.0" in errors[0] and "Traceback" not in err
+    assert open_log(out).status != "complete"
