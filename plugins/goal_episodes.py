@@ -216,23 +216,22 @@ class GoalEpisodes:
     def episode_starts(self, world: World, rng: np.random.Generator,
                        robot: RobotParams) -> tuple[np.ndarray, np.ndarray]:
         """The ``episodes`` start poses (n, 3) and goals (n, 3: x, y, radius) in ``world``."""
-        self._world = world  # (score_episode measures the shortest path in it)
-        if self.pairs == "world":
-            return world_pairs(world, self.episodes)
-        return goal_pairs(world, self.episodes, rng, min_distance=self.min_distance,
-                          goal_radius=self.radius, robot_radius=robot.radius,
-                          margin=self.margin)
+        return self._starts(world, rng, robot, 0.0)
 
     def training_starts(self, world: World, rng: np.random.Generator,
                         robot: RobotParams) -> tuple[np.ndarray, np.ndarray]:
         """The pairs of a learning trial run in episodes: :meth:`episode_starts`'
         with ``train_detour`` of them detour pairs."""
-        if self.pairs == "world" or not self.train_detour:
-            return self.episode_starts(world, rng, robot)
-        self._world = world
+        return self._starts(world, rng, robot, self.train_detour)
+
+    def _starts(self, world: World, rng: np.random.Generator, robot: RobotParams,
+                detour_share: float) -> tuple[np.ndarray, np.ndarray]:
+        self._world = world  # (score_episode measures the shortest path in it)
+        if self.pairs == "world":
+            return world_pairs(world, self.episodes)
         return goal_pairs(world, self.episodes, rng, min_distance=self.min_distance,
                           goal_radius=self.radius, robot_radius=robot.radius,
-                          margin=self.margin, detour_share=self.train_detour,
+                          margin=self.margin, detour_share=detour_share,
                           detour_ratio=self.detour_ratio)
 
     def terminated(self, context: Context) -> bool:

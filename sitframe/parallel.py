@@ -88,11 +88,18 @@ def numpy_simd() -> str:
     return f"{' '.join(getattr(umath, '__cpu_baseline__', []))} + {' '.join(used) or '-'}"
 
 
-def arithmetic() -> str:
-    """What decides the bits of a trial beyond sitframe's own code: numpy's version and SIMD."""
-    import numpy as np
+def arithmetic(versions: dict[str, str] | None = None) -> str:
+    """What decides the bits of a trial beyond sitframe's own code: numpy's version and SIMD.
 
-    return f"numpy {np.__version__}, SIMD {numpy_simd()}"
+    Of this process, or of a log's ``versions`` (``""`` for a log written before they
+    were recorded)."""
+    if versions is None:
+        import numpy as np
+
+        return f"numpy {np.__version__}, SIMD {numpy_simd()}"
+    if "numpy_simd" not in versions:
+        return ""
+    return f"numpy {versions.get('numpy')}, SIMD {versions['numpy_simd']}"
 
 
 def arithmetic_hint(have: str, want: str) -> str:

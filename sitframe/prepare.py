@@ -238,8 +238,7 @@ def _check_reusable(path: str, cfg: dict[str, Any], experiment: str,
         raise InputError(f"exists but was not made by '{experiment}' as it is now (another "
                          "config); remove it to remake it, or name the config that made it",
                          file=path, key=key)
-    was = log.versions
-    arith = f"numpy {was.get('numpy')}, SIMD {was['numpy_simd']}" if "numpy_simd" in was else ""
+    arith = arithmetic(log.versions)
     return (str(log.attrs.get("code_hash", "")) == code_fingerprint(log.plugins),
             "" if arith in ("", arithmetic()) else arith)
 

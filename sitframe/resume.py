@@ -113,12 +113,8 @@ def prepare_resume(
 def _check_arithmetic(log: Any) -> None:
     """Refuse to resume with another numpy version or other numpy SIMD targets than the run
     started with (logs that do not record them are resumed as before)."""
-    was = log.versions
-    if "numpy_simd" not in was:
-        return
-    then = f"numpy {was.get('numpy')}, SIMD {was['numpy_simd']}"
-    now = arithmetic()
-    if then != now:
+    then, now = arithmetic(log.versions), arithmetic()
+    if then and then != now:
         raise InputError(f"the run started with {then}, this process has {now}: the new trials "
                          "would not be bit-identical to what the run would have written; "
                          f"expected the same ({arithmetic_hint(now, then)})", file=log.path,

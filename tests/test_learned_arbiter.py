@@ -232,3 +232,21 @@ def test_train_detour_makes_the_training_episodes_detours_and_leaves_evaluation_
                 for pose0, g in zip(plain.arrays["pose"][plain.episodes["learn/first_iteration"]],
                                     plain.episodes["learn/goal"], strict=True)]
     assert np.mean(straight) > 0.5
+
+
+@pytest.mark.parametrize("value, error, match", [
+    (lambda self, world: None, "PluginError",
+     r"training_starts\(world\) cannot be called as training_starts\(world, rng, robot\)"),
+    (lambda self, world, rng, robot: (np.zeros(3), None), "PluginFault",
+     r"training_starts.*expected \(n, 3\)"),
+])
+def test_a_protocols_training_starts_breaking_the_contract_is_one_clear_error(
+        monkeypatch, value, error, match):
+    """The optional ``training_starts`` is checked as ``episode_starts`` is: its signature
+    when the protocol is made, what it returns when a learning trial draws pairs."""
+    import sitframe.errors as E
+    from sitframe.plugins.goal_episodes import GoalEpisodes
+
+    monkeypatch.setattr(GoalEpisodes, "training_starts", value)
+    with pytest.raises(getattr(E, error), match=match):
+        Experiment(goal_run()).run(interpreter_state=STATE)
