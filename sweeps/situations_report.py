@@ -6,7 +6,7 @@ base is judged in the rooms it never saw (``--rooms``, default the two novel
 rooms), with that trial's own situations::
 
     python sweeps/situations_report.py \\
-        "c = 12::logs/sweeps/situations/interpreter=*c=12*_seed=*.h5" \\
+        "c = 12::logs/sweeps/situations/interpreter=fcm-c=12-*_seed=*.h5" \\
         "evolving::logs/sweeps/situations/interpreter=*evolving*_seed=*.h5" \\
         --figure docs/situations.png
 
@@ -122,13 +122,23 @@ def main() -> int:
     ap.add_argument("--rooms", nargs="+", default=["novel-1", "novel-2"])
     ap.add_argument("--figure", metavar="PNG")
     args = ap.parse_args()
-    results = {}
+    results: dict[str, dict[str, np.ndarray]] = {}
+    owner: dict[str, str] = {}  # log -> the setting that matched it first
     for arg in args.settings:
         name, _, pattern = arg.partition("::")
         paths = sorted(glob.glob(pattern))
         if not paths:
             print(f"situations_report: no logs match '{pattern}' ({name})", file=sys.stderr)
             return 2
+        # A glob that also matches another setting's logs (``*c=12-*`` matches the
+        # evolving logs of sweeps/situations.toml too) would pool two settings in one row.
+        twice = [p for p in paths if p in owner]
+        if twice:
+            print(f"situations_report: '{pattern}' ({name}) matches {twice[0]}, already pooled "
+                  f"in '{owner[twice[0]]}'; expected each log in one setting (narrow the glob)",
+                  file=sys.stderr)
+            return 2
+        owner.update(dict.fromkeys(paths, name))
         results[name] = pool(paths, args.rooms)
         print(f"{name}: {len(paths)} logs", file=sys.stderr)
     print(table(results, args.rooms))
