@@ -423,7 +423,11 @@ def print_run(result: Any) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    console = Console()
+    # Piped or redirected (no terminal, no COLUMNS), rich would cut the tables to 80
+    # columns, and a wide rule-base table (a learned arbiter has two columns per
+    # context) would reach the file as ellipses; there, print the table at full width.
+    wide = not sys.stdout.isatty() and "COLUMNS" not in os.environ
+    console = Console(width=1000 if wide else None)
     t = Table(title=f"{result.info.name}: {len(result.trials)} trials "
               f"in {result.wall_seconds:.1f} s")
     for col in ("trial", "converged at", "collisions", "coll./1000 after conv.", "coverage"):

@@ -55,6 +55,20 @@ def test_plain_run_and_evaluate(tmp_path, capsys, monkeypatch):
     assert doc["iterations"] == 50
 
 
+def test_piped_run_prints_its_tables_whole(tmp_path, capsys, monkeypatch):
+    # Redirected to a file rich would cut the tables to 80 columns; the rule-base table
+    # (description + two columns per output) is wider and reached the file as ellipses.
+    monkeypatch.delenv("COLUMNS", raising=False)
+    cfg = tmp_path / "piped.toml"
+    cfg.write_text(small_config(name="piped", trials=2, iterations=200, eval_iterations=50))
+    capsys.readouterr()
+    assert main(["run", str(cfg), "--out", str(tmp_path / "piped.h5"), "--workers", "1"]) == 0
+    text = capsys.readouterr().out
+    assert "…" not in text
+    assert max(len(line) for line in text.splitlines()) > 80  # (the case this is about)
+    assert len(_cells(text, "S1")) == 1  # a situation's row on one line, all its cells
+
+
 def test_world_list_names_and_describes_every_shipped_world(capsys):
     assert main(["world", "list"]) == 0
     lines = capsys.readouterr().out.splitlines()
