@@ -37,7 +37,7 @@ from sitframe.loop import (
     stage_seed,
     step_hook_of,
 )
-from sitframe.parallel import InOrder, SerialExecutor, TrialPipeline, numpy_simd
+from sitframe.parallel import InOrder, SerialExecutor, TrialPipeline, arithmetic_versions
 from sitframe.pluginmanager import Registry, get_plugin_manager
 from sitframe.records import RunInfo, TrialResult
 from sitframe.resolve import Resolved
@@ -539,15 +539,15 @@ def warm_up(handle: Experiment | Setup) -> int:
 
 
 def versions() -> dict[str, str]:
-    """Versions of sitframe, Python and the numerical/IO stack, and numpy's SIMD targets
-    (:func:`sitframe.parallel.numpy_simd`: with the numpy version, what decides the last
-    bits of sin, cos, exp and log, so of every trajectory)."""
+    """Versions of sitframe, Python and the numerical/IO stack, numpy's SIMD targets and its
+    BLAS (:func:`sitframe.parallel.arithmetic_versions`: with the numpy version, what
+    decides the last bits of sin, cos, exp, log and dot products, so of every trajectory)."""
     import h5py
     import scipy
 
     return {
-        "sitframe": __version__, "python": platform.python_version(), "numpy": np.__version__,
-        "numpy_simd": numpy_simd(),
+        "sitframe": __version__, "python": platform.python_version(),
+        **arithmetic_versions(),
         "scipy": scipy.__version__, "h5py": h5py.__version__, "hdf5": h5py.version.hdf5_version,
         "pluggy": pluggy.__version__ if hasattr(pluggy, "__version__") else "",
     }

@@ -240,7 +240,7 @@ def _check_reusable(path: str, cfg: dict[str, Any], experiment: str,
                          file=path, key=key)
     arith = arithmetic(log.versions)
     return (str(log.attrs.get("code_hash", "")) == code_fingerprint(log.plugins),
-            "" if arith in ("", arithmetic()) else arith)
+            "" if arith in ("", arithmetic(like=log.versions)) else arith)
 
 
 def check_out(out: str, inputs: dict[str, str]) -> None:

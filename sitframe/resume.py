@@ -111,9 +111,10 @@ def prepare_resume(
 
 
 def _check_arithmetic(log: Any) -> None:
-    """Refuse to resume with another numpy version or other numpy SIMD targets than the run
-    started with (logs that do not record them are resumed as before)."""
-    then, now = arithmetic(log.versions), arithmetic()
+    """Refuse to resume with another numpy version, other numpy SIMD targets or another BLAS
+    kernel than the run started with (on what the log recorded; logs that record none of
+    them are resumed as before)."""
+    then, now = arithmetic(log.versions), arithmetic(like=log.versions)
     if then and then != now:
         raise InputError(f"the run started with {then}, this process has {now}: the new trials "
                          "would not be bit-identical to what the run would have written; "

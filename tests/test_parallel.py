@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import platform
 import sys
 import time
 from concurrent.futures.process import BrokenProcessPool
@@ -132,7 +133,7 @@ def test_arithmetic_names_numpy_and_its_simd_targets_and_follows_the_environment
     from sitframe.parallel import arithmetic, numpy_simd
 
     here = numpy_simd()
-    assert arithmetic() == f"numpy {np.__version__}, SIMD {here}"
+    assert arithmetic().startswith(f"numpy {np.__version__}, SIMD {here}, BLAS ")
     used = here.partition("+")[2].split()
     if used == ["-"]:
         pytest.skip("numpy dispatches to no extra SIMD target on this CPU")
@@ -141,6 +142,27 @@ def test_arithmetic_names_numpy_and_its_simd_targets_and_follows_the_environment
                           "print(numpy_simd())"], env=env, capture_output=True, text=True,
                          check=True).stdout.strip()
     assert off == f"{here.partition('+')[0]}+ -"
+
+
+def test_blas_names_the_kernel_openblas_picked_and_follows_the_environment():
+    # OpenBLAS picks its kernels by the CPU at load time, and they change a run's log
+    # (np.dot and @ go through them), so the kernel is part of the arithmetic.
+    import subprocess
+
+    from sitframe.parallel import arithmetic, blas
+
+    here = blas()
+    assert here in arithmetic()
+    if not here.startswith("openblas "):
+        pytest.skip(f"numpy's BLAS here is not OpenBLAS ({here})")
+    if platform.machine() not in ("x86_64", "AMD64"):
+        pytest.skip("the kernel override below names an x86-64 kernel")
+    env = {**os.environ, "OPENBLAS_CORETYPE": "Prescott"}  # (SSE3 kernels: every x86-64)
+    other = subprocess.run([sys.executable, "-c", "from sitframe.parallel import blas; "
+                            "print(blas())"], env=env, capture_output=True, text=True,
+                           check=True).stdout.strip()
+    assert other.split()[:2] == here.split()[:2]  # same library and version,
+    assert other != here  # another kernel (OpenBLAS calls Prescott's "Katmai")
 
 
 def test_workers_of_another_arithmetic_are_refused_with_the_fix():
@@ -153,6 +175,14 @@ def test_workers_of_another_arithmetic_are_refused_with_the_fix():
         check_same_arithmetic(avx2, {"tcp://a:1": avx2, "tcp://b:1": avx512})
     with pytest.raises(InputError, match="same SIMD targets"):
         check_same_arithmetic(avx512, {"tcp://a:1": avx2})
+    haswell, skx = f"{avx2}, BLAS openblas 0.3.31 Haswell", f"{avx2}, BLAS openblas 0.3.31 SkylakeX"
+    with pytest.raises(InputError, match=r"there: OPENBLAS_CORETYPE=Haswell set before numpy"):
+        check_same_arithmetic(haswell, {"tcp://a:1": skx})
+    with pytest.raises(InputError, match=r"there: numpy with the BLAS mkl 2024.1\)"):
+        check_same_arithmetic(f"{avx2}, BLAS mkl 2024.1", {"tcp://a:1": skx})
+    with pytest.raises(InputError, match=r'there: NPY_DISABLE_CPU_FEATURES="AVX512_ICL X86_V4" '
+                                         r"set before numpy is imported and OPENBLAS_CORETYPE"):
+        check_same_arithmetic(haswell, {"tcp://a:1": f"{avx512}, BLAS openblas 0.3.31 SkylakeX"})
     with pytest.raises(InputError, match=r"there: numpy 2.4.6\)") as err:
         check_same_arithmetic(avx2, {"tcp://a:1": "numpy 2.3.0, SIMD X86_V2 + X86_V3"})
     assert err.value.key == "--scheduler" and "worker tcp://a:1 computes with numpy 2.3.0" in \

@@ -307,9 +307,28 @@ def test_resume_refuses_another_arithmetic(reference, tmp_path, capsys):
                                                    f"started with numpy {np.__version__}, SIMD")
     assert "FUTURE" in err and "would not be bit-identical" in err
     assert out.read_bytes() == before
-    # a log written before the key existed resumes as before
+    # another BLAS kernel (OpenBLAS picks one by the CPU) is another arithmetic too
+    with h5py.File(out, "a") as f:
+        f.attrs["versions"] = json.dumps({**versions, "blas": "openblas 0.3.31 SkylakeX"})
+    assert main(["run", "--resume", str(out), "--json"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "BLAS openblas 0.3.31 SkylakeX, this process has" in err
+    # logs written before a key existed resume on the keys they have (session-15 logs
+    # record numpy_simd but not blas; older ones neither)
+    from sitframe.resume import _check_arithmetic
+
+    for drop in (("blas",), ("blas", "numpy_simd")):
+        with h5py.File(out, "a") as f:
+            f.attrs["versions"] = json.dumps({k: v for k, v in versions.items()
+                                              if k not in drop})
+        _check_arithmetic(open_log(out))  # (raises InputError if it would refuse)
+        with h5py.File(out, "a") as f:  # ... and with another SIMD it still refuses
+            f.attrs["versions"] = json.dumps({**{k: v for k, v in versions.items()
+                                                 if k not in drop}, "numpy_simd": "OTHER"})
+        with pytest.raises(InputError, match="SIMD OTHER"):
+            _check_arithmetic(open_log(out))
     with h5py.File(out, "a") as f:
         f.attrs["versions"] = json.dumps({k: v for k, v in versions.items()
-                                          if k != "numpy_simd"})
+                                          if k not in ("blas", "numpy_simd")})
     assert main(["run", "--resume", str(out), "--json"]) == 0
     assert compare_logs(ref, out) == []
