@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import dataclasses
+import functools
 import multiprocessing as mp
 import os
 import signal
@@ -91,6 +92,7 @@ def numpy_simd() -> str:
     return f"{' '.join(getattr(umath, '__cpu_baseline__', []))} + {' '.join(used) or '-'}"
 
 
+@functools.cache  # (fixed when numpy loads; Dask asks again before every task)
 def blas() -> str:
     """numpy's BLAS in this process: library, version and the kernel it picked for this CPU.
 
@@ -108,9 +110,9 @@ def blas() -> str:
     libs = [i for i in threadpool_info() if i.get("user_api") == "blas"]
     own = [i for i in libs if os.path.basename(os.path.dirname(i.get("filepath", "")))
            .startswith("numpy")]
-    return "; ".join(sorted({" ".join(str(i[k]) for k in ("internal_api", "version",
-                                                           "architecture") if i.get(k))
-                             for i in own or libs})) or "-"
+    keys = ("internal_api", "version", "architecture")
+    names = {" ".join(str(i[k]) for k in keys if i.get(k)) for i in own or libs}
+    return "; ".join(sorted(names)) or "-"
 
 
 def arithmetic_versions() -> dict[str, str]:
