@@ -231,6 +231,11 @@ class Arbiter(Protocol):
     ) -> tuple[Proposal, np.ndarray]:
         """Return the fused proposal and the (k,) weight given to each proposal, in order.
 
+        Weights are finite and non-negative: how much each proposal counted,
+        logged as ``trials/K/weights`` (the built-in arbiters normalise them to
+        sum 1; the core does not require it). A negative or non-finite weight
+        ends the run with a one-line plugin error.
+
         A fused speed of ``None`` means the run's ``experiment.default_speed``.
         The run driver clips the result to the robot's limits.
         """

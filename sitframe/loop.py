@@ -712,8 +712,9 @@ def _check_trial_values(readings: np.ndarray, u: np.ndarray, weights: np.ndarray
             (u, nonfinite(u) | (u < 0).any(axis=1)
              | (np.abs(u.sum(axis=1) - 1.0) > MEMBERSHIP_SUM_TOL), "interpreter", "memberships",
              lambda m: memberships_mismatch(m, u.shape[1]) or "invalid"),
-            (weights, nonfinite(weights), "arbiter", "combine",
-             lambda w: f"returned non-finite weights {w.tolist()}")):
+            (weights, nonfinite(weights) | (weights < 0).any(axis=1), "arbiter", "combine",
+             lambda w: f"returned {'non-finite' if not np.isfinite(w).all() else 'negative'} "
+                       f"weights {w.tolist()}, expected the share each proposal got (>= 0)")):
         if bad.any():
             t = int(np.argmax(bad))
             raise PluginFault(why(values[t]), where=str(origins[key]), method=method,

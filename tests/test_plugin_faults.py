@@ -610,6 +610,10 @@ def sitframe_behaviours():
           arbiter("return (good[0], np.ones(3)) if self.now else good"), 3,
           A, "combine() in trial 1", "weights of shape (3,), expected (1,)", add=ARBITER_ADD,
           trial=1),
+    fault("arbiter-negative-weights",  # was logged as a behaviour's weight, unnoticed
+          arbiter("return (good[0], -good[1]) if self.now else good"), 3,
+          A, "combine() in trial 1", "returned negative weights [-1.0], expected the share each "
+          "proposal got (>= 0)", add=ARBITER_ADD, trial=1),
     fault("arbiter-empties-the-proposals",  # was a traceback when the trial was logged
           arbiter("proposals.clear()\nreturn good"), 3,
           A, "combine() in trial 0, iteration 0", "changed the proposals it was given: 0 left of 1",
