@@ -86,7 +86,10 @@ def evaluate_log(
     replaced by the log's learned (else frozen) behaviour (its table and its policy), with
     the log's situations. ``arbiter`` names another arbiter (its own
     parameters are kept if the fusion config configures that arbiter, else
-    its defaults). Returns ``episodes``, ``success_rate``,
+    its defaults); a learned arbitration in the log belongs to the arbiter
+    that learned it, so another arbiter runs without it, and an arbiter that
+    learns (it has ``policy()``) with no learned arbitration of its own in the
+    log is an input error, not an untrained run. Returns ``episodes``, ``success_rate``,
     ``collisions_per_episode``, ``collision_free_rate``, ``spl``,
     ``mean_time_s``, ``heading_change_per_m``, ``mean_path_length_m``.
 
@@ -127,8 +130,17 @@ def evaluate_log(
                                                    log_path)
         if arbiter is not None:
             params = cfg["arbiter"] if cfg["arbiter"].get("component") == arbiter else {}
+            if not params:  # (a learned arbitration belongs to the arbiter that learned it)
+                policies.pop("arbiter", None)
             cfg["arbiter"] = {**params, "component": arbiter}
         res = Resolved.build(cfg, registry, source)
+    if callable(getattr(res.arbiter(), "policy", None)) and "arbiter" not in policies:
+        name = res.config.arbiter.name
+        raise InputError(f"arbiter '{name}' learns its arbitration, but trial {trial} of the log "
+                         f"has no arbitration learned by '{name}' to run; expected an arbiter "
+                         "that learns nothing (e.g. cdb, priority) or the log of a run that "
+                         f"learned with '{name}'", file=log_path,
+                         key="--arbiter" if arbiter is not None else "arbiter")
     res.world(world, key="--world")
     check_state(res, state, log_path, log.sensor)
     for label in set(policies) & set(res.config.behaviours):

@@ -372,3 +372,66 @@ def test_train_detour_changes_the_training_pairs_only():
         GoalEpisodes(train_detour=1.5)
     with pytest.raises(InputError, match="detour_ratio"):
         GoalEpisodes(detour_ratio=1.0)
+
+
+@pytest.fixture(scope="module")
+def learned_log(tmp_path_factory, oa_log) -> str:
+    """A short ``goal-finding-learned`` run on oa_log's situations and rule base (the wall
+    follower is oa_log's avoider under another label: only the arbitration matters here)."""
+    d = tmp_path_factory.mktemp("gfl")
+    text = preset_text("goal-finding-learned").split("\n[prerequisites]")[0]
+    text = text.replace("logs/obstacle-avoidance-12.h5", oa_log).replace(
+        "logs/wall-following-12.h5", oa_log).replace(
+        'behaviour = "avoid", trial = { world = "goal-training", episodes = 100, seed = 0 }',
+        'behaviour = "avoid", trial = 0').replace(
+        'trial = "best", behaviour = "follow"', 'trial = 0, behaviour = "avoid"').replace(
+        "headings = [90, 60, 40, 20, 0, -20, -40, -60, -90]",
+        "headings = [90, 60, 30, 0, -30, -60, -90]").replace(
+        "trials = 11", "trials = 1").replace("iterations = 20000", "iterations = 300").replace(
+        "episodes = 50", "episodes = 2").replace(
+        'worlds = ["goal", "novel-1", "novel-2", "multi-room", "u-trap"]', 'worlds = ["goal"]')
+    (d / "gfl.toml").write_text(text)
+    out = str(d / "gfl.h5")
+    assert main(["run", str(d / "gfl.toml"), "--out", out]) == 0
+    return out
+
+
+def test_evaluate_runs_the_learned_arbitration_in_any_world_file(learned_log, tmp_path,
+                                                                 capsys, monkeypatch):
+    """``sitframe evaluate LOG --world W --goal-episodes N --json`` on a learned-arbitration
+    log freezes the arbiter with the trial's learned arbitration, in a world of our own."""
+    import sitframe.plugins.learned_arbiter as la
+
+    world = tmp_path / "l-room.toml"
+    world.write_text('name = "l-room"\n[robot]\nstart = [1, 1, 0]\n[[walls]]\npoints = '
+                     '[[0, 0], [9, 0], [9, 4], [4, 4], [4, 9], [0, 9], [0, 0]]\n')
+    loaded = []
+    load = la.FuzzyQArbiter.load_policy
+    monkeypatch.setattr(la.FuzzyQArbiter, "load_policy",
+                        lambda self, p: (loaded.append(p), load(self, p))[1])
+    assert main(["evaluate", learned_log, "--world", str(world), "--goal-episodes", "3",
+                 "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["arbiter"] == "fuzzy-q-arbiter" and doc["episodes"] == 3
+    assert set(AGGREGATE_KEYS) <= set(doc)
+    rules = open_log(learned_log).trial(0).policies["arbiter"]
+    assert loaded
+    for got in loaded:
+        assert set(got.outputs) == set(rules.outputs)
+        for name, o in rules.outputs.items():
+            np.testing.assert_array_equal(got.outputs[name].rules, o.rules)
+
+
+def test_evaluate_with_another_arbiter_drops_the_learned_arbitration(learned_log, oa_log,
+                                                                     capsys):
+    """``--arbiter cdb`` on a learned-arbitration log runs CDB over the same behaviours (was
+    "the log's contents are damaged": the learned arbitration was handed to CDB); a learning
+    arbiter asked for on a log that learned none is refused instead of run untrained."""
+    assert evaluate_log(learned_log, world="goal", goal_episodes=2,
+                        arbiter="cdb")["arbiter"] == "cdb"
+    assert main(["evaluate", oa_log, "--world", "goal", "--goal-episodes", "2",
+                 "--arbiter", "fuzzy-q-arbiter"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"sitframe: error: {oa_log}: --arbiter: ")
+    assert "arbiter 'fuzzy-q-arbiter' learns its arbitration, but trial 0 of the log has no " \
+        "arbitration learned by 'fuzzy-q-arbiter'" in err[0]
