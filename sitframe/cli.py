@@ -291,7 +291,12 @@ def _execute(exp: Any, kwargs: dict[str, Any], *, replacing: bool = False,
     failed = True
     try:
         _claim(exp.out, replacing=replacing, key=key)
-        result = exp.run(**kwargs)
+        try:
+            result = exp.run(**kwargs)
+        except InputError as exc:  # a setting a component found wrong as it ran: the config's
+            if exc.file is None and exc.key:
+                raise exc.at(file=exp.res.file) from None
+            raise
         failed = False
         return result
     finally:

@@ -435,3 +435,15 @@ def test_evaluate_with_another_arbiter_drops_the_learned_arbitration(learned_log
     assert len(err) == 1 and err[0].startswith(f"sitframe: error: {oa_log}: --arbiter: ")
     assert "arbiter 'fuzzy-q-arbiter' learns its arbitration, but trial 0 of the log has no " \
         "arbitration learned by 'fuzzy-q-arbiter'" in err[0]
+
+
+def test_a_setting_found_wrong_while_running_names_the_config_file(tmp_path, oa_log, capsys):
+    """``min_distance`` no pair of the world meets is found when the pairs are drawn, as the
+    run goes: the one line names the config file too (it named only the key)."""
+    path = goal_config(tmp_path, oa_log)
+    Path(path).write_text(Path(path).read_text().replace("min_distance = 3.0",
+                                                         "min_distance = 40.0"))
+    assert main(["run", path, "--out", str(tmp_path / "x.h5")]) == 2
+    err = [ln for ln in capsys.readouterr().err.splitlines() if "error" in ln]
+    assert len(err) == 1 and err[0].startswith(f"sitframe: error: {path}: goal.min_distance: "
+                                               "found no start and goal 40 m apart")
