@@ -294,7 +294,7 @@ def _execute(exp: Any, kwargs: dict[str, Any], *, replacing: bool = False,
         try:
             result = exp.run(**kwargs)
         except InputError as exc:  # a setting a component found wrong as it ran: the config's
-            if exc.file is None and exc.key:
+            if exc.file is None and exc.key and not exc.key.startswith("-"):  # (not an option)
                 raise exc.at(file=exp.res.file) from None
             raise
         failed = False
