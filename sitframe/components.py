@@ -222,6 +222,12 @@ class Arbiter(Protocol):
     ``reward = "..."`` (and ``reward_params``) in ``[arbiter]`` and a method
     ``learn(transition, reward)``; it may also have ``reset``, ``policy`` and
     ``load_policy`` (a learned policy is logged under the label ``arbiter``).
+    Its policy is a situation rule base like a behaviour's: every output
+    holds one rule per situation, shape (c,); an arbiter whose state adds a
+    context to the situations logs one output per context (``fuzzy-q-arbiter``:
+    ``ahead``, ``left``, ..., ``right_stalled``). A policy over another state
+    (e.g. the goal's bearing alone) is refused at the end of the first trial,
+    in one line; such an arbiter keeps what it learned in ``trial_data()``.
     """
 
     name: ClassVar[str]
