@@ -54,6 +54,7 @@ from sitframe.errors import (
     PluginError,
     PluginFault,
     forget_notes,
+    located_in,
     note,
 )
 
@@ -291,12 +292,8 @@ def _execute(exp: Any, kwargs: dict[str, Any], *, replacing: bool = False,
     failed = True
     try:
         _claim(exp.out, replacing=replacing, key=key)
-        try:
+        with located_in(exp.res.file):  # (a setting a component found wrong as it ran)
             result = exp.run(**kwargs)
-        except InputError as exc:  # a setting a component found wrong as it ran: the config's
-            if exc.file is None and exc.key and not exc.key.startswith("-"):  # (not an option)
-                raise exc.at(file=exp.res.file) from None
-            raise
         failed = False
         return result
     finally:

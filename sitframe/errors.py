@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import difflib
 import sys
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 
@@ -140,3 +141,17 @@ def _printable(s: str) -> str:
     """``s``, or its escaped form if it holds control or other unprintable characters
     (a TOML key or a file name may contain a newline)."""
     return s if s.isprintable() else s.encode("unicode_escape").decode("ascii")
+
+
+@contextmanager
+def located_in(file: str | None) -> Iterator[None]:
+    """Locate in ``file`` an :class:`InputError` raised inside the block that names a config
+    key but no file: a setting a component finds wrong only as a run goes (e.g. the goal
+    pairs' ``min_distance`` in a world too small), whose key is in that config or log.
+    Errors naming a command-line option (``--scheduler``) are left as they are."""
+    try:
+        yield
+    except InputError as exc:
+        if exc.file is None and exc.key and not exc.key.startswith("-") and file:
+            raise exc.at(file=file) from None
+        raise

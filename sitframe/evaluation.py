@@ -23,7 +23,7 @@ from sitframe.config import (
     validate_config,
 )
 from sitframe.contract import BoundaryError, call, check_data
-from sitframe.errors import InputError, PluginFault
+from sitframe.errors import InputError, PluginFault, located_in
 from sitframe.logged import (
     BEST_TRIAL_RULE,
     best_of,
@@ -134,13 +134,7 @@ def evaluate_log(
                 policies.pop("arbiter", None)
             cfg["arbiter"] = {**params, "component": arbiter}
         res = Resolved.build(cfg, registry, source)
-    if callable(getattr(res.arbiter(), "policy", None)) and "arbiter" not in policies:
-        name = res.config.arbiter.name
-        raise InputError(f"arbiter '{name}' learns its arbitration, but trial {trial} of the log "
-                         f"has no arbitration learned by '{name}' to run; expected an arbiter "
-                         "that learns nothing (e.g. cdb, priority) or the log of a run that "
-                         f"learned with '{name}'", file=log_path,
-                         key="--arbiter" if arbiter is not None else "arbiter")
+    _check_arbitration(res, policies, trial, log_path, arbiter)
     res.world(world, key="--world")
     check_state(res, state, log_path, log.sensor)
     for label in set(policies) & set(res.config.behaviours):
@@ -156,15 +150,29 @@ def evaluate_log(
                                    else {"iterations": iterations})}
     res = Resolved.build(cfg, registry, source)
     stage = (STAGE_BATCH, 0) if goal_episodes else (STAGE_EVAL, trial)
-    result = simulate(res, TrialSpec(index=trial, seed=stage_seed(seed, *stage), world=world,
-                                     iterations=int(res.protocol(name).iterations),
-                                     learn=False, interpreter_state=state, policies=policies,
-                                     protocol=name))
+    with located_in(source):  # (a setting of the log's config found wrong in this world)
+        result = simulate(res, TrialSpec(index=trial, seed=stage_seed(seed, *stage), world=world,
+                                         iterations=int(res.protocol(name).iterations),
+                                         learn=False, interpreter_state=state,
+                                         policies=policies, protocol=name))
     out = {"log": log_path, "world": world, "trial": trial}
     if goal_episodes:
         return {**out, "arbiter": res.config.arbiter.name, **batch_scores(result)}
     out.update({key: result.summary[key] for key in EVAL_KEYS})
     return {**out, **_reward_metrics(res, result.arrays)}
+
+
+def _check_arbitration(res: Resolved, policies: dict[str, Any], trial: int, log_path: str,
+                       arbiter: str | None) -> None:
+    """Refuse to run an arbiter that learns (it has ``policy()``) without an arbitration it
+    learned: that would score an untrained arbitration as if it were the log's."""
+    if callable(getattr(res.arbiter(), "policy", None)) and "arbiter" not in policies:
+        name = res.config.arbiter.name
+        raise InputError(f"arbiter '{name}' learns its arbitration, but trial {trial} of the log "
+                         f"has no arbitration learned by '{name}' to run; expected an arbiter "
+                         "that learns nothing (e.g. cdb, priority) or the log of a run that "
+                         f"learned with '{name}'", file=log_path,
+                         key="--arbiter" if arbiter is not None else "arbiter")
 
 
 def _reward_metrics(res: Resolved, arrays: dict[str, np.ndarray]) -> dict[str, Any]:

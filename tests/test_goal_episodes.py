@@ -447,3 +447,17 @@ def test_a_setting_found_wrong_while_running_names_the_config_file(tmp_path, oa_
     err = [ln for ln in capsys.readouterr().err.splitlines() if "error" in ln]
     assert len(err) == 1 and err[0].startswith(f"sitframe: error: {path}: goal.min_distance: "
                                                "found no start and goal 40 m apart")
+
+
+def test_evaluate_in_a_room_too_small_for_the_pairs_names_where_min_distance_is_set(
+        oa_log, learned_log, tmp_path, capsys):
+    """The pairs' ``min_distance`` comes from the fusion config (a log without a protocol) or
+    from the log's own config (a goal run): the one line names that file, not just the key."""
+    small = tmp_path / "small.toml"
+    small.write_text('name = "small"\n[robot]\nstart = [1, 1, 0]\n[[walls]]\n'
+                     'points = [[0, 0], [3, 0], [3, 3], [0, 3], [0, 0]]\n')
+    for log, where in ((learned_log, learned_log), (oa_log, "preset:goal-finding")):
+        assert main(["evaluate", log, "--world", str(small), "--goal-episodes", "2"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(
+            f"sitframe: error: {where}: goal.min_distance: found no start and goal 3 m apart")
