@@ -109,7 +109,8 @@ class Experiment:
             seed=e.seed, out=out, n_trials=e.trials, iterations=e.iterations, plugins=plugins,
             worlds=worlds,
             extra={"versions": versions(), "source": source or "",
-                   "sensor": self.res.run.sensor.as_dict()},
+                   "sensor": self.res.run.sensor.as_dict(),
+                   "evaluation": {"protocol": self.protocol, "worlds": self.eval_worlds}},
         )
 
     # -- stages ------------------------------------------------------------

@@ -10,7 +10,10 @@ Layout (schema ``sitframe-log``, version :data:`SCHEMA_VERSION`)::
                           failure (one line, when plugin code failed), inputs
                           (JSON: SHA-256 of what the run read from other logs,
                           e.g. ``policy_from/<label>``; ``run --resume`` refuses
-                          when any of these, the worlds or the plugins changed)
+                          when any of these, the worlds or the plugins changed),
+                          evaluation (JSON: the evaluation protocol and its worlds,
+                          e.g. {"protocol": "goal-episodes", "worlds": [...]};
+                          absent in logs written before it was recorded)
     /collect/             samples (n, d) [m], poses (n, 3) [m, m, rad],
                           source (n,) world index; attrs worlds (JSON)
     /cluster/             trial_centers (T, c, d), trial_measures (T, k) with
@@ -375,6 +378,8 @@ class LogWriter:
                     "source": str(ex.get("source", "")),
                     "versions": json.dumps(ex.get("versions", {})),
                     "plugins": json.dumps(info.plugins), "worlds": json.dumps(info.worlds),
+                    **({"evaluation": json.dumps(ex["evaluation"])} if ex.get("evaluation")
+                       else {}),
                     **({"sensor": json.dumps(ex["sensor"])} if ex.get("sensor") else {}),
                     "inputs": json.dumps(ex.get("inputs", {})),
                     **({"code_hash": str(ex["code_hash"])} if ex.get("code_hash") else {})})

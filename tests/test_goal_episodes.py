@@ -470,3 +470,24 @@ def test_a_sweep_point_failing_on_a_setting_names_the_sweep_file(tmp_path, oa_lo
     assert main(["sweep", str(sw), "--out", str(tmp_path / "out")]) == 2
     err = [ln for ln in capsys.readouterr().err.splitlines() if "error" in ln]
     assert len(err) == 1 and err[0].startswith(f"sitframe: error: {sw}: goal.min_distance: ")
+
+
+def test_a_goal_runs_log_is_complete_and_a_missing_evaluation_is_named(learned_log, tmp_path):
+    """The log records the evaluation protocol's worlds (a goal run's ``[goal] worlds``), so
+    an incomplete-log check does not expect ``[evaluate] worlds`` (it said "evaluation in
+    'training' missing" for every complete goal-finding-learned log) and still names a world
+    a trial lacks."""
+    import shutil
+
+    import h5py
+
+    from sitframe.analysis.report import log_problems
+
+    assert json.loads(open_log(learned_log).attrs["evaluation"]) == {
+        "protocol": "goal-episodes", "worlds": ["goal"]}
+    assert log_problems(learned_log) == []
+    cut = tmp_path / "cut.h5"
+    shutil.copy(learned_log, cut)
+    with h5py.File(cut, "a") as f:
+        del f["trials/0000/episodes/eval/goal"]
+    assert log_problems(str(cut)) == ["evaluation in 'goal' missing for trial(s) 0"]

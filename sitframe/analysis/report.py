@@ -23,6 +23,7 @@ analysed as far as they go; what is missing is listed in ``index.md`` and in
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import tempfile
@@ -97,8 +98,10 @@ def log_problems(log: R.LogLike) -> list[str]:
 
     Checks the status attribute, the stages the config asked for
     (``experiment.stages``), the number of finished trials against
-    ``n_trials``, and each finished trial's evaluation episodes against
-    ``evaluate.worlds``.
+    ``n_trials``, and, in a run that learns and evaluates, each finished
+    trial's evaluations against the worlds the others were evaluated in
+    (the evaluation protocol's, e.g. a goal run's ``[goal] worlds``; where no
+    trial has one, ``[evaluate] worlds``).
     """
     lg = R.as_log(log)
     out: list[str] = []
@@ -122,17 +125,21 @@ def log_problems(log: R.LogLike) -> list[str]:
         missing = sorted(set(range(n)) - set(have))
         if missing:
             out.append(f"{len(missing)} of {n} learning trials missing: {_ranges(missing)}")
-    if "evaluate" in stages and have:
-        worlds = list(cfg.get("evaluate", {}).get("worlds", []))
-        if worlds:
-            lacking: dict[str, list[int]] = {}
-            with lg._file() as f:
-                for k in have:
-                    g = f[f"trials/{k:04d}"]
-                    for w in worlds:
-                        if f"episodes/eval/{w}/pose" not in g:
-                            lacking.setdefault(w, []).append(k)
-            for w, ks in lacking.items():
+    if "evaluate" in stages and "learn" in stages and have:  # (else the batches are trials)
+        with lg._file() as f:
+            done = {k: {w for w, e in f.get(f"trials/{k:04d}/episodes/eval", {}).items()
+                        if "pose" in e} for k in have}
+        # The worlds of the run's evaluation protocol (``[evaluate] worlds`` for the frozen
+        # one, a goal run's ``[goal] worlds``, ...), as the log recorded them; a log written
+        # before it did: the worlds any trial was evaluated in, else ``[evaluate]``'s.
+        try:
+            worlds = list(json.loads(lg.attrs["evaluation"])["worlds"])
+        except (KeyError, TypeError, ValueError):
+            worlds = sorted(set().union(*done.values())) or \
+                list(cfg.get("evaluate", {}).get("worlds", []))
+        for w in worlds:
+            ks = [k for k in have if w not in done[k]]
+            if ks:
                 out.append(f"evaluation in '{w}' missing for trial(s) {_ranges(ks)}")
     return out
 
