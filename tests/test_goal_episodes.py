@@ -491,3 +491,35 @@ def test_a_goal_runs_log_is_complete_and_a_missing_evaluation_is_named(learned_l
     with h5py.File(cut, "a") as f:
         del f["trials/0000/episodes/eval/goal"]
     assert log_problems(str(cut)) == ["evaluation in 'goal' missing for trial(s) 0"]
+
+
+def test_path_figures_of_goal_episodes_draw_no_jump_between_episodes(learned_log):
+    """A chain of goal episodes (a batch: one more pose row per episode; a learning trial:
+    the next start replaces the last step's end) is drawn episode by episode: no segment
+    joins one episode's end to the next one's start (they crossed walls in the figures),
+    and each episode's goal is starred."""
+    from matplotlib.collections import LineCollection
+
+    from sitframe.analysis import learning_plots as LP
+    from sitframe.analysis.results import evaluation_episodes
+
+    log = open_log(learned_log)
+    tr = log.trial(0)
+    world = parse_world(log.worlds["goal"])
+    ep = evaluation_episodes(tr)["goal"]
+    n_it = len(ep["collision"])
+    assert ep["pose"].shape[0] == n_it + len(ep["first_iteration"])  # (the batch layout)
+    training = parse_world(log.worlds["goal-training"])
+    for fig, n in ((LP.plot_evaluation_paths({"goal": world}, {"goal": ep}), n_it),
+                   (LP.plot_trajectory(training, tr.arrays["pose"],
+                                       collision=tr.arrays["collision"],
+                                       first=tr.episodes["learn/first_iteration"],
+                                       goals=tr.episodes["learn/goal"]),
+                    len(tr.arrays["collision"]) - (len(tr.episodes["learn/first_iteration"]) - 1))):
+        ax = fig.axes[0]
+        (lc,) = [c for c in ax.collections if isinstance(c, LineCollection)]
+        seg = np.asarray(lc.get_segments())
+        step = np.hypot(*(seg[:, 1] - seg[:, 0]).T)
+        assert len(seg) == n and step.max() < 0.2  # (0.10 m/s x 1.5 s = 0.15 m per step)
+        stars = [ln for ln in ax.lines if ln.get_marker() == "*"]
+        assert len(stars) == 1 and len(stars[0].get_xdata()) >= 1

@@ -345,22 +345,49 @@ def plot_learning_curves(
 
 
 def _draw_path(ax, world: World, pose: np.ndarray, collision: np.ndarray | None,
-               contact: np.ndarray | None, start: int, stop: int, radius: float):
-    """Draw the world and the path of iterations [start, stop); return the LineCollection."""
-    plot_world(world, ax=ax, show_trajectories=False, show_start=False, show_goal=True,
-               robot_radius=radius)
-    xy = np.asarray(pose)[start:stop + 1, :2]
-    seg = np.stack([xy[:-1], xy[1:]], axis=1)
+               contact: np.ndarray | None, start: int, stop: int, radius: float,
+               first: np.ndarray | None = None, goals: np.ndarray | None = None):
+    """Draw the world and the path of iterations [start, stop); return the LineCollection
+    and the number of collisions drawn.
+
+    ``first``: the first iteration of each episode, when the path is a chain of
+    episodes (goal episodes). A learning trial's chain has one pose row per
+    iteration and one more, the next episode's start replacing the last step's
+    end; an evaluation batch has one more row per episode (each episode's end).
+    Either way the jump from one episode to the next is not drawn, and each
+    drawn episode's goal (``goals``, (episodes, >= 2) [m]) is starred instead
+    of the world's ``[goal]``.
+    """
+    plot_world(world, ax=ax, show_trajectories=False, show_start=False,
+               show_goal=goals is None, robot_radius=radius)
+    P = np.asarray(pose)
+    it = np.arange(start, stop)
+    row = it.copy()  # the pose row each iteration starts from
+    if first is not None:
+        f = np.asarray(first, dtype=np.intp)
+        n_it = P.shape[0] - 1 if collision is None else len(collision)
+        if P.shape[0] == n_it + len(f):  # (a batch: each episode ends in a row of its own)
+            row = it + np.searchsorted(f, it, side="right") - 1
+        else:  # (a learning chain: iteration first[j] - 1 ends where episode j starts)
+            keep = ~np.isin(it, f[f > 0] - 1)
+            it, row = it[keep], row[keep]
+        if goals is not None:
+            g = np.asarray(goals, dtype=float)[:len(f), :2]
+            ends = np.append(f[1:], np.iinfo(np.intp).max)[:len(g)]
+            shown = g[(f[:len(g)] < stop) & (ends > start)]
+            ax.plot(shown[:, 0], shown[:, 1], ls="", marker="*", ms=7, color="darkgoldenrod",
+                    zorder=6)
+    seg = np.stack([P[row, :2], P[row + 1, :2]], axis=1)
     lc = LineCollection(seg, cmap=_path_cmap(), lw=0.9, zorder=5)
-    lc.set_array(np.arange(start, start + seg.shape[0]))
+    lc.set_array(it)
     lc.set_clim(start, max(stop, start + 1))
     ax.add_collection(lc)
-    ax.plot(*xy[0], "o", ms=4.5, mfc="white", mec="black", mew=1.0, zorder=7)
-    ax.plot(*xy[-1], "s", ms=4.5, mfc="black", mec="black", zorder=7)
-    idx = np.zeros(0, np.intp) if collision is None else \
-        np.flatnonzero(np.asarray(collision, dtype=bool)[start:stop]) + start
-    if idx.size:
-        pts = collision_points(pose, idx, contact)
+    if len(row):
+        ax.plot(*P[row[0], :2], "o", ms=4.5, mfc="white", mec="black", mew=1.0, zorder=7)
+        ax.plot(*P[row[-1] + 1, :2], "s", ms=4.5, mfc="black", mec="black", zorder=7)
+    hit = np.zeros(0, bool) if collision is None else np.asarray(collision, dtype=bool)[it]
+    if hit.any():
+        pts = collision_points(P, it[hit], contact, rows=row[hit])
         ax.plot(pts[:, 0], pts[:, 1], "x", ms=4, mew=1.1, color=_C["vermillion"], zorder=8)
     x0, y0, x1, y1 = world.bounds
     if max(x1 - x0, y1 - y0) > 8:  # 1 m ticks crowd a column-wide panel; grid stays at 1 m
@@ -373,11 +400,11 @@ def _draw_path(ax, world: World, pose: np.ndarray, collision: np.ndarray | None,
     ax.tick_params(labelsize=_FONT - 1)
     ax.xaxis.label.set_fontsize(_FONT)
     ax.yaxis.label.set_fontsize(_FONT)
-    return lc, idx.size
+    return lc, int(hit.sum())
 
 
 def _path_keys(fig: Figure, lc: LineCollection, ax: Any, collisions: bool,
-               **colorbar: Any) -> None:
+               goals: bool = False, **colorbar: Any) -> None:
     """The colour bar (iteration) beside ``ax`` and the legend (start, end, collisions) below."""
     fig.set_layout_engine("constrained")
     cb = fig.colorbar(lc, ax=ax, **colorbar)
@@ -388,6 +415,9 @@ def _path_keys(fig: Figure, lc: LineCollection, ax: Any, collisions: bool,
     if collisions:
         handles.append(Line2D([], [], ls="", marker="x", ms=4, mew=1.1, color=_C["vermillion"],
                               label="collision"))
+    if goals:
+        handles.append(Line2D([], [], ls="", marker="*", ms=7, color="darkgoldenrod",
+                              label="episode goal"))
     fig.legend(handles=handles, loc="outside lower center", ncols=len(handles),
                fontsize=_FONT - 1, frameon=False)
 
@@ -408,6 +438,8 @@ def plot_trajectory(
     stop: int | None = None,
     robot_radius: float = 0.15,
     title: str | None = None,
+    first: np.ndarray | None = None,
+    goals: np.ndarray | None = None,
 ) -> Figure:
     """The robot's path on the world, coloured by iteration, collisions marked (Figs. 5.10/5.11).
 
@@ -427,6 +459,10 @@ def plot_trajectory(
     robot_radius : float
         For the world drawing, metres.
     title : str, optional
+    first, goals : array_like, optional
+        A chain of episodes (a learning trial run in goal episodes): the first
+        iteration of each, and its goal (episodes, >= 2) [m]; the jumps between
+        episodes are not drawn and the drawn episodes' goals are starred.
 
     Returns
     -------
@@ -440,8 +476,9 @@ def plot_trajectory(
     aspect = (y1 - y0 + 0.6) / (x1 - x0 + 0.6)
     fig = Figure(figsize=(_COL, min((_COL - 1.25) * aspect + 1.05, 5.5)))
     ax = fig.add_subplot()
-    lc, n_coll = _draw_path(ax, world, P, collision, contact, s, e, robot_radius)
-    _path_keys(fig, lc, ax, collision is not None, shrink=0.95, pad=0.02, aspect=25)
+    lc, n_coll = _draw_path(ax, world, P, collision, contact, s, e, robot_radius, first, goals)
+    _path_keys(fig, lc, ax, collision is not None, first is not None and goals is not None,
+               shrink=0.95, pad=0.02, aspect=25)
     ax.set_title(title or f"{world.name}: it. {s}–{e}, {n_coll} collisions", fontsize=_FONT)
     return fig
 
@@ -463,7 +500,9 @@ def plot_evaluation_paths(
     ----------
     worlds : mapping name -> World
     episodes : mapping name -> {"pose": (n+1, 3), "collision": (n,)}
-        As returned by :func:`sitframe.analysis.results.evaluation_episodes`.
+        As returned by :func:`sitframe.analysis.results.evaluation_episodes`;
+        a batch of goal episodes (``first_iteration``, ``goal``) is drawn
+        episode by episode, each with its goal starred.
     start, stop : int, optional
         Iteration window drawn in every panel (collisions counted in it).
     robot_radius : float
@@ -486,14 +525,17 @@ def plot_evaluation_paths(
     for k, name in enumerate(names):
         ax = fig.add_subplot(nrows, ncols, k + 1)
         ep = episodes[name]
-        n = np.asarray(ep["pose"]).shape[0] - 1
+        n = len(ep["collision"]) if "collision" in ep else np.asarray(ep["pose"]).shape[0] - 1
         s, e = _window(n, start, stop)
         lc, n_coll = _draw_path(ax, worlds[name], ep["pose"], ep.get("collision"),
-                                ep.get("contact"), s, e, robot_radius)
+                                ep.get("contact"), s, e, robot_radius,
+                                ep.get("first_iteration"), ep.get("goal"))
         cov = "" if not coverage or name not in coverage else (
             f", coverage {coverage[name]:.2f}")
         ax.set_title(f"{name}: it. {s}–{e}, {n_coll} coll.{cov}", fontsize=_FONT - 1)
-    _path_keys(fig, lc, fig.axes, True, shrink=0.7, pad=0.01, aspect=30)
+    _path_keys(fig, lc, fig.axes, True,
+               any("first_iteration" in e and "goal" in e for e in episodes.values()),
+               shrink=0.7, pad=0.01, aspect=30)
     if title:
         fig.suptitle(title, fontsize=_FONT + 1)
     return fig

@@ -399,15 +399,17 @@ def evaluation_episodes(trial: TrialLog) -> dict[str, dict[str, np.ndarray]]:
 
 
 def collision_points(pose: np.ndarray, iterations: np.ndarray,
-                     contact: np.ndarray | None = None) -> np.ndarray:
+                     contact: np.ndarray | None = None,
+                     rows: np.ndarray | None = None) -> np.ndarray:
     """Where the collisions of ``iterations`` (k,) happened, (k, 2) [m].
 
     The logged contact point (``contact``, (L, 2)); where there is none (not
     logged, or NaN), the robot's position after the colliding iteration
-    (``pose`` row ``i + 1``).
+    (``pose`` row ``i + 1``, or ``rows + 1`` when the iterations start from
+    other rows, (k,): a batch of episodes has one more pose row per episode).
     """
     it = np.asarray(iterations, dtype=np.intp)
-    after = np.asarray(pose)[it + 1, :2]
+    after = np.asarray(pose)[(it if rows is None else np.asarray(rows, np.intp)) + 1, :2]
     if contact is None:
         return after
     at = np.asarray(contact, dtype=np.float64)[it]
