@@ -523,3 +523,21 @@ def test_path_figures_of_goal_episodes_draw_no_jump_between_episodes(learned_log
         assert len(seg) == n and step.max() < 0.2  # (0.10 m/s x 1.5 s = 0.15 m per step)
         stars = [ln for ln in ax.lines if ln.get_marker() == "*"]
         assert len(stars) == 1 and len(stars[0].get_xdata()) >= 1
+
+
+def test_replay_of_goal_episodes_keeps_each_frame_at_its_reading(learned_log, tmp_path,
+                                                                 oa_log):
+    """A batch's extra pose row per episode shifted the replayed robot one row per episode
+    behind its readings; each episode now has one pose per iteration and one more."""
+    from sitframe.analysis.replay_data import replay_payload
+
+    path = goal_config(tmp_path, oa_log)
+    out = str(tmp_path / "gf.h5")
+    assert main(["run", path, "--out", out]) == 0
+    for name in (learned_log, out):
+        log = open_log(name)
+        eps = replay_payload(log, {k: log.trial(k) for k in log.trial_indices()})["episodes"]
+        batches = [e for e in eps if e["kind"] in ("evaluation", "run")]
+        assert batches
+        for e in batches:
+            assert e["xy"]["shape"][0] == e["n"] + 1 == e["reading"]["shape"][0] + 1

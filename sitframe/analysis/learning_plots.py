@@ -470,7 +470,7 @@ def plot_trajectory(
         One panel, 3.5 in wide (wider for tall worlds), colour bar = iteration.
     """
     P = np.asarray(pose)
-    n = P.shape[0] - 1
+    n = P.shape[0] - 1 if collision is None else len(collision)
     s, e = _window(n, start, stop)
     x0, y0, x1, y1 = world.bounds
     aspect = (y1 - y0 + 0.6) / (x1 - x0 + 0.6)

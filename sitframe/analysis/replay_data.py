@@ -78,6 +78,12 @@ def _episode(P: _Packer, arrays: dict[str, np.ndarray], rules: np.ndarray | None
     pose = np.asarray(arrays["pose"], dtype=np.float64)
     coll = np.asarray(arrays["collision"], dtype=bool)
     n = coll.size
+    first = arrays.get("first_iteration")
+    if first is not None and n and pose.shape[0] == n + len(first):
+        # a batch of episodes ends each in a pose row of its own: the row each iteration
+        # starts from, and the last episode's end (frames stay aligned with the readings)
+        row = np.arange(n) + np.searchsorted(np.asarray(first), np.arange(n), "right") - 1
+        pose = pose[np.append(row, row[-1] + 1)]
     reading = np.clip(np.nan_to_num(np.asarray(arrays["reading"], dtype=np.float64),
                                     nan=max_range, posinf=max_range), 0.0, max_range)
     cmd = np.nan_to_num(np.asarray(arrays["command"], dtype=np.float64))
@@ -153,8 +159,10 @@ def replay_payload(log: Log, trials: dict[int, TrialLog]) -> dict[str, Any]:
         conv = R.convergence_iteration(tr)
         # the rule per situation: per iteration while learning, the frozen policy otherwise
         own = per_it if per_it is not None else (None if learns else frozen)
+        own_arrays = tr.arrays if learns or "first_iteration" not in tr.episodes else \
+            {**tr.arrays, "first_iteration": tr.episodes["first_iteration"]}  # (a batch)
         runs: list[tuple[str, str, dict[str, np.ndarray], np.ndarray | None]] = [
-            ("learning" if learns else "run", tr.world, tr.arrays, own)]
+            ("learning" if learns else "run", tr.world, own_arrays, own)]
         runs += [("evaluation", w, arrays, frozen)
                  for w, arrays in R.evaluation_episodes(tr).items()]
         for kind, world, arrays, rules in runs:

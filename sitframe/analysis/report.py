@@ -422,8 +422,9 @@ def _trial_figures(W: _Writer, lg: Log, tr: TrialLog, worlds: dict[str, Any], wi
                  lambda: LP.plot_trajectory(
                      world, tr.arrays["pose"], collision=tr.arrays.get("collision"),
                      contact=tr.arrays.get("contact"), start=s, stop=e, robot_radius=radius,
-                     first=tr.episodes.get("learn/first_iteration"),
-                     goals=tr.episodes.get("learn/goal"),
+                     first=tr.episodes.get("learn/first_iteration",
+                                           tr.episodes.get("first_iteration")),
+                     goals=tr.episodes.get("learn/goal", tr.episodes.get("goal")),
                      title=f"Trial {k}, {tr.world}, it. {s}–{e}: {_count(tr, s, e)} coll."))
     else:
         W.r.skipped.append(f"trajectory_trial{k}.png: world '{tr.world}' not in the log")
