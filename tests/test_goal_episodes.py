@@ -541,3 +541,7 @@ def test_replay_of_goal_episodes_keeps_each_frame_at_its_reading(learned_log, tm
         assert batches
         for e in batches:
             assert e["xy"]["shape"][0] == e["n"] + 1 == e["reading"]["shape"][0] + 1
+            assert e["goal"]["shape"] == [e["n"], 3]  # (each iteration's episode goal)
+    learning = [e for e in replay_payload(open_log(learned_log), {0: open_log(
+        learned_log).trial(0)})["episodes"] if e["kind"] == "learning"]
+    assert learning and learning[0]["goal"]["shape"] == [learning[0]["n"], 3]

@@ -3,7 +3,8 @@
 Every replayable episode of a log (each learning trial, and each trial's
 frozen-policy evaluation in every evaluation world) is reduced to the arrays
 the replay draws: pose, sensor reading, memberships, command, reward,
-collisions with their contact points and the executed rule per situation.
+collisions with their contact points, the executed rule per situation, and in
+goal episodes each iteration's goal.
 Each array is quantised to integers at a fixed resolution (positions and
 1 mm, heading 1 mrad, ranges 1/250 of the sensor's range (1.2 cm for
 3 m), memberships 0.01, commands 0.1 deg and 1 mm/s,
@@ -79,10 +80,12 @@ def _episode(P: _Packer, arrays: dict[str, np.ndarray], rules: np.ndarray | None
     coll = np.asarray(arrays["collision"], dtype=bool)
     n = coll.size
     first = arrays.get("first_iteration")
-    if first is not None and n and pose.shape[0] == n + len(first):
+    episode = None if first is None or not n else \
+        np.searchsorted(np.asarray(first), np.arange(n), "right") - 1  # of each iteration
+    if episode is not None and pose.shape[0] == n + len(first):
         # a batch of episodes ends each in a pose row of its own: the row each iteration
         # starts from, and the last episode's end (frames stay aligned with the readings)
-        row = np.arange(n) + np.searchsorted(np.asarray(first), np.arange(n), "right") - 1
+        row = np.arange(n) + episode
         pose = pose[np.append(row, row[-1] + 1)]
     reading = np.clip(np.nan_to_num(np.asarray(arrays["reading"], dtype=np.float64),
                                     nan=max_range, posinf=max_range), 0.0, max_range)
@@ -100,6 +103,11 @@ def _episode(P: _Packer, arrays: dict[str, np.ndarray], rules: np.ndarray | None
         "collision": P.add(coll, 1.0),
         "contact": P.add(pts.reshape(-1, 2), SCALES["contact"]),
     }
+    goals = arrays.get("goal")
+    if episode is not None and goals is not None and np.ndim(goals) == 2 and \
+            np.shape(goals)[1] >= 3 and len(goals) == len(first) and np.isfinite(goals).all():
+        out["goal"] = P.add(np.asarray(goals, dtype=np.float64)[episode, :3],
+                            SCALES["pose_xy"])  # (x, y, radius of the iteration's episode)
     rew = [k for k in arrays if k.startswith("reward/")]
     if rew:
         out["reward"] = P.add(np.nan_to_num(arrays[rew[0]]), SCALES["reward"])
@@ -159,8 +167,10 @@ def replay_payload(log: Log, trials: dict[int, TrialLog]) -> dict[str, Any]:
         conv = R.convergence_iteration(tr)
         # the rule per situation: per iteration while learning, the frozen policy otherwise
         own = per_it if per_it is not None else (None if learns else frozen)
-        own_arrays = tr.arrays if learns or "first_iteration" not in tr.episodes else \
-            {**tr.arrays, "first_iteration": tr.episodes["first_iteration"]}  # (a batch)
+        pre = "learn/" if learns else ""  # (a learning chain's episodes, or a batch's)
+        own_arrays = {**tr.arrays, **{k: tr.episodes[pre + k] for k in ("first_iteration",
+                                                                        "goal")
+                                      if pre + k in tr.episodes}}
         runs: list[tuple[str, str, dict[str, np.ndarray], np.ndarray | None]] = [
             ("learning" if learns else "run", tr.world, own_arrays, own)]
         runs += [("evaluation", w, arrays, frozen)

@@ -48,7 +48,7 @@
     ep = D.episodes[j];
     A = {};
     for (const key of ["xy", "th", "reading", "memberships", "heading", "speed", "collision",
-                       "contact", "reward", "rules"]) if (ep[key]) A[key] = view(ep[key]);
+                       "contact", "reward", "rules", "goal"]) if (ep[key]) A[key] = view(ep[key]);
     A.collIdx = [];
     for (let r = 0; r < ep.n; r++) if (A.collision.v[r]) A.collIdx.push(r);
     el.slider.max = ep.n - 1;
@@ -107,9 +107,11 @@
       for (const o of w.obstacles) { poly(ctx, o, true); ctx.fill(); ctx.stroke(); }
       ctx.strokeStyle = "#1a1a1a"; ctx.lineWidth = Math.max(2, px * 3); ctx.lineCap = "round";
       for (const wl of w.walls) { poly(ctx, wl, false); ctx.stroke(); }
-      if (w.goal) {
+      // the goal of this iteration's episode (goal episodes), else the world's [goal]
+      const g = A.goal ? [at(A.goal, i, 0), at(A.goal, i, 1), at(A.goal, i, 2)] : w.goal;
+      if (g) {
         ctx.fillStyle = "rgba(230,159,0,.35)"; ctx.beginPath();
-        ctx.arc(X(w.goal[0]), Y(w.goal[1]), w.goal[2] * scale, 0, 2 * Math.PI); ctx.fill();
+        ctx.arc(X(g[0]), Y(g[1]), g[2] * scale, 0, 2 * Math.PI); ctx.fill();
       }
     }
     // path so far
