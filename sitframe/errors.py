@@ -143,15 +143,20 @@ def _printable(s: str) -> str:
     return s if s.isprintable() else s.encode("unicode_escape").decode("ascii")
 
 
+def located(exc: InputError, file: str | None) -> InputError:
+    """``exc`` located in ``file`` if it names a config key but no file: a setting a
+    component finds wrong only as a run goes (e.g. the goal pairs' ``min_distance`` in a
+    world too small), whose key is in that config or log. Errors naming a command-line
+    option (``--scheduler``) or a file already are returned as they are."""
+    if exc.file is None and exc.key and not exc.key.startswith("-") and file:
+        return exc.at(file=file)
+    return exc
+
+
 @contextmanager
 def located_in(file: str | None) -> Iterator[None]:
-    """Locate in ``file`` an :class:`InputError` raised inside the block that names a config
-    key but no file: a setting a component finds wrong only as a run goes (e.g. the goal
-    pairs' ``min_distance`` in a world too small), whose key is in that config or log.
-    Errors naming a command-line option (``--scheduler``) are left as they are."""
+    """Re-raise an :class:`InputError` of the block :func:`located` in ``file``."""
     try:
         yield
     except InputError as exc:
-        if exc.file is None and exc.key and not exc.key.startswith("-") and file:
-            raise exc.at(file=file) from None
-        raise
+        raise located(exc, file) from None

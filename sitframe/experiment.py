@@ -26,7 +26,14 @@ from sitframe import __version__
 from sitframe.collect import Collected, collect_trajectories, collect_wander, concat_collected
 from sitframe.config import config_hash, to_toml
 from sitframe.contract import BoundaryError, call, check_data, fault, sensor_spec_mismatch
-from sitframe.errors import PLUGIN_ERRORS, InputError, PluginError, PluginFault, TaskCancelled
+from sitframe.errors import (
+    PLUGIN_ERRORS,
+    InputError,
+    PluginError,
+    PluginFault,
+    TaskCancelled,
+    located,
+)
 from sitframe.loop import (
     STAGE_BATCH,
     STAGE_CLUSTER,
@@ -455,6 +462,10 @@ def drive(runs: list[tuple[Experiment, RunPlan]], executor: Any) -> list[RunResu
                     book.trial(*tag, value)
     except BaseException as exc:
         book.stop(exc)
+        task = getattr(exc, "task", None)  # (a trial's: a setting found wrong as it ran)
+        if isinstance(exc, InputError) and task is not None:
+            i = task[0] if isinstance(task, tuple) else task
+            raise located(exc, runs[i][0].res.file) from None
         raise
     wall = time.perf_counter() - t0
     return [RunResult(exp.info, book.results[i], wall, book.status[i], book.states[i],

@@ -432,6 +432,9 @@ class TrialPipeline:
                 except PluginFault as exc:
                     failure = self._fault(failure, kind, tag, exc)
                     continue
+                except InputError as exc:  # (say whose: the run driver locates it)
+                    exc.task = tag
+                    raise
                 if failure is not None and not _earlier(tag, failure[0]):
                     if kind == "learn":
                         self._learning -= 1

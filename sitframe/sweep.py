@@ -81,7 +81,7 @@ from sitframe.config import (
     load_config,
     validate_config,
 )
-from sitframe.errors import InputError, did_you_mean, located_in, note
+from sitframe.errors import InputError, did_you_mean, note
 from sitframe.params import accepted_params, known_keys
 from sitframe.records import summary_key
 from sitframe.robot import RobotParams
@@ -492,8 +492,14 @@ def run_sweep(sweep: Sweep, executor: Any, *, progress: bool = False,
     for pt in todo:
         pt.experiment.info.extra["progress"] = progress
         pt.experiment.info.extra["progress_group"] = f"sweep {sweep.name}"
-    with located_in(str(sweep.file)):  # (a setting found wrong only as a point runs)
+    try:
         drive([(pt.experiment, RunPlan.of(pt.run_kwargs)) for pt in todo], executor)
+    except InputError as exc:  # a setting found wrong only as a point ran: say which point
+        pt = next((p for p in todo if p.experiment.res.file == exc.file), None)
+        if pt is None:
+            raise
+        with _at_point(sweep, pt.name, exc.file):
+            raise
     rows = [summarise_point(pt) for pt in sweep.points]
     return {"name": sweep.name, "out": str(sweep.out), "keys": list(sweep.grid),
             "wall_seconds": round(time.perf_counter() - t0, 3), "points": rows,

@@ -463,13 +463,14 @@ def test_evaluate_in_a_room_too_small_for_the_pairs_names_where_min_distance_is_
             f"sitframe: error: {where}: goal.min_distance: found no start and goal 3 m apart")
 
 
-def test_a_sweep_point_failing_on_a_setting_names_the_sweep_file(tmp_path, oa_log, capsys):
+def test_a_sweep_point_failing_on_a_setting_names_the_sweep_file_and_the_point(tmp_path, oa_log, capsys):
     base = goal_config(tmp_path, oa_log)
     sw = tmp_path / "sw.toml"
     sw.write_text(f'[sweep]\nbase = "{base}"\n[grid]\n"goal.min_distance" = [40.0]\n')
     assert main(["sweep", str(sw), "--out", str(tmp_path / "out")]) == 2
     err = [ln for ln in capsys.readouterr().err.splitlines() if "error" in ln]
-    assert len(err) == 1 and err[0].startswith(f"sitframe: error: {sw}: goal.min_distance: ")
+    assert len(err) == 1 and err[0].startswith(
+        f"sitframe: error: {sw}: point min_distance=40: goal.min_distance: found no start")
 
 
 def test_a_goal_runs_log_is_complete_and_a_missing_evaluation_is_named(learned_log, tmp_path):
