@@ -54,7 +54,6 @@ from sitframe.errors import (
     PluginError,
     PluginFault,
     forget_notes,
-    located_in,
     note,
 )
 
@@ -292,8 +291,7 @@ def _execute(exp: Any, kwargs: dict[str, Any], *, replacing: bool = False,
     failed = True
     try:
         _claim(exp.out, replacing=replacing, key=key)
-        with located_in(exp.res.file):  # (a setting a component found wrong as it ran)
-            result = exp.run(**kwargs)
+        result = exp.run(**kwargs)
         failed = False
         return result
     finally:

@@ -33,6 +33,7 @@ from sitframe.errors import (
     PluginFault,
     TaskCancelled,
     located,
+    located_in,
 )
 from sitframe.loop import (
     STAGE_BATCH,
@@ -442,16 +443,17 @@ def drive(runs: list[tuple[Experiment, RunPlan]], executor: Any) -> list[RunResu
         with pipe:
             for i, (exp, plan) in enumerate(runs):
                 book.status[i] = "running"  # (observers hear the end even if begin fails)
-                exp.begin()
-                if exp.needs_clusters(plan.interpreter_state, plan.collected) and \
-                        len(runs) > 1 and not executor.in_process:
-                    pipe.add_call(i, run_clusters, handles[i])
-                    continue
-                if len(runs) == 1 and "learn" in exp.config.experiment.stages:
-                    if isinstance(handles[i], Setup):  # forked workers inherit what is built
-                        _cache.setdefault(handles[i].key, exp)
-                    executor.warm(warm_up, handles[i])  # workers start while we cluster
-                book.add_trials(i, exp.prepare(plan.interpreter_state, plan.collected))
+                with located_in(exp.res.file):  # (a setting found wrong as the run set up)
+                    exp.begin()
+                    if exp.needs_clusters(plan.interpreter_state, plan.collected) and \
+                            len(runs) > 1 and not executor.in_process:
+                        pipe.add_call(i, run_clusters, handles[i])
+                        continue
+                    if len(runs) == 1 and "learn" in exp.config.experiment.stages:
+                        if isinstance(handles[i], Setup):  # forked workers inherit it
+                            _cache.setdefault(handles[i].key, exp)
+                        executor.warm(warm_up, handles[i])  # workers start while we cluster
+                    book.add_trials(i, exp.prepare(plan.interpreter_state, plan.collected))
             for kind, tag, value in pipe:
                 if kind == "call":
                     collected, fit, state = value
@@ -462,7 +464,7 @@ def drive(runs: list[tuple[Experiment, RunPlan]], executor: Any) -> list[RunResu
                     book.trial(*tag, value)
     except BaseException as exc:
         book.stop(exc)
-        task = getattr(exc, "task", None)  # (a trial's: a setting found wrong as it ran)
+        task = getattr(exc, "task", None)  # (a trial's or a run's: found wrong as it ran)
         if isinstance(exc, InputError) and task is not None:
             i = task[0] if isinstance(task, tuple) else task
             raise located(exc, runs[i][0].res.file) from None

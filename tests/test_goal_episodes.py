@@ -463,7 +463,8 @@ def test_evaluate_in_a_room_too_small_for_the_pairs_names_where_min_distance_is_
             f"sitframe: error: {where}: goal.min_distance: found no start and goal 3 m apart")
 
 
-def test_a_sweep_point_failing_on_a_setting_names_the_sweep_file_and_the_point(tmp_path, oa_log, capsys):
+def test_a_sweep_point_failing_on_a_setting_names_the_sweep_file_and_the_point(tmp_path, oa_log,
+                                                                              capsys):
     base = goal_config(tmp_path, oa_log)
     sw = tmp_path / "sw.toml"
     sw.write_text(f'[sweep]\nbase = "{base}"\n[grid]\n"goal.min_distance" = [40.0]\n')

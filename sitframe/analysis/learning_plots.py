@@ -28,6 +28,7 @@ from sitframe.analysis.results import (
     CollisionIntervals,
     _deg,
     collision_points,
+    episode_rows,
     reward_per_window,
 )
 from sitframe.analysis.world_plot import plot_world
@@ -366,10 +367,9 @@ def _draw_path(ax, world: World, pose: np.ndarray, collision: np.ndarray | None,
     if first is not None:
         f = np.asarray(first, dtype=np.intp)
         n_it = P.shape[0] - 1 if collision is None else len(collision)
-        if P.shape[0] == n_it + len(f):  # (a batch: each episode ends in a row of its own)
-            row = it + np.searchsorted(f, it, side="right") - 1
-        else:  # (a learning chain: iteration first[j] - 1 ends where episode j starts)
-            keep = ~np.isin(it, f[f > 0] - 1)
+        row = episode_rows(n_it, f, P.shape[0])[0][start:stop]
+        if P.shape[0] == n_it + 1:  # (a learning chain: iteration first[j] - 1 ends where
+            keep = ~np.isin(it, f[f > 0] - 1)  # episode j starts: not drawn)
             it, row = it[keep], row[keep]
         if goals is not None:
             g = np.asarray(goals, dtype=float)[:len(f), :2]

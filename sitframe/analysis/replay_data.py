@@ -80,12 +80,9 @@ def _episode(P: _Packer, arrays: dict[str, np.ndarray], rules: np.ndarray | None
     coll = np.asarray(arrays["collision"], dtype=bool)
     n = coll.size
     first = arrays.get("first_iteration")
-    episode = None if first is None or not n else \
-        np.searchsorted(np.asarray(first), np.arange(n), "right") - 1  # of each iteration
-    if episode is not None and pose.shape[0] == n + len(first):
-        # a batch of episodes ends each in a pose row of its own: the row each iteration
-        # starts from, and the last episode's end (frames stay aligned with the readings)
-        row = np.arange(n) + episode
+    episode = None
+    if first is not None and n:  # (a batch's extra row per episode: frames stay aligned)
+        row, episode = R.episode_rows(n, first, pose.shape[0])
         pose = pose[np.append(row, row[-1] + 1)]
     reading = np.clip(np.nan_to_num(np.asarray(arrays["reading"], dtype=np.float64),
                                     nan=max_range, posinf=max_range), 0.0, max_range)

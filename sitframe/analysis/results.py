@@ -378,6 +378,20 @@ def reward_per_window(reward: np.ndarray, window: int = 50) -> np.ndarray:
     return np.add.reduceat(r, starts) / np.diff(np.r_[starts, r.size])
 
 
+def episode_rows(n: int, first: np.ndarray, n_rows: int) -> tuple[np.ndarray, np.ndarray]:
+    """For a chain of episodes (``first``: each one's first iteration) of ``n`` iterations:
+    the pose row each iteration starts from and the episode it belongs to, both (n,).
+
+    A batch of goal episodes ends each episode in a pose row of its own
+    (``n_rows == n + episodes``), so iteration ``i`` of episode ``e`` starts from
+    row ``i + e``; a learning chain (``n + 1`` rows) starts each from row ``i``.
+    """
+    f = np.asarray(first, dtype=np.intp)
+    episode = np.searchsorted(f, np.arange(n), side="right") - 1
+    it = np.arange(n)
+    return (it + episode if n_rows == n + len(f) else it), episode
+
+
 def evaluation_episodes(trial: TrialLog) -> dict[str, dict[str, np.ndarray]]:
     """Evaluation runs of a trial: world name -> {``pose`` (n+1, 3), ``collision`` (n,), ...}.
 
