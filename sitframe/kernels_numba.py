@@ -18,8 +18,9 @@ too (BLAS).
 Why compiled: one sonar read is 40 rays against 40 wall edges and one robot
 step 31 substeps against the edges within reach; in numpy each costs some
 25 small-array calls (about 1 µs of overhead each), in a kernel one call.
-Kernels are compiled on first use and cached on disk (``cache=True``), so only
-the first run after an install pays the compilation.
+Kernels are compiled on first use and cached on disk in the user's cache folder
+(:mod:`sitframe.numba_cache`; never inside the installed package), so only the first run
+after an install pays the compilation.
 
 Segment sets are passed as one ``(5, S)`` array :attr:`SegmentSet.packed
 <sitframe.geometry.SegmentSet>`: rows ``ax, ay, ex, ey, inv_len2``.
@@ -33,7 +34,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from sitframe.numba_cache import announce_compilation
+from sitframe import numba_cache
 
 __all__ = ["arc_angles", "arc_poses", "backoff", "backoffs", "cast", "cast_each",
            "contact_points", "fcm_ratios", "first_contact", "label_strengths", "linspace",
@@ -44,7 +45,7 @@ _EPS = 1e-12  # the hit tolerance of sitframe.geometry._raycast
 _INV_PI = 1.0 / math.pi
 _SINC_EPS = float(np.finfo(np.float64).eps)  # numpy.sinc's stand-in for 0
 
-_JIT = {"cache": True, "nogil": True, "error_model": "numpy", "fastmath": False}
+_JIT = {"cache": numba_cache.configure(), "nogil": True, "error_model": "numpy", "fastmath": False}
 
 
 @njit(**_JIT)
@@ -613,5 +614,5 @@ def _warm() -> None:
     frozen_td(ro, 0.3, True, -1.0, 0.9, 0.5, two, np.zeros(2, dtype=np.intp), out)
 
 
-announce_compilation(Path(__file__))
+numba_cache.announce_compilation(Path(__file__))
 _warm()

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import unittest.mock as mock
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -224,18 +225,21 @@ def test_rim_ranges_many_rows_are_rim_ranges(room: World,
 
 
 def test_the_first_run_after_an_install_says_why_it_waits(tmp_path, monkeypatch) -> None:
-    """On a terminal, a process about to compile the kernels (no numba cache index as new as
-    their source) says so in one line; with the cache filled, or off a terminal, nothing."""
+    """On a terminal, a process about to compile the kernels (no numba cache index in the cache
+    folder as new as their source) says so in one line; with the cache filled, or off a
+    terminal, nothing."""
     import io
     import os
 
+    from numba.core.caching import UserProvidedCacheLocator
+
     from sitframe import numba_cache
 
-    src = tmp_path / "kernels_numba.py"
+    src = tmp_path / "pkg" / "kernels_numba.py"
+    src.parent.mkdir()
     src.write_text("# kernels\n")
-    cache = tmp_path / "__pycache__"
-    cache.mkdir()
-    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    folder = tmp_path / "cache"
+    monkeypatch.setattr(numba_cache, "_CONFIGURED", [folder])
 
     class Terminal(io.StringIO):
         def isatty(self) -> bool:
@@ -246,19 +250,68 @@ def test_the_first_run_after_an_install_says_why_it_waits(tmp_path, monkeypatch)
         numba_cache.announce_compilation(src)
         return stream.getvalue()
 
-    assert numba_cache.compile_pending(src)  # no cache yet
+    assert numba_cache.compile_pending(src, folder)  # no cache yet
     assert said(Terminal()).startswith("sitframe: compiling the simulator's kernels with numba")
     assert said(Terminal()).count("\n") == 1
     assert said(io.StringIO()) == ""  # a pipe or a log: never
-    index = cache / "kernels_numba.cast-40.py311.nbi"
+    sub = folder / UserProvidedCacheLocator.get_suitable_cache_subpath(str(src))
+    sub.mkdir(parents=True)
+    index = sub / "kernels_numba.cast-40.py311.nbi"
     index.write_bytes(b"")
     t = src.stat().st_mtime
     os.utime(index, (t + 1, t + 1))
-    assert not numba_cache.compile_pending(src) and said(Terminal()) == ""
+    assert not numba_cache.compile_pending(src, folder) and said(Terminal()) == ""
     os.utime(src, (t + 2, t + 2))  # the source changed after the cache was written
-    assert numba_cache.compile_pending(src)
-    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "elsewhere"))
-    assert not numba_cache.compile_pending(src)  # a cache elsewhere is not claimed either way
+    assert numba_cache.compile_pending(src, folder)
+    monkeypatch.setattr(numba_cache, "_CONFIGURED", [None])  # no cache: every process compiles
+    assert said(Terminal()) == ""
+
+
+def test_the_kernel_cache_lives_in_the_users_cache_folder(tmp_path, monkeypatch) -> None:
+    """The cache folder is NUMBA_CACHE_DIR if set, else SITFRAME_CACHE_DIR/numba, else the
+    user's cache folder: never the installed package, whose __pycache__ a later editable
+    install would turn into a namespace package."""
+    from numba.core import config
+
+    from sitframe import numba_cache
+
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    monkeypatch.delenv("SITFRAME_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert numba_cache.cache_dir() == tmp_path / "xdg" / "sitframe" / "numba"
+    monkeypatch.setenv("SITFRAME_CACHE_DIR", str(tmp_path / "own"))
+    assert numba_cache.cache_dir() == tmp_path / "own" / "numba"
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba's"))
+    assert numba_cache.cache_dir() == tmp_path / "numba's"
+    monkeypatch.setattr(numba_cache, "_CONFIGURED", [])
+    monkeypatch.setattr(config, "CACHE_DIR", config.CACHE_DIR)
+    assert numba_cache.configure() is True
+    assert config.CACHE_DIR == str(tmp_path / "numba's") and (tmp_path / "numba's").is_dir()
+    package = Path(numba_cache.__file__).parent
+    assert not Path(config.CACHE_DIR).resolve().is_relative_to(package.resolve())
+
+
+def test_an_unwritable_cache_folder_means_no_cache_and_one_warning(tmp_path, monkeypatch,
+                                                                  capsys) -> None:
+    """A cache folder that cannot be made (here: under a regular file) turns caching off with
+    one warning line naming the folder; numba is not pointed anywhere (so it cannot fall
+    back into the package either: the kernels' ``cache`` flag is this answer)."""
+    from numba.core import config
+
+    from sitframe import numba_cache
+
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    monkeypatch.setenv("SITFRAME_CACHE_DIR", str(blocker))
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    monkeypatch.setattr(numba_cache, "_CONFIGURED", [])
+    monkeypatch.setattr(config, "CACHE_DIR", "")
+    assert numba_cache.configure() is False
+    assert numba_cache.configure() is False  # asked again: said once
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("sitframe: warning: kernel cache folder ")
+    assert str(blocker / "numba") in err and "SITFRAME_CACHE_DIR" in err
+    assert config.CACHE_DIR == ""
 
 
 @settings(max_examples=40, deadline=None)
