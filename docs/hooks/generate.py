@@ -1,0 +1,311 @@
+"""The generated parts of the documentation site, made from the code as the site builds.
+
+A MkDocs hooks module (``hooks:`` in mkdocs.yml). A page asks for a generated part with a
+marker line, ``<!-- generated: NAME [ARG] -->``, which :func:`on_page_markdown` replaces
+by what :data:`GENERATORS` ``[NAME]`` returns for it:
+
+``cli``
+    Every command of ``sitframe``, grouped as ``sitframe --help`` groups them, with its
+    usage, options (default and help) and example: from :func:`sitframe.cli.build_parser`.
+``config``
+    Every config key with its type, default, unit and range: from the typed config's
+    declarations (:mod:`sitframe.contract.config`), the ones validation uses.
+``components``
+    Every built-in component with its parameters (default from the signature, type, unit
+    and range where the component declares them): from the plugin registry.
+``layers``
+    The picture of the layers: import-linter's contracts in pyproject.toml for the order,
+    grimp's import graph for the arrows (one per import between two subpackages that no
+    longer chain implies), as a Mermaid diagram; then the contracts, which ``lint-imports``
+    keeps in CI.
+``subpackages``
+    One row per subpackage: its job and what it may import, from its ``__init__``
+    docstring.
+``face``
+    The public face, ``from sitframe import ...``: every name with its documentation.
+``api PACKAGE``
+    A subpackage's modules, documented from their docstrings (mkdocstrings directives).
+
+The functions are plain functions of no MkDocs state, so the tests call them too
+(``tests/test_doc_examples.py``): no page can go stale, and none can miss a command, an
+option or a key.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import re
+import sys
+import tomllib
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _importable() -> None:
+    """The checkout first on ``sys.path``: ``plugins`` (the built-ins' source) and sitframe
+    import from it. (MkDocs restores ``sys.path`` after loading a hooks module, so this is
+    done as each part is made.)"""
+    if str(ROOT) not in sys.path:
+        sys.path.insert(0, str(ROOT))
+
+MARKER = re.compile(r"^<!-- generated: (?P<name>[\w-]+)(?: (?P<arg>[\w.-]+))? -->$",
+                    re.MULTILINE)
+
+#: The subpackages of sitframe, top layer first (the order of the API pages).
+SUBPACKAGES = ("cli", "gym", "analysis", "runs", "logs", "contract", "learning",
+               "situations", "sim")
+
+
+# -- small helpers -----------------------------------------------------------------------
+
+_ROLE = re.compile(r":(?:mod|func|class|data|meth|attr|exc):`(~?)([\w.]+)`")
+
+
+def rst_to_md(text: str) -> str:
+    """Sphinx roles and double backticks of a docstring as Markdown code."""
+    text = _ROLE.sub(lambda m: f"`{m.group(2).rsplit('.', 1)[-1] if m.group(1) else m.group(2)}`",
+                     text)
+    return text.replace("``", "`")
+
+
+def cell(text: Any) -> str:
+    """``text`` fit for one Markdown table cell."""
+    return " ".join(str(text).split()).replace("|", "\\|")
+
+
+def docstring_sections(doc: str) -> tuple[str, dict[str, str]]:
+    """The summary line of a subpackage docstring and its headed paragraphs."""
+    lines = (doc or "").strip().splitlines()
+    summary = lines[0] if lines else ""
+    sections: dict[str, list[str]] = {}
+    current = None
+    for line in lines[1:]:
+        if line and not line.startswith(" "):
+            current = line.strip()
+            sections[current] = []
+        elif current is not None:
+            sections[current].append(line.strip())
+    return summary, {k: " ".join(v).strip() for k, v in sections.items()}
+
+
+# -- the command line --------------------------------------------------------------------
+
+
+def _subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return dict(action.choices)
+    return {}
+
+
+def _help_of(parser: argparse.ArgumentParser) -> dict[str, str]:
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return {a.dest: a.help or "" for a in action._choices_actions}
+    return {}
+
+
+def _option_rows(parser: argparse.ArgumentParser) -> list[str]:
+    rows = []
+    for a in parser._actions:
+        if isinstance(a, argparse._HelpAction | argparse._SubParsersAction):
+            continue
+        takes_value = a.nargs != 0
+        metavar = a.metavar if isinstance(a.metavar, str) else a.dest.upper()
+        if a.option_strings:
+            name = ", ".join(f"`{o} {metavar}`" if takes_value else f"`{o}`"
+                             for o in a.option_strings)
+        else:
+            name = f"`{a.metavar or a.dest}`"
+        shown = a.default is not None and a.default is not False and a.default != [] \
+            and a.default is not argparse.SUPPRESS and not a.required and takes_value
+        default = f"`{a.default}`" if shown else ""
+        if a.choices is not None:
+            extra = "one of " + ", ".join(f"`{c}`" for c in a.choices)
+            default = f"{default} ({extra})" if default else extra
+        help_text = (a.help or "") % {"default": a.default} if a.help else ""
+        rows.append(f"| {name} | {cell(help_text)} | {cell(default)} |")
+    return rows
+
+
+def _command_section(name: str, parser: argparse.ArgumentParser, help_text: str,
+                     level: str = "###") -> list[str]:
+    out = [f"{level} `sitframe {name}`", "", cell(help_text) + ("." if help_text else ""), ""]
+    out += ["```text", parser.format_usage().strip(), "```", ""]
+    if parser.description:
+        out += [rst_to_md(parser.description.strip()), ""]
+    rows = _option_rows(parser)
+    if rows:
+        out += ["| argument | meaning | default |", "|---|---|---|", *rows, ""]
+    subs = _subcommands(parser)
+    helps = _help_of(parser)
+    for sub, sub_parser in subs.items():
+        out += _command_section(f"{name} {sub}", sub_parser, helps.get(sub, ""), level + "#")
+    if parser.epilog and not subs:
+        out += ["Example:", "", "```text", parser.epilog.strip(), "```", ""]
+    return out
+
+
+def cli_reference(_arg: str | None = None) -> str:
+    """Every command and option of ``sitframe``, grouped as ``sitframe --help`` groups them."""
+    from sitframe.cli import build_parser
+
+    parser = build_parser()
+    groups = getattr(sys.modules[build_parser.__module__], "COMMAND_GROUPS", None) \
+        or {"commands": list(_subcommands(parser))}
+    subs, helps = _subcommands(parser), _help_of(parser)
+    out = ["```text", parser.format_help().strip(), "```", "",
+           "## Options of every command", "",
+           "| argument | meaning | default |", "|---|---|---|", *_option_rows(parser), ""]
+    for group, names in groups.items():
+        out += [f"## {group.capitalize()}", ""]
+        for name in names:
+            out += _command_section(name, subs[name], helps.get(name, ""))
+    return "\n".join(out)
+
+
+# -- the layers --------------------------------------------------------------------------
+
+
+def import_contracts() -> list[dict[str, Any]]:
+    """import-linter's contracts, as pyproject.toml declares them."""
+    data = tomllib.loads((ROOT / "pyproject.toml").read_text("utf-8"))
+    return list(data.get("tool", {}).get("importlinter", {}).get("contracts", []))
+
+
+def _package_edges(packages: list[str]) -> set[tuple[str, str]]:
+    import grimp
+
+    graph = grimp.build_graph("sitframe", "plugins", cache_dir=None)
+    return {(a, b) for a in packages for b in packages if a != b and
+            graph.direct_import_exists(importer=a, imported=b, as_packages=True)}
+
+
+def _reduce(edges: set[tuple[str, str]]) -> set[tuple[str, str]]:
+    """The edges no longer path implies (a transitive reduction of an acyclic graph)."""
+    succ: dict[str, set[str]] = {}
+    for a, b in edges:
+        succ.setdefault(a, set()).add(b)
+
+    def reach(a: str, skip: tuple[str, str]) -> set[str]:
+        seen, todo = set(), [n for n in succ.get(a, ()) if (a, n) != skip]
+        while todo:
+            n = todo.pop()
+            if n not in seen:
+                seen.add(n)
+                todo += succ.get(n, ())
+        return seen
+
+    return {(a, b) for a, b in edges if b not in reach(a, (a, b))}
+
+
+def layers_diagram(_arg: str | None = None) -> str:
+    """The layers as a Mermaid diagram, and the contracts that keep them."""
+    contracts = import_contracts()
+    layered = next(c for c in contracts if c.get("type") == "layers")
+    rows = [[m.strip() for m in layer.split("|")] for layer in layered["layers"]]
+    import sitframe  # the ground floor: sitframe's own modules outside every subpackage
+
+    ground = [f"sitframe.{i.name}" for i in pkgutil.iter_modules(sitframe.__path__[:1])
+              if not i.ispkg and not i.name.startswith("_")]
+    packages = [m for row in rows for m in row] + ground
+    edges = _reduce(_package_edges(packages))
+
+    def node(m: str) -> str:
+        mod = importlib.import_module(m)
+        short = m.removeprefix("sitframe.")
+        count = sum(1 for _ in pkgutil.iter_modules(getattr(mod, "__path__", [])))
+        what = f"{count} modules" if hasattr(mod, "__path__") else "module"
+        return f'{short.replace(".", "_")}["<b>{short}</b><br/>{what}"]'
+
+    out = ["```mermaid", "flowchart TB", '  plugins(["plugins/ (the built-ins)"]) -->|"from sitframe import ..."| face',
+           '  face{{"sitframe: the public face"}}']
+    for i, row in enumerate(rows):
+        out.append(f'  subgraph L{i}[" "]')
+        out.append("    direction LR")
+        out += [f"    {node(m)}" for m in row]
+        out.append("  end")
+    out.append('  subgraph G[" ground floor "]')
+    out.append("    direction LR")
+    out += [f"    {node(m)}" for m in ground]
+    out.append("  end")
+    for a, b in sorted(edges):
+        out.append(f"  {a.removeprefix('sitframe.').replace('.', '_')} --> "
+                   f"{b.removeprefix('sitframe.').replace('.', '_')}")
+    out += ["```", "", "*An arrow is an import from one subpackage into another that no "
+            "chain of other arrows already implies; the order of the rows is import-linter's "
+            "layers contract, top to bottom. Drawn from the code as this site builds.*", "",
+            "The contracts, kept by `lint-imports` in CI:", ""]
+    out += [f"- **{cell(c['name'])}** ({c['type']})" for c in contracts]
+    return "\n".join(out)
+
+
+def subpackages_table(_arg: str | None = None) -> str:
+    """One row per subpackage: its job and what it may import (from its docstring)."""
+    out = ["| subpackage | its job | what it may import |", "|---|---|---|"]
+    for name in SUBPACKAGES:
+        summary, sections = docstring_sections(importlib.import_module(f"sitframe.{name}")
+                                               .__doc__ or "")
+        out.append(f"| [`sitframe.{name}`](../reference/api/{name}.md) | "
+                   f"{cell(rst_to_md(summary))} | "
+                   f"{cell(rst_to_md(sections.get('What it may import', '')))} |")
+    return "\n".join(out)
+
+
+# -- the Python API ----------------------------------------------------------------------
+
+
+def face_page(_arg: str | None = None) -> str:
+    """The public face: every name ``from sitframe import ...`` serves, documented."""
+    import sitframe
+
+    by_module: dict[str, list[str]] = {}
+    for name, module in sitframe._PUBLIC.items():
+        by_module.setdefault(module, []).append(name)
+    out = ["| name | defined in |", "|---|---|"]
+    out += [f"| [`{n}`](#sitframe.{m}.{n}) | `sitframe.{m}` |"
+            for m, names in by_module.items() for n in names]
+    out += ["", f"Modules used as namespaces: "
+            + ", ".join(f"`sitframe.{k}` (`sitframe.{v}`)" for k, v in sitframe._MODULES.items()),
+            "", "::: sitframe.hookimpl", "    options:", "      show_root_heading: true", ""]
+    for module, names in by_module.items():
+        for n in names:
+            out += [f"::: sitframe.{module}.{n}", "    options:", "      heading_level: 3", ""]
+    return "\n".join(out)
+
+
+def api_page(package: str | None) -> str:
+    """A subpackage's modules, each documented from its docstrings."""
+    assert package, "api needs a package: <!-- generated: api sitframe.sim -->"
+    pkg = importlib.import_module(package)
+    out = [f"::: {package}", "    options:", "      members: false", "      show_root_heading: false", ""]
+    for info in pkgutil.iter_modules(pkg.__path__):
+        if info.name.startswith("_") or info.name == "__main__":
+            continue
+        out += [f"::: {package}.{info.name}", "    options:", "      heading_level: 2", ""]
+    return "\n".join(out)
+
+
+GENERATORS: dict[str, Callable[[str | None], str]] = {
+    "cli": cli_reference,
+    "layers": layers_diagram,
+    "subpackages": subpackages_table,
+    "face": face_page,
+    "api": api_page,
+}
+
+
+def render(markdown: str) -> str:
+    """``markdown`` with every marker replaced by its generated part."""
+    _importable()
+    return MARKER.sub(lambda m: GENERATORS[m.group("name")](m.group("arg")), markdown)
+
+
+def on_page_markdown(markdown: str, **_kw: Any) -> str:
+    """MkDocs hook: the page's markers replaced."""
+    return render(markdown)
