@@ -7,9 +7,9 @@ import signal
 
 import pytest
 
-from sitframe.interrupts import deferred_interrupt
-from sitframe.logs import LogWriter, open_log
-from sitframe.records import RunInfo
+from sitframe.contract.records import RunInfo
+from sitframe.logs._log import LogWriter, open_log
+from sitframe.logs.interrupts import deferred_interrupt
 
 
 @pytest.fixture

@@ -35,7 +35,7 @@ _EXPORTS: dict[str, str] = {
         "plot_collision_intervals", "plot_evaluation_paths",
         "plot_exploration", "plot_learning_curves", "plot_reward_per_window",
         "plot_trajectory")},
-    "plot_world": "sitframe.analysis.world_plot",
+    "plot_world": "sitframe.sim.draw",
     # whole report, animation
     "AnalysisReport": "sitframe.analysis.report",
     "analyse": "sitframe.analysis.report",
