@@ -32,7 +32,7 @@ import argparse
 
 import numpy as np
 
-from sitframe.logs._log import open_log
+from sitframe.logs.reader import open_log
 from sitframe.situations.clustering import sweep_c
 from sitframe.situations.fcm import memberships
 

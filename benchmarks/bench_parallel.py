@@ -36,8 +36,8 @@ from pathlib import Path
 import numpy as np
 
 from sitframe.errors import InputError
-from sitframe.logs._log import open_log
-from sitframe.runs.parallel import compare_logs
+from sitframe.logs.compare import compare_logs
+from sitframe.logs.reader import open_log
 
 SITFRAME = [sys.executable, "-m", "sitframe.cli"]
 

@@ -120,7 +120,7 @@ def main() -> None:
         return
 
     from sitframe.contract.config import load_config
-    from sitframe.logs._log import LogWriter
+    from sitframe.logs.writer import LogWriter
     from sitframe.runs.prepare import prepare_experiment
 
     cfg, source, _ = load_config("obstacle-avoidance")

@@ -43,8 +43,8 @@ def _load(log: str, trial: int, arbiter: str | None) -> Any:
     if key not in _LOADED:
         from sitframe.contract.config import validate_config
         from sitframe.contract.pluginmanager import Registry, get_plugin_manager
-        from sitframe.logs._log import open_log
         from sitframe.logs.policies import logged_policy as _logged_policy
+        from sitframe.logs.reader import open_log
 
         lg = open_log(log)
         cfg = validate_config(lg.config, file=log)
@@ -88,7 +88,7 @@ def _evaluate(task: tuple[str, str, int, str | None, str, int, int]) -> dict[str
 def select_trial(log: str, episodes: int = 100, seed: int = 1000, workers: int = 2) -> int:
     """The trial whose frozen policies do best in a short goal-episode run in the log's
     learning world: most collision-free episodes, then success, then SPL."""
-    from sitframe.logs._log import open_log
+    from sitframe.logs.reader import open_log
 
     lg = open_log(log)
     world = lg.config["experiment"]["world"]

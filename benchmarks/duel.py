@@ -141,7 +141,7 @@ def run_fuzzy(seed: int, out: Path, a: argparse.Namespace) -> dict[str, Any]:
     """Learn with sitframe itself (one trial), then score the logged rule bases."""
     from sitframe.gym import Task
     from sitframe.learning.fcs import SituationFCS
-    from sitframe.logs._log import open_log
+    from sitframe.logs.reader import open_log
 
     log_path = out / f"fuzzy-q-{seed}.h5"
     cpu_path = log_path.with_suffix(".cpu")

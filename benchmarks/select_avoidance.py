@@ -43,7 +43,7 @@ def _cf(task: tuple[str, int, str, int, int]) -> dict[str, Any]:
 
 def rank_sums(log: str) -> dict[int, float]:
     """Trial -> the rank sum :func:`sitframe.logs.policies.best_trial` minimises."""
-    from sitframe.logs._log import open_log
+    from sitframe.logs.reader import open_log
 
     lg = open_log(log)
     t = lg.summary()
@@ -63,8 +63,8 @@ def main() -> None:
     ap.add_argument("--worlds", nargs="+", default=list(TEST_WORLDS), help="test rooms")
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
-    from sitframe.logs._log import open_log
     from sitframe.logs.policies import best_trial
+    from sitframe.logs.reader import open_log
 
     lg = open_log(args.log)
     trials = lg.trial_indices()

@@ -43,7 +43,7 @@ import numpy as np
 from scipy.stats import spearmanr
 
 from sitframe.analysis import situation_labels
-from sitframe.logs._log import open_log
+from sitframe.logs.reader import open_log
 from sitframe.situations.clustering import SECTORS_DEG
 
 AHEAD_DEG = SECTORS_DEG[0]

@@ -69,7 +69,7 @@ def main() -> None:
     ap.add_argument("--plugins-dir", action="append", default=[],
                     help="plugin folder the log's run loaded (e.g. benchmarks/plugins)")
     args = ap.parse_args()
-    from sitframe.logs._log import open_log
+    from sitframe.logs.reader import open_log
 
     trials = open_log(args.log).trial_indices()
     with ProcessPoolExecutor(args.workers) as pool:

@@ -80,8 +80,8 @@ MOVED: dict[str, str] = {
                                     "pluginmanager", "resolve")},
     "frames": "logs.frames", "interrupts": "logs.interrupts", "logged": "logs.policies",
     **{m: f"runs.{m}" for m in ("loop", "collect", "experiment", "parallel", "prepare",
-                                "resume", "sweep", "evaluation")},
-    "pack": "cli.pack",
+                                "sweep", "evaluation")},
+    "resume": "runs.prepare", "pack": "cli.pack",
 }
 
 __all__ = ["__version__", "hookimpl", *_PUBLIC, *_MODULES]

@@ -28,7 +28,7 @@ import sys
 
 import numpy as np
 
-from sitframe.logs._log import open_log
+from sitframe.logs.reader import open_log
 from sitframe.sim.metrics import frontal_between_prototypes
 
 

@@ -12,7 +12,7 @@ from helpers import small_config
 
 from sitframe.cli.main import main
 from sitframe.contract.config import list_presets, load_config
-from sitframe.logs._log import open_log
+from sitframe.logs.reader import open_log
 from sitframe.sim.world import list_worlds, load_world
 
 

@@ -17,7 +17,7 @@ import sitframe
 from sitframe.cli.main import main
 from sitframe.contract.pluginmanager import Registry, get_plugin_manager
 from sitframe.contract.records import Context, Proposal
-from sitframe.logs._log import open_log
+from sitframe.logs.reader import open_log
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -39,8 +39,8 @@ import numpy as np
 import pytest
 
 from sitframe.cli.main import main
-from sitframe.logs._log import open_log
-from sitframe.runs.parallel import compare_logs
+from sitframe.logs.compare import compare_logs
+from sitframe.logs.reader import open_log
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "plugins.md"
 

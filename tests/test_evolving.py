@@ -8,7 +8,7 @@ from helpers import run_config, run_json, small_config
 
 from sitframe.contract.records import TrialInfo
 from sitframe.learning.fuzzy_q import FuzzyQLearner, QLearningParams
-from sitframe.logs._log import open_log
+from sitframe.logs.reader import open_log
 from sitframe.plugins.evolving import EvolvingInterpreter
 from sitframe.plugins.fcm_interpreter import FCMInterpreter
 from sitframe.situations.events import SituationEvent, count_per_iteration

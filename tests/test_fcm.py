@@ -1,4 +1,5 @@
-"""Tests of sitframe.situations.fcm: Eq. 3.2 memberships, Algorithm 1, validity measures (Eqs. 4.1-4.9)."""
+"""Tests of sitframe.situations.fcm: Eq. 3.2 memberships, Algorithm 1, validity measures
+(Eqs. 4.1-4.9)."""
 
 from __future__ import annotations
 

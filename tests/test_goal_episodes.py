@@ -16,7 +16,7 @@ from sitframe.contract.config import load_config, preset_text, validate_config
 from sitframe.contract.pluginmanager import Registry, get_plugin_manager
 from sitframe.contract.resolve import Resolved
 from sitframe.errors import InputError
-from sitframe.logs._log import open_log
+from sitframe.logs.reader import open_log
 from sitframe.plugins.goal_episodes import AGGREGATE_KEYS, GoalEpisodes, goal_pairs, world_pairs
 from sitframe.runs.evaluation import evaluate_log, select_trial
 from sitframe.runs.loop import TrialSpec, batch_scores, simulate

@@ -27,8 +27,8 @@ import pytest
 from helpers import INTERRUPTED_TRIALS, ROOM, small_config
 
 from sitframe.cli.main import main
-from sitframe.logs._log import open_log
-from sitframe.runs.parallel import compare_logs
+from sitframe.logs.compare import compare_logs
+from sitframe.logs.reader import open_log
 
 SMALL = small_config(trials=2, iterations=100, eval_iterations=50)
 #: Starts the CLI with Python's SIGINT handler even under a shell that ignores it.
@@ -408,7 +408,7 @@ def test_9_scheduler_address_checks_and_plain_tcp_warning(tmp_path, capsys, monk
     assert capsys.readouterr().err == ""
     # a worker whose numpy computes otherwise (another CPU) is refused, with the fix
     from sitframe.errors import InputError
-    from sitframe.runs.parallel import arithmetic
+    from sitframe.runs.arithmetic import arithmetic
 
     FakeClient.workers = {"tcp://10.0.0.6:1": arithmetic(), "tcp://10.0.0.7:1": "numpy 0.0"}
     with pytest.raises(InputError, match=r"worker tcp://10.0.0.7:1 computes with numpy 0.0"):
@@ -420,7 +420,7 @@ def test_9_scheduler_address_checks_and_plain_tcp_warning(tmp_path, capsys, monk
 
 
 def test_10_disk_full_mid_run_keeps_the_published_log(tmp_path, capsys, monkeypatch):
-    import sitframe.logs._log as L
+    import sitframe.logs.writer as L
 
     (tmp_path / "c.toml").write_text(SMALL)
     out = tmp_path / "full.h5"
@@ -443,7 +443,7 @@ def test_10_disk_full_mid_run_keeps_the_published_log(tmp_path, capsys, monkeypa
 
 
 def test_13_disk_full_at_start_leaves_nothing(tmp_path, capsys, monkeypatch):
-    import sitframe.logs._log as L
+    import sitframe.logs.writer as L
 
     (tmp_path / "c.toml").write_text(SMALL)
     real = h5py.File
@@ -538,7 +538,7 @@ def test_11_damaged_log_contents_give_one_line(base, tmp_path, capsys, damage, c
 def test_11_read_only_folder_on_resume_and_replay(base, tmp_path, capsys, monkeypatch):
     import tempfile
 
-    import sitframe.logs._log as L
+    import sitframe.logs.writer as L
 
     ro = tmp_path / "ro"
     ro.mkdir()

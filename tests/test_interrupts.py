@@ -8,8 +8,9 @@ import signal
 import pytest
 
 from sitframe.contract.records import RunInfo
-from sitframe.logs._log import LogWriter, open_log
 from sitframe.logs.interrupts import deferred_interrupt
+from sitframe.logs.reader import open_log
+from sitframe.logs.writer import LogWriter
 
 
 @pytest.fixture

@@ -9,7 +9,7 @@ from helpers import run_config, small_config
 
 from sitframe.cli.main import main
 from sitframe.errors import InputError
-from sitframe.logs._log import open_log
+from sitframe.logs.reader import open_log
 
 
 @pytest.fixture(scope="module")

@@ -32,7 +32,7 @@ from pathlib import Path
 import pytest
 
 from sitframe.cli.main import main
-from sitframe.logs._log import open_log
+from sitframe.logs.reader import open_log
 
 #: Imports and helpers every faulty plugin file starts with.
 PRELUDE = '''

@@ -17,8 +17,8 @@ from helpers import INTERRUPTED_ITERATIONS, INTERRUPTED_TRIALS, run_json
 
 from sitframe.cli.main import main
 from sitframe.errors import InputError
-from sitframe.logs._log import open_log
-from sitframe.runs.parallel import compare_logs
+from sitframe.logs.compare import compare_logs
+from sitframe.logs.reader import open_log
 
 N_TRIALS, ITERATIONS = INTERRUPTED_TRIALS, INTERRUPTED_ITERATIONS
 
@@ -248,7 +248,7 @@ def test_resume_refuses_a_log_whose_plugins_changed(reference, tmp_path, capsys)
 def test_resume_api_and_the_records_a_log_may_lack_or_add(reference, tmp_path, capsys):
     import h5py
 
-    from sitframe.runs.resume import prepare_resume
+    from sitframe.runs.prepare import prepare_resume
 
     _cfg, ref = reference
     out = tmp_path / "api.h5"
@@ -290,7 +290,7 @@ def test_resume_refuses_another_arithmetic(reference, tmp_path, capsys):
     bits of sin/cos/exp differ, and a closed loop turns them into other trajectories."""
     import h5py
 
-    from sitframe.runs.parallel import numpy_simd
+    from sitframe.runs.arithmetic import numpy_simd
 
     _cfg, ref = reference
     out = tmp_path / "simd.h5"
@@ -315,7 +315,7 @@ def test_resume_refuses_another_arithmetic(reference, tmp_path, capsys):
     assert err.count("\n") == 1 and "BLAS openblas 0.3.31 SkylakeX, this process has" in err
     # logs written before a key existed resume on the keys they have (session-15 logs
     # record numpy_simd but not blas; older ones neither)
-    from sitframe.runs.resume import _check_arithmetic
+    from sitframe.runs.prepare import _check_arithmetic
 
     for drop in (("blas",), ("blas", "numpy_simd")):
         with h5py.File(out, "a") as f:

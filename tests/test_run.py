@@ -8,7 +8,8 @@ import pytest
 from helpers import run_json, small_config
 
 from sitframe.cli.main import main
-from sitframe.logs._log import SCHEMA_VERSION, open_log
+from sitframe.logs.layout import SCHEMA_VERSION
+from sitframe.logs.reader import open_log
 
 SMALL = small_config()
 
@@ -156,7 +157,7 @@ def test_same_seed_is_bit_identical_across_processes_and_another_seed_is_not(tmp
     import subprocess
     import sys
 
-    from sitframe.runs.parallel import compare_logs
+    from sitframe.logs.compare import compare_logs
 
     cfg = tmp_path / "small.toml"
     cfg.write_text(small_config(trials=2, iterations=200))

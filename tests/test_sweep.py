@@ -11,8 +11,8 @@ import pytest
 from helpers import small_config
 
 from sitframe.cli.main import main
-from sitframe.logs._log import open_log
-from sitframe.runs.parallel import compare_logs
+from sitframe.logs.compare import compare_logs
+from sitframe.logs.reader import open_log
 from sitframe.runs.sweep import point_names
 
 BASE = small_config(name="base", iterations=200, seed=7, c=4, fcm_trials=3,

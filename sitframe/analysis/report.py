@@ -41,7 +41,7 @@ from sitframe.analysis import results as R
 from sitframe.analysis.report_html import write_report_html
 from sitframe.contract.records import summary_key
 from sitframe.errors import InputError
-from sitframe.logs._log import Log, TrialLog
+from sitframe.logs.reader import Log, TrialLog
 
 __all__ = ["AnalysisReport", "analyse", "log_problems"]
 

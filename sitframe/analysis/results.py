@@ -1,7 +1,7 @@
 """Numbers behind the thesis's chapter-5 figures and tables, read from a log.
 
-Everything here takes a :class:`sitframe.logs._log.Log` (or a path to one) and/or a
-:class:`sitframe.logs._log.TrialLog` and returns numpy arrays, small dataclasses or
+Everything here takes a :class:`sitframe.logs.reader.Log` (or a path to one) and/or a
+:class:`sitframe.logs.reader.TrialLog` and returns numpy arrays, small dataclasses or
 :class:`Table` objects; nothing draws. Figures are in
 :mod:`sitframe.analysis.learning_plots`.
 
@@ -36,7 +36,7 @@ import numpy as np
 
 from sitframe.contract.records import summary_key
 from sitframe.errors import InputError
-from sitframe.logs._log import Log, TrialLog, open_log
+from sitframe.logs.reader import Log, TrialLog, open_log
 from sitframe.sim.world import World, parse_world
 from sitframe.situations.clustering import (
     SELECTION_RULE,
@@ -77,7 +77,7 @@ LogLike = Log | str | os.PathLike[str]
 
 
 def as_log(log: LogLike) -> Log:
-    """Return ``log`` itself, or open the path with :func:`sitframe.logs._log.open_log`.
+    """Return ``log`` itself, or open the path with :func:`sitframe.logs.reader.open_log`.
 
     Raises
     ------
@@ -111,13 +111,13 @@ def sensor_angles(log: LogLike) -> np.ndarray:
 
     Any layout (a front arc, a 360 deg ring). Logs written before the spec was
     logged: the ``[sensor]`` table's ``angles_deg``, else the Pioneer 2DX front
-    ring (:attr:`sitframe.logs._log.Log.sensor`).
+    ring (:attr:`sitframe.logs.reader.Log.sensor`).
     """
     return as_log(log).sensor.angles_deg
 
 
 def sensor_max_range(log: LogLike) -> float:
-    """Maximum range [m] of the run's sensor (:attr:`sitframe.logs._log.Log.sensor`)."""
+    """Maximum range [m] of the run's sensor (:attr:`sitframe.logs.reader.Log.sensor`)."""
     return as_log(log).sensor.max_range
 
 
@@ -250,7 +250,7 @@ def learned_output(trial: TrialLog, label: str | None = None,
     Parameters
     ----------
     trial
-        A trial read with :meth:`sitframe.logs._log.Log.trial`.
+        A trial read with :meth:`sitframe.logs.reader.Log.trial`.
     label
         Behaviour label; default the first behaviour that learned ``output``.
     output
@@ -650,7 +650,7 @@ def rule_bases_across_trials(log: LogLike, label: str | None = None,
                              read: Callable[[int], TrialLog] | None = None) -> Table:
     """Every trial's learned action per situation, and the most frequent one (Tables A.2/A.3).
 
-    ``read`` reads trial ``k`` (default :meth:`sitframe.logs._log.Log.trial`; a caller
+    ``read`` reads trial ``k`` (default :meth:`sitframe.logs.reader.Log.trial`; a caller
     that already holds the trials passes its cache).
 
     Returns

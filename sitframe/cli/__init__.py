@@ -15,6 +15,15 @@ Entry points
     (returns the exit status), :func:`build_parser`.
 """
 
-from sitframe.cli.main import add_parallel_arguments, build_parser, console_main, main
+from __future__ import annotations
+
+import importlib
+from typing import Any
 
 __all__ = ["add_parallel_arguments", "build_parser", "console_main", "main"]
+
+
+def __getattr__(name: str) -> Any:  # (the parser is built only when a command runs)
+    if name in __all__:
+        return getattr(importlib.import_module("sitframe.cli.main"), name)
+    raise AttributeError(f"module 'sitframe.cli' has no attribute {name!r}")

@@ -56,7 +56,7 @@ class Analyse:
     def main(args: argparse.Namespace) -> int:
         """Run ``analyse``; print the index path (stdout) and any incompleteness (stderr)."""
         from sitframe.analysis.report import analyse
-        from sitframe.logs._log import open_log
+        from sitframe.logs.reader import open_log
 
         for name in ("window", "path_iterations", "dpi"):
             if getattr(args, name) < 1:
@@ -115,7 +115,7 @@ class Replay:
     def main(args: argparse.Namespace) -> int:
         """Write the animation and print its path."""
         from sitframe.analysis.replay import replay
-        from sitframe.logs._log import open_log
+        from sitframe.logs.reader import open_log
 
         if args.dpi < 1:
             raise InputError(f"must be at least 1, got {args.dpi}", key="--dpi")

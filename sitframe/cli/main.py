@@ -129,7 +129,7 @@ EXTRA_COMMANDS: dict[str, str] = {"analyse": "sitframe.cli.logs:Analyse",
                                   "replay": "sitframe.cli.logs:Replay",
                                   "compare": "sitframe.cli.logs:Compare",
                                   "export": "sitframe.cli.logs:Export",
-                                  "sweep": "sitframe.runs.sweep", "pack": "sitframe.cli.pack"}
+                                  "sweep": "sitframe.cli.sweep", "pack": "sitframe.cli.pack"}
 
 
 #: Commands that read a log given on the command line: an exception while they use its
@@ -147,8 +147,8 @@ def main(argv: list[str] | None = None) -> int:
     ``aborted`` in both cases), 141 when stdout is closed early (``| head``;
     quietly).
     """
-    from sitframe.logs._log import unlock_log
     from sitframe.logs.interrupts import Terminated, terminate_as_interrupt
+    from sitframe.logs.writer import unlock_log
 
     args = None
     forget_notes()
@@ -271,7 +271,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 def _claim(out: str, *, replacing: bool = False, key: str = "--out") -> None:
     """Become the log's only writer now (refused, one line, if another process is); with
     ``replacing``, say on stderr that an existing log will be replaced."""
-    from sitframe.logs._log import lock_log, open_log
+    from sitframe.logs.reader import open_log
+    from sitframe.logs.writer import lock_log
 
     lock_log(out, key)
     if replacing and Path(out).is_file():
@@ -302,7 +303,7 @@ def _execute(exp: Any, kwargs: dict[str, Any], *, replacing: bool = False,
 
 def _run_resume(args: argparse.Namespace) -> int:
     from sitframe.runs.parallel import make_executor
-    from sitframe.runs.resume import prepare_resume
+    from sitframe.runs.prepare import prepare_resume
 
     if args.experiment:
         raise InputError("give either EXPERIMENT or --resume LOG, not both (the log's config "
@@ -313,7 +314,7 @@ def _run_resume(args: argparse.Namespace) -> int:
                              key=f"--{opt.replace('_', '-')}")
     exp, kwargs, missing = prepare_resume(args.resume, plugins_dirs=tuple(args.plugins_dir),
                                           progress=not args.json and sys.stderr.isatty())
-    from sitframe.logs._log import open_log
+    from sitframe.logs.reader import open_log
 
     if not missing and open_log(args.resume).complete:
         if args.json:

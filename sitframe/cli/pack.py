@@ -24,12 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from sitframe.logs._log import (  # h5py: start-up time
-        LogWriter,
-        lock_log,
-        open_log,
-        shard_folder,
-    )
+    from sitframe.logs.layout import shard_folder  # h5py: start-up time
+    from sitframe.logs.reader import open_log  # h5py: start-up time
+    from sitframe.logs.writer import LogWriter, lock_log  # h5py: start-up time
 
     log = open_log(args.log)
     lock_log(args.log, key="LOG")  # refused while a run writes it

@@ -112,8 +112,8 @@ def check_protocol(obj: Any, origin: Origin, *, needs: tuple[str, ...] = ()) -> 
             try:
                 getattr(obj, member)
             except AttributeError:
-                raise PluginError(f"{origin}: has no attribute '{member}' (sitframe.contract.components "
-                                  f"requires it of a {origin.kind})") from None
+                raise PluginError(f"{origin}: has no attribute '{member}' (sitframe's "
+                                  f"{origin.kind} protocol requires it)") from None
             except PLUGIN_ERRORS as exc:  # a property that raises is the plugin's
                 raise PluginFault(f"{type(exc).__name__}: {exc}", where=str(origin),
                                   method=member) from None
@@ -448,7 +448,8 @@ _SCALAR = (bool, int, float, str, np.integer, np.floating, np.bool_)
 
 
 def _unloggable(v: Any) -> str | None:
-    """Why the log cannot store ``v`` (as :func:`sitframe.logs._log._write_value` would), or None."""
+    """Why the log cannot store ``v`` (as :func:`sitframe.logs.writer._write_value` would), or
+    None."""
     if v is None or isinstance(v, _SCALAR):
         return None
     if isinstance(v, list | tuple) and v and all(isinstance(s, str) for s in v):

@@ -227,7 +227,7 @@ def sitframe_trial_data(trial: TrialResult) -> dict[str, Any] | None:
         numpy arrays or scalars. The logger writes it under
         ``/trials/NNNN/plugins/<plugin>/`` in the same crash-safe transaction
         as the trial (an evaluation's under ``.../eval/<world>/``), and
-        :meth:`sitframe.logs._log.Log.trial` returns it as ``TrialLog.plugins``.
+        :meth:`sitframe.logs.reader.Log.trial` returns it as ``TrialLog.plugins``.
 
     Every implementation is called; each result is kept under its own plugin's
     name (a key handed twice by one plugin is an error).

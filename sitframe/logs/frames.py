@@ -1,4 +1,4 @@
-"""A log's tables as pandas DataFrames (:meth:`sitframe.logs._log.Log.summary_frame`, ...).
+"""A log's tables as pandas DataFrames (:meth:`sitframe.logs.reader.Log.summary_frame`, ...).
 
 Tidy tables: one row per observation, one column per variable.
 
@@ -19,7 +19,7 @@ clear :class:`ImportError` says so when it is missing. ``sitframe export``
 (:mod:`sitframe.analysis.export`) writes these tables as CSV or Parquet.
 
 This module imports nothing from sitframe (the reader imports it), so it
-takes the :class:`~sitframe.logs._log.Log` it is given rather than a path.
+takes the :class:`~sitframe.logs.reader.Log` it is given rather than a path.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from sitframe.logs._log import Log, TrialLog
+    from sitframe.logs.reader import Log, TrialLog
 
 __all__ = ["evaluations_frame", "iterations_frame", "summary_frame"]
 

@@ -14,16 +14,18 @@ import os
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from sitframe.contract.checks import Origin, fault
 from sitframe.contract.records import LearnedPolicy, SensorSpec, summary_key
-from sitframe.contract.resolve import Resolved
 from sitframe.errors import PLUGIN_ERRORS, InputError, PluginError
-from sitframe.logs._log import Log
+from sitframe.logs.reader import Log
 from sitframe.situations.clustering import average_ranks
+
+if TYPE_CHECKING:
+    from sitframe.contract.resolve import Resolved
 
 
 def check_state(res: Resolved, state: dict[str, Any], path: str,

@@ -7,7 +7,7 @@ What it holds
     (an experiment's stages in order, reported to the observers),
     :mod:`~sitframe.runs.parallel` (trials on a process pool or a Dask cluster, results
     bit-identical), :mod:`~sitframe.runs.prepare` (a run from a config, with the logs it
-    reuses), :mod:`~sitframe.runs.resume` (finishing an interrupted run),
+    reuses), :mod:`~sitframe.runs.prepare` (finishing an interrupted run),
     :mod:`~sitframe.runs.sweep` (a grid of config values x seeds) and
     :mod:`~sitframe.runs.evaluation` (a log's frozen policies evaluated in any world).
 
@@ -18,7 +18,7 @@ What it may import
     :mod:`sitframe.cli`.
 
 Entry points
-    :func:`~sitframe.runs.prepare.prepare_experiment`, :class:`~sitframe.runs.experiment.Experiment`,
-    :func:`~sitframe.runs.sweep.run_sweep`, :func:`~sitframe.runs.evaluation.evaluate_log`,
-    :func:`~sitframe.runs.parallel.make_executor`.
+    :func:`~sitframe.runs.prepare.prepare_experiment`,
+    :class:`~sitframe.runs.experiment.Experiment`, :func:`~sitframe.runs.sweep.run_sweep`,
+    :func:`~sitframe.runs.evaluation.evaluate_log`, :func:`~sitframe.runs.parallel.make_executor`.
 """

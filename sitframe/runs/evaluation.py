@@ -26,7 +26,6 @@ from sitframe.contract.pluginmanager import Registry, get_plugin_manager
 from sitframe.contract.records import LearnedPolicy, summary_key
 from sitframe.contract.resolve import Resolved
 from sitframe.errors import InputError, PluginFault, located_in
-from sitframe.logs._log import Log, open_log
 from sitframe.logs.policies import (
     BEST_TRIAL_RULE,
     best_of,
@@ -35,6 +34,7 @@ from sitframe.logs.policies import (
     logged_policy,
     plugins_of,
 )
+from sitframe.logs.reader import Log, open_log
 from sitframe.runs.loop import (
     EVAL_KEYS,
     STAGE_BATCH,

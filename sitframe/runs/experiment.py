@@ -37,6 +37,7 @@ from sitframe.errors import (
     located,
     located_in,
 )
+from sitframe.runs.arithmetic import arithmetic_versions
 from sitframe.runs.collect import (
     Collected,
     collect_trajectories,
@@ -48,12 +49,13 @@ from sitframe.runs.loop import (
     STAGE_CLUSTER,
     STAGE_COLLECT,
     STAGE_TRIALS,
+    TRIAL_WORK,
     TrialSpec,
     simulate,
     stage_seed,
     step_hook_of,
 )
-from sitframe.runs.parallel import InOrder, SerialExecutor, TrialPipeline, arithmetic_versions
+from sitframe.runs.parallel import InOrder, SerialExecutor, TrialPipeline
 
 
 @dataclass
@@ -189,7 +191,7 @@ class Experiment:
         """Announce the run to observers (the logger creates, or on resume reopens, the log)."""
         self.info.extra.setdefault("step_hooks", bool(self.executor.in_process))
         if self.out and "code_hash" not in self.info.extra:
-            from sitframe.logs._log import code_fingerprint  # h5py: imported only when a run logs
+            from sitframe.logs.writer import code_fingerprint  # h5py: imported only when a run logs
 
             self.info.extra["code_hash"] = code_fingerprint(self.info.plugins)
         self._notify("sitframe_run_start", run=self.info)
@@ -442,7 +444,7 @@ def drive(runs: list[tuple[Experiment, RunPlan]], executor: Any) -> list[RunResu
     for exp, _plan in runs:
         exp.executor = executor
     handles = [exp if executor.in_process else Setup.of(exp) for exp, _plan in runs]
-    pipe = TrialPipeline(executor, run_trial)
+    pipe = TrialPipeline(executor, run_trial, TRIAL_WORK)
     book = _Runs(runs, pipe, handles)
     try:
         with pipe:
@@ -559,7 +561,7 @@ def warm_up(handle: Experiment | Setup) -> int:
 
 def versions() -> dict[str, str]:
     """Versions of sitframe, Python and the numerical/IO stack, numpy's SIMD targets and its
-    BLAS (:func:`sitframe.runs.parallel.arithmetic_versions`: with the numpy version, what
+    BLAS (:func:`sitframe.runs.arithmetic.arithmetic_versions`: with the numpy version, what
     decides the last bits of sin, cos, exp, log and dot products, so of every trajectory)."""
     import h5py
     import scipy

@@ -29,7 +29,7 @@ import dataclasses
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pluggy
@@ -65,12 +65,14 @@ from sitframe.contract.records import (
     TrialResult,
     summary_key,
 )
-from sitframe.contract.resolve import Resolved
 from sitframe.errors import PLUGIN_ERRORS, InputError, PluginFault, TaskCancelled
+from sitframe.runs.tracker import SituationTracker
 from sitframe.sim.metrics import collisions_per_1000, coverage, path_length
 from sitframe.sim.robot import Command, RobotParams, StepOutcome, step_robot
 from sitframe.sim.world import Goal, World
-from sitframe.situations.events import SituationTracker
+
+if TYPE_CHECKING:  # (the run's components, bound: built by the run driver)
+    from sitframe.contract.resolve import Resolved
 
 #: Seed stages (:func:`stage_seed`); ``STAGE_BATCH``: the episode batches of a run that
 #: does not learn (one per world of its evaluation protocol).
@@ -840,3 +842,21 @@ def trial_summary(world: World, arrays: dict[str, np.ndarray], bdata: dict[str, 
         if key.startswith("reward/"):
             out[f"mean_{key.replace('/', '_')}"] = float(val.mean())
     return out
+
+
+@dataclass(frozen=True)
+class TrialWork:
+    """How a trial splits into tasks for a pool (:class:`~sitframe.runs.parallel.TrialPipeline`)
+    and is put back together: the learning part, then one task per evaluation world."""
+
+    learning: Callable[[TrialSpec], TrialSpec]
+    evaluations: Callable[[TrialSpec, TrialResult], list[TrialSpec]]
+    attach: Callable[[TrialResult, str, TrialResult], None]
+
+
+#: The control loop's :class:`TrialWork`: the same pieces :func:`simulate` runs in sequence.
+TRIAL_WORK = TrialWork(
+    learning=lambda spec: dataclasses.replace(spec, evaluate=()) if spec.evaluate else spec,
+    evaluations=lambda spec, result: evaluation_specs(spec, result.policies,
+                                                      result.situations.get("state")),
+    attach=attach_evaluation)

@@ -13,20 +13,9 @@ the HDF5 log, in trial order.
 
 Results are bit-identical to a serial run: a trial depends only on its
 :class:`~sitframe.runs.loop.TrialSpec` (its seed is spawned from the run seed
-and its index) and on the config, never on which worker runs it or when.
-Across *machines* it holds only for the same versions of sitframe, numpy and
-the plugins **and the same numpy SIMD targets and BLAS kernels**
-(:func:`arithmetic`): numpy picks its sin, cos, exp, log and power loops at
-run time by the CPU's features, and OpenBLAS its dot-product kernels; an
-AVX-512 loop or kernel differs from the AVX2 one in the last bit of some
-results, and a closed loop of robot and learner carries such a bit into a
-different trajectory within a few hundred iterations. A log records them
-(``versions``: ``numpy``, ``numpy_simd``, ``blas``); ``--resume`` and a Dask
-cluster refuse to mix two arithmetics. Both choices can be overridden before
-numpy is imported: ``NPY_DISABLE_CPU_FEATURES="X86_V4 AVX512_ICL
-AVX512_SPR"`` turns numpy's AVX-512 targets off and ``OPENBLAS_CORETYPE=Haswell``
-makes OpenBLAS use its AVX2 kernels; only both together make an AVX-512
-machine compute as an AVX2 one.
+and its index) and on the config, never on which worker runs it or when; across
+machines only for the same arithmetic (:mod:`sitframe.runs.arithmetic`), which a
+Dask cluster checks on every worker.
 
 ``sitframe_step`` observers fire only in-process (:class:`SerialExecutor`,
 ``--workers 1``); with a pool they do not see iterations, and progress
@@ -52,8 +41,6 @@ marked ``aborted`` with finished trials kept.
 from __future__ import annotations
 
 import concurrent.futures as cf
-import dataclasses
-import functools
 import multiprocessing as mp
 import os
 import signal
@@ -65,112 +52,15 @@ from typing import TYPE_CHECKING, Any
 
 from sitframe.errors import InputError, PluginFault, TaskCancelled
 from sitframe.logs.interrupts import deferred_interrupt
-from sitframe.runs.loop import TrialSpec, attach_evaluation, evaluation_specs
+from sitframe.runs.arithmetic import arithmetic, check_same_arithmetic
 from sitframe.sim import kernels
 
 if TYPE_CHECKING:
     from sitframe.contract.records import TrialResult
+    from sitframe.runs.loop import TrialSpec
 
 #: Seconds to wait for a Dask scheduler before giving up.
 DASK_CONNECT_TIMEOUT = 5.0
-
-
-def numpy_simd() -> str:
-    """numpy's SIMD targets in this process: its baseline and the dispatch targets it uses.
-
-    E.g. ``"X86_V2 + X86_V3 X86_V4 AVX512_ICL"`` on an AVX-512 machine,
-    ``"X86_V2 + X86_V3"`` on an AVX2 one or under
-    ``NPY_DISABLE_CPU_FEATURES="X86_V4 AVX512_ICL AVX512_SPR"``. Two processes
-    with the same numpy version and the same value compute the same bits.
-    """
-    import numpy as np
-
-    umath = getattr(getattr(np, "_core", None), "_multiarray_umath", None) or \
-        np.core._multiarray_umath  # (numpy < 2)
-    found = getattr(umath, "__cpu_features__", {})
-    used = [f for f in getattr(umath, "__cpu_dispatch__", []) if found.get(f)]
-    return f"{' '.join(getattr(umath, '__cpu_baseline__', []))} + {' '.join(used) or '-'}"
-
-
-@functools.cache  # (fixed when numpy loads; Dask asks again before every task)
-def blas() -> str:
-    """numpy's BLAS in this process: library, version and the kernel it picked for this CPU.
-
-    E.g. ``"openblas 0.3.31.188.0 Haswell"`` (``threadpoolctl``'s view of the
-    loaded libraries; numpy's own copy where a wheel bundles one, since scipy may
-    load another). OpenBLAS picks its kernels at load time by the CPU, as numpy
-    its SIMD loops, and ``np.dot`` and ``@`` go through them: under
-    ``OPENBLAS_CORETYPE=Sandybridge`` instead of the ``Haswell`` kernels it
-    picks on an AVX2 CPU, ``sitframe run obstacle-avoidance-12`` writes another
-    log (666 datasets differ, the clustering already). ``"-"`` if none is loaded.
-    """
-    import numpy  # noqa: F401  (threadpoolctl sees only loaded libraries)
-    from threadpoolctl import threadpool_info
-
-    libs = [i for i in threadpool_info() if i.get("user_api") == "blas"]
-    own = [i for i in libs if os.path.basename(os.path.dirname(i.get("filepath", "")))
-           .startswith("numpy")]
-    keys = ("internal_api", "version", "architecture")
-    names = {" ".join(str(i[k]) for k in keys if i.get(k)) for i in own or libs}
-    return "; ".join(sorted(names)) or "-"
-
-
-def arithmetic_versions() -> dict[str, str]:
-    """This process's ``versions`` entries that decide a trial's bits beyond sitframe's code."""
-    import numpy as np
-
-    return {"numpy": np.__version__, "numpy_simd": numpy_simd(), "blas": blas()}
-
-
-def arithmetic(versions: dict[str, str] | None = None, *,
-               like: dict[str, str] | None = None) -> str:
-    """What decides the bits of a trial beyond sitframe's own code: numpy's version, its SIMD
-    targets and its BLAS (library, version, kernel), as one string.
-
-    Of this process (``versions`` None), or of a log's ``versions`` (``""`` for a log
-    written before they were recorded). ``like``: only what that log recorded (a log
-    written before ``blas`` was recorded is compared on numpy and its SIMD targets)."""
-    v = arithmetic_versions() if versions is None else versions
-    if "numpy_simd" not in v:
-        return ""
-    text = f"numpy {v.get('numpy')}, SIMD {v['numpy_simd']}"
-    return text + (f", BLAS {v['blas']}" if "blas" in v and "blas" in (like or v) else "")
-
-
-def _parts(arith: str) -> tuple[str, str, str]:
-    """(numpy version, SIMD targets, BLAS) of an :func:`arithmetic` string."""
-    head, _, blas_ = arith.partition(", BLAS ")
-    numpy_, _, simd = head.partition(", SIMD ")
-    return numpy_, simd, blas_
-
-
-def arithmetic_hint(have: str, want: str) -> str:
-    """How to make a process with :func:`arithmetic` ``have`` compute as one with ``want``."""
-    (hn, hs, hb), (wn, ws, wb) = _parts(have), _parts(want)
-    if hn != wn:
-        return wn
-    hints = []
-    if hs != ws:
-        extra = set(hs.partition("+")[2].split()) - set(ws.partition("+")[2].split()) - {"-"}
-        hints.append(f'NPY_DISABLE_CPU_FEATURES="{" ".join(sorted(extra))}" set before numpy '
-                     "is imported" if extra else
-                     "a machine whose CPU offers numpy the same SIMD targets")
-    if hb != wb:
-        h, w = hb.split(), wb.split()
-        hints.append(f"OPENBLAS_CORETYPE={w[2]} set before numpy is imported, if this CPU runs "
-                     "that kernel" if len(h) == len(w) == 3 and h[:2] == w[:2]
-                     and h[0] == "openblas" else f"numpy with the BLAS {wb}")
-    return " and ".join(hints)
-
-
-def check_same_arithmetic(here: str, workers: dict[str, str]) -> None:
-    """Refuse workers whose :func:`arithmetic` differs from this process's ``here``."""
-    other = {w: a for w, a in workers.items() if a != here}
-    if other:
-        w, a = sorted(other.items())[0]
-        raise InputError(f"worker {w} computes with {a}, this process with {here}: its trials "
-                         "would not be bit-identical to a serial run's; expected the same on "
-                         f"every worker (there: {arithmetic_hint(a, here)})", key="--scheduler")
 
 
 # ---------------------------------------------------------------------------
@@ -263,7 +153,8 @@ class PoolExecutor:
 
     @property
     def task_map(self) -> _TaskMap:
-        """This pool as a :class:`~sitframe.situations.clustering.TaskMap` (used by the clustering stage)."""
+        """This pool as a :class:`~sitframe.situations.clustering.TaskMap` (for the clustering
+        stage)."""
         return _TaskMap(self)
 
     def shutdown(self, cancel: bool = False) -> None:
@@ -351,6 +242,11 @@ class TrialPipeline:
     run
         The task: ``run(handle, spec) -> TrialResult`` (module-level, so a
         pool can pickle it by reference).
+    work
+        How a trial splits into tasks and is put back together (the control loop's
+        :data:`~sitframe.runs.loop.TRIAL_WORK`): ``learning(spec)`` the learning part's
+        spec, ``evaluations(spec, result)`` the evaluations' specs once it finished,
+        ``attach(result, world, evaluation)`` adds one to the trial's result.
 
     Iterating yields ``("trial", tag, TrialResult)`` when a trial is complete
     and ``("call", tag, value)`` when a call added by :meth:`add_call` returns,
@@ -359,9 +255,10 @@ class TrialPipeline:
     """
 
     def __init__(self, executor: PoolExecutor, run: Callable[[Any, TrialSpec], TrialResult],
-                 window: int | None = None) -> None:
+                 work: Any, window: int | None = None) -> None:
         self.executor = executor
         self.run = run
+        self.work = work
         self.window = window or executor.capacity + (0 if executor.in_process else 1)
         self._queue: deque[tuple[Any, Any, TrialSpec]] = deque()
         self._inflight: dict[Any, tuple[str, Any, Any]] = {}
@@ -379,8 +276,7 @@ class TrialPipeline:
     def _fill(self) -> None:
         while self._queue and self._learning < self.window:
             tag, handle, spec = self._queue.popleft()
-            learn = dataclasses.replace(spec, evaluate=()) if spec.evaluate else spec
-            fut = self.executor.submit(self.run, handle, learn)
+            fut = self.executor.submit(self.run, handle, self.work.learning(spec))
             self._inflight[fut] = ("learn", tag, (handle, spec))
             self._learning += 1
 
@@ -400,7 +296,7 @@ class TrialPipeline:
         if kind == "learn":
             self._learning -= 1
             handle, spec = info
-            evs = evaluation_specs(spec, value.policies, value.situations.get("state"))
+            evs = self.work.evaluations(spec, value)
             if not evs:
                 return value
             self._partial[tag] = [value, [None] * len(evs), len(evs), [ev.world for ev in evs]]
@@ -414,7 +310,7 @@ class TrialPipeline:
             return None
         result, done, _n, worlds = self._partial.pop(tag)
         for world, ev_result in zip(worlds, done, strict=True):
-            attach_evaluation(result, world, ev_result)
+            self.work.attach(result, world, ev_result)
         return result
 
     def __iter__(self) -> Iterator[tuple[str, Any, Any]]:
@@ -521,8 +417,9 @@ def start_method() -> str:
 def _mp_context(method: str) -> mp.context.BaseContext:
     ctx = mp.get_context(method)
     if method == "forkserver":  # (workers fork from it with the compiled kernels loaded)
-        ctx.set_forkserver_preload(["sitframe.runs.parallel", "sitframe.runs.experiment", "sitframe.runs.loop",
-                                    *(["sitframe.sim.kernels_numba"] if kernels.wanted() else [])])
+        compiled = ["sitframe.sim.numba_cache", "sitframe.sim.kernels_numba"]  # (in this order)
+        ctx.set_forkserver_preload(["sitframe.runs.parallel", "sitframe.runs.experiment",
+                                    "sitframe.runs.loop", *(compiled if kernels.wanted() else [])])
     return ctx
 
 
@@ -734,56 +631,5 @@ def make_executor(workers: int | None = None, scheduler: str | None = None,
     return ProcessExecutor(k)
 
 
-def log_contents(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """Every dataset and group of an HDF5 log and every attribute below the root, by path.
-
-    Root attributes are left out: they describe the run (``created``,
-    ``status``), not its results. Trial attributes (index, seed, world, and
-    the summary scalars) are included as ``"<group>@<attr>"``; a group is
-    included as ``"<group>/"`` (value ``None``), so an empty group counts too.
-    """
-    import h5py
-
-    out: dict[str, Any] = {}
-    with h5py.File(path, "r") as f:
-        def visit(name: str, obj: Any) -> None:
-            if isinstance(obj, h5py.Dataset):
-                out[name] = obj[()]
-            else:
-                out[f"{name}/"] = None
-            for k, v in obj.attrs.items():
-                out[f"{name}@{k}"] = v
-        f.visititems(visit)  # hard links only; trials not yet packed are in their own files:
-        trials = f.get("trials")
-        for t in trials if isinstance(trials, h5py.Group) else ():
-            if isinstance(trials.get(t, getlink=True), h5py.ExternalLink):
-                visit(f"trials/{t}", trials[t])
-                trials[t].visititems(lambda n, o, t=t: visit(f"trials/{t}/{n}", o))
-    return out
-
-
-def compare_logs(a: str | os.PathLike[str], b: str | os.PathLike[str]) -> list[str]:
-    """Paths whose contents differ between two logs, bit for bit (empty = identical).
-
-    Compares every dataset (dtype, shape and bytes) and every non-root
-    attribute, and which groups exist, as :func:`log_contents` lists them.
-    Variable-length strings (object arrays) are compared by value, since their
-    bytes are pointers.
-    """
-    import numpy as np
-
-    ca, cb = log_contents(a), log_contents(b)
-    diff = sorted(set(ca) ^ set(cb))
-    for key in sorted(set(ca) & set(cb)):
-        x, y = np.asarray(ca[key]), np.asarray(cb[key])
-        same = x.dtype == y.dtype and x.shape == y.shape and (
-            x.tolist() == y.tolist() if x.dtype.kind == "O" else x.tobytes() == y.tobytes())
-        if not same:
-            diff.append(key)
-    return diff
-
-
 __all__ = ["DaskExecutor", "InOrder", "PoolExecutor", "ProcessExecutor", "SerialExecutor",
-           "TaskCancelled", "TrialPipeline", "arithmetic", "arithmetic_versions", "blas",
-           "check_same_arithmetic", "compare_logs", "log_contents", "make_executor",
-           "numpy_simd"]
+           "TaskCancelled", "TrialPipeline", "make_executor"]

@@ -54,20 +54,17 @@ valid key is suggested. Every point's config is then validated and resolved.
 
 from __future__ import annotations
 
-import argparse
 import copy
 import csv
 import itertools
 import json
 import math
 import re
-import sys
 import time
 import tomllib
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -90,7 +87,6 @@ from sitframe.sim.robot import RobotParams
 # (``sitframe --help`` and every command), so what only one command needs is imported
 # inside the function that needs it.
 
-HELP = "run an experiment over a grid of config values; one log per point + a summary table"
 
 _SWEEP_KEYS = ("name", "description", "base", "trials", "seed", "out")
 #: Most grid points a sweep may have (each point's experiment is prepared up front).
@@ -471,7 +467,7 @@ def run_sweep(sweep: Sweep, executor: Any, *, progress: bool = False,
         ``{"name", "out", "wall_seconds", "points": [summary row per point],
         "reused": [names of the points whose logs were kept]}``.
     """
-    from sitframe.logs._log import lock_log
+    from sitframe.logs.writer import lock_log
     from sitframe.runs.experiment import RunPlan, drive
 
     t0 = time.perf_counter()
@@ -510,7 +506,8 @@ def _reusable(pt: Point, codes: dict[str, str]) -> str:
     """``"same"`` if the point's log is complete and was made by the point's config and this
     code, ``"code"`` if only the code differs, else ``""``. ``codes`` caches the code
     fingerprint by plugin list."""
-    from sitframe.logs._log import code_fingerprint, open_log
+    from sitframe.logs.reader import open_log
+    from sitframe.logs.writer import code_fingerprint
 
     if not pt.log.exists():
         return ""
@@ -608,7 +605,7 @@ def _protocol_scores(tables: list[np.ndarray]) -> dict[str, list[str]]:
 
 def summarise_log(path: str | Path) -> dict[str, Any]:
     """Per-point statistics from a log's summary table (see the module docstring)."""
-    from sitframe.logs._log import open_log
+    from sitframe.logs.reader import open_log
 
     log = open_log(path)
     return {"log": str(path), "status": log.status,
@@ -625,7 +622,7 @@ def pool_over_seeds(result: dict[str, Any]) -> list[dict[str, Any]]:
     over all their trials (``seeds`` tells how many runs); an empty list when
     the grid has no seed axis.
     """
-    from sitframe.logs._log import open_log
+    from sitframe.logs.reader import open_log
 
     keys = result["keys"]
     if SEED_KEY not in keys:
@@ -763,73 +760,6 @@ def _scores_table(rows: list[dict[str, Any]], keys: list[str], pooled: bool) -> 
                 cells.append(_med_iqr(r, pre, 2) if f"{pre}_median" in r else "–")
             lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
-
-
-# ---------------------------------------------------------------------------
-# CLI
-# ---------------------------------------------------------------------------
-
-
-def _finite(obj: Any) -> Any:
-    """``obj`` with non-finite floats replaced by ``None`` (valid JSON)."""
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_finite(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from sitframe.cli.main import add_parallel_arguments
-
-    parser.add_argument("sweep", help="sweep definition (.toml)")
-    parser.add_argument("--out", metavar="DIR",
-                        help="folder for the logs and summary (default [sweep] out, else "
-                        "logs/sweeps/<name>)")
-    parser.add_argument("--json", action="store_true", help="print the summary as JSON")
-    parser.add_argument("--reuse", action="store_true",
-                        help="keep a point's log that is complete and was made by the same "
-                        "config and the same code instead of running the point again (e.g. "
-                        "after adding a value to the grid)")
-    add_parallel_arguments(parser)
-
-
-def main(args: argparse.Namespace) -> int:
-    from sitframe.runs.parallel import make_executor
-
-    if args.workers is not None and args.workers < 1:
-        raise InputError(f"must be at least 1, got {args.workers}", key="--workers")
-    from sitframe.runs.prepare import make_prerequisites
-
-    dirs = tuple(args.plugins_dir)
-    executor_for = partial(make_executor, args.workers, args.scheduler)
-    sweep = load_sweep(args.sweep, out=args.out, plugins_dirs=dirs, prerequisites=lambda c, b:
-                       make_prerequisites(c, b, executor_for=executor_for, plugins_dirs=dirs,
-                                          say=note))
-    total = sum(pt.experiment.info.n_trials for pt in sweep.points)
-    executor = make_executor(args.workers, args.scheduler, total)
-    failed = True
-    try:
-        result = run_sweep(sweep, executor, progress=not args.json and sys.stderr.isatty(),
-                           reuse=args.reuse)
-        failed = False
-    finally:
-        executor.shutdown(cancel=failed)
-    result["pooled"] = pool_over_seeds(result)
-    csv_path, md_path = write_tables(result, sweep.out)
-    if args.json:
-        doc = _finite({**result, "csv": str(csv_path), "markdown": str(md_path)})
-        print(json.dumps(doc, indent=2, default=str))
-    else:
-        print(markdown_table(result), end="")
-        if result["pooled"]:
-            print(f"\npooled over the seeds ({md_path.parent / 'summary-pooled.md'}):")
-            print(markdown_table(result, pooled=True), end="")
-        print(f"{len(sweep.points)} points, {total} trials in {result['wall_seconds']:.1f} s; "
-              f"logs and summary in {sweep.out}")
-    return 0
 
 
 __all__ = ["Sweep", "check_key", "load_sweep", "markdown_table", "point_names",

@@ -50,7 +50,10 @@ def load() -> ModuleType | None:
         k = None
         if wanted():
             try:  # imported here, not at the top: numba's import costs ~0.3 s of start-up,
-                from sitframe.sim import kernels_numba as k  # paid only by processes that simulate
+                from sitframe.sim import numba_cache  # paid only by processes that simulate;
+                # (importing it points numba's cache at the user's folder, first)
+                numba_cache.announce_compilation()
+                from sitframe.sim import kernels_numba as k  # (compiles or loads: seconds)
             except ImportError:
                 k = None
         _LOADED.append(k)

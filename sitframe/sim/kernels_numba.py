@@ -29,12 +29,10 @@ Segment sets are passed as one ``(5, S)`` array :attr:`SegmentSet.packed
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 from numba import njit
-
-from sitframe.sim import numba_cache
+from numba.core import config as numba_config
 
 __all__ = ["arc_angles", "arc_poses", "backoff", "backoffs", "cast", "cast_each",
            "contact_points", "fcm_ratios", "first_contact", "label_strengths", "linspace",
@@ -45,7 +43,11 @@ _EPS = 1e-12  # the hit tolerance of sitframe.sim.geometry._raycast
 _INV_PI = 1.0 / math.pi
 _SINC_EPS = float(np.finfo(np.float64).eps)  # numpy.sinc's stand-in for 0
 
-_JIT = {"cache": numba_cache.configure(), "nogil": True, "error_model": "numpy", "fastmath": False}
+#: ``cache``: only where :mod:`sitframe.sim.numba_cache` pointed numba at a writable folder of
+#: the user's (it sets ``CACHE_DIR`` when imported, before this module; with none, numba would
+#: cache beside this file, inside the installed package, so nothing is cached).
+_JIT = {"cache": bool(numba_config.CACHE_DIR), "nogil": True, "error_model": "numpy",
+        "fastmath": False}
 
 
 @njit(**_JIT)
@@ -614,5 +616,4 @@ def _warm() -> None:
     frozen_td(ro, 0.3, True, -1.0, 0.9, 0.5, two, np.zeros(2, dtype=np.intp), out)
 
 
-numba_cache.announce_compilation(Path(__file__))
 _warm()

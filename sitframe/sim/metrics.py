@@ -6,9 +6,12 @@ read back from a log.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-from sitframe.sim.world import World
+if TYPE_CHECKING:  # (a world is read through free_cells and bounds only)
+    from sitframe.sim.world import World
 
 
 def collisions_per_1000(collision: np.ndarray, start: int = 0) -> float:

@@ -61,7 +61,10 @@ def _writable(folder: Path) -> str | None:
 def configure() -> bool:
     """Point numba's cache at :func:`cache_dir`; whether kernels are to be cached at all.
 
-    Called by :mod:`sitframe.sim.kernels_numba` before it defines a kernel, once per process.
+    Called once per process when this module is imported, which the kernels' loader
+    (:func:`sitframe.sim.kernels.load`) and a worker pool's forkserver do before
+    :mod:`sitframe.sim.kernels_numba` defines its kernels (they are cached only if it
+    succeeded: ``numba.core.config.CACHE_DIR`` is set).
     ``False`` (compile without a cache, one warning line on stderr) when the folder cannot be
     written: numba would otherwise fall back to the ``__pycache__`` folder inside the package.
     """
@@ -74,6 +77,7 @@ def configure() -> bool:
             config.CACHE_DIR = str(folder)
             _CONFIGURED.append(folder)
         else:
+            config.CACHE_DIR = ""  # (numba's own NUMBA_CACHE_DIR, if that was the one)
             _CONFIGURED.append(None)
             print(f"sitframe: warning: kernel cache folder {folder}: cannot write there "
                   f"({problem}); the kernels are compiled in every process instead (set "
@@ -98,13 +102,19 @@ def compile_pending(source: Path, folder: Path | None = None) -> bool:
     return not any(p.stat().st_mtime >= newest for p in sub.glob(f"{source.stem}.*.nbi"))
 
 
-def announce_compilation(source: Path) -> None:
+def announce_compilation(source: Path | None = None) -> None:
     """Say on a terminal why the first run after an install waits (numba compiling).
 
-    Printed only when stderr is a terminal and the kernels are cached, so logs, pipes and
-    tests never see it (without a cache every process compiles, as its warning said).
+    ``source``: the kernels' module (default :mod:`sitframe.sim.kernels_numba`). Printed
+    only when stderr is a terminal and the kernels are cached, so logs, pipes and tests
+    never see it (without a cache every process compiles, as its warning said).
     """
+    if source is None:
+        source = Path(__file__).with_name("kernels_numba.py")
     if (sys.stderr is not None and sys.stderr.isatty() and _CONFIGURED
             and _CONFIGURED[0] is not None and compile_pending(source, _CONFIGURED[0])):
         print("sitframe: compiling the simulator's kernels with numba (once after an "
               "install or upgrade; some 10-40 s)", file=sys.stderr, flush=True)
+
+
+configure()

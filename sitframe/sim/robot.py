@@ -52,14 +52,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from sitframe.params import choice, number
 from sitframe.sim import geometry as geo
 from sitframe.sim.kernels import kernels
-from sitframe.sim.world import World
+
+if TYPE_CHECKING:  # (a world is read through its segments and start pose only)
+    from sitframe.sim.world import World
 
 __all__ = ["Command", "RobotParams", "Simulator", "StepOutcome", "step_robot", "trajectory"]
 
@@ -514,8 +516,9 @@ class Simulator:
 
     def __init__(self, world: World, *, params: RobotParams | None = None,
                  sensor: Any = None, seed: int | None = None):
-        if not isinstance(world, World):
-            raise TypeError(f"world must be a sitframe.sim.world.World, got {type(world).__name__}")
+        if not hasattr(world, "segment_set") or not hasattr(world, "start"):
+            raise TypeError(f"world must be a sitframe World (load_world), got "
+                            f"{type(world).__name__}")
         self.world = world
         self.params = RobotParams() if params is None else params
         self.sensor = sensor

@@ -13,7 +13,8 @@ What it may import
 
 Entry points
     :func:`~sitframe.situations.fcm.fcm`, :func:`~sitframe.situations.fcm.memberships`,
-    :func:`~sitframe.situations.fcm.validity`, :func:`~sitframe.situations.clustering.cluster_trials`,
+    :func:`~sitframe.situations.fcm.validity`,
+    :func:`~sitframe.situations.clustering.cluster_trials`,
     :class:`~sitframe.situations.events.SituationEvent`. The names of the former module
     ``sitframe.situations`` (``SituationEvent``, ``accumulate_errors``, ...) are served
     from here.
