@@ -182,7 +182,7 @@ def kill_tally(n: int, tmp: Path, seed: int) -> int:
 #: Starts the CLI with Python's SIGINT handler even if this benchmark was
 #: started with SIGINT ignored (as background jobs of a shell are).
 _CLI = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-        "from sitframe.cli.main import console_main; sys.exit(console_main(sys.argv[1:]))")
+        "from sitframe.cli.app import console_main; sys.exit(console_main(sys.argv[1:]))")
 
 
 def interrupt_tally(n: int, tmp: Path, seed: int) -> int:

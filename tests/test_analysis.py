@@ -13,7 +13,7 @@ from helpers import run_config, small_config
 from matplotlib.figure import Figure
 
 from sitframe import analysis as A
-from sitframe.cli.main import main
+from sitframe.cli.app import main
 from sitframe.errors import InputError
 from sitframe.plugins.sonar import PIONEER_ANGLES_DEG as PIONEER
 from sitframe.sim.world import parse_world

@@ -10,7 +10,7 @@ import re
 import pytest
 from helpers import small_config
 
-from sitframe.cli.main import main
+from sitframe.cli.app import main
 from sitframe.contract.config import list_presets, load_config
 from sitframe.logs.reader import open_log
 from sitframe.sim.world import list_worlds, load_world

@@ -13,7 +13,7 @@ import pytest
 
 from sitframe.analysis.compare import _compare, _holm, compare_logs, compare_sweeps
 from sitframe.analysis.replay_data import replay_payload
-from sitframe.cli.main import main
+from sitframe.cli.app import main
 from sitframe.logs.reader import open_log
 
 

@@ -14,7 +14,7 @@ import pytest
 from helpers import run_config, run_json, small_config
 
 import sitframe
-from sitframe.cli.main import main
+from sitframe.cli.app import main
 from sitframe.contract.pluginmanager import Registry, get_plugin_manager
 from sitframe.contract.records import Context, Proposal
 from sitframe.logs.reader import open_log

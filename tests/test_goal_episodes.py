@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sitframe.cli.main import main
+from sitframe.cli.app import main
 from sitframe.contract.config import load_config, preset_text, validate_config
 from sitframe.contract.pluginmanager import Registry, get_plugin_manager
 from sitframe.contract.resolve import Resolved

@@ -199,7 +199,7 @@ def test_evaluate_rescores_an_sb3_run_with_its_own_model(sb3_model, tmp_path, ca
 
     from helpers import run_config, run_json, small_config
 
-    from sitframe.cli.main import main
+    from sitframe.cli.app import main
 
     model = tmp_path / "avoid.zip"
     shutil.copy(sb3_model[1], model)

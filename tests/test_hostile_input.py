@@ -4,7 +4,7 @@ Each test names the issue's item it covers. A refused input gives exit status 2
 and exactly one stderr line ``sitframe: error: FILE: KEY: ...`` with no
 traceback, and whatever was finished before (a published log, a config, a
 source log) is byte for byte as it was. Most cases call
-:func:`sitframe.cli.main.main` in-process; concurrency, SIGTERM and closed pipes
+:func:`sitframe.cli.app.main` in-process; concurrency, SIGTERM and closed pipes
 need real processes.
 """
 
@@ -26,14 +26,14 @@ import numpy as np
 import pytest
 from helpers import INTERRUPTED_TRIALS, ROOM, small_config
 
-from sitframe.cli.main import main
+from sitframe.cli.app import main
 from sitframe.logs.compare import compare_logs
 from sitframe.logs.reader import open_log
 
 SMALL = small_config(trials=2, iterations=100, eval_iterations=50)
 #: Starts the CLI with Python's SIGINT handler even under a shell that ignores it.
 _CLI = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-        "from sitframe.cli.main import console_main; sys.exit(console_main(sys.argv[1:]))")
+        "from sitframe.cli.app import console_main; sys.exit(console_main(sys.argv[1:]))")
 
 
 
@@ -69,7 +69,7 @@ def _run(folder: Path, config: str, out: str, capsys, *argv: str) -> Path:
 @pytest.fixture(scope="module")
 def base(tmp_path_factory) -> Path:
     """A complete small log (2 trials) in its own folder."""
-    from sitframe.cli.main import main as run_main
+    from sitframe.cli.app import main as run_main
 
     d = tmp_path_factory.mktemp("hostile")
     (d / "base.toml").write_text(SMALL)

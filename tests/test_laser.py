@@ -10,7 +10,7 @@ from helpers import run_config, small_config
 
 from sitframe import InputError
 from sitframe import analysis as A
-from sitframe.cli.main import main
+from sitframe.cli.app import main
 from sitframe.plugins.laser import LaserScanner, sitframe_sensors
 from sitframe.plugins.sonar import PIONEER_ANGLES_DEG as PIONEER
 from sitframe.sim.world import load_world, parse_world

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from helpers import run_config, small_config
 
-from sitframe.cli.main import main
+from sitframe.cli.app import main
 from sitframe.errors import InputError
 from sitframe.logs.reader import open_log
 

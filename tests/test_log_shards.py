@@ -15,7 +15,7 @@ import h5py
 import numpy as np
 import pytest
 
-from sitframe.cli.main import main
+from sitframe.cli.app import main
 from sitframe.contract.records import RunInfo, TrialResult
 from sitframe.errors import InputError
 from sitframe.logs.compare import compare_logs

@@ -11,7 +11,7 @@ from concurrent.futures.process import BrokenProcessPool
 import pytest
 from helpers import run_config, run_json, small_config
 
-from sitframe.cli.main import main
+from sitframe.cli.app import main
 from sitframe.errors import InputError
 from sitframe.logs.compare import compare_logs
 from sitframe.logs.reader import open_log

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import pytest
 
-from sitframe.cli.main import main
+from sitframe.cli.app import main
 from sitframe.logs.reader import open_log
 
 #: Imports and helpers every faulty plugin file starts with.

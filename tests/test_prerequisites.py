@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from helpers import small_config
 
-from sitframe.cli.main import main
+from sitframe.cli.app import main
 from sitframe.contract.config import config_hash, load_config, parse_config, to_toml
 from sitframe.errors import InputError
 from sitframe.logs.reader import open_log

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from helpers import INTERRUPTED_ITERATIONS, INTERRUPTED_TRIALS, run_json
 
-from sitframe.cli.main import main
+from sitframe.cli.app import main
 from sitframe.errors import InputError
 from sitframe.logs.compare import compare_logs
 from sitframe.logs.reader import open_log
@@ -25,7 +25,7 @@ N_TRIALS, ITERATIONS = INTERRUPTED_TRIALS, INTERRUPTED_ITERATIONS
 #: Runs the CLI with Python's own SIGINT handler even if the test runner was
 #: started with SIGINT ignored (as background jobs of a non-interactive shell are).
 _CLI = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-        "from sitframe.cli.main import console_main; sys.exit(console_main(sys.argv[1:]))")
+        "from sitframe.cli.app import console_main; sys.exit(console_main(sys.argv[1:]))")
 
 
 @pytest.fixture

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from helpers import run_json, small_config
 
-from sitframe.cli.main import main
+from sitframe.cli.app import main
 from sitframe.logs.layout import SCHEMA_VERSION
 from sitframe.logs.reader import open_log
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from helpers import small_config
 
-from sitframe.cli.main import main
+from sitframe.cli.app import main
 from sitframe.logs.compare import compare_logs
 from sitframe.logs.reader import open_log
 from sitframe.runs.sweep import point_names
@@ -264,7 +264,7 @@ def test_sweep_on_a_two_worker_dask_cluster_gives_the_local_summaries(swept, tmp
 def test_tables_give_an_episode_protocols_scores_per_world():
     """A goal sweep's tables show the goal episodes' scores (success, SPL, ...) per world,
     median [IQR] over the trials of every seed, not only frozen-run collisions."""
-    from sitframe.runs.sweep import markdown_table, summarise_tables
+    from sitframe.runs.summaries import markdown_table, summarise_tables
 
     def table(success: list[float], spl: list[float]) -> np.ndarray:
         dt = [("trial", "i8"), ("converged", "?"), ("convergence_iteration", "f8"),
@@ -288,7 +288,7 @@ def test_tables_give_an_episode_protocols_scores_per_world():
 def test_a_run_that_learned_nothing_shows_no_convergence_count():
     """Goal episodes of frozen behaviours: "–" where "0/N converged" would be untrue; a
     learning run whose trials did not converge still shows 0/N."""
-    from sitframe.runs.sweep import markdown_table, summarise_tables
+    from sitframe.runs.summaries import markdown_table, summarise_tables
 
     t = np.array([(0, False, -1.0), (1, False, -1.0)],
                  [("trial", "i8"), ("converged", "?"), ("convergence_iteration", "f8")])

@@ -85,7 +85,7 @@ def plot_prototypes(
     centers : array_like, shape (c, d)
         Prototypes: one range per beam, metres (clipped to ``max_range`` for drawing).
     angles_deg : array_like, shape (d,)
-        Beam bearings, degrees, positive = left; default the Pioneer 2DX front ring.
+        Beam bearings, degrees, positive = left (the sensor's ``SensorSpec.angles_deg``).
     max_range : float, metres
         The sensor's maximum range = radial axis limit.
     labels : list of str, optional

@@ -19,6 +19,9 @@ Definitions used throughout
 * Situations are numbered from 1 (``S1 ... Sc``) in labels, tables and
   figures, as in the thesis; array rows (``memberships[:, i]``, ``q[i]``)
   stay 0-based, so situation ``Sk`` is row ``k - 1``.
+
+Why one module of this size: every table and array of the analysis API reads a log the same
+few ways (``as_log``, ``_col``, ``_summary``); split by table they would repeat those.
 """
 
 from __future__ import annotations
@@ -689,7 +692,7 @@ def rule_bases_across_trials(log: LogLike, label: str | None = None,
 
 def _eval_worlds(s: np.ndarray) -> list[str]:
     """The evaluation worlds of a summary table (those with a collision rate)."""
-    head, tail = "eval.", ".collisions_per_1000"
+    head, tail = summary_key("eval", "", sep="."), summary_key("", "collisions_per_1000", sep=".")
     return [n[len(head):-len(tail)] for n in s.dtype.names or ()
             if n.startswith(head) and n.endswith(tail)]
 

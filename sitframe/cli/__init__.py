@@ -1,7 +1,7 @@
 """The ``sitframe`` command line.
 
 What it holds
-    :mod:`~sitframe.cli.main` (the parser, ``run``, ``evaluate``, ``world``, ``presets``,
+    :mod:`~sitframe.cli.app` (the parser, ``run``, ``evaluate``, ``world``, ``presets``,
     ``plugins`` and the error handling every command shares), :mod:`~sitframe.cli.logs`
     (``analyse``, ``replay``, ``compare``, ``export``), :mod:`~sitframe.cli.sweep`
     (``sweep``) and :mod:`~sitframe.cli.pack` (``pack``).
@@ -25,5 +25,5 @@ __all__ = ["add_parallel_arguments", "build_parser", "console_main", "main"]
 
 def __getattr__(name: str) -> Any:  # (the parser is built only when a command runs)
     if name in __all__:
-        return getattr(importlib.import_module("sitframe.cli.main"), name)
+        return getattr(importlib.import_module("sitframe.cli.app"), name)
     raise AttributeError(f"module 'sitframe.cli' has no attribute {name!r}")

@@ -2,6 +2,6 @@
 
 import sys
 
-from sitframe.cli.main import console_main
+from sitframe.cli.app import console_main
 
 sys.exit(console_main())

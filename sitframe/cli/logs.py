@@ -1,6 +1,6 @@
 """The log commands ``analyse``, ``replay``, ``compare`` and ``export``: one class each.
 
-Each class is what :data:`sitframe.cli.main.EXTRA_COMMANDS` names: its docstring
+Each class is what :data:`sitframe.cli.app.EXTRA_COMMANDS` names: its docstring
 is the command's description, ``HELP`` its one-line help, ``add_arguments``
 adds its options and ``main`` runs it (returns the exit status).
 """

@@ -12,9 +12,10 @@ import sys
 from functools import partial
 from typing import Any
 
-from sitframe.cli.main import add_parallel_arguments
+from sitframe.cli.app import add_parallel_arguments
 from sitframe.errors import InputError, note
-from sitframe.runs.sweep import load_sweep, markdown_table, pool_over_seeds, run_sweep, write_tables
+from sitframe.runs.summaries import markdown_table, pool_over_seeds, write_tables
+from sitframe.runs.sweep import load_sweep, run_sweep
 
 HELP = "run an experiment over a grid of config values; one log per point + a summary table"
 

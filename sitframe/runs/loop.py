@@ -21,6 +21,9 @@ Seeds: the run seed ``S`` gives each stage and each trial its own
 :class:`numpy.random.SeedSequence` (``spawn_key`` = stage, trial), so trial
 ``k`` is the same whatever the number of trials or workers, and all
 randomness of a trial flows from one :class:`numpy.random.Generator`.
+
+Why one module of this size: the per-iteration path (sensing to recording) is one chain of
+private steps sharing a trial's state; here it reads top to bottom.
 """
 
 from __future__ import annotations

@@ -17,6 +17,9 @@ wherever a ``segments`` array is.
 
 The property tests check these functions against brute-force references written
 with a different algorithm (plain Python loops, ``tests/geometry_reference.py``).
+
+Why one module of this size: ray casting, distances and polygons all work on one packed
+segment set (:class:`SegmentSet`) and its compiled twins.
 """
 
 from __future__ import annotations

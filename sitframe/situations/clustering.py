@@ -573,8 +573,10 @@ def describe_prototype(
     ----------
     center : array_like, shape (d,)
         One prototype: a range per beam, metres.
-    angles_deg : array_like, shape (d,), default Pioneer 2DX front ring
-        Beam bearings, degrees, positive = left (counter-clockwise).
+    angles_deg : array_like, shape (d,)
+        Beam bearings, degrees, positive = left (counter-clockwise): the sensor's own
+        (``SensorSpec.angles_deg``; the Pioneer front ring is
+        ``sitframe.plugins.sonar.PIONEER_ANGLES_DEG``).
     near, far : float, metres
         Thresholds, ``0 < near < far``.
 

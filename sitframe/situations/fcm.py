@@ -40,6 +40,10 @@ multiplication (and one square root) instead of ``np.power``. The objective
 comes for free: ``sum_i u_ij**m d2_ij = d2_min,j * S_j**(1-m)``. Squared distances
 use the expansion ``|x|^2 - 2 x.v + |v|^2`` computed by one matrix product (clamped
 at 0); points within round-off of a centre are recomputed exactly.
+
+Why one module of this size: the algorithm, its stable memberships and the validity measures
+share one formula and one ``m``; apart, the measures would lose the memberships they are
+defined on.
 """
 
 from __future__ import annotations

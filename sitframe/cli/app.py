@@ -393,7 +393,9 @@ def _finite(x: Any) -> Any:
 
 def run_json(result: Any) -> dict[str, Any]:
     """The ``run --json`` document (keys are a contract; see the README)."""
-    trials = []
+    from sitframe.contract.records import summary_key  # (light; the parser never needs it)
+
+    trials, head = [], summary_key("eval", "")
     # (the run's number of situations; an evolving interpreter's trials each report their own)
     situations = len(result.interpreter_state.get("centers", ()))
     for tr in result.trials:
@@ -413,7 +415,7 @@ def run_json(result: Any) -> dict[str, Any]:
             "collisions_per_1000": _finite(s["collisions_per_1000"]),
             "coverage": _finite(s["coverage"]),
             "situations": int(s.get("situations", situations)),
-            "evaluation": {k[5:]: _finite(v) for k, v in s.items() if k.startswith("eval/")},
+            "evaluation": {k[len(head):]: _finite(v) for k, v in s.items() if k.startswith(head)},
         }
         trials.append(entry)
     return {"log": result.info.out, "wall_seconds": round(result.wall_seconds, 3),
