@@ -7,7 +7,7 @@ Run::
 For every log given (it needs the ``collect`` stage), the collected readings
 are mapped to the interpreter's feature space (its ``transform`` and
 ``offset``) and clustered for each c in ``--cs`` by
-:func:`sitframe.clustering.sweep_c` (``--restarts`` FCM runs per c, one chosen
+:func:`sitframe.situations.clustering.sweep_c` (``--restarts`` FCM runs per c, one chosen
 as in the run). Each index then picks a c:
 
 ``R_f`` (minimise; sitframe's ``c = "auto"`` rule, thesis Eq. 4.9)
@@ -32,9 +32,9 @@ import argparse
 
 import numpy as np
 
-from sitframe.clustering import sweep_c
-from sitframe.fcm import memberships
-from sitframe.logs import open_log
+from sitframe.logs.reader import open_log
+from sitframe.situations.clustering import sweep_c
+from sitframe.situations.fcm import memberships
 
 MINIMISE = {"R_f": True, "XB": True, "FS": True, "PBMF": False}
 

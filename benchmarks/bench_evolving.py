@@ -24,8 +24,8 @@ def main() -> None:
     ap.add_argument("--iterations", type=int, default=5000)
     args = ap.parse_args()
 
-    from sitframe.config import load_config, validate_config
-    from sitframe.prepare import prepare_experiment
+    from sitframe.contract.config import load_config, validate_config
+    from sitframe.runs.prepare import prepare_experiment
 
     cfg, source, _ = load_config("obstacle-avoidance-evolving")
     cfg["experiment"].update(trials=1, iterations=args.iterations,

@@ -7,7 +7,7 @@ Run::
 
 For n = 1500 with c = 8, 12, 16 and n = 100,000 with c = 8 (m = 1.2, 8-D
 sonar-like data clipped to [0, 3] m) it prints the time per FCM iteration of
-``sitframe.fcm.fcm`` and ``skfuzzy.cluster.cmeans`` (same data, same starting
+``sitframe.situations.fcm.fcm`` and ``skfuzzy.cluster.cmeans`` (same data, same starting
 point, a fixed iteration budget: skfuzzy with ``error=0``, sitframe with a
 negligible ``tol``; median of the repeats, the two measured alternately), the
 speed-up, and the relative difference of the objective at the fixed point
@@ -22,8 +22,8 @@ import time
 
 import numpy as np
 
-from sitframe.clustering import cluster_trials
-from sitframe.fcm import FCMResult, fcm, memberships, validity
+from sitframe.situations.clustering import cluster_trials
+from sitframe.situations.fcm import FCMResult, fcm, memberships, validity
 
 PROTOTYPES = np.array([
     [3.0, 3.0, 3.0, 3.0, 3.0, 3.0, 3.0, 3.0],  # open space

@@ -36,7 +36,7 @@ import numpy as np
 from gymnasium.utils.env_checker import check_env
 
 import sitframe.gym as sg
-from sitframe.robot import Command, step_robot
+from sitframe.sim.robot import Command, step_robot
 
 
 def plain(env: sg.SitframeEnv, steps: int, seed: int) -> float:

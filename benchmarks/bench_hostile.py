@@ -16,7 +16,7 @@ runs of the kill/interrupt config of ``bench_parallel.py`` (1 or 2 workers)
 and to sweeps of it (2 points), and counts the logs that end ``aborted``
 (exit 143; or ``complete`` with exit 0 when the signal came after the end)
 with no traceback, and how many resume (``run --resume``) to the
-uninterrupted result bit for bit (``sitframe.parallel.compare_logs``). A
+uninterrupted result bit for bit (``sitframe.logs.compare.compare_logs``). A
 signal that arrives while the interpreter is still starting (before any
 sitframe code runs, so before its handler exists) kills the process (exit
 -15); that counts as clean only if nothing was written.
@@ -41,8 +41,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_parallel import _CLI, SITFRAME, reference_run  # noqa: E402
 
 from sitframe.errors import InputError  # noqa: E402
-from sitframe.logs import open_log  # noqa: E402
-from sitframe.parallel import compare_logs  # noqa: E402
+from sitframe.logs.compare import compare_logs  # noqa: E402
+from sitframe.logs.reader import open_log  # noqa: E402
 
 SMALL_RUN = ["obstacle-avoidance", "--trials", "2", "--iterations", "300", "--workers", "1",
              "--json"]

@@ -29,7 +29,7 @@ from the log's creation to just past the end of an uninterrupted run (so
 also while a trial file, the run file or the final packing is being
 written). Each killed log must open and be read whole (``Log.check``:
 every dataset with its checksum), and ``run --resume`` must bring it to
-the uninterrupted run's log bit for bit (:func:`sitframe.parallel.compare_logs`),
+the uninterrupted run's log bit for bit (:func:`sitframe.logs.compare.compare_logs`),
 packed into one file with no trial files or scratch files left beside it.
 Prints figures; it is not a test.
 """
@@ -57,8 +57,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_parallel import kill_config  # noqa: E402
 
 from sitframe.errors import InputError  # noqa: E402
-from sitframe.logs import LogWriter, open_log, shard_folder  # noqa: E402
-from sitframe.parallel import compare_logs  # noqa: E402
+from sitframe.logs.compare import compare_logs  # noqa: E402
+from sitframe.logs.layout import shard_folder
+from sitframe.logs.reader import open_log
+from sitframe.logs.writer import LogWriter  # noqa: E402
 
 SITFRAME = [sys.executable, "-m", "sitframe.cli"]
 REPO = Path(__file__).resolve().parent.parent
@@ -80,8 +82,8 @@ def old_logs_module(rev: str, tmp: Path) -> ModuleType:
 
 def one_trial(tmp: Path) -> tuple[Any, dict[str, dict[str, Any]], Any]:
     """(run info, stage data, one finished trial) of a short obstacle-avoidance run."""
-    from sitframe.config import load_config
-    from sitframe.prepare import prepare_experiment
+    from sitframe.contract.config import load_config
+    from sitframe.runs.prepare import prepare_experiment
 
     cfg, source, _ = load_config("obstacle-avoidance")
     cfg["experiment"].update(trials=1, iterations=300, stages=["collect", "cluster", "learn"])

@@ -36,8 +36,8 @@ from pathlib import Path
 import numpy as np
 
 from sitframe.errors import InputError
-from sitframe.logs import open_log
-from sitframe.parallel import compare_logs
+from sitframe.logs.compare import compare_logs
+from sitframe.logs.reader import open_log
 
 SITFRAME = [sys.executable, "-m", "sitframe.cli"]
 
@@ -182,7 +182,7 @@ def kill_tally(n: int, tmp: Path, seed: int) -> int:
 #: Starts the CLI with Python's SIGINT handler even if this benchmark was
 #: started with SIGINT ignored (as background jobs of a shell are).
 _CLI = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-        "from sitframe.cli import console_main; sys.exit(console_main(sys.argv[1:]))")
+        "from sitframe.cli.app import console_main; sys.exit(console_main(sys.argv[1:]))")
 
 
 def interrupt_tally(n: int, tmp: Path, seed: int) -> int:

@@ -32,12 +32,12 @@ def main() -> None:
     args = ap.parse_args()
 
     import sitframe.plugins.goal_episodes as ge
-    from sitframe import paths
-    from sitframe.config import validate_config
-    from sitframe.loop import TrialSpec, simulate
-    from sitframe.pluginmanager import Registry, get_plugin_manager
-    from sitframe.resolve import Resolved
-    from sitframe.world import load_world
+    from sitframe.contract.config import validate_config
+    from sitframe.contract.pluginmanager import Registry, get_plugin_manager
+    from sitframe.contract.resolve import Resolved
+    from sitframe.runs.loop import TrialSpec, simulate
+    from sitframe.sim import paths
+    from sitframe.sim.world import load_world
 
     cfg = validate_config({"interpreter": {"component": "fcm", "c": 2},
                            "behaviours": {"goal": {"component": "goal"}},

@@ -43,10 +43,10 @@ from pathlib import Path
 
 import numpy as np
 
-from sitframe import geometry as geo
 from sitframe.plugins.sonar import SonarRing
-from sitframe.robot import Command, RobotParams, StepOutcome, step_robot
-from sitframe.world import World, load_world
+from sitframe.sim import geometry as geo
+from sitframe.sim.robot import Command, RobotParams, StepOutcome, step_robot
+from sitframe.sim.world import World, load_world
 
 StepFn = Callable[[World, np.ndarray, Command, RobotParams, np.random.Generator], StepOutcome]
 
@@ -103,7 +103,7 @@ ROOT = Path(__file__).resolve().parent.parent
 def _load_kernels() -> None:
     """Load the compiled kernels now (a revision without them: nothing to load)."""
     try:
-        from sitframe.kernels import load
+        from sitframe.sim.kernels import load
     except ImportError:
         return
     load()
@@ -149,9 +149,9 @@ def _against(rev: str, args: argparse.Namespace) -> None:
 _FIRST_CALL = """
 import time
 t0 = time.perf_counter()
-import numpy, scipy.linalg, sitframe.world, sitframe.robot, sitframe.plugins.sonar
+import numpy, scipy.linalg, sitframe.sim.world, sitframe.sim.robot, sitframe.plugins.sonar
 t1 = time.perf_counter()
-from sitframe.kernels import load
+from sitframe.sim.kernels import load
 assert load() is not None
 t2 = time.perf_counter()
 print(t1 - t0, t2 - t1)

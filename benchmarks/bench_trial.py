@@ -41,11 +41,11 @@ def _time_trials(iterations: int, repeats: int, config: str = "obstacle-avoidanc
                  ) -> list[float]:
     """Seconds per learning trial of ``config`` (a preset name or a .toml path) with this
     process's sitframe."""
-    from sitframe.config import load_config, validate_config
-    from sitframe.pluginmanager import get_plugin_manager
+    from sitframe.contract.config import load_config, validate_config
+    from sitframe.contract.pluginmanager import get_plugin_manager
 
     try:
-        from sitframe.experiment import Experiment
+        from sitframe.runs.experiment import Experiment
     except ImportError:  # a revision from before Experiment moved (--against)
         from sitframe.scheduler import Experiment
 
@@ -119,9 +119,9 @@ def main() -> None:
         _against(args.against, args.iterations, args.repeats)
         return
 
-    from sitframe.config import load_config
-    from sitframe.logs import LogWriter
-    from sitframe.prepare import prepare_experiment
+    from sitframe.contract.config import load_config
+    from sitframe.logs.writer import LogWriter
+    from sitframe.runs.prepare import prepare_experiment
 
     cfg, source, _ = load_config("obstacle-avoidance")
     cfg["experiment"].update(trials=1, iterations=args.iterations, stages=["collect", "cluster"])

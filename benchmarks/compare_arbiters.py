@@ -41,10 +41,10 @@ def _load(log: str, trial: int, arbiter: str | None) -> Any:
     (``evaluate_log`` re-reads and checksums the whole log on every call)."""
     key = (log, trial, arbiter)
     if key not in _LOADED:
-        from sitframe.config import validate_config
-        from sitframe.logged import logged_policy as _logged_policy
-        from sitframe.logs import open_log
-        from sitframe.pluginmanager import Registry, get_plugin_manager
+        from sitframe.contract.config import validate_config
+        from sitframe.contract.pluginmanager import Registry, get_plugin_manager
+        from sitframe.logs.policies import logged_policy as _logged_policy
+        from sitframe.logs.reader import open_log
 
         lg = open_log(log)
         cfg = validate_config(lg.config, file=log)
@@ -64,9 +64,9 @@ def _batch(log: str, trial: int, arbiter: str | None, world: str, seed: int,
            episodes: int, step_hook: Any = None) -> Any:
     """One batch of goal episodes, exactly as ``sitframe evaluate LOG --world W --trial K
     --goal-episodes N --seed S [--arbiter A]`` runs it (``step_hook`` sees every
-    iteration's :class:`sitframe.records.StepRecord`)."""
-    from sitframe.loop import STAGE_BATCH, TrialSpec, simulate, stage_seed
-    from sitframe.resolve import Resolved
+    iteration's :class:`sitframe.contract.records.StepRecord`)."""
+    from sitframe.contract.resolve import Resolved
+    from sitframe.runs.loop import STAGE_BATCH, TrialSpec, simulate, stage_seed
 
     cfg, policies, state, registry = _load(log, trial, arbiter)
     cfg = {**cfg, "goal": {**cfg["goal"], "episodes": episodes}}
@@ -78,7 +78,7 @@ def _batch(log: str, trial: int, arbiter: str | None, world: str, seed: int,
 
 
 def _evaluate(task: tuple[str, str, int, str | None, str, int, int]) -> dict[str, Any]:
-    from sitframe.loop import batch_scores
+    from sitframe.runs.loop import batch_scores
 
     name, log, trial, arbiter, world, seed, episodes = task
     out = batch_scores(_batch(log, trial, arbiter, world, seed, episodes))
@@ -88,7 +88,7 @@ def _evaluate(task: tuple[str, str, int, str | None, str, int, int]) -> dict[str
 def select_trial(log: str, episodes: int = 100, seed: int = 1000, workers: int = 2) -> int:
     """The trial whose frozen policies do best in a short goal-episode run in the log's
     learning world: most collision-free episodes, then success, then SPL."""
-    from sitframe.logs import open_log
+    from sitframe.logs.reader import open_log
 
     lg = open_log(log)
     world = lg.config["experiment"]["world"]
@@ -126,7 +126,7 @@ def draw_paths(runs: list[tuple[str, str, int, str | None]], world: str, seed: i
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from sitframe.analysis.world_plot import plot_world
+    from sitframe.sim.draw import plot_world
 
     paths = {name: _episode_paths(log, trial, arbiter, world, seed, episodes)
              for name, log, trial, arbiter in runs}
@@ -136,7 +136,7 @@ def draw_paths(runs: list[tuple[str, str, int, str | None]], world: str, seed: i
     score = np.where(ok, np.abs(spl - med).sum(axis=0), np.inf)
     e = int(np.argmin(score))
     fig, axes = plt.subplots(1, len(runs), figsize=(5.2 * len(runs), 3.9), squeeze=False)
-    from sitframe.world import load_world
+    from sitframe.sim.world import load_world
     w = load_world(world)
     for ax, (name, p) in zip(axes[0], paths.items(), strict=True):
         plot_world(w, ax=ax, show_start=False, show_goal=False)
@@ -162,7 +162,7 @@ def draw_paths(runs: list[tuple[str, str, int, str | None]], world: str, seed: i
 def _episode_paths(log: str, trial: int, arbiter: str | None, world: str, seed: int,
                    episodes: int) -> dict[str, Any]:
     """Per-episode paths of one arbiter's batch (as ``evaluate_log`` runs it)."""
-    from sitframe.metrics import spl as spl_of
+    from sitframe.sim.metrics import spl as spl_of
 
     r = _batch(log, trial, arbiter, world, seed, episodes)
     first = list(r.episodes["first_iteration"]) + [r.arrays["collision"].size]

@@ -69,7 +69,7 @@ from typing import Any
 
 import numpy as np
 
-from sitframe.metrics import coverage
+from sitframe.sim.metrics import coverage
 
 PRESET = "obstacle-avoidance"
 NOVEL = ("novel-1", "novel-2")
@@ -139,9 +139,9 @@ def score(policy: Any, a: argparse.Namespace) -> dict[str, float]:
 
 def run_fuzzy(seed: int, out: Path, a: argparse.Namespace) -> dict[str, Any]:
     """Learn with sitframe itself (one trial), then score the logged rule bases."""
-    from sitframe.fuzzy import SituationFCS
     from sitframe.gym import Task
-    from sitframe.logs import open_log
+    from sitframe.learning.fcs import SituationFCS
+    from sitframe.logs.reader import open_log
 
     log_path = out / f"fuzzy-q-{seed}.h5"
     cpu_path = log_path.with_suffix(".cpu")

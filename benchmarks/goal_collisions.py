@@ -39,8 +39,8 @@ UNSEEN_RIM = 0.2  # m: ... while the rim is this close to an edge: the sonars mi
 def classify(log: str, trial: int, world: str, seed: int, episodes: int,
              avoid: str = "avoid") -> dict[str, Any]:
     """Counts of the collisions of one batch by class (module docstring)."""
-    from sitframe.geometry import min_distance
-    from sitframe.world import load_world
+    from sitframe.sim.geometry import min_distance
+    from sitframe.sim.world import load_world
 
     edges = load_world(world).segment_set
     rows: list[tuple[float, float, float, float]] = []

@@ -25,9 +25,9 @@ from typing import Any
 
 import numpy as np
 
-from sitframe.logs import open_log
-from sitframe.pluginmanager import Registry, get_plugin_manager
-from sitframe.resolve import Resolved
+from sitframe.contract.pluginmanager import Registry, get_plugin_manager
+from sitframe.contract.resolve import Resolved
+from sitframe.logs.reader import open_log
 
 BAD = 10.0  # collisions per 1000 iterations that make an evaluation "bad"
 BAND_BAD = 0.5  # a wall-following evaluation in the band less than half the time

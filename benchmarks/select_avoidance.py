@@ -10,7 +10,7 @@ goal-finding fusion (CDB, ``sitframe evaluate LOG --trial K --goal-episodes N``)
 
 and prints the Spearman correlation with the test rooms' collision-free rate
 of (a) today's ``trial = "best"`` score (rank sum of training-room collisions
-and coverage, :func:`sitframe.logged.best_trial`; lower is better, so a
+and coverage, :func:`sitframe.logs.policies.best_trial`; lower is better, so a
 useful score correlates *negatively*) and (b) the short goal run's
 collision-free rate (a useful score correlates positively), and the rule base
 each picks.
@@ -33,7 +33,7 @@ TEST_WORLDS = ("goal", "novel-1", "novel-2")
 
 
 def _cf(task: tuple[str, int, str, int, int]) -> dict[str, Any]:
-    from sitframe.evaluation import evaluate_log
+    from sitframe.runs.evaluation import evaluate_log
 
     log, trial, world, seed, episodes = task
     out = evaluate_log(log, world=world, trial=trial, seed=seed, goal_episodes=episodes)
@@ -42,8 +42,8 @@ def _cf(task: tuple[str, int, str, int, int]) -> dict[str, Any]:
 
 
 def rank_sums(log: str) -> dict[int, float]:
-    """Trial -> the rank sum :func:`sitframe.logged.best_trial` minimises."""
-    from sitframe.logs import open_log
+    """Trial -> the rank sum :func:`sitframe.logs.policies.best_trial` minimises."""
+    from sitframe.logs.reader import open_log
 
     lg = open_log(log)
     t = lg.summary()
@@ -63,8 +63,8 @@ def main() -> None:
     ap.add_argument("--worlds", nargs="+", default=list(TEST_WORLDS), help="test rooms")
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
-    from sitframe.logged import best_trial
-    from sitframe.logs import open_log
+    from sitframe.logs.policies import best_trial
+    from sitframe.logs.reader import open_log
 
     lg = open_log(args.log)
     trials = lg.trial_indices()

@@ -43,8 +43,8 @@ import numpy as np
 from scipy.stats import spearmanr
 
 from sitframe.analysis import situation_labels
-from sitframe.clustering import SECTORS_DEG
-from sitframe.logs import open_log
+from sitframe.logs.reader import open_log
+from sitframe.situations.clustering import SECTORS_DEG
 
 AHEAD_DEG = SECTORS_DEG[0]
 DECILES = 10

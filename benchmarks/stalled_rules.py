@@ -35,7 +35,7 @@ def _run(log: str, world: str, trial: int, episodes: int, seed: int,
     """One trial's goal batch, its stalled rules (``every``: all rules) set to ``action``
     (None: as learned)."""
     import sitframe.plugins.learned_arbiter as la
-    from sitframe.evaluation import evaluate_log
+    from sitframe.runs.evaluation import evaluate_log
 
     load = la.FuzzyQArbiter.load_policy
 
@@ -69,7 +69,7 @@ def main() -> None:
     ap.add_argument("--plugins-dir", action="append", default=[],
                     help="plugin folder the log's run loaded (e.g. benchmarks/plugins)")
     args = ap.parse_args()
-    from sitframe.logs import open_log
+    from sitframe.logs.reader import open_log
 
     trials = open_log(args.log).trial_indices()
     with ProcessPoolExecutor(args.workers) as pool:

@@ -12,7 +12,7 @@
     Switching: the first behaviour (in a configured order) whose condition
     holds wins outright, as in subsumption-like arbitration.
 
-The arbiter contract (:class:`sitframe.components.Arbiter`): ``combine(context,
+The arbiter contract (:class:`sitframe.contract.components.Arbiter`): ``combine(context,
 proposals)`` gets the proposals of every behaviour keyed by label, in config
 order, and returns ``(fused proposal, weights)`` where ``weights`` is a (k,)
 array, one weight per proposal in that order, summing to 1 (logged as the

@@ -6,7 +6,7 @@ system that would create models of new situations as they arise" and a
 number of situations learned "with respect to the environment and goal".
 This interpreter does both, during each learning trial, with the FCM
 membership formula and m of the off-line clustering
-(:class:`sitframe.fcm.MembershipFunction`):
+(:class:`sitframe.situations.fcm.MembershipFunction`):
 
 Start
     From nothing (the run has no collect/cluster stage: the first reading

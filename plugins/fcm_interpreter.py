@@ -2,9 +2,9 @@
 
 ``fit`` runs many FCM trials from random starts on the collected readings,
 keeps every trial's centres and validity measures (they are logged), and
-picks one trial by :func:`sitframe.clustering.select_trial`. ``memberships``
+picks one trial by :func:`sitframe.situations.clustering.select_trial`. ``memberships``
 then fuzzifies each live reading with the *same* formula and the *same* m as
-the clustering, :func:`sitframe.fcm.memberships`.
+the clustering, :func:`sitframe.situations.fcm.memberships`.
 
 Config (``[interpreter]``)::
 

@@ -12,7 +12,7 @@ It is a *continuing* protocol (:attr:`FrozenEvaluation.episodic` is False):
 the run is not an episode among others but the evaluation itself, so it
 runs on the evaluation's own seed and is logged as one run, with no
 per-episode records. Its scores are the figures the core measures of every
-evaluation (:data:`sitframe.loop.EVAL_KEYS`): ``iterations``,
+evaluation (:data:`sitframe.runs.loop.EVAL_KEYS`): ``iterations``,
 ``collisions``, ``collisions_per_1000``, ``distance_m``,
 ``mean_speed_m_s`` and ``coverage`` (the fraction of free 0.5 m grid cells
 the robot's centre visited), as ``eval/<world>/<key>``; it adds no

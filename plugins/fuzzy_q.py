@@ -37,7 +37,7 @@ With an evolving interpreter (``plugins/evolving.py``, the contract in
 ``situations_changed`` grows a new situation's row from its neighbours'
 rows (membership-weighted, pulled towards the optimistic ``q_init_value`` by
 ``new_row_optimism``) and combines merged rows visit-weighted
-(:meth:`sitframe.learning.FuzzyQLearner.situations_changed`);
+(:meth:`sitframe.learning.fuzzy_q.FuzzyQLearner.situations_changed`);
 ``situation_errors`` reports the last update's absolute TD errors per
 situation, from which the interpreter splits situations the task finds hard.
 """

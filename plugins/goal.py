@@ -6,7 +6,7 @@ heading, wrapped to (-180, 180] degrees and clipped to ``+-max_turn_deg``
 (90, the largest command). A goal straight behind the robot gives ``+90``
 (turn left). It has no opinion on speed (``None``: the run's default speed).
 
-The goal comes from the context (:attr:`sitframe.records.Context.goal`):
+The goal comes from the context (:attr:`sitframe.contract.records.Context.goal`):
 the world's ``[goal]`` or the goal of the current goal episode. The class
 attribute ``evaluation_protocol = "goal-episodes"`` makes a run with this
 behaviour a *goal run*: its evaluate stage runs the goal episodes of the

@@ -1,7 +1,7 @@
 """The ``goal-episodes`` evaluation protocol: drive from a start to a goal, and score it.
 
 An *episode* starts the robot at a start pose with a goal disc in the
-context (:attr:`sitframe.records.Context.goal`) and runs the configured
+context (:attr:`sitframe.contract.records.Context.goal`) and runs the configured
 behaviours and arbiter, without learning, until
 
 * the robot's centre is within the goal radius (**terminated**: success), or
@@ -31,7 +31,7 @@ Per episode: ``success``, ``iterations``, ``collisions``, ``path_length_m``
 *edge* of the goal disc, the shortest possible successful path ignoring
 obstacles, used by ``spl``), ``shortest_m`` (the same for the shortest path
 the robot's disc can drive, around walls and through doors:
-:func:`sitframe.paths.shortest_path_length` minus the goal radius; ``inf``
+:func:`sitframe.sim.paths.shortest_path_length` minus the goal radius; ``inf``
 when the goal cannot be reached; used by ``spl_shortest``), ``time_s``
 (iterations x control period, 1.5 s), ``heading_change_per_m`` (total
 |heading change| per metre, path smoothness).
@@ -39,7 +39,7 @@ when the goal cannot be reached; used by ``spl_shortest``), ``time_s``
 Aggregates over a batch (:meth:`GoalEpisodes.aggregate`): ``episodes``,
 ``success_rate``, ``collisions_per_episode``, ``collision_free_rate``
 (fraction of episodes without a collision), ``spl``
-(:func:`sitframe.metrics.spl` against the straight line, as in logs before
+(:func:`sitframe.sim.metrics.spl` against the straight line, as in logs before
 ``spl_shortest`` existed), ``spl_shortest`` (SPL as Anderson et al. 2018
 define it, against the shortest path: the straight line passes through the
 walls of a multi-room world, so there ``spl`` charges a detour no robot can
@@ -106,7 +106,7 @@ def goal_pairs(
         y [m], radius [m]. Both positions are free for a disc of
         ``robot_radius + margin``; they are at least ``min_distance`` apart,
         and a path of the ``robot_radius`` disc joins them
-        (:func:`sitframe.paths.shortest_path_length` is finite): in a world of
+        (:func:`sitframe.sim.paths.shortest_path_length` is finite): in a world of
         separate rooms a pair in two of them would fail every controller, and
         count as its failure.
 

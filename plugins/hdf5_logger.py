@@ -1,7 +1,7 @@
 """Observer plugin: writes the run to an HDF5 log (layout in :mod:`sitframe.logs`).
 
 It holds no file open: every stage and every finished trial is one
-crash-safe transaction (:class:`sitframe.logs.LogWriter`: a trial goes to its
+crash-safe transaction (:class:`sitframe.logs.writer.LogWriter`: a trial goes to its
 own file, linked from the run file; the run's end packs them into the run
 file, whatever its status), so a run
 killed at any moment leaves a readable log whose root ``status`` says
@@ -21,7 +21,7 @@ another observer's ``sitframe_trial_end`` may still add arrays to
 ``trial.plugin_data["<its plugin name>"]``, and they are written in the same
 transaction as the trial.
 
-The process holds the log's lock (:func:`sitframe.logs.lock_log`) from the
+The process holds the log's lock (:func:`sitframe.logs.writer.lock_log`) from the
 run's start to its end, so a second writer of the same log is refused.
 """
 

@@ -1,7 +1,7 @@
 """Reward plugins of the thesis: obstacle avoidance (Alg. 4) and speed (Alg. 6).
 
 A reward is any callable class with a ``name`` that maps a
-:class:`sitframe.records.Transition` to a float. This module is the example
+:class:`sitframe.contract.records.Transition` to a float. This module is the example
 to copy; a new reward is ~20 lines::
 
     from sitframe import hookimpl

@@ -12,7 +12,7 @@ floats. To add your own:
    obstacle edge; :func:`sitframe.cast_rays` casts all rays in one call, and
    :func:`sitframe.rim_ranges` turns them into a range finder's reading
    (ranges from the robot's rim, the nearest of each beam's rays). Both run
-   compiled kernels when numba is installed (:mod:`sitframe.kernels`).
+   compiled kernels when numba is installed (:mod:`sitframe.sim.kernels`).
    Everything a plugin needs is importable from ``sitframe`` itself.
 3. Take all randomness from the ``rng`` you are given (never ``np.random``),
    and draw from it only when an option needs it, so runs stay reproducible.

@@ -118,7 +118,7 @@ def note(message: str) -> None:
     """One line on stderr saying what a command chose to do for the user (not an error).
 
     Each message is said once per command (a sweep whose twenty points make the
-    same choice says it once, not twenty times); :func:`sitframe.cli.main` starts
+    same choice says it once, not twenty times); :func:`sitframe.cli.app.main` starts
     every command afresh with :func:`forget_notes`.
     """
     if message not in _SAID:

@@ -15,7 +15,7 @@ fixed interpreter's c); evaluation collisions per 1000 iterations, median
 [IQR] and worst, over every (trial, room) evaluation, and the median in
 each room; the share of evaluations above 10 per 1000; median coverage; and
 the *frontal collisions that began between prototypes*
-(:func:`sitframe.metrics.frontal_between_prototypes`: contact within 30 deg of
+(:func:`sitframe.sim.metrics.frontal_between_prototypes`: contact within 30 deg of
 the heading, the acted-on reading's top membership below 0.5) as a share of
 all evaluation collisions.
 """
@@ -28,8 +28,8 @@ import sys
 
 import numpy as np
 
-from sitframe.logs import open_log
-from sitframe.metrics import frontal_between_prototypes
+from sitframe.logs.reader import open_log
+from sitframe.sim.metrics import frontal_between_prototypes
 
 
 def pool(paths: list[str], rooms: list[str]) -> dict[str, np.ndarray]:

@@ -1,4 +1,4 @@
-"""Brute-force references for :mod:`sitframe.geometry` (plain Python loops, another method).
+"""Brute-force references for :mod:`sitframe.sim.geometry` (plain Python loops, another method).
 
 The property tests compare the vectorised functions with these; they are test oracles,
 kept out of the package so that nothing but the tests depends on them.

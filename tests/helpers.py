@@ -56,7 +56,7 @@ INTERRUPTED = small_config(name="resume", trials=INTERRUPTED_TRIALS,
 def run_config(folder, config: str, out_name: str, *argv: str):
     """Write ``config`` to ``folder/<stem>.toml``, ``sitframe run`` it into ``folder/out_name``
     with ``--json`` plus ``argv``, assert exit 0; return ``(config_path, log_path)``."""
-    from sitframe.cli import main
+    from sitframe.cli.app import main
 
     cfg = folder / (out_name.rsplit(".", 1)[0] + ".toml")
     cfg.write_text(config)
@@ -69,7 +69,7 @@ def run_json(capsys, *argv: str):
     """Run the CLI, assert exit 0 (showing stderr otherwise), return its stdout as JSON."""
     import json
 
-    from sitframe.cli import main
+    from sitframe.cli.app import main
 
     code = main(list(argv))
     captured = capsys.readouterr()

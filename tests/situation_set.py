@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from sitframe import load_world
-from sitframe.world import parse_world
+from sitframe.sim.world import parse_world
 
 DATA = Path(__file__).parent / "data" / "situations.toml"
 ROOM = "[[walls]]\npoints = [[-5, -5], [5, -5], [5, 5], [-5, 5], [-5, -5]]\n"

@@ -13,10 +13,10 @@ from helpers import run_config, small_config
 from matplotlib.figure import Figure
 
 from sitframe import analysis as A
-from sitframe.cli import main
+from sitframe.cli.app import main
 from sitframe.errors import InputError
 from sitframe.plugins.sonar import PIONEER_ANGLES_DEG as PIONEER
-from sitframe.world import parse_world
+from sitframe.sim.world import parse_world
 
 TINY = small_config(name="tiny", seed=5, sweep=(3, 6))
 

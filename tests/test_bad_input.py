@@ -5,7 +5,7 @@ directory and asserts that it is rejected cleanly: exit status 2, stderr is
 exactly one line starting ``sitframe: error:`` that names the file (and the
 key, where there is one), no traceback anywhere, and nothing written (the
 working directory and the input files are unchanged: no ``logs/`` folder, no
-output file, no modified log). Most cases call :func:`sitframe.cli.main`
+output file, no modified log). Most cases call :func:`sitframe.cli.app.main`
 in-process; :func:`test_real_command_has_no_traceback` runs the installed
 ``sitframe`` command in subprocesses.
 
@@ -30,7 +30,7 @@ import h5py
 import pytest
 from helpers import ROOM, small_config
 
-from sitframe.cli import main
+from sitframe.cli.app import main
 
 SMALL = small_config(trials=1, iterations=100, eval_iterations=50)
 
@@ -452,7 +452,7 @@ def test_real_command_has_no_traceback(cid: str, inputs: Path, tmp_path: Path) -
     """The installed ``sitframe`` command: one line on stderr, exit 2, nothing written."""
     exe = shutil.which("sitframe")
     cmd = [exe] if exe else [sys.executable, "-c",
-                             "import sys; from sitframe.cli import main; sys.exit(main())"]
+                             "import sys; from sitframe.cli.app import main; sys.exit(main())"]
     c = next(c for c in CASES if c.id == cid)
     D = str(inputs)
     _write_files(c, tmp_path, D)

@@ -7,14 +7,14 @@ import math
 import numpy as np
 import pytest
 
+from sitframe.contract.records import Context, Proposal, Transition
 from sitframe.errors import InputError
 from sitframe.plugins.arbiters import CDBArbiter, PriorityArbiter, trapezoid
 from sitframe.plugins.goal import GoalBehaviour, goal_bearing_deg
 from sitframe.plugins.sonar import PIONEER_ANGLES_DEG as PIONEER
 from sitframe.plugins.wall_following import WallFollowingReward
-from sitframe.records import Context, Proposal, Transition
-from sitframe.robot import Command, StepOutcome
-from sitframe.world import Goal, load_world
+from sitframe.sim.robot import Command, StepOutcome
+from sitframe.sim.world import Goal, load_world
 
 WORLD = load_world("goal")
 FAR = 3.0  # max range: nothing seen

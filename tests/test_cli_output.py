@@ -10,10 +10,10 @@ import re
 import pytest
 from helpers import small_config
 
-from sitframe.cli import main
-from sitframe.config import list_presets, load_config
-from sitframe.logs import open_log
-from sitframe.world import list_worlds, load_world
+from sitframe.cli.app import main
+from sitframe.contract.config import list_presets, load_config
+from sitframe.logs.reader import open_log
+from sitframe.sim.world import list_worlds, load_world
 
 
 def _cells(out: str, first: str) -> list[list[str]]:

@@ -13,8 +13,8 @@ import pytest
 
 from sitframe.analysis.compare import _compare, _holm, compare_logs, compare_sweeps
 from sitframe.analysis.replay_data import replay_payload
-from sitframe.cli import main
-from sitframe.logs import open_log
+from sitframe.cli.app import main
+from sitframe.logs.reader import open_log
 
 
 def _summary(it: np.ndarray, coll: np.ndarray) -> np.ndarray:

@@ -10,7 +10,7 @@ import h5py
 import numpy as np
 import pytest
 
-from sitframe.parallel import compare_logs
+from sitframe.logs.compare import compare_logs
 
 
 def _write(path) -> None:

@@ -6,7 +6,7 @@ import tomllib
 
 import pytest
 
-from sitframe.config import list_presets, load_config, parse_config, to_toml
+from sitframe.contract.config import list_presets, load_config, parse_config, to_toml
 from sitframe.errors import InputError
 
 MINIMAL = '[behaviours.avoid]\ncomponent = "fuzzy-q"\nreward = "obstacle-avoidance"\n'

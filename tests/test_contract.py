@@ -14,10 +14,10 @@ import pytest
 from helpers import run_config, run_json, small_config
 
 import sitframe
-from sitframe.cli import main
-from sitframe.logs import open_log
-from sitframe.pluginmanager import Registry, get_plugin_manager
-from sitframe.records import Context, Proposal
+from sitframe.cli.app import main
+from sitframe.contract.pluginmanager import Registry, get_plugin_manager
+from sitframe.contract.records import Context, Proposal
+from sitframe.logs.reader import open_log
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parent.parent
 def test_every_public_name_resolves_and_import_stays_light():
     for name in sitframe.__all__:
         assert getattr(sitframe, name) is not None, name
-    code = ("import sys, sitframe; print(sorted(m for m in ('sitframe.experiment', "
+    code = ("import sys, sitframe; print(sorted(m for m in ('sitframe.runs.experiment', "
             "'sitframe.logs', 'h5py', 'scipy') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, cwd=ROOT)

@@ -6,7 +6,7 @@ The tutorial's fenced blocks are marked:
 * ```` ```console ```` (optionally ``exit=N``, default 0): each ``$ COMMAND``
   line is run and the lines after it (up to the next ``$``) must appear in
   its output, in order (``...`` stands for any lines). ``sitframe ...`` runs
-  :func:`sitframe.cli.main` in-process; ``mkdir``, ``cp`` and ``touch`` run in
+  :func:`sitframe.cli.app.main` in-process; ``mkdir``, ``cp`` and ``touch`` run in
   a shell; ``pip install -e DIR`` is emulated without network or touching the
   virtualenv: a ``<name>-<version>.dist-info`` folder with ``METADATA`` and
   ``entry_points.txt`` made from ``DIR/pyproject.toml`` is written to a site
@@ -38,9 +38,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from sitframe.cli import main
-from sitframe.logs import open_log
-from sitframe.parallel import compare_logs
+from sitframe.cli.app import main
+from sitframe.logs.compare import compare_logs
+from sitframe.logs.reader import open_log
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "plugins.md"
 
@@ -90,7 +90,7 @@ class Tutorial:
                    if k not in ("SITFRAME_TRACEBACK", "SITFRAME_DISABLE_PLUGIN_AUTOLOAD")}
             env["PYTHONPATH"] = os.pathsep.join(self.pythonpath)
             proc = subprocess.run(
-                [sys.executable, "-c", "import sys; from sitframe.cli import main; "
+                [sys.executable, "-c", "import sys; from sitframe.cli.app import main; "
                  "sys.exit(main())", *argv], cwd=self.root, env=env, capture_output=True,
                 text=True, timeout=300)
             return Outcome(argv, proc.returncode, proc.stdout, proc.stderr)

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 from helpers import run_config, run_json, small_config
 
-from sitframe.learning import FuzzyQLearner, QLearningParams
-from sitframe.logs import open_log
+from sitframe.contract.records import TrialInfo
+from sitframe.learning.fuzzy_q import FuzzyQLearner, QLearningParams
+from sitframe.logs.reader import open_log
 from sitframe.plugins.evolving import EvolvingInterpreter
 from sitframe.plugins.fcm_interpreter import FCMInterpreter
-from sitframe.records import TrialInfo
-from sitframe.situations import SituationEvent, count_per_iteration
+from sitframe.situations.events import SituationEvent, count_per_iteration
 
 
 def _interp(**kw) -> EvolvingInterpreter:
@@ -200,7 +200,7 @@ def test_online_run_logs_history_and_evaluates_own_situations(tmp_path, capsys) 
     assert ev["collisions"] == tl.summary["eval/novel-1/collisions"]
     # the report of an online run has its evolving-situations section
     from sitframe.analysis import analyse
-    from sitframe.cli import main
+    from sitframe.cli.app import main
 
     rep = analyse(out, tmp_path / "report", dpi=40)
     evolving = {name for sec, name, _cap in rep.files if sec == "Evolving situations"}
@@ -255,7 +255,7 @@ def test_auto_c_cardinality_stops_where_the_smallest_situation_stops_shrinking()
 
 
 def test_a_sweep_starts_online_runs_from_no_situations(tmp_path) -> None:
-    from sitframe.cli import main
+    from sitframe.cli.app import main
 
     (tmp_path / "base.toml").write_text(_online_config(iterations=100))
     (tmp_path / "s.toml").write_text('[sweep]\nbase = "base.toml"\n[grid]\n'

@@ -1,4 +1,5 @@
-"""Tests of sitframe.fcm: Eq. 3.2 memberships, Algorithm 1, validity measures (Eqs. 4.1-4.9)."""
+"""Tests of sitframe.situations.fcm: Eq. 3.2 memberships, Algorithm 1, validity measures
+(Eqs. 4.1-4.9)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from sitframe.errors import InputError
-from sitframe.fcm import (
+from sitframe.situations.fcm import (
     MEASURE_DIRECTIONS,
     FCMResult,
     fcm,
@@ -352,7 +353,7 @@ def test_same_fixed_point_as_skfuzzy(c):
 @given(st.integers(2, 16), st.floats(1.01, 3.0), st.integers(0, 10_000))
 @settings(max_examples=150, deadline=None)
 def test_membership_function_matches_memberships(c, m, seed):
-    from sitframe.fcm import MembershipFunction
+    from sitframe.situations.fcm import MembershipFunction
 
     rng = np.random.default_rng(seed)
     V = rng.uniform(0, 3, (c, 8))
@@ -586,7 +587,7 @@ def test_fcm_accepts_lists_ints_bools_and_object_arrays_as_numbers():
 @pytest.fixture(params=["numpy", "compiled"])
 def membership_path(request, monkeypatch):
     """Run MembershipFunction on the numpy code or on the compiled kernels."""
-    from sitframe import kernels
+    from sitframe.sim import kernels
 
     if request.param == "compiled":
         pytest.importorskip("numba")
@@ -603,7 +604,7 @@ def test_membership_function_is_eq_3_2_on_either_path(membership_path):
     """The controller's per-reading memberships: Eq. 3.2 near and far (squared distances
     below and above 1), 1 on a centre, shared equally between identical centres, a single
     centre gets everything, and ~1e-300 (not 0 or subnormal) at m = 1.01."""
-    from sitframe.fcm import MembershipFunction
+    from sitframe.situations.fcm import MembershipFunction
 
     V = np.array([[0.0, 0.0], [0.5, 0.0], [3.0, 1.0]])
     f = MembershipFunction(V, 1.5)
@@ -628,7 +629,7 @@ def test_membership_function_is_eq_3_2_on_either_path(membership_path):
     (np.array([[0.0, np.nan]]), r"\(1, 2\)"), (np.array([[0.0, np.inf], [1.0, 1.0]]), r"\(2, 2\)"),
 ])
 def test_membership_function_refuses_centres_that_are_not_a_finite_table(centers, shape):
-    from sitframe.fcm import MembershipFunction
+    from sitframe.situations.fcm import MembershipFunction
 
     with pytest.raises(ValueError, match=rf"^centers must be a finite \(c, d\) array, got shape "
                                          rf"{shape}$"):

@@ -13,8 +13,8 @@ import pytest  # noqa: E402
 from matplotlib.patches import Circle, FancyArrowPatch  # noqa: E402
 
 from sitframe.analysis import situation_plots as SP  # noqa: E402
-from sitframe.analysis.world_plot import plot_world  # noqa: E402
-from sitframe.world import load_world  # noqa: E402
+from sitframe.sim.draw import plot_world  # noqa: E402
+from sitframe.sim.world import load_world  # noqa: E402
 
 
 @pytest.fixture(autouse=True)

@@ -2,10 +2,10 @@
 
 Every generated input must either load or raise the *documented* error:
 
-* ``sitframe.world.parse_world`` and ``sitframe.config.parse_config``:
+* ``sitframe.sim.world.parse_world`` and ``sitframe.contract.config.parse_config``:
   :class:`~sitframe.errors.InputError` (a ``ValueError``), one line, naming
   the file;
-* ``sitframe.fcm.fcm`` / ``memberships`` / ``validity``: ``ValueError`` or
+* ``sitframe.situations.fcm.fcm`` / ``memberships`` / ``validity``: ``ValueError`` or
   ``TypeError``; and what loads is a valid fuzzy partition (finite, rows sum
   to 1).
 
@@ -32,10 +32,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from sitframe.config import parse_config
+from sitframe.contract.config import parse_config
 from sitframe.errors import InputError
-from sitframe.fcm import FCMResult, fcm, memberships, validity
-from sitframe.world import parse_world
+from sitframe.sim.world import parse_world
+from sitframe.situations.fcm import FCMResult, fcm, memberships, validity
 
 FILE = "fuzz.toml"
 
@@ -466,7 +466,7 @@ def component_docs(draw: st.DrawFn) -> dict[str, Any]:
     doc["behaviours"]["avoid"]["reward"] = reward
     doc["behaviours"]["avoid"]["reward_params"] = {}
     from sitframe.params import accepted_params
-    from sitframe.robot import RobotParams
+    from sitframe.sim.robot import RobotParams
 
     tables = {
         "sensor": (doc.setdefault("sensor", {}), reg.entries["sensor"]["pioneer-sonar"]),
@@ -490,7 +490,7 @@ _REGISTRY: list[Any] = []
 
 def _registry() -> Any:
     if not _REGISTRY:
-        from sitframe.pluginmanager import Registry, get_plugin_manager
+        from sitframe.contract.pluginmanager import Registry, get_plugin_manager
 
         _REGISTRY.append(Registry.collect(get_plugin_manager()))
     return _REGISTRY[0]
@@ -498,7 +498,7 @@ def _registry() -> Any:
 
 def classify_components(doc: dict[str, Any]) -> str:
     """``parse_config`` then resolve every component (what ``sitframe run`` does first)."""
-    from sitframe.resolve import Resolved
+    from sitframe.contract.resolve import Resolved
 
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -549,7 +549,7 @@ def test_renderer_round_trips() -> None:
 
 
 # ----------------------------------------------------------------------------- regressions
-# Inputs the fuzzers found escaping as the wrong error type (fixed in sitframe.fcm).
+# Inputs the fuzzers found escaping as the wrong error type (fixed in sitframe.situations.fcm).
 
 
 @pytest.mark.parametrize("bad", [

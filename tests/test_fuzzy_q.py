@@ -15,7 +15,7 @@ from sitframe import (
 )
 from sitframe.errors import InputError
 from sitframe.plugins.fuzzy_q import CrispQBehaviour, FuzzyQBehaviour
-from sitframe.robot import Command, StepOutcome
+from sitframe.sim.robot import Command, StepOutcome
 
 H3 = [90.0, 0.0, -90.0]
 

@@ -13,7 +13,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from sitframe import geometry as g
+from sitframe.sim import geometry as g
 
 coord = st.floats(-5.0, 5.0, allow_nan=False, allow_infinity=False, width=64)
 small_int = st.integers(-4, 4).map(float)  # exact values: hits ends, parallels, on-segment
@@ -166,7 +166,7 @@ def test_sensor_casts_match_the_reference_with_and_without_compiled_kernels(
         compiled: bool, monkeypatch: pytest.MonkeyPatch) -> None:
     """The sensors' unchecked fast paths (one origin, N origins, readings from a disc's rim)
     read what the brute-force cast reads, whether numba is there or not (SITFRAME_NUMBA=0)."""
-    from sitframe import kernels
+    from sitframe.sim import kernels
 
     if not compiled:
         monkeypatch.setattr(kernels, "_LOADED", [None])
@@ -307,7 +307,7 @@ def test_polygon_self_intersection_open_closed_folds_and_edge_lengths():
 @pytest.fixture(params=["compiled", "numpy"])
 def kernel_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
     """Run a test with the compiled kernels and again with the numpy path (no numba)."""
-    from sitframe import kernels
+    from sitframe.sim import kernels
 
     if request.param == "numpy":
         monkeypatch.setattr(kernels, "_LOADED", [None])

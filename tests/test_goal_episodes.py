@@ -11,17 +11,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sitframe.cli import main
-from sitframe.config import load_config, preset_text, validate_config
+from sitframe.cli.app import main
+from sitframe.contract.config import load_config, preset_text, validate_config
+from sitframe.contract.pluginmanager import Registry, get_plugin_manager
+from sitframe.contract.resolve import Resolved
 from sitframe.errors import InputError
-from sitframe.evaluation import evaluate_log, select_trial
-from sitframe.logs import open_log
-from sitframe.loop import TrialSpec, batch_scores, simulate
-from sitframe.pluginmanager import Registry, get_plugin_manager
+from sitframe.logs.reader import open_log
 from sitframe.plugins.goal_episodes import AGGREGATE_KEYS, GoalEpisodes, goal_pairs, world_pairs
-from sitframe.prepare import prepare_experiment
-from sitframe.resolve import Resolved
-from sitframe.world import load_world, parse_world
+from sitframe.runs.evaluation import evaluate_log, select_trial
+from sitframe.runs.loop import TrialSpec, batch_scores, simulate
+from sitframe.runs.prepare import prepare_experiment
+from sitframe.sim.world import load_world, parse_world
 
 STATE = {"centers": np.array([[0.5] * 8, [3.0] * 8]), "m": 1.2}
 
@@ -216,8 +216,8 @@ def test_learning_goal_run_evaluates_each_trials_learned_policy():
     (Before, the episodes ran as extra trials after the learning trials with the
     untrained behaviour: the rule base all zeros.)
     """
-    from sitframe.experiment import Experiment
-    from sitframe.loop import evaluation_specs, simulate
+    from sitframe.runs.experiment import Experiment
+    from sitframe.runs.loop import evaluation_specs, simulate
 
     cfg = validate_config({
         "experiment": {"trials": 2, "iterations": 80, "world": "goal",
@@ -315,7 +315,7 @@ def test_spl_shortest_measures_against_the_path_round_walls():
 
 
 def test_random_pairs_are_joined_by_a_path_in_a_world_of_separate_rooms():
-    from sitframe.paths import shortest_path_length
+    from sitframe.sim.paths import shortest_path_length
 
     # two 4 m x 4 m rooms side by side with no door: a pair across the wall is no test
     text = ('name = "apart"\ndescription = "two rooms, no door"\n[robot]\nstart = [1, 1, 0]\n'
@@ -331,7 +331,7 @@ def test_random_pairs_are_joined_by_a_path_in_a_world_of_separate_rooms():
 
 
 def test_detour_pairs_need_a_path_longer_than_the_straight_line():
-    from sitframe.paths import shortest_path_length
+    from sitframe.sim.paths import shortest_path_length
 
     w = load_world("goal-training")
 
@@ -357,7 +357,7 @@ def test_detour_pairs_need_a_path_longer_than_the_straight_line():
 
 
 def test_train_detour_changes_the_training_pairs_only():
-    from sitframe.robot import RobotParams
+    from sitframe.sim.robot import RobotParams
 
     robot, w = RobotParams(), load_world("goal-training")
     plain = GoalEpisodes(episodes=8, margin=0.3)

@@ -84,7 +84,7 @@ def test_goal_reached_terminates() -> None:
                                                     ("goal-finding", True)])
 def test_vector_env_equals_single_envs(config: str, continuous: bool, compiled: bool,
                                        monkeypatch: pytest.MonkeyPatch) -> None:
-    from sitframe import kernels
+    from sitframe.sim import kernels
 
     if compiled and kernels.load() is None:
         pytest.skip("compiled kernels switched off or numba missing")
@@ -114,7 +114,7 @@ def test_vector_env_equals_single_envs(config: str, continuous: bool, compiled: 
 
 def test_sonar_read_many_equals_read() -> None:
     from sitframe.plugins.sonar import SonarRing
-    from sitframe.world import load_world
+    from sitframe.sim.world import load_world
 
     world = load_world("training")
     rng = np.random.default_rng(1)
@@ -144,7 +144,7 @@ def _sb3_table(model: str) -> dict:
 
 
 def test_sb3_behaviour_without_sb3_names_the_extra(tmp_path, monkeypatch) -> None:
-    from sitframe.pluginmanager import Registry, get_plugin_manager
+    from sitframe.contract.pluginmanager import Registry, get_plugin_manager
 
     model = tmp_path / "m.zip"
     model.write_bytes(b"")
@@ -173,10 +173,10 @@ def sb3_model(tmp_path_factory) -> tuple:
 
 
 def test_sb3_policy_behaviour_acts_as_in_the_env(sb3_model) -> None:
-    from sitframe.config import load_config
-    from sitframe.pluginmanager import Registry, get_plugin_manager
-    from sitframe.records import Context
-    from sitframe.resolve import Resolved
+    from sitframe.contract.config import load_config
+    from sitframe.contract.pluginmanager import Registry, get_plugin_manager
+    from sitframe.contract.records import Context
+    from sitframe.contract.resolve import Resolved
 
     model, path = sb3_model
     env = sg.make_env("obstacle-avoidance")
@@ -199,7 +199,7 @@ def test_evaluate_rescores_an_sb3_run_with_its_own_model(sb3_model, tmp_path, ca
 
     from helpers import run_config, run_json, small_config
 
-    from sitframe.cli import main
+    from sitframe.cli.app import main
 
     model = tmp_path / "avoid.zip"
     shutil.copy(sb3_model[1], model)

@@ -4,7 +4,7 @@ Each test names the issue's item it covers. A refused input gives exit status 2
 and exactly one stderr line ``sitframe: error: FILE: KEY: ...`` with no
 traceback, and whatever was finished before (a published log, a config, a
 source log) is byte for byte as it was. Most cases call
-:func:`sitframe.cli.main` in-process; concurrency, SIGTERM and closed pipes
+:func:`sitframe.cli.app.main` in-process; concurrency, SIGTERM and closed pipes
 need real processes.
 """
 
@@ -26,14 +26,14 @@ import numpy as np
 import pytest
 from helpers import INTERRUPTED_TRIALS, ROOM, small_config
 
-from sitframe.cli import main
-from sitframe.logs import open_log
-from sitframe.parallel import compare_logs
+from sitframe.cli.app import main
+from sitframe.logs.compare import compare_logs
+from sitframe.logs.reader import open_log
 
 SMALL = small_config(trials=2, iterations=100, eval_iterations=50)
 #: Starts the CLI with Python's SIGINT handler even under a shell that ignores it.
 _CLI = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-        "from sitframe.cli import console_main; sys.exit(console_main(sys.argv[1:]))")
+        "from sitframe.cli.app import console_main; sys.exit(console_main(sys.argv[1:]))")
 
 
 
@@ -69,7 +69,7 @@ def _run(folder: Path, config: str, out: str, capsys, *argv: str) -> Path:
 @pytest.fixture(scope="module")
 def base(tmp_path_factory) -> Path:
     """A complete small log (2 trials) in its own folder."""
-    from sitframe.cli import main as run_main
+    from sitframe.cli.app import main as run_main
 
     d = tmp_path_factory.mktemp("hostile")
     (d / "base.toml").write_text(SMALL)
@@ -152,7 +152,7 @@ def test_2_sweep_points_that_would_share_a_log_are_refused(tmp_path, capsys, val
 
 
 def test_2_close_floats_get_distinct_reversible_names():
-    from sitframe.sweep import point_names
+    from sitframe.runs.sweep import point_names
 
     names = [n for n, _ in point_names({"behaviours.avoid.alpha": [0.1, 0.1000001, 5.0]})]
     assert names == ["alpha=0.1", "alpha=0.1000001", "alpha=5"]
@@ -259,7 +259,7 @@ def test_14_free_cells_of_many_obstacles_are_those_of_the_direct_test():
     """The per-obstacle computation of free cells (time proportional to the room plus the
     obstacles; its speed is measured by benchmarks, not asserted here) gives the cells of
     the direct test, in a room of many obstacles and in shipped rooms."""
-    from sitframe.world import load_world, parse_world
+    from sitframe.sim.world import load_world, parse_world
 
     rows = ['name = "many"', "[robot]", "start = [0.5, 0.5, 0]", "[[walls]]",
             "points = [[0, 0], [16, 0], [16, 16], [0, 16], [0, 0]]"]
@@ -383,7 +383,7 @@ def test_9_scheduler_address_checks_and_plain_tcp_warning(tmp_path, capsys, monk
     pytest.importorskip("distributed")
     import distributed
 
-    from sitframe.parallel import DaskExecutor
+    from sitframe.runs.parallel import DaskExecutor
 
     refused(capsys, ["run", "obstacle-avoidance", "--scheduler", "tcp://::::", "--out",
                      tmp_path / "x.h5"], "--scheduler:", "malformed")
@@ -408,7 +408,7 @@ def test_9_scheduler_address_checks_and_plain_tcp_warning(tmp_path, capsys, monk
     assert capsys.readouterr().err == ""
     # a worker whose numpy computes otherwise (another CPU) is refused, with the fix
     from sitframe.errors import InputError
-    from sitframe.parallel import arithmetic
+    from sitframe.runs.arithmetic import arithmetic
 
     FakeClient.workers = {"tcp://10.0.0.6:1": arithmetic(), "tcp://10.0.0.7:1": "numpy 0.0"}
     with pytest.raises(InputError, match=r"worker tcp://10.0.0.7:1 computes with numpy 0.0"):
@@ -420,7 +420,7 @@ def test_9_scheduler_address_checks_and_plain_tcp_warning(tmp_path, capsys, monk
 
 
 def test_10_disk_full_mid_run_keeps_the_published_log(tmp_path, capsys, monkeypatch):
-    import sitframe.logs as L
+    import sitframe.logs.writer as L
 
     (tmp_path / "c.toml").write_text(SMALL)
     out = tmp_path / "full.h5"
@@ -443,7 +443,7 @@ def test_10_disk_full_mid_run_keeps_the_published_log(tmp_path, capsys, monkeypa
 
 
 def test_13_disk_full_at_start_leaves_nothing(tmp_path, capsys, monkeypatch):
-    import sitframe.logs as L
+    import sitframe.logs.writer as L
 
     (tmp_path / "c.toml").write_text(SMALL)
     real = h5py.File
@@ -538,7 +538,7 @@ def test_11_damaged_log_contents_give_one_line(base, tmp_path, capsys, damage, c
 def test_11_read_only_folder_on_resume_and_replay(base, tmp_path, capsys, monkeypatch):
     import tempfile
 
-    import sitframe.logs as L
+    import sitframe.logs.writer as L
 
     ro = tmp_path / "ro"
     ro.mkdir()

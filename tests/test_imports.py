@@ -86,3 +86,58 @@ def test_function_local_imports_say_they_buy_start_up_time():
         bare += [f"{p.name}:{n}" for _t, local, n in _imports(p, mods)
                  if local and "#" not in lines[n - 1]]
     assert not bare, bare
+
+
+def _graph() -> dict[str, set[str]]:
+    mods = _modules()
+    return {m: {t for t, _l, _n in _imports(p, mods)} - {m} for m, p in mods.items()}
+
+
+def test_no_chain_of_imports_is_longer_than_ten_modules():
+    """The layers keep paths short: a module reaches the bottom of the house in at most ten
+    steps (function-local imports counted). A longer chain means a layer grew a staircase."""
+    graph = _graph()
+    longest: dict[str, list[str]] = {}
+
+    def chain(m: str) -> list[str]:
+        if m not in longest:
+            longest[m] = [m, *max((chain(d) for d in graph[m]), key=len, default=[])]
+        return longest[m]
+
+    worst = max((chain(m) for m in graph), key=len)
+    assert len(worst) <= 10, " -> ".join(worst)
+
+
+def test_the_top_level_is_the_ground_floor_and_the_subpackages():
+    """sitframe/ holds the public face, the ground floor (errors, params), one subpackage per
+    job and the presets: twelve entries besides data folders. A new module belongs in the
+    subpackage of its job."""
+    entries = sorted(p.name for p in ROOT.iterdir() if p.name != "__pycache__")
+    subpackages = ["analysis", "cli", "contract", "gym", "learning", "logs", "runs", "sim",
+                   "situations"]
+    assert entries == sorted(["__init__.py", "errors.py", "params.py", "presets",
+                              *subpackages])
+    for sub in subpackages:  # each says its job, what it may import and its entry points
+        doc = ast.get_docstring(ast.parse((ROOT / sub / "__init__.py").read_text())) or ""
+        assert "may import" in doc and "Entry points" in doc, sub
+
+
+def test_modules_over_700_lines_say_why():
+    """A module over 700 lines says in its docstring why it is one module."""
+    long = [str(p.relative_to(ROOT)) for p in _modules().values()
+            if len(p.read_text().splitlines()) > 700
+            and "Why one module" not in (ast.get_docstring(ast.parse(p.read_text())) or "")]
+    assert not long, long
+
+
+def test_the_import_layers_are_kept():
+    """import-linter's contracts (pyproject.toml, [tool.importlinter]) all hold: the command
+    line on top, the simulator at the bottom, plugins through the public face only."""
+    import shutil
+    import subprocess
+
+    exe = shutil.which("lint-imports")
+    assert exe, "import-linter is part of the test extra"
+    res = subprocess.run([exe, "--no-cache"], cwd=ROOT.parent, capture_output=True, text=True)
+    assert res.returncode == 0, res.stdout[-2000:]
+    assert "broken" in res.stdout and " 0 broken" in res.stdout

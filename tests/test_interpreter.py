@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sitframe.fcm import memberships
 from sitframe.plugins.fcm_interpreter import FCMInterpreter
+from sitframe.situations.fcm import memberships
 
 
 def _readings(n: int = 400, seed: int = 0) -> np.ndarray:

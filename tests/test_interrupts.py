@@ -7,9 +7,10 @@ import signal
 
 import pytest
 
-from sitframe.interrupts import deferred_interrupt
-from sitframe.logs import LogWriter, open_log
-from sitframe.records import RunInfo
+from sitframe.contract.records import RunInfo
+from sitframe.logs.interrupts import deferred_interrupt
+from sitframe.logs.reader import open_log
+from sitframe.logs.writer import LogWriter
 
 
 @pytest.fixture

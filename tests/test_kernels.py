@@ -16,14 +16,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sitframe import geometry as geo
-from sitframe import kernels
-from sitframe.fcm import MembershipFunction, online_update
-from sitframe.fuzzy import SituationFCS
-from sitframe.learning import FuzzyQLearner, QLearningParams
-from sitframe.robot import Command, RobotParams, step_robot
-from sitframe.situations import accumulate_errors
-from sitframe.world import World, parse_world
+from sitframe.learning.fcs import SituationFCS
+from sitframe.learning.fuzzy_q import FuzzyQLearner, QLearningParams
+from sitframe.sim import geometry as geo
+from sitframe.sim import kernels
+from sitframe.sim.robot import Command, RobotParams, step_robot
+from sitframe.sim.world import World, parse_world
+from sitframe.situations.events import accumulate_errors
+from sitframe.situations.fcm import MembershipFunction, online_update
 
 pytest.importorskip("numba")
 
@@ -187,7 +187,7 @@ def _fields(o) -> tuple:  # noqa: ANN001 - a StepOutcome
 
 @pytest.mark.parametrize("recovery", ["backoff-turn", "none"])
 def test_fleet_steps_as_step_robot(room: World, recovery: str) -> None:
-    from sitframe.fleet import step_robots
+    from sitframe.sim.fleet import step_robots
 
     rng = np.random.default_rng(5)
     xy = rng.uniform([0.05, 0.05], [4.95, 3.95], (240, 2))  # some touching or inside a wall
@@ -233,7 +233,7 @@ def test_the_first_run_after_an_install_says_why_it_waits(tmp_path, monkeypatch)
 
     from numba.core.caching import UserProvidedCacheLocator
 
-    from sitframe import numba_cache
+    from sitframe.sim import numba_cache
 
     src = tmp_path / "pkg" / "kernels_numba.py"
     src.parent.mkdir()
@@ -273,7 +273,7 @@ def test_the_kernel_cache_lives_in_the_users_cache_folder(tmp_path, monkeypatch)
     install would turn into a namespace package."""
     from numba.core import config
 
-    from sitframe import numba_cache
+    from sitframe.sim import numba_cache
 
     monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
     monkeypatch.delenv("SITFRAME_CACHE_DIR", raising=False)
@@ -298,7 +298,7 @@ def test_an_unwritable_cache_folder_means_no_cache_and_one_warning(tmp_path, mon
     back into the package either: the kernels' ``cache`` flag is this answer)."""
     from numba.core import config
 
-    from sitframe import numba_cache
+    from sitframe.sim import numba_cache
 
     blocker = tmp_path / "a-file"
     blocker.write_text("")

@@ -10,11 +10,11 @@ from helpers import run_config, small_config
 
 from sitframe import InputError
 from sitframe import analysis as A
-from sitframe.cli import main
-from sitframe.clustering import describe_prototype
+from sitframe.cli.app import main
 from sitframe.plugins.laser import LaserScanner, sitframe_sensors
 from sitframe.plugins.sonar import PIONEER_ANGLES_DEG as PIONEER
-from sitframe.world import load_world, parse_world
+from sitframe.sim.world import load_world, parse_world
+from sitframe.situations.clustering import describe_prototype
 
 # A 6 x 1.4 m corridor, closed at both ends.
 CORRIDOR = parse_world("""
@@ -59,7 +59,7 @@ def test_matches_the_brute_force_reference(kwargs: dict) -> None:
 
 def test_ranges_from_the_rim_and_bind() -> None:
     from sitframe import RunContext, SensorSpec
-    from sitframe.robot import RobotParams
+    from sitframe.sim.robot import RobotParams
 
     laser = LaserScanner(fov_deg=360, beams=4)  # behind, right, ahead, left
     pose = np.array([3.0, 0.7, 0.0])
@@ -108,8 +108,8 @@ def test_bad_params_are_one_input_error_naming_the_parameter(kwargs: dict, name:
 
 
 def test_registration_and_protocol() -> None:
-    from sitframe.components import Sensor
-    from sitframe.pluginmanager import Registry, get_plugin_manager
+    from sitframe.contract.components import Sensor
+    from sitframe.contract.pluginmanager import Registry, get_plugin_manager
 
     assert sitframe_sensors() == [LaserScanner]
     assert isinstance(LaserScanner(), Sensor)

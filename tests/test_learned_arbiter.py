@@ -8,15 +8,15 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from sitframe.config import validate_config
+from sitframe.contract.config import validate_config
+from sitframe.contract.pluginmanager import Registry, get_plugin_manager
+from sitframe.contract.records import Context, LearnedPolicy, Proposal, Transition
+from sitframe.contract.resolve import Resolved
 from sitframe.errors import InputError
-from sitframe.experiment import Experiment
-from sitframe.loop import TrialSpec, simulate
-from sitframe.pluginmanager import Registry, get_plugin_manager
 from sitframe.plugins.learned_arbiter import FuzzyQArbiter, GoalProgressReward, goal_sector
-from sitframe.records import Context, LearnedPolicy, Proposal, Transition
-from sitframe.resolve import Resolved
-from sitframe.world import Goal, load_world
+from sitframe.runs.experiment import Experiment
+from sitframe.runs.loop import TrialSpec, simulate
+from sitframe.sim.world import Goal, load_world
 
 STATE = {"centers": np.array([[0.5] * 8, [3.0] * 8]), "m": 1.2}
 WORLD = load_world("goal")
@@ -213,7 +213,7 @@ def test_path_reward_refuses_a_goal_the_robot_cannot_reach():
 def test_train_detour_makes_the_training_episodes_detours_and_leaves_evaluation_alone(learned):
     """``[goal] train_detour = 1``: every training pair needs a path ``detour_ratio`` times
     the straight line (the curriculum reaches the loop through ``training_starts``)."""
-    from sitframe.paths import shortest_path_length
+    from sitframe.sim.paths import shortest_path_length
 
     cfg = goal_run()
     cfg["goal"].update(train_detour=1.0, detour_ratio=1.2)

@@ -8,8 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sitframe.errors import InputError
-from sitframe.fuzzy import SituationFCS, centre_of_gravity, label_strengths
-from sitframe.learning import FuzzyQLearner, QLearningParams, softmax_choice
+from sitframe.learning.fcs import SituationFCS, centre_of_gravity, label_strengths
+from sitframe.learning.fuzzy_q import FuzzyQLearner, QLearningParams, softmax_choice
 
 HEADINGS = np.array([90, 60, 30, 0, -30, -60, -90], float)
 
@@ -269,7 +269,7 @@ def test_min_updates_delays_convergence_until_every_situation_was_updated():
 
 
 def test_greedy_tie_break_first_or_centre():
-    from sitframe.learning import greedy_actions
+    from sitframe.learning.fuzzy_q import greedy_actions
 
     q = np.array([[5.0, 5.0, 5.0, 5.0, 5.0],    # never updated: all tied
                   [1.0, 7.0, 2.0, 7.0, 0.0],    # tie between 1 and 3
@@ -399,7 +399,7 @@ def test_td_errors_are_tracked_only_for_the_rules_just_updated_and_after_converg
 def test_min_updates_counts_only_live_situations_of_an_evolving_interpreter():
     """A pruned situation, or one created and not yet visited, does not block convergence;
     a visited live one still needs its updates."""
-    from sitframe.situations import SituationEvent
+    from sitframe.situations.events import SituationEvent
 
     def learner():
         lr = FuzzyQLearner(4, 3, QLearningParams(b=1, p=2, min_updates=2, activation=0.5),
@@ -429,7 +429,7 @@ def test_min_updates_counts_only_live_situations_of_an_evolving_interpreter():
 def test_softmax_draws_follow_the_boltzmann_probabilities():
     """Frequencies of 6000 draws per row against ``exp(logits) / sum``, rows of different
     scales and spreads in one call (each row uses its own max and min)."""
-    from sitframe.learning import greedy_actions
+    from sitframe.learning.fuzzy_q import greedy_actions
 
     def freq(q_rows, params, temperature=None):
         q = np.repeat(np.asarray(q_rows, float), 6000, axis=0)
@@ -475,7 +475,7 @@ def test_a_new_situation_starts_from_its_parents_pulled_to_the_optimistic_start(
     """create/split: Q of the new row = (1 - optimism) * sum_j w_j Q_j + optimism * Q0, no
     updates yet, alive; a converged learner re-opens learning; the learning rates of the
     new row and its parents start anew; other rows are untouched."""
-    from sitframe.situations import SituationEvent
+    from sitframe.situations.events import SituationEvent
 
     lr = _evolving_learner(converged=True)
     before = lr.q.copy()
@@ -502,7 +502,7 @@ def test_merging_averages_by_visits_and_pruning_resets():
     it inherits their updates; absorbed rows go back to Q0 with no updates and are marked
     removed; the greedy rule base follows, and a converged learner executes it. prune resets
     and removes the row only."""
-    from sitframe.situations import SituationEvent
+    from sitframe.situations.events import SituationEvent
 
     lr = _evolving_learner(converged=True)
     before = lr.q.copy()
@@ -555,7 +555,7 @@ def test_frozen_rules_report_the_td_errors_of_their_update_rule(update, terminal
 def test_an_evolving_learner_without_any_update_yet_does_not_converge():
     """With situations created on-line, rows never updated are not yet situations: a run
     whose rules were never strong enough to be updated has not met ``min_updates = 1``."""
-    from sitframe.situations import SituationEvent
+    from sitframe.situations.events import SituationEvent
 
     lr = FuzzyQLearner(3, 2, QLearningParams(b=1, p=1, activation=0.5, min_updates=1),
                        np.random.default_rng(0), 10)

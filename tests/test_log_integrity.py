@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from helpers import run_config, small_config
 
-from sitframe.cli import main
+from sitframe.cli.app import main
 from sitframe.errors import InputError
-from sitframe.logs import open_log
+from sitframe.logs.reader import open_log
 
 
 @pytest.fixture(scope="module")

@@ -15,11 +15,13 @@ import h5py
 import numpy as np
 import pytest
 
-from sitframe.cli import main
+from sitframe.cli.app import main
+from sitframe.contract.records import RunInfo, TrialResult
 from sitframe.errors import InputError
-from sitframe.logs import LogWriter, _write_summary, open_log, shard_folder
-from sitframe.parallel import compare_logs
-from sitframe.records import RunInfo, TrialResult
+from sitframe.logs.compare import compare_logs
+from sitframe.logs.layout import shard_folder
+from sitframe.logs.reader import open_log
+from sitframe.logs.writer import LogWriter, _write_summary
 
 
 def _trial(k: int, extra: bool = False) -> TrialResult:
@@ -79,7 +81,7 @@ def test_an_unpacked_log_reads_as_the_packed_one(unpacked, tmp_path, capsys):
 
 def test_the_end_of_the_run_packs_and_a_failed_commit_leaves_no_trial_file(unpacked,
                                                                            monkeypatch):
-    import sitframe.logs as L
+    import sitframe.logs.writer as L
 
     w = LogWriter(unpacked)
 

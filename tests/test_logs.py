@@ -20,10 +20,11 @@ import h5py
 import numpy as np
 import pytest
 
-import sitframe.logs as L
+import sitframe.logs.writer as L
+from sitframe.contract.records import LearnedPolicy, PolicyOutput, RunInfo, TrialResult
 from sitframe.errors import InputError
-from sitframe.logs import LogWriter, code_fingerprint, open_log
-from sitframe.records import LearnedPolicy, PolicyOutput, RunInfo, TrialResult
+from sitframe.logs.reader import open_log
+from sitframe.logs.writer import LogWriter, code_fingerprint
 
 CONFIG = '[experiment]\nname = "rt"\n\n[sensor]\ncomponent = "pioneer-sonar"\n'
 SENSOR = {"name": "ring", "angles_deg": [-30.0, 0.0, 30.0], "max_range": 2.5, "unit": "m"}
@@ -547,7 +548,7 @@ def _second_writer(path) -> None:
     import subprocess
     import sys
 
-    code = ("import sys; from sitframe.logs import lock_log\n"
+    code = ("import sys; from sitframe.logs.writer import lock_log\n"
             "try:\n    lock_log(sys.argv[1])\nexcept Exception as e:\n    print(e); sys.exit(2)")
     r = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True)
     if r.returncode:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from helpers import ROOM
 
-from sitframe.metrics import (
+from sitframe.sim.metrics import (
     collisions_per_1000,
     coverage,
     frontal_between_prototypes,
@@ -17,7 +17,7 @@ from sitframe.metrics import (
     path_length,
     spl,
 )
-from sitframe.world import parse_world
+from sitframe.sim.world import parse_world
 
 #: 6 m x 4 m: 12 x 8 cells of 0.5 m; the obstacle [4, 5] x [2.5, 3.2] grown by the robot
 #: radius (0.15 m) covers the centres of the 4 cells x in {4.25, 4.75}, y in {2.75, 3.25}.

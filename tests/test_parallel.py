@@ -11,16 +11,11 @@ from concurrent.futures.process import BrokenProcessPool
 import pytest
 from helpers import run_config, run_json, small_config
 
-from sitframe.cli import main
+from sitframe.cli.app import main
 from sitframe.errors import InputError
-from sitframe.logs import open_log
-from sitframe.parallel import (
-    ProcessExecutor,
-    SerialExecutor,
-    TaskCancelled,
-    compare_logs,
-    make_executor,
-)
+from sitframe.logs.compare import compare_logs
+from sitframe.logs.reader import open_log
+from sitframe.runs.parallel import ProcessExecutor, SerialExecutor, TaskCancelled, make_executor
 
 SMALL = small_config(trials=5, seed=11, eval_worlds=("novel-1", "training"))
 
@@ -59,7 +54,7 @@ def test_dask_cluster_log_identical_to_serial(serial_log, tmp_path, capsys):
 
 def test_unreachable_scheduler_fails_fast_one_line(serial_log, tmp_path, capsys, monkeypatch):
     pytest.importorskip("distributed")
-    monkeypatch.setattr("sitframe.parallel.DASK_CONNECT_TIMEOUT", 0.5)  # (default 5 s)
+    monkeypatch.setattr("sitframe.runs.parallel.DASK_CONNECT_TIMEOUT", 0.5)  # (default 5 s)
     cfg, _ref = serial_log
     capsys.readouterr()
     out = tmp_path / "never.h5"
@@ -130,7 +125,7 @@ def test_arithmetic_names_numpy_and_its_simd_targets_and_follows_the_environment
 
     import numpy as np
 
-    from sitframe.parallel import arithmetic, numpy_simd
+    from sitframe.runs.arithmetic import arithmetic, numpy_simd
 
     here = numpy_simd()
     assert arithmetic().startswith(f"numpy {np.__version__}, SIMD {here}, BLAS ")
@@ -138,7 +133,7 @@ def test_arithmetic_names_numpy_and_its_simd_targets_and_follows_the_environment
     if used == ["-"]:
         pytest.skip("numpy dispatches to no extra SIMD target on this CPU")
     env = {**os.environ, "NPY_DISABLE_CPU_FEATURES": " ".join(used)}
-    off = subprocess.run([sys.executable, "-c", "from sitframe.parallel import numpy_simd; "
+    off = subprocess.run([sys.executable, "-c", "from sitframe.runs.arithmetic import numpy_simd; "
                           "print(numpy_simd())"], env=env, capture_output=True, text=True,
                          check=True).stdout.strip()
     assert off == f"{here.partition('+')[0]}+ -"
@@ -149,7 +144,7 @@ def test_blas_names_the_kernel_openblas_picked_and_follows_the_environment():
     # (np.dot and @ go through them), so the kernel is part of the arithmetic.
     import subprocess
 
-    from sitframe.parallel import arithmetic, blas
+    from sitframe.runs.arithmetic import arithmetic, blas
 
     here = blas()
     assert here in arithmetic()
@@ -158,7 +153,7 @@ def test_blas_names_the_kernel_openblas_picked_and_follows_the_environment():
     if platform.machine() not in ("x86_64", "AMD64"):
         pytest.skip("the kernel override below names an x86-64 kernel")
     env = {**os.environ, "OPENBLAS_CORETYPE": "Prescott"}  # (SSE3 kernels: every x86-64)
-    other = subprocess.run([sys.executable, "-c", "from sitframe.parallel import blas; "
+    other = subprocess.run([sys.executable, "-c", "from sitframe.runs.arithmetic import blas; "
                             "print(blas())"], env=env, capture_output=True, text=True,
                            check=True).stdout.strip()
     assert other.split()[:2] == here.split()[:2]  # same library and version,
@@ -166,7 +161,7 @@ def test_blas_names_the_kernel_openblas_picked_and_follows_the_environment():
 
 
 def test_workers_of_another_arithmetic_are_refused_with_the_fix():
-    from sitframe.parallel import check_same_arithmetic
+    from sitframe.runs.arithmetic import check_same_arithmetic
 
     avx2 = "numpy 2.4.6, SIMD X86_V2 + X86_V3"
     avx512 = "numpy 2.4.6, SIMD X86_V2 + X86_V3 X86_V4 AVX512_ICL"
@@ -193,7 +188,7 @@ def test_a_dask_task_on_a_worker_of_another_arithmetic_fails_the_run_in_one_line
         serial_log, tmp_path, capsys, monkeypatch):
     """A worker that joined after the connection check is caught by its first task."""
     distributed = pytest.importorskip("distributed")
-    import sitframe.parallel as par
+    import sitframe.runs.parallel as par
 
     cfg, _ref = serial_log
     real = par.DaskExecutor.__init__

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from sitframe.metrics import spl
-from sitframe.paths import PathDistance, segment_clear, shortest_path_length
-from sitframe.world import load_world, parse_world
+from sitframe.sim.metrics import spl
+from sitframe.sim.paths import PathDistance, segment_clear, shortest_path_length
+from sitframe.sim.world import load_world, parse_world
 
 ROOM = """name = "t"
 description = "a 10 m x 8 m room"

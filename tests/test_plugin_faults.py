@@ -31,8 +31,8 @@ from pathlib import Path
 
 import pytest
 
-from sitframe.cli import main
-from sitframe.logs import open_log
+from sitframe.cli.app import main
+from sitframe.logs.reader import open_log
 
 #: Imports and helpers every faulty plugin file starts with.
 PRELUDE = '''
@@ -398,7 +398,7 @@ def sitframe_sensors():
           In, "memberships() in trial 1", "FloatingPointError: overflow", cfg=INTERP, trial=1),
     fault("evolving-interpreter-event-names-no-situation", '''
 from sitframe.plugins.evolving import EvolvingInterpreter
-from sitframe.situations import SituationEvent
+from sitframe.situations.events import SituationEvent
 
 class Bad(EvolvingInterpreter):  # was blamed on fuzzy-q's situations_changed (an IndexError)
     name = "bad"
@@ -696,7 +696,7 @@ def sitframe_rewards():
 @hookimpl
 def sitframe_reward():
     return []
-''', 2, "p.py", "sitframe_reward", "the hooks are listed in sitframe.hookspecs"),
+''', 2, "p.py", "sitframe_reward", "the hooks are listed in sitframe.contract.hookspecs"),
     fault("hook-without-hookimpl", '''
 class Bad(ObstacleAvoidanceReward):
     name = "bad"

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from sitframe import hookimpl
+from sitframe.contract.pluginmanager import Registry, get_plugin_manager, register
 from sitframe.errors import InputError, PluginError
-from sitframe.pluginmanager import Registry, get_plugin_manager, register
 
 BUILTIN_COMPONENTS = {
     "sensor": {"pioneer-sonar", "laser"},

@@ -5,10 +5,10 @@ from __future__ import annotations
 import pytest
 from helpers import small_config
 
-from sitframe.cli import main
-from sitframe.config import config_hash, load_config, parse_config, to_toml
+from sitframe.cli.app import main
+from sitframe.contract.config import config_hash, load_config, parse_config, to_toml
 from sitframe.errors import InputError
-from sitframe.logs import open_log
+from sitframe.logs.reader import open_log
 
 #: Builds on the situations of base.toml's log; learns only, no evaluation (fast).
 DEPENDENT = """
@@ -68,7 +68,7 @@ def test_missing_prerequisite_is_made_first_then_reused(folder, capsys):
     # made on a CPU whose numpy computes otherwise: a valid input, reused, and said so
     import json
 
-    from sitframe.parallel import arithmetic
+    from sitframe.runs.arithmetic import arithmetic
 
     with h5py.File(folder / "logs/base.h5", "r+") as f:
         v = json.loads(f.attrs["versions"])

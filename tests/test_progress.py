@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
+from sitframe.contract.records import RunInfo
 from sitframe.plugins import progress
-from sitframe.records import RunInfo
 
 
 def _info(name: str, group: str | None, n_trials: int = 3, step_hooks: bool = False) -> RunInfo:

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from sitframe import Proposal, hookimpl
-from sitframe.config import validate_config
+from sitframe.contract.config import validate_config
+from sitframe.contract.pluginmanager import get_plugin_manager
 from sitframe.errors import InputError, PluginError, PluginFault
-from sitframe.experiment import Experiment
-from sitframe.loop import TrialSpec, simulate
-from sitframe.pluginmanager import get_plugin_manager
+from sitframe.runs.experiment import Experiment
+from sitframe.runs.loop import TrialSpec, simulate
 
 STATE = {"centers": np.array([[0.5] * 8, [3.0] * 8]), "m": 1.2}
 

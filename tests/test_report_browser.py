@@ -14,7 +14,7 @@ import time
 
 import pytest
 
-from sitframe.cli import main
+from sitframe.cli.app import main
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 DRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"

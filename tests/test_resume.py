@@ -15,17 +15,17 @@ import numpy as np
 import pytest
 from helpers import INTERRUPTED_ITERATIONS, INTERRUPTED_TRIALS, run_json
 
-from sitframe.cli import main
+from sitframe.cli.app import main
 from sitframe.errors import InputError
-from sitframe.logs import open_log
-from sitframe.parallel import compare_logs
+from sitframe.logs.compare import compare_logs
+from sitframe.logs.reader import open_log
 
 N_TRIALS, ITERATIONS = INTERRUPTED_TRIALS, INTERRUPTED_ITERATIONS
 
 #: Runs the CLI with Python's own SIGINT handler even if the test runner was
 #: started with SIGINT ignored (as background jobs of a non-interactive shell are).
 _CLI = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-        "from sitframe.cli import console_main; sys.exit(console_main(sys.argv[1:]))")
+        "from sitframe.cli.app import console_main; sys.exit(console_main(sys.argv[1:]))")
 
 
 @pytest.fixture
@@ -248,7 +248,7 @@ def test_resume_refuses_a_log_whose_plugins_changed(reference, tmp_path, capsys)
 def test_resume_api_and_the_records_a_log_may_lack_or_add(reference, tmp_path, capsys):
     import h5py
 
-    from sitframe.resume import prepare_resume
+    from sitframe.runs.prepare import prepare_resume
 
     _cfg, ref = reference
     out = tmp_path / "api.h5"
@@ -290,7 +290,7 @@ def test_resume_refuses_another_arithmetic(reference, tmp_path, capsys):
     bits of sin/cos/exp differ, and a closed loop turns them into other trajectories."""
     import h5py
 
-    from sitframe.parallel import numpy_simd
+    from sitframe.runs.arithmetic import numpy_simd
 
     _cfg, ref = reference
     out = tmp_path / "simd.h5"
@@ -315,7 +315,7 @@ def test_resume_refuses_another_arithmetic(reference, tmp_path, capsys):
     assert err.count("\n") == 1 and "BLAS openblas 0.3.31 SkylakeX, this process has" in err
     # logs written before a key existed resume on the keys they have (session-15 logs
     # record numpy_simd but not blas; older ones neither)
-    from sitframe.resume import _check_arithmetic
+    from sitframe.runs.prepare import _check_arithmetic
 
     for drop in (("blas",), ("blas", "numpy_simd")):
         with h5py.File(out, "a") as f:

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sitframe.contract.records import Context, Transition
 from sitframe.plugins.rewards import ObstacleAvoidanceReward, SpeedReward
-from sitframe.records import Context, Transition
-from sitframe.robot import Command, StepOutcome
-from sitframe.world import load_world
+from sitframe.sim.robot import Command, StepOutcome
+from sitframe.sim.world import load_world
 
 WORLD = load_world("training")
 

@@ -7,10 +7,17 @@ import math
 import numpy as np
 import pytest
 
-from sitframe import geometry as geo
 from sitframe.errors import InputError
-from sitframe.robot import Command, RobotParams, Simulator, StepOutcome, step_robot, trajectory
-from sitframe.world import World, parse_world
+from sitframe.sim import geometry as geo
+from sitframe.sim.robot import (
+    Command,
+    RobotParams,
+    Simulator,
+    StepOutcome,
+    step_robot,
+    trajectory,
+)
+from sitframe.sim.world import World, parse_world
 
 OPEN = """
 name = "open"

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 from helpers import run_json, small_config
 
-from sitframe.cli import main
-from sitframe.logs import SCHEMA_VERSION, open_log
+from sitframe.cli.app import main
+from sitframe.logs.layout import SCHEMA_VERSION
+from sitframe.logs.reader import open_log
 
 SMALL = small_config()
 
@@ -156,7 +157,7 @@ def test_same_seed_is_bit_identical_across_processes_and_another_seed_is_not(tmp
     import subprocess
     import sys
 
-    from sitframe.parallel import compare_logs
+    from sitframe.logs.compare import compare_logs
 
     cfg = tmp_path / "small.toml"
     cfg.write_text(small_config(trials=2, iterations=200))
@@ -172,7 +173,7 @@ def test_same_seed_is_bit_identical_across_processes_and_another_seed_is_not(tmp
 
 
 def test_best_of_weighs_collisions_and_coverage():
-    from sitframe.logged import best_of
+    from sitframe.logs.policies import best_of
 
     idx = [0, 1, 2, 3]
     # trial 1 never collides but hardly moves (a looper); trial 2 is nearly as
@@ -187,7 +188,7 @@ def test_best_of_weighs_collisions_and_coverage():
 
 def test_best_trial_uses_only_the_learning_world(tmp_path, capsys):
     from sitframe.errors import InputError
-    from sitframe.logged import best_trial
+    from sitframe.logs.policies import best_trial
 
     cfg = tmp_path / "best.toml"
     cfg.write_text(small_config(trials=3, iterations=200, eval_worlds=("training", "novel-1")))

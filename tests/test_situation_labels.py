@@ -7,10 +7,10 @@ from collections import Counter
 import pytest
 from situation_set import labelled_readings
 
-from sitframe.clustering import describe_prototype
 from sitframe.plugins.laser import LaserScanner
 from sitframe.plugins.sonar import PIONEER_ANGLES_DEG as PIONEER
 from sitframe.plugins.sonar import SonarRing
+from sitframe.situations.clustering import describe_prototype
 
 
 def sonar_label(ranges, **kw):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sitframe.plugins.sonar import SonarRing, sitframe_sensors
-from sitframe.world import World, load_world, parse_world
+from sitframe.sim.world import World, load_world, parse_world
 
 BOX = """
 name = "box"
@@ -110,7 +110,7 @@ def test_bad_params_name_the_parameter(kwargs: dict, name: str) -> None:
 
 
 def test_registration_and_protocol() -> None:
-    from sitframe.components import Sensor
+    from sitframe.contract.components import Sensor
 
     assert sitframe_sensors() == [SonarRing]
     s = SonarRing()

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from helpers import small_config
 
-from sitframe.cli import main
-from sitframe.logs import open_log
-from sitframe.parallel import compare_logs
-from sitframe.sweep import point_names
+from sitframe.cli.app import main
+from sitframe.logs.compare import compare_logs
+from sitframe.logs.reader import open_log
+from sitframe.runs.sweep import point_names
 
 BASE = small_config(name="base", iterations=200, seed=7, c=4, fcm_trials=3,
                     eval_iterations=60)
@@ -192,7 +192,7 @@ def test_bad_sweeps_one_line_exit_2(swept, tmp_path, capsys, grid, pattern):
 
 def test_sweep_unreachable_scheduler_exit_2(swept, tmp_path, capsys, monkeypatch):
     pytest.importorskip("distributed")
-    monkeypatch.setattr("sitframe.parallel.DASK_CONNECT_TIMEOUT", 0.5)  # (default 5 s)
+    monkeypatch.setattr("sitframe.runs.parallel.DASK_CONNECT_TIMEOUT", 0.5)  # (default 5 s)
     d, _out = swept
     out = tmp_path / "never"
     capsys.readouterr()
@@ -219,7 +219,7 @@ def test_shipped_sweeps_load(name):
     """The sweep files the README cites resolve every point (keys, values, presets)."""
     from pathlib import Path
 
-    from sitframe.sweep import load_sweep
+    from sitframe.runs.sweep import load_sweep
 
     path = Path(__file__).resolve().parents[1] / "sweeps" / f"{name}.toml"
     sweep = load_sweep(str(path))
@@ -264,7 +264,7 @@ def test_sweep_on_a_two_worker_dask_cluster_gives_the_local_summaries(swept, tmp
 def test_tables_give_an_episode_protocols_scores_per_world():
     """A goal sweep's tables show the goal episodes' scores (success, SPL, ...) per world,
     median [IQR] over the trials of every seed, not only frozen-run collisions."""
-    from sitframe.sweep import markdown_table, summarise_tables
+    from sitframe.runs.summaries import markdown_table, summarise_tables
 
     def table(success: list[float], spl: list[float]) -> np.ndarray:
         dt = [("trial", "i8"), ("converged", "?"), ("convergence_iteration", "f8"),
@@ -288,7 +288,7 @@ def test_tables_give_an_episode_protocols_scores_per_world():
 def test_a_run_that_learned_nothing_shows_no_convergence_count():
     """Goal episodes of frozen behaviours: "–" where "0/N converged" would be untrue; a
     learning run whose trials did not converge still shows 0/N."""
-    from sitframe.sweep import markdown_table, summarise_tables
+    from sitframe.runs.summaries import markdown_table, summarise_tables
 
     t = np.array([(0, False, -1.0), (1, False, -1.0)],
                  [("trial", "i8"), ("converged", "?"), ("convergence_iteration", "f8")])
@@ -302,10 +302,10 @@ def test_a_run_that_learned_nothing_shows_no_convergence_count():
 def test_the_arbiters_reward_parameters_are_sweep_keys():
     """``arbiter.reward_params.NAME`` names one parameter of the arbiter's reward, as
     ``behaviours.LABEL.reward_params.NAME`` does a behaviour's; a misspelt one is refused."""
-    from sitframe.config import load_config
+    from sitframe.contract.config import load_config
+    from sitframe.contract.pluginmanager import Registry, get_plugin_manager
     from sitframe.errors import InputError
-    from sitframe.pluginmanager import Registry, get_plugin_manager
-    from sitframe.sweep import check_key
+    from sitframe.runs.sweep import check_key
 
     cfg = load_config("goal-finding-learned")[0]
     reg = Registry.collect(get_plugin_manager())
@@ -333,7 +333,7 @@ def test_a_bad_point_value_is_refused_before_the_prerequisites_are_made(tmp_path
     """A grid value a component refuses is reported (one located line) before the base's
     prerequisite runs are made, not after them."""
     from sitframe.errors import InputError
-    from sitframe.sweep import load_sweep
+    from sitframe.runs.sweep import load_sweep
 
     f = tmp_path / "s.toml"
     f.write_text(f'[sweep]\nbase = "goal-finding-learned"\n[grid]\n{grid}\n')

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from sitframe import geometry as geo
 from sitframe.errors import InputError
-from sitframe.world import World, list_worlds, load_world, parse_world
+from sitframe.sim import geometry as geo
+from sitframe.sim.world import World, list_worlds, load_world, parse_world
 
 GOOD = """
 name = "room"

@@ -14,11 +14,11 @@ Usage::
                                         [--fresh] [--max-children N] [--functions NAME ...]
                                         [--mutants NAME ...]
 
-MODULE is a dotted name as installed (``sitframe.fcm``, ``sitframe.plugins.rewards``);
+MODULE is a dotted name as installed (``sitframe.situations.fcm``, ``sitframe.plugins.rewards``);
 none = every module of ``[tool.mutmut] only_mutate``. ``--tests`` replaces the test
 files of ``pytest_add_cli_args_test_selection`` (a fast subset for the modules asked for).
 ``--functions`` tests only the mutants of the module-level functions named (e.g.
-``compare_logs log_contents`` of ``sitframe.parallel``, whose other code is not in the scope).
+``compare_logs log_contents`` of ``sitframe.runs.parallel``, whose other code is not in the scope).
 ``--mutants`` re-tests the mutants named (mutmut's names or patterns), e.g. the survivors of an
 earlier run once tests were added (``mutmut`` keeps the other verdicts).
 """

@@ -1,1 +1,1 @@
-"""Shipped world files (TOML). Load them by name with ``sitframe.world.load_world``."""
+"""Shipped world files (TOML). Load them by name with ``sitframe.sim.world.load_world``."""

@@ -29,8 +29,8 @@ from typing import Any
 import numpy as np
 
 from sitframe import Context, Proposal, hookimpl
-from sitframe.logged import best_trial, logged_policy
-from sitframe.logs import open_log
+from sitframe.logs.policies import best_trial, logged_policy
+from sitframe.logs.reader import open_log
 from sitframe.plugins.fcm_interpreter import FCMInterpreter
 from sitframe.plugins.fuzzy_q import FuzzyQBehaviour
 

@@ -1,11 +1,23 @@
 """Offline analysis of sitframe HDF5 logs: arrays, tables and matplotlib figures.
 
-The names below are loaded lazily (importing :mod:`sitframe.analysis` does
-not import matplotlib). Numbers and tables come from
-:mod:`sitframe.analysis.results`, figures from
-:mod:`sitframe.analysis.clustering_plots` and
-:mod:`sitframe.analysis.learning_plots`, the whole report from
-:mod:`sitframe.analysis.report`, animations from :mod:`sitframe.analysis.replay`.
+What it holds
+    Numbers and tables (:mod:`~sitframe.analysis.results`), figures
+    (:mod:`~sitframe.analysis.clustering_plots`, :mod:`~sitframe.analysis.learning_plots`,
+    :mod:`~sitframe.analysis.situation_plots`), the HTML report with its replay
+    (:mod:`~sitframe.analysis.report`, :mod:`~sitframe.analysis.report_html`,
+    :mod:`~sitframe.analysis.replay_data`), animations (:mod:`~sitframe.analysis.replay`),
+    comparisons of runs and sweeps with rank tests (:mod:`~sitframe.analysis.compare`,
+    :mod:`~sitframe.analysis.compare_report`) and tidy exports
+    (:mod:`~sitframe.analysis.export`).
+
+What it may import
+    :mod:`sitframe.logs` (it reads what runs wrote), :mod:`sitframe.contract` (records),
+    :mod:`sitframe.situations`, :mod:`sitframe.sim` (worlds, drawing) and the ground floor;
+    never :mod:`sitframe.runs` (analysis does not run anything) or the command line.
+
+Entry points
+    The names below, loaded lazily (importing :mod:`sitframe.analysis` does not import
+    matplotlib): :func:`analyse` (the whole report), :func:`as_log`, the tables and figures.
 
 Example
 -------
@@ -35,7 +47,7 @@ _EXPORTS: dict[str, str] = {
         "plot_collision_intervals", "plot_evaluation_paths",
         "plot_exploration", "plot_learning_curves", "plot_reward_per_window",
         "plot_trajectory")},
-    "plot_world": "sitframe.analysis.world_plot",
+    "plot_world": "sitframe.sim.draw",
     # whole report, animation
     "AnalysisReport": "sitframe.analysis.report",
     "analyse": "sitframe.analysis.report",

@@ -15,8 +15,8 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from sitframe.clustering import ClusteringTrials, SweepResult, describe_prototype
-from sitframe.fcm import MEASURE_DIRECTIONS
+from sitframe.situations.clustering import ClusteringTrials, SweepResult, describe_prototype
+from sitframe.situations.fcm import MEASURE_DIRECTIONS
 
 __all__ = ["OKABE_ITO", "plot_auto_c", "plot_measures_by_c", "plot_measures_by_trial",
            "plot_prototypes"]
@@ -85,7 +85,7 @@ def plot_prototypes(
     centers : array_like, shape (c, d)
         Prototypes: one range per beam, metres (clipped to ``max_range`` for drawing).
     angles_deg : array_like, shape (d,)
-        Beam bearings, degrees, positive = left; default the Pioneer 2DX front ring.
+        Beam bearings, degrees, positive = left (the sensor's ``SensorSpec.angles_deg``).
     max_range : float, metres
         The sensor's maximum range = radial axis limit.
     labels : list of str, optional
@@ -192,7 +192,7 @@ def plot_measures_by_trial(trials: ClusteringTrials, *, units: str = "m") -> Fig
     Parameters
     ----------
     trials : ClusteringTrials
-        Output of :func:`sitframe.clustering.cluster_trials`.
+        Output of :func:`sitframe.situations.clustering.cluster_trials`.
     units : str, default "m"
         Units of the clustered data (for ``J_m``'s axis label).
 
@@ -227,7 +227,7 @@ def plot_measures_by_c(sweep: SweepResult, *, units: str = "m") -> Figure:
     Parameters
     ----------
     sweep : SweepResult
-        Output of :func:`sitframe.clustering.sweep_c`.
+        Output of :func:`sitframe.situations.clustering.sweep_c`.
     units : str, default "m"
         Units of the clustered data (for ``J_m``'s axis label).
 

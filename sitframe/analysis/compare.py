@@ -49,8 +49,8 @@ import numpy as np
 from scipy import stats
 
 from sitframe.analysis.results import Table, _col, _summary, as_log
+from sitframe.contract.records import summary_key
 from sitframe.errors import InputError
-from sitframe.records import summary_key
 
 __all__ = ["Comparison", "MetricResult", "compare_logs", "compare_sweep", "trial_metrics"]
 

@@ -1,4 +1,4 @@
-"""``sitframe export``: a log's tables (:mod:`sitframe.frames`) as CSV or Parquet files.
+"""``sitframe export``: a log's tables (:mod:`sitframe.logs.frames`) as CSV or Parquet files.
 
 ``summary`` (one row per trial), ``iterations`` (one row per iteration of
 every learning trial, with a ``trial`` column) and ``evaluations`` (one row
@@ -14,7 +14,7 @@ from pathlib import Path
 
 from sitframe.analysis.results import LogLike, as_log
 from sitframe.errors import InputError
-from sitframe.frames import _pandas, evaluations_frame, iterations_frame, summary_frame
+from sitframe.logs.frames import _pandas, evaluations_frame, iterations_frame, summary_frame
 
 __all__ = ["export"]
 

@@ -31,8 +31,8 @@ from sitframe.analysis.results import (
     episode_rows,
     reward_per_window,
 )
-from sitframe.analysis.world_plot import plot_world
-from sitframe.world import World
+from sitframe.sim.draw import plot_world
+from sitframe.sim.world import World
 
 __all__ = [
     "ITERATION_S",

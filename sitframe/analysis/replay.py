@@ -30,8 +30,8 @@ import numpy as np
 from sitframe.analysis import results as R
 from sitframe.analysis.replay_data import REPLAY_ARRAYS
 from sitframe.errors import InputError
-from sitframe.situations import count_per_iteration
-from sitframe.world import parse_world
+from sitframe.sim.world import parse_world
+from sitframe.situations.events import count_per_iteration
 
 __all__ = ["DEFAULT_FRAMES", "replay"]
 
@@ -94,7 +94,7 @@ def replay(
     from matplotlib.patches import Circle
 
     from sitframe.analysis.clustering_plots import OKABE_ITO as C  # matplotlib: start-up time
-    from sitframe.analysis.world_plot import plot_world  # matplotlib: start-up time
+    from sitframe.sim.draw import plot_world  # matplotlib: start-up time
 
     out = Path(out)
     suffix = _check_output(out, fps)

@@ -27,7 +27,7 @@ import numpy as np
 
 from sitframe.analysis import results as R
 from sitframe.errors import InputError
-from sitframe.logs import Log, TrialLog
+from sitframe.logs.reader import Log, TrialLog
 
 __all__ = ["REPLAY_ARRAYS", "replay_payload"]
 
@@ -137,7 +137,7 @@ def replay_payload(log: Log, trials: dict[int, TrialLog]) -> dict[str, Any]:
     log
         The log (for worlds, sensor geometry, robot radius, situation labels).
     trials
-        Trial index -> trial, as read with :meth:`sitframe.logs.Log.trial`.
+        Trial index -> trial, as read with :meth:`sitframe.logs.reader.Log.trial`.
 
     Returns
     -------

@@ -39,9 +39,9 @@ import numpy as np
 
 from sitframe.analysis import results as R
 from sitframe.analysis.report_html import write_report_html
+from sitframe.contract.records import summary_key
 from sitframe.errors import InputError
-from sitframe.logs import Log, TrialLog
-from sitframe.records import summary_key
+from sitframe.logs.reader import Log, TrialLog
 
 __all__ = ["AnalysisReport", "analyse", "log_problems"]
 

@@ -21,7 +21,7 @@ from typing import Any
 from sitframe.analysis import html as H
 from sitframe.analysis.replay_data import replay_payload
 from sitframe.analysis.results import Table
-from sitframe.logs import Log, TrialLog
+from sitframe.logs.reader import Log, TrialLog
 
 __all__ = ["write_report_html"]
 

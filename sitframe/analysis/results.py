@@ -1,7 +1,7 @@
 """Numbers behind the thesis's chapter-5 figures and tables, read from a log.
 
-Everything here takes a :class:`sitframe.logs.Log` (or a path to one) and/or a
-:class:`sitframe.logs.TrialLog` and returns numpy arrays, small dataclasses or
+Everything here takes a :class:`sitframe.logs.reader.Log` (or a path to one) and/or a
+:class:`sitframe.logs.reader.TrialLog` and returns numpy arrays, small dataclasses or
 :class:`Table` objects; nothing draws. Figures are in
 :mod:`sitframe.analysis.learning_plots`.
 
@@ -19,6 +19,9 @@ Definitions used throughout
 * Situations are numbered from 1 (``S1 ... Sc``) in labels, tables and
   figures, as in the thesis; array rows (``memberships[:, i]``, ``q[i]``)
   stay 0-based, so situation ``Sk`` is row ``k - 1``.
+
+Why one module of this size: every table and array of the analysis API reads a log the same
+few ways (``as_log``, ``_col``, ``_summary``); split by table they would repeat those.
 """
 
 from __future__ import annotations
@@ -34,18 +37,18 @@ from typing import Any
 
 import numpy as np
 
-from sitframe.clustering import (
+from sitframe.contract.records import summary_key
+from sitframe.errors import InputError
+from sitframe.logs.reader import Log, TrialLog, open_log
+from sitframe.sim.world import World, parse_world
+from sitframe.situations.clustering import (
     SELECTION_RULE,
     ClusteringTrials,
     SweepResult,
     describe_prototype,
     rank_trials,
 )
-from sitframe.errors import InputError
-from sitframe.fcm import MEASURE_DIRECTIONS
-from sitframe.logs import Log, TrialLog, open_log
-from sitframe.records import summary_key
-from sitframe.world import World, parse_world
+from sitframe.situations.fcm import MEASURE_DIRECTIONS
 
 __all__ = [
     "CollisionIntervals",
@@ -77,7 +80,7 @@ LogLike = Log | str | os.PathLike[str]
 
 
 def as_log(log: LogLike) -> Log:
-    """Return ``log`` itself, or open the path with :func:`sitframe.logs.open_log`.
+    """Return ``log`` itself, or open the path with :func:`sitframe.logs.reader.open_log`.
 
     Raises
     ------
@@ -111,13 +114,13 @@ def sensor_angles(log: LogLike) -> np.ndarray:
 
     Any layout (a front arc, a 360 deg ring). Logs written before the spec was
     logged: the ``[sensor]`` table's ``angles_deg``, else the Pioneer 2DX front
-    ring (:attr:`sitframe.logs.Log.sensor`).
+    ring (:attr:`sitframe.logs.reader.Log.sensor`).
     """
     return as_log(log).sensor.angles_deg
 
 
 def sensor_max_range(log: LogLike) -> float:
-    """Maximum range [m] of the run's sensor (:attr:`sitframe.logs.Log.sensor`)."""
+    """Maximum range [m] of the run's sensor (:attr:`sitframe.logs.reader.Log.sensor`)."""
     return as_log(log).sensor.max_range
 
 
@@ -129,7 +132,7 @@ def robot_radius(log: LogLike) -> float:
 def situation_labels(log: LogLike, *, numbered: bool = True) -> list[str]:
     """One short label per situation, derived from the fitted prototypes.
 
-    Uses :func:`sitframe.clustering.describe_prototype` on
+    Uses :func:`sitframe.situations.clustering.describe_prototype` on
     ``/cluster/state/centers`` with the log's sensor angles. Without prototypes
     (another interpreter) the labels are just ``S1 ... Sc``.
 
@@ -170,7 +173,7 @@ def clustering_trials(log: LogLike) -> ClusteringTrials:
     """Rebuild the clustering stage (every FCM trial, the chosen one) from ``/cluster``.
 
     Ranks and eligibility are recomputed with
-    :func:`sitframe.clustering.rank_trials`; the chosen trial is the logged one.
+    :func:`sitframe.situations.clustering.rank_trials`; the chosen trial is the logged one.
     Initial centres are not logged (``init_centers`` is NaN).
 
     Raises
@@ -250,7 +253,7 @@ def learned_output(trial: TrialLog, label: str | None = None,
     Parameters
     ----------
     trial
-        A trial read with :meth:`sitframe.logs.Log.trial`.
+        A trial read with :meth:`sitframe.logs.reader.Log.trial`.
     label
         Behaviour label; default the first behaviour that learned ``output``.
     output
@@ -650,7 +653,7 @@ def rule_bases_across_trials(log: LogLike, label: str | None = None,
                              read: Callable[[int], TrialLog] | None = None) -> Table:
     """Every trial's learned action per situation, and the most frequent one (Tables A.2/A.3).
 
-    ``read`` reads trial ``k`` (default :meth:`sitframe.logs.Log.trial`; a caller
+    ``read`` reads trial ``k`` (default :meth:`sitframe.logs.reader.Log.trial`; a caller
     that already holds the trials passes its cache).
 
     Returns
@@ -689,7 +692,7 @@ def rule_bases_across_trials(log: LogLike, label: str | None = None,
 
 def _eval_worlds(s: np.ndarray) -> list[str]:
     """The evaluation worlds of a summary table (those with a collision rate)."""
-    head, tail = "eval.", ".collisions_per_1000"
+    head, tail = summary_key("eval", "", sep="."), summary_key("", "collisions_per_1000", sep=".")
     return [n[len(head):-len(tail)] for n in s.dtype.names or ()
             if n.startswith(head) and n.endswith(tail)]
 

@@ -10,8 +10,8 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from sitframe.analysis.world_plot import plot_world
-from sitframe.situations import KINDS, count_per_iteration
+from sitframe.sim.draw import plot_world
+from sitframe.situations.events import KINDS, count_per_iteration
 
 #: Marker and colour of each event kind on the room map.
 _STYLE = {"create": ("o", "tab:blue"), "split": ("^", "tab:red"), "merge": ("s", "tab:green"),
@@ -22,7 +22,7 @@ def plot_situation_counts(counts: dict[int, np.ndarray], title: str) -> Figure:
     """Number of alive situations (y) against the iteration (x), one line per trial.
 
     ``counts`` maps a trial index to its (L,) count per iteration
-    (:func:`sitframe.situations.count_per_iteration`).
+    (:func:`sitframe.situations.events.count_per_iteration`).
     """
     fig = Figure(figsize=(7, 3.6), layout="constrained")  # (no pyplot: nothing to close)
     ax = fig.add_subplot()

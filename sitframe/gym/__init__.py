@@ -13,6 +13,15 @@ Importing this package registers three ids::
 and :func:`make_env` makes one from any config (preset name or TOML path);
 :class:`SitframeVectorEnv` steps N robots together. Spaces, episodes and the
 choices behind them: :mod:`sitframe.gym.env` and :mod:`sitframe.gym.task`.
+
+What it may import
+    :mod:`sitframe.contract` (a config resolved into its sensor, interpreter and reward),
+    :mod:`sitframe.sim` (worlds, the robot, N robots stepped together) and the ground floor;
+    never runs, logs or analysis (an environment is stepped by its learner, not run).
+
+Entry points
+    :func:`make_env`, :func:`make_vector_env`, :class:`SitframeEnv`,
+    :class:`SitframeVectorEnv`, :class:`Task`, and the ids in :data:`ENV_IDS`.
 """
 
 from __future__ import annotations

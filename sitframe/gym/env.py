@@ -15,7 +15,7 @@ Action
     mapped onto [min_speed, max_speed].
 Step
     One control iteration (1.5 s of robot time) through the simulator and
-    sensor code paths of a sitframe trial (:func:`sitframe.robot.step_robot`,
+    sensor code paths of a sitframe trial (:func:`sitframe.sim.robot.step_robot`,
     the sensor plugin's ``read``), rewarded by the config's reward plugin.
 Episode
     See :mod:`sitframe.gym.task` (start poses, goals, time limit, termination).
@@ -31,10 +31,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from sitframe.contract.records import Transition
 from sitframe.gym.task import Task
-from sitframe.records import Transition
-from sitframe.robot import step_robot
-from sitframe.world import Goal
+from sitframe.sim.robot import step_robot
+from sitframe.sim.world import Goal
 
 __all__ = ["SitframeEnv", "render_frame"]
 
@@ -150,7 +150,7 @@ def render_frame(world: Any, pose: np.ndarray, reading: np.ndarray | None, senso
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.patches import Circle
 
-    from sitframe.analysis.world_plot import plot_world  # matplotlib: only when rendering
+    from sitframe.sim.draw import plot_world  # matplotlib: only when rendering
 
     fig = plot_world(world, show_trajectories=False, show_start=False, show_goal=False,
                      robot_radius=radius)

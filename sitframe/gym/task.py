@@ -1,7 +1,7 @@
 """A sitframe config seen as a reinforcement-learning task (shared by the single and vector envs).
 
 :class:`Task` resolves a config (preset name or TOML path) with the same
-code a run uses (:class:`sitframe.resolve.Resolved`): its robot, its sensor
+code a run uses (:class:`sitframe.contract.resolve.Resolved`): its robot, its sensor
 plugin, the reward plugin of its learning behaviour, its worlds, and — for a
 goal task (a config whose components ask for the ``goal-episodes``
 protocol) — that protocol's start/goal pairs and its ``terminated`` test.
@@ -38,13 +38,13 @@ from typing import Any
 
 import numpy as np
 
-from sitframe.config import Component, load_config
+from sitframe.contract.config import Component, load_config
+from sitframe.contract.pluginmanager import Registry, get_plugin_manager
+from sitframe.contract.records import Context, TrialInfo
+from sitframe.contract.resolve import Resolved
 from sitframe.errors import InputError
-from sitframe.pluginmanager import Registry, get_plugin_manager
-from sitframe.records import Context, TrialInfo
-from sitframe.resolve import Resolved
-from sitframe.robot import Command
-from sitframe.world import Goal, World
+from sitframe.sim.robot import Command
+from sitframe.sim.world import Goal, World
 
 __all__ = ["GOAL_REWARD", "Task", "goal_features"]
 

@@ -6,7 +6,7 @@ copies): same start poses, goals, readings and rewards for the same actions
 (tested, bit for bit, collisions included, with and without the compiled
 kernels). What is shared is the simulator's work:
 
-- the robots move in one :func:`sitframe.fleet.step_robots` call (with the
+- the robots move in one :func:`sitframe.sim.fleet.step_robots` call (with the
   compiled kernels, a few compiled calls for all N robots: which walls each
   can reach, its substeps and first contact, the refinement of the contacts,
   the contact points and back-offs);
@@ -16,7 +16,7 @@ kernels). What is shared is the simulator's work:
 - the observations are built in one array operation.
 
 What stays per robot is what a reward plugin needs: the contexts, the
-:class:`~sitframe.records.Transition` and the reward call. Without the
+:class:`~sitframe.contract.records.Transition` and the reward call. Without the
 compiled kernels the robots are stepped one by one (the numpy reference).
 
 Episodes end as in the single env; a finished robot is reset at the next
@@ -33,10 +33,10 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from sitframe.fleet import step_robots
+from sitframe.contract.records import Context, Transition
 from sitframe.gym.env import SitframeEnv
 from sitframe.gym.task import _NO_U, Task
-from sitframe.records import Context, Transition
+from sitframe.sim.fleet import step_robots
 
 __all__ = ["SitframeVectorEnv"]
 

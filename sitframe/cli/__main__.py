@@ -1,0 +1,7 @@
+"""``python -m sitframe.cli``: the ``sitframe`` command line."""
+
+import sys
+
+from sitframe.cli.app import console_main
+
+sys.exit(console_main())

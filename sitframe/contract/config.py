@@ -1,0 +1,559 @@
+"""Run configs: TOML files (or shipped presets) validated into a plain dict.
+
+A config has these tables (every key optional unless noted; defaults are the
+thesis's Table A.1):
+
+``[experiment]``
+    ``name``, ``description``, ``seed`` (int), ``trials`` (learning trials),
+    ``iterations`` (l, per trial), ``stages`` (subset of
+    ``["collect", "cluster", "learn", "evaluate"]``), ``world`` (the learning
+    world: a shipped name or a .toml path), ``default_speed`` (m/s, when no
+    behaviour proposes a speed),
+    ``clusters_from`` (path of a log whose fitted situations are reused;
+    collect and cluster are then skipped).
+``[robot]``
+    Fields of :class:`sitframe.sim.robot.RobotParams` (radius, turn-rate limit,
+    substep, speed limits, collision recovery).
+``[sensor]``
+    ``component`` (required; e.g. ``"pioneer-sonar"``) and its parameters.
+``[collect]``
+    ``mode`` (``"trajectory"``, ``"wander"`` or ``"both"``), ``worlds``, ``speed`` (m/s),
+    ``rate_hz`` (samples per second), ``wander_samples`` (per world).
+``[interpreter]``
+    ``component`` (e.g. ``"fcm"``) and its parameters (c, m, trials ...).
+``[behaviours.LABEL]``
+    One table per behaviour: ``component`` (required), optional ``reward``
+    (a reward component name: the behaviour learns from it), optional
+    ``reward_params`` table, optional ``policy_from = {log = "...", trial = 0,
+    behaviour = "LABEL"}`` to start from a learned policy (``trial = "best"``
+    picks the trial whose frozen rule base ranked best on collisions and
+    coverage when evaluated in the log's own learning world; see
+    :func:`sitframe.logs.policies.best_trial`; a table ``trial = {world = "W",
+    episodes = 100, score = "collision_free_rate", seed = 0}`` picks the
+    trial that scores highest in that many episodes of the evaluation
+    protocol in world W, see :func:`sitframe.runs.evaluation.select_trial`), then the
+    behaviour's own parameters.
+``[arbiter]``
+    ``component`` (default ``"single"``) and its parameters.
+``[evaluate]``
+    ``worlds`` (default: the shipped novel rooms and the learning world),
+    ``iterations``: the default ``frozen`` evaluation protocol's.
+``[goal]``
+    ``episodes``, ``timeout``, ``min_distance``, ``worlds``, ``pairs``
+    (``"random"`` or ``"world"``), ``radius``, ``margin``, optionally ``train``
+    (``"world"`` or ``"episodes"``: how a learning trial runs), ``train_detour`` and
+    ``detour_ratio`` (a share of detour pairs in training): the parameters of
+    the ``goal-episodes`` evaluation protocol (``plugins/goal_episodes.py``)
+    that a goal run's evaluate stage uses.
+``[prerequisites]``
+    ``"LOG PATH" = "EXPERIMENT"``: a log this config reads (``clusters_from``,
+    ``policy_from.log``) and the experiment (preset name or .toml path) that
+    makes it; ``sitframe run`` makes a missing one first, or reuses a complete
+    one of the same config (:func:`sitframe.runs.prepare.make_prerequisites`).
+``[plugins]``
+    ``dirs``: folders of loose plugin modules, relative to the config file.
+    Every ``*.py`` file in them is imported, i.e. **runs**, when the config
+    is loaded (as pytest imports ``conftest.py``): use only configs you
+    trust. ``run --resume`` does not import folders named only by a log.
+
+Paths in a config (world files, ``clusters_from``, ``policy_from.log``,
+``plugins.dirs``) resolve against the config file's folder; a world given
+as a bare name (no ``/``, no ``.toml``) is a shipped world. Text is stored
+in the log as TOML, so any string round-trips; behaviour labels name HDF5
+groups and may not be empty, ``.`` or contain ``/``.
+
+Component parameters are checked against the component's signature when the
+run resolves its components (unknown names get a did-you-mean); everything
+else is checked here. Every error is an :class:`~sitframe.errors.InputError`
+naming the file and the key path.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import hashlib
+import importlib.resources
+import re
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sitframe import params as P
+from sitframe.errors import InputError, did_you_mean
+from sitframe.sim.robot import RobotParams
+
+STAGES = ("collect", "cluster", "learn", "evaluate")
+
+#: Defaults of the core sections; component tables are free-form.
+DEFAULTS: dict[str, dict[str, Any]] = {
+    "experiment": {
+        "name": "experiment",
+        "description": "",
+        "seed": 0,
+        "trials": 11,
+        "iterations": 5000,
+        "stages": list(STAGES),
+        "world": "training",
+        "default_speed": 0.15,
+        "clusters_from": "",
+    },
+    "robot": {},
+    "sensor": {"component": "pioneer-sonar"},
+    "collect": {
+        "mode": "trajectory",
+        "worlds": ["collect-1", "collect-2", "collect-3", "collect-4", "collect-5"],
+        "speed": 0.15,
+        "rate_hz": 2.0,
+        "wander_samples": 300,
+    },
+    "interpreter": {"component": "fcm"},
+    "behaviours": {},
+    "arbiter": {"component": "single"},
+    "evaluate": {"worlds": ["training", "novel-1", "novel-2"], "iterations": 1000},
+    # The goal-episodes protocol's table (plugins/goal_episodes.py checks its values when a
+    # run resolves; its defaults stay here so every config's text, and hash, keeps it).
+    "goal": {"episodes": 50, "timeout": 300, "min_distance": 3.0, "worlds": ["goal"],
+             "pairs": "random", "radius": 0.3, "margin": 0.1},
+    "plugins": {"dirs": []},
+}
+DEFAULT_PROTOCOL = "frozen"  # the evaluation protocol of a run whose components name none
+#: Optional sections without defaults (absent from a config that does not use them, so the
+#: config's text, and so its hash, stays what it was before they existed).
+OPTIONAL_SECTIONS = ("prerequisites",)
+#: Optional keys without defaults, for the same reason (checked by the component that reads
+#: them: ``goal.train...`` by the goal-episodes protocol).
+OPTIONAL_KEYS = {"goal": {"train", "train_detour", "detour_ratio"}}
+
+_CORE_KEYS = {s: set(v) for s, v in DEFAULTS.items() if s not in ("behaviours",)}
+
+#: Upper bounds of the counts (beyond them arrays do not fit in memory or the
+#: log's 64-bit integer attributes cannot hold the value).
+MAX_SEED = 2**63 - 1
+MAX_TRIALS = 100_000
+MAX_ITERATIONS = 10_000_000
+MAX_RATE_HZ = 1000.0
+MIN_RATE_HZ = 0.01
+_COMPONENT_SECTIONS = ("sensor", "interpreter", "arbiter")
+#: Keys of a ``[behaviours.LABEL]`` (or ``[arbiter]``) table that the core reads and that
+#: are not the component's parameters (the one definition; resolve and sweep use it).
+META_KEYS = ("component", "reward", "reward_params", "policy_from")
+
+
+@dataclass(frozen=True)
+class Component:
+    """A component table: the registered ``name`` and the component's own ``params``.
+
+    ``reward``, ``reward_params`` and ``policy_from`` are the reserved keys
+    (:data:`META_KEYS`) the core reads from behaviour and arbiter tables.
+    """
+
+    name: str
+    params: dict[str, Any]
+    reward: str | None = None
+    reward_params: dict[str, Any] = dataclasses.field(default_factory=dict)
+    policy_from: dict[str, Any] | None = None
+
+    @classmethod
+    def of(cls, table: dict[str, Any]) -> Component:
+        return cls(table["component"], {k: v for k, v in table.items() if k not in META_KEYS},
+                   table.get("reward"), dict(table.get("reward_params", {})),
+                   table.get("policy_from"))
+
+
+@dataclass(frozen=True)
+class ExperimentSection:
+    """``[experiment]``: what runs, how long, where (see the module docstring)."""
+
+    name: str
+    description: str
+    seed: int
+    trials: int
+    iterations: int
+    stages: tuple[str, ...]
+    world: str
+    default_speed: float
+    clusters_from: str
+
+
+@dataclass(frozen=True)
+class CollectSection:
+    """``[collect]``: how sensor data for the cluster stage is recorded."""
+
+    mode: str
+    worlds: tuple[str, ...]
+    speed: float
+    rate_hz: float
+    wander_samples: int
+
+
+@dataclass(frozen=True)
+class EvaluateSection:
+    """``[evaluate]``: the worlds of the default evaluation (``iterations``: the protocol's)."""
+
+    worlds: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Config:
+    """A validated config, typed: what the core reads (built by :meth:`of`).
+
+    The plain dict it is built from stays the config's serial form (the
+    log's TOML, sweep keys); ``tables`` holds every table as validated, for
+    plugins that read a table by name (an evaluation protocol's, e.g. ``[goal]``).
+    """
+
+    experiment: ExperimentSection
+    robot: dict[str, Any]
+    sensor: Component
+    collect: CollectSection
+    interpreter: Component
+    behaviours: dict[str, Component]
+    arbiter: Component
+    evaluate: EvaluateSection
+    plugin_dirs: tuple[str, ...]
+    prerequisites: dict[str, str]
+    tables: dict[str, dict[str, Any]]
+
+    @classmethod
+    def of(cls, cfg: dict[str, Any]) -> Config:
+        """The typed view of a config validated by :func:`validate_config`."""
+        e, c, v = cfg["experiment"], cfg["collect"], cfg["evaluate"]
+        return cls(
+            ExperimentSection(e["name"], e["description"], int(e["seed"]), int(e["trials"]),
+                              int(e["iterations"]), tuple(e["stages"]), e["world"],
+                              float(e["default_speed"]), e["clusters_from"]),
+            dict(cfg["robot"]), Component.of(cfg["sensor"]),
+            CollectSection(c["mode"], tuple(c["worlds"]), float(c["speed"]),
+                           float(c["rate_hz"]), int(c["wander_samples"])),
+            Component.of(cfg["interpreter"]),
+            {label: Component.of(t) for label, t in cfg["behaviours"].items()},
+            Component.of(cfg["arbiter"]),
+            EvaluateSection(tuple(v["worlds"])),
+            tuple(cfg["plugins"]["dirs"]), dict(cfg.get("prerequisites", {})),
+            {k: t for k, t in cfg.items() if isinstance(t, dict)})
+
+    def worlds(self) -> list[str]:
+        """The worlds the stages name, once each: the learning world, then the collection
+        rooms (if it collects) and the evaluation rooms (if it evaluates)."""
+        e = self.experiment
+        names = [e.world]
+        if "collect" in e.stages:
+            names += self.collect.worlds
+        if "evaluate" in e.stages:
+            names += self.evaluate.worlds
+        return list(dict.fromkeys(names))
+
+
+def list_presets() -> list[str]:
+    """Names of the experiment presets shipped with sitframe."""
+    root = importlib.resources.files("sitframe.presets")
+    return sorted(p.name[:-5] for p in root.iterdir() if p.name.endswith(".toml"))
+
+
+def preset_text(name: str) -> str:
+    """TOML text of a shipped preset."""
+    return (importlib.resources.files("sitframe.presets") / f"{name}.toml").read_text("utf-8")
+
+
+def load_config(experiment: str) -> tuple[dict[str, Any], str, str]:
+    """Load a preset name or a TOML path.
+
+    Returns
+    -------
+    (config, source, base_dir)
+        The validated config (defaults filled in), a label for the source used
+        in error messages, and the folder relative paths are resolved from.
+    """
+    path = Path(experiment)
+    try:
+        experiment.encode("utf-8")
+    except UnicodeEncodeError:
+        raise InputError("the file name is not UTF-8; the log stores it as UTF-8 text: rename "
+                         "the file", file=experiment) from None
+    if experiment.endswith(".toml") or path.exists() or "/" in experiment:
+        if not path.is_file():
+            raise InputError("config file not found (expected a preset name or a .toml file)",
+                             file=experiment)
+        try:
+            text = path.read_text("utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise InputError(f"cannot read config: {exc}", file=experiment) from None
+        return parse_config(text, file=str(path)), str(path), str(path.parent)
+    presets = list_presets()
+    if experiment not in presets:
+        raise InputError(
+            f"unknown experiment '{experiment}'{did_you_mean(experiment, presets)}; "
+            f"available presets: {', '.join(presets)} (or give a path to a .toml config)"
+        )
+    return parse_config(preset_text(experiment), file=f"preset:{experiment}"), \
+        f"preset:{experiment}", "."
+
+
+def parse_config(text: str, *, file: str | None = None) -> dict[str, Any]:
+    """Parse and validate config TOML text; fill in defaults."""
+    if not text.strip():
+        raise InputError("config is empty (expected TOML with at least [behaviours])", file=file)
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"not valid TOML: {exc}", file=file) from None
+    return validate_config(raw, file=file)
+
+
+def validate_config(raw: dict[str, Any], *, file: str | None = None) -> dict[str, Any]:
+    """Validate a config dict and return a new dict with defaults filled in."""
+    cfg = copy.deepcopy(DEFAULTS)
+    sections = {*DEFAULTS, *OPTIONAL_SECTIONS}
+    for section, value in raw.items():
+        if section not in sections:
+            raise InputError(
+                f"unknown section{did_you_mean(section, sections)}; "
+                f"expected one of {', '.join(sorted(sections))}",
+                file=file, key=section,
+            )
+        if not isinstance(value, dict):
+            raise InputError(f"expected a table, got {type(value).__name__}", file=file,
+                             key=section)
+        if section == "behaviours":
+            cfg["behaviours"] = _validate_behaviours(value, file)
+        elif section in _COMPONENT_SECTIONS:
+            table = dict(value)
+            if "component" in table:
+                table["component"] = _at(P.string, "component", table["component"], file, section)
+            else:
+                table["component"] = DEFAULTS[section]["component"]
+            _check_meta(table, file, section, ("reward", "reward_params")
+                        if section == "arbiter" else ())
+            cfg[section] = table
+        elif section == "robot":
+            cfg["robot"] = _validate_robot(value, file)
+        elif section == "prerequisites":
+            cfg[section] = {log: _at(P.string, log, run, file, section)
+                            for log, run in value.items()}
+        else:
+            P.known_keys(value, sorted(_CORE_KEYS[section] | OPTIONAL_KEYS.get(section, set())),
+                         prefix=section, file=file)
+            cfg[section].update(value)
+    _check_core(cfg, file)
+    _check_utf8(cfg, file, "")
+    if not cfg["behaviours"]:
+        raise InputError("no behaviours configured (expected at least one [behaviours.LABEL] "
+                         "table with a 'component')", file=file, key="behaviours")
+    return cfg
+
+
+def _check_utf8(value: Any, file: str | None, key: str) -> None:
+    """Every key and string below ``value`` is valid UTF-8 (the log stores the config as
+    UTF-8 text; a non-UTF-8 file name given on the command line is not)."""
+    items = value.items() if isinstance(value, dict) else \
+        enumerate(value) if isinstance(value, list) else ()
+    for k, v in items:
+        sub = f"{key}.{k}" if isinstance(k, str) and key else f"{key}[{k}]" if key else str(k)
+        for text in (k, v):
+            if isinstance(text, str):
+                try:
+                    text.encode("utf-8")
+                except UnicodeEncodeError:
+                    raise InputError("holds bytes that are not UTF-8 (a non-UTF-8 file name?); "
+                                     "expected UTF-8 text: rename the file", file=file,
+                                     key=sub) from None
+        _check_utf8(v, file, sub)
+
+
+def _at(fn: Any, name: str, value: Any, file: str | None, prefix: str, **kw: Any) -> Any:
+    try:
+        return fn(name, value, **kw)
+    except InputError as exc:
+        raise exc.at(file=file, key_prefix=prefix) from None
+
+
+def _validate_robot(value: dict[str, Any], file: str | None) -> dict[str, Any]:
+    P.known_keys(value, sorted(P.accepted_params(RobotParams)[0]), prefix="robot", file=file)
+    try:
+        RobotParams(**value)
+    except InputError as exc:
+        raise exc.at(file=file, key_prefix="robot") from None
+    except (ValueError, TypeError) as exc:
+        raise InputError(str(exc), file=file, key="robot") from None
+    return dict(value)
+
+
+def _check_meta(table: dict[str, Any], file: str | None, key: str,
+                takes: tuple[str, ...]) -> None:
+    """The reserved keys (:data:`META_KEYS`) of component table ``key``, which ``takes`` some."""
+    for k in META_KEYS[1:]:
+        if k in table and k not in takes:
+            who = "behaviours" if k == "policy_from" else "behaviours and the arbiter"
+            raise InputError(f"the {key} table takes no '{k}' (only {who} do)", file=file,
+                             key=f"{key}.{k}")
+    if "reward" in table:
+        _at(P.string, "reward", table["reward"], file, key)
+    if "reward_params" in table:
+        if not isinstance(table["reward_params"], dict):
+            raise InputError("expected a table", file=file, key=f"{key}.reward_params")
+        if "reward" not in table:
+            raise InputError("reward_params without a reward: name the reward they are for "
+                             "(reward = \"...\")", file=file, key=f"{key}.reward_params")
+
+
+def _validate_behaviours(value: dict[str, Any], file: str | None) -> dict[str, Any]:
+    out = {}
+    for label, table in value.items():
+        key = f"behaviours.{label}"
+        if label in ("", ".") or "/" in label:
+            raise InputError(f"expected a behaviour label that can name an HDF5 group (not "
+                             f"empty, not '.', no '/'), got {label!r}", file=file, key=key)
+        if not isinstance(table, dict):
+            raise InputError(f"expected a table, got {type(table).__name__}", file=file, key=key)
+        if "component" not in table:
+            raise InputError("missing 'component' (the behaviour's registered name)",
+                             file=file, key=key)
+        t = dict(table)
+        _at(P.string, "component", t["component"], file, key)
+        _check_meta(t, file, key, META_KEYS)
+        if "policy_from" in t:
+            pf = t["policy_from"]
+            if not isinstance(pf, dict) or "log" not in pf:
+                raise InputError("expected a table {log = \"path.h5\", trial = 0, "
+                                 "behaviour = \"label\"}", file=file, key=f"{key}.policy_from")
+            P.known_keys(pf, ("log", "trial", "behaviour"), prefix=f"{key}.policy_from",
+                         file=file)
+            _at(P.string, "log", pf["log"], file, f"{key}.policy_from")
+            if isinstance(pf.get("trial"), dict):
+                _check_selection(pf["trial"], file, f"{key}.policy_from.trial")
+            elif "trial" in pf and pf["trial"] != "best":
+                _at(P.number, "trial", pf["trial"], file, f"{key}.policy_from", lo=0, integer=True)
+        out[label] = t
+    return out
+
+
+#: Keys of a ``policy_from.trial`` selection table and their defaults
+#: (:func:`sitframe.runs.evaluation.select_trial`).
+SELECTION_DEFAULTS: dict[str, Any] = {"world": "", "episodes": 100,
+                                      "score": "collision_free_rate", "seed": 0}
+
+
+def _check_selection(sel: dict[str, Any], file: str | None, key: str) -> None:
+    P.known_keys(sel, list(SELECTION_DEFAULTS), prefix=key, file=file)
+    if "world" not in sel:
+        raise InputError("expected the world the trials are compared in, e.g. world = "
+                         "\"goal-training\"", file=file, key=f"{key}.world")
+    sel = {**SELECTION_DEFAULTS, **sel}
+    _at(P.string, "world", sel["world"], file, key)
+    _at(P.string, "score", sel["score"], file, key)
+    _at(P.number, "episodes", sel["episodes"], file, key, lo=1, integer=True)
+    _at(P.number, "seed", sel["seed"], file, key, lo=0, integer=True)
+
+
+def _check_core(cfg: dict[str, Any], file: str | None) -> None:
+    e = cfg["experiment"]
+    _at(P.string, "name", e["name"], file, "experiment")
+    if any(ord(ch) < 32 for ch in e["name"]):
+        raise InputError(f"expected a name without control characters, got {e['name']!r}",
+                         file=file, key="experiment.name")
+    # The default log is logs/<name>.h5: a name may nest (sweeps use "sweep/point")
+    # but must stay inside logs/.
+    parts = e["name"].replace("\\", "/").split("/")
+    if e["name"].startswith(("/", "\\")) or any(p in ("", ".", "..") for p in parts) \
+            or ":" in e["name"]:
+        raise InputError(f"expected a name that is a relative path inside logs/ (no leading "
+                         f"'/', no empty, '.' or '..' part, no ':'), got {e['name']!r}",
+                         file=file, key="experiment.name")
+    if not isinstance(e["description"], str):
+        raise InputError("expected a string", file=file, key="experiment.description")
+    e["seed"] = _count("seed", e["seed"], file, "experiment", 0, MAX_SEED)
+    e["trials"] = _count("trials", e["trials"], file, "experiment", 1, MAX_TRIALS)
+    e["iterations"] = _count("iterations", e["iterations"], file, "experiment", 1, MAX_ITERATIONS)
+    _at(P.number, "default_speed", e["default_speed"], file, "experiment", lo=0.0, lo_open=True)
+    _at(P.string, "world", e["world"], file, "experiment")
+    if not isinstance(e["clusters_from"], str):
+        raise InputError("expected a path to a log (string)", file=file,
+                         key="experiment.clusters_from")
+    stages = e["stages"]
+    if not isinstance(stages, list) or not stages:
+        raise InputError(f"expected a non-empty list of stages from {list(STAGES)}", file=file,
+                         key="experiment.stages")
+    for i, s in enumerate(stages):
+        _at(P.choice, f"stages[{i}]", s, file, "experiment", choices=STAGES)
+    c = cfg["collect"]
+    _at(P.choice, "mode", c["mode"], file, "collect", choices=("trajectory", "wander", "both"))
+    _check_names(c["worlds"], file, "collect.worlds")
+    _at(P.number, "speed", c["speed"], file, "collect", lo=0.0, lo_open=True)
+    _at(P.number, "rate_hz", c["rate_hz"], file, "collect", lo=MIN_RATE_HZ, hi=MAX_RATE_HZ)
+    c["wander_samples"] = _count("wander_samples", c["wander_samples"], file, "collect", 1,
+                                 MAX_ITERATIONS)
+    v = cfg["evaluate"]
+    _check_names(v["worlds"], file, "evaluate.worlds")
+    v["iterations"] = _count("iterations", v["iterations"], file, "evaluate", 1, MAX_ITERATIONS)
+    _check_names(cfg["plugins"]["dirs"], file, "plugins.dirs", allow_empty=True)
+
+
+def _count(name: str, value: Any, file: str | None, section: str, lo: int, hi: int) -> int:
+    """An integer in [lo, hi] (the upper bound checked apart, so the usual message stays)."""
+    v = int(_at(P.number, name, value, file, section, lo=lo, integer=True))
+    if v > hi:
+        raise InputError(f"expected an integer <= {hi}, got {v}", file=file,
+                         key=f"{section}.{name}")
+    return v
+
+
+def _check_names(value: Any, file: str | None, key: str, allow_empty: bool = False) -> None:
+    if not isinstance(value, list) or (not value and not allow_empty):
+        raise InputError(f"expected a {'' if allow_empty else 'non-empty '}list of names, "
+                         f"got {value!r}", file=file, key=key)
+    for i, v in enumerate(value):
+        if not isinstance(v, str) or not v:
+            raise InputError(f"expected a name (string), got {v!r}", file=file, key=f"{key}[{i}]")
+
+
+def to_toml(cfg: dict[str, Any]) -> str:
+    """Render a config dict as TOML (for logs; round-trips through tomllib)."""
+    lines: list[str] = []
+
+    def val(v: Any) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, int | float):
+            return repr(v)
+        if isinstance(v, str):
+            return _toml_string(v)
+        if isinstance(v, list | tuple):
+            return "[" + ", ".join(val(x) for x in v) + "]"
+        if isinstance(v, dict):
+            return "{" + ", ".join(f"{_k(k)} = {val(x)}" for k, x in v.items()) + "}"
+        raise TypeError(f"cannot render {type(v).__name__} as TOML")
+
+    def table(prefix: str, d: dict[str, Any]) -> None:
+        scalars = {k: v for k, v in d.items() if not isinstance(v, dict)}
+        nested = {k: v for k, v in d.items() if isinstance(v, dict)}
+        if prefix:
+            lines.append(f"[{prefix}]")
+        for k, v in scalars.items():
+            lines.append(f"{_k(k)} = {val(v)}")
+        lines.append("")
+        for k, v in nested.items():
+            if prefix and k in ("reward_params", "policy_from"):
+                lines.insert(len(lines) - 1, f"{_k(k)} = {val(v)}")
+                continue
+            table(f"{prefix}.{_k(k)}" if prefix else _k(k), v)
+
+    table("", cfg)
+    return "\n".join(lines).strip() + "\n"
+
+
+def _k(key: str) -> str:
+    """A TOML key: bare if it may be (ASCII letters, digits, ``_``, ``-``), else quoted."""
+    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else _toml_string(key)
+
+
+def _toml_string(v: str) -> str:
+    """A TOML basic string holding exactly ``v`` (control characters escaped)."""
+    body = v.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
+    body = re.sub(r"[\x00-\x08\x0b-\x1f\x7f]", lambda m: f"\\u{ord(m.group()):04x}", body)
+    return f'"{body}"'
+
+
+def config_hash(text: str) -> str:
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()

@@ -1,0 +1,267 @@
+"""Resolving a config against the plugin registry: fresh, checked, bound components.
+
+:class:`Resolved` creates every component a run needs by the names the config
+gives (the core knows no component by name), checks each against its protocol
+(:mod:`sitframe.contract`), binds it to the run (:class:`sitframe.contract.records.RunContext`)
+and loads the run's worlds. One is built per run (and per worker process).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sitframe.contract.checks import (
+    BoundaryError,
+    Origin,
+    call,
+    check_n_situations,
+    check_protocol,
+    fault,
+    sensor_geometry,
+    sensor_spec_mismatch,
+)
+from sitframe.contract.config import DEFAULT_PROTOCOL, Component, Config
+from sitframe.contract.pluginmanager import Registry
+from sitframe.contract.records import RunContext, SensorSpec
+from sitframe.errors import PLUGIN_ERRORS, InputError, PluginError, PluginFault
+from sitframe.sim.robot import RobotParams
+from sitframe.sim.world import World, load_world
+
+
+@dataclass
+class Resolved:
+    """A config resolved against a registry: creates fresh, checked, bound components on demand.
+
+    Every component is checked against its protocol when created and bound
+    to the run (``bind(run)``, :class:`sitframe.contract.records.RunContext`) before it
+    is used; :attr:`origins` names the plugin behind each config key for
+    messages.
+    """
+
+    cfg: dict[str, Any]
+    registry: Registry
+    file: str | None = None
+    robot: RobotParams = field(default_factory=RobotParams)
+    _worlds: dict[str, World] = field(default_factory=dict)
+    origins: dict[str, Origin] = field(default_factory=dict)
+    run: RunContext | None = None
+    base_dir: str = "."
+
+    @cached_property
+    def config(self) -> Config:
+        """The typed view of :attr:`cfg` (what the core reads)."""
+        return Config.of(self.cfg)
+
+    @classmethod
+    def build(cls, cfg: dict[str, Any], registry: Registry, file: str | None = None,
+              worlds: tuple[str, ...] = (), base_dir: str = ".") -> Resolved:
+        """Resolve ``cfg``: create and bind each component once, so every mistake is found now.
+
+        ``worlds`` names further worlds the caller will use (e.g. ``--world``);
+        relative world paths resolve against ``base_dir`` (the config's folder).
+
+        Plugin code that fails here (a property or ``bind`` that raises, a
+        first reading that breaks the sensor's spec) fails before anything
+        runs or is written: it is a :class:`PluginError` (CLI exit 2), not a
+        :class:`PluginFault` of a run (exit 3, a log marked failed).
+        """
+        try:
+            return cls._build(cfg, registry, file, worlds, base_dir)
+        except PluginFault as exc:
+            raise PluginError(str(exc)) from exc
+
+    @classmethod
+    def _build(cls, cfg: dict[str, Any], registry: Registry, file: str | None,
+               worlds: tuple[str, ...], base_dir: str) -> Resolved:
+        try:
+            robot = RobotParams(**cfg["robot"])
+        except InputError as exc:
+            raise exc.at(file=file, key_prefix="robot") from None
+        except (ValueError, TypeError) as exc:
+            raise InputError(str(exc), file=file, key="robot") from None
+        res = cls(cfg, registry, file, robot, base_dir=base_dir)
+        sensor = res._create("sensor", "sensor", res.config.sensor, bind=False)
+        o = res.origins["sensor"]
+        try:
+            spec = SensorSpec(*sensor_geometry(sensor), str(getattr(sensor, "unit", "m")))
+        except BoundaryError as exc:
+            raise PluginFault(exc.args[1], where=str(o), method=exc.args[0]) from None
+        except PLUGIN_ERRORS as exc:  # a property that raises is the plugin's
+            raise fault(exc, o, "angles_deg") from exc
+        interp = res._create("interpreter", "interpreter", res.config.interpreter, bind=False)
+        c = call(res.origins["interpreter"], "n_situations", lambda: interp.n_situations)
+        try:
+            c = check_n_situations(c, unknown_ok=True)
+        except BoundaryError as exc:
+            raise PluginFault(str(exc), where=str(res.origins["interpreter"]),
+                              method="n_situations") from None
+        e = res.config.experiment
+        loaded = {n: res.world(n, "experiment.world" if n == e.world else "worlds")
+                  for n in dict.fromkeys([*res.config.worlds(), *worlds])}
+        res.run = RunContext(robot, spec, tuple(res.config.behaviours),
+                             None if c is None else int(c), loaded, e.seed, e.iterations,
+                             e.default_speed)
+        res._bind(sensor, "sensor")
+        res._check_sensor(sensor, spec, loaded[e.world])
+        res._bind(interp, "interpreter")
+        res.behaviours()
+        res.arbiter()
+        for name in registry.names("protocol"):  # a protocol's own table is checked now
+            if getattr(registry.get("protocol", name).factory, "table", None) in \
+                    res.config.tables:
+                res.protocol(name)
+        return res
+
+    def _check_sensor(self, sensor: Any, spec: SensorSpec, world: World) -> None:
+        """Read once at the learning world's start: the reading must match the declared spec."""
+        o = self.origins["sensor"]
+        reading = call(o, "read", sensor.read, world, world.start.copy(),
+                       np.random.default_rng(0))
+        why = sensor_spec_mismatch(reading, spec.dim, spec.max_range)
+        if why is not None:
+            raise PluginFault(why, where=str(o), method="read")
+
+    def _create(self, kind: str, key: str, table: Component, *, bind: bool = True,
+                needs: tuple[str, ...] = ()) -> Any:
+        comp = self.registry.create(kind, table.name, table.params, file=self.file, key=key)
+        entry = self.registry.get(kind, table.name)
+        origin = Origin(self.registry.describe_plugin(entry.plugin), kind, entry.name, key,
+                        entry.plugin)
+        self.origins[key] = origin
+        check_protocol(comp, origin, needs=needs)
+        if bind:
+            self._bind(comp, key)
+        return comp
+
+    def _bind(self, comp: Any, key: str) -> None:
+        fn = getattr(comp, "bind", None)
+        if fn is None:
+            return
+        o = self.origins[key]
+        try:
+            fn(dataclasses.replace(self.run, component=key))
+        except InputError as exc:
+            raise exc.at(file=self.file, key_prefix=key) from None
+        except (ValueError, TypeError) as exc:  # the component's parameters do not fit the run
+            raise InputError(f"{exc} ({o.kind} '{o.name}' of plugin {o.plugin}, at bind)",
+                             file=self.file, key=key) from None
+        except (KeyboardInterrupt, PluginFault):
+            raise
+        except PLUGIN_ERRORS as exc:  # any other fault in plugin code
+            raise fault(exc, o, "bind") from exc
+
+    def sensor(self) -> Any:
+        return self._create("sensor", "sensor", self.config.sensor)
+
+    def interpreter(self) -> Any:
+        return self._create("interpreter", "interpreter", self.config.interpreter)
+
+    def arbiter(self) -> Any:
+        table = self.config.arbiter
+        return self._create("arbiter", "arbiter", table, needs=self._learner_needs(table))
+
+    def _learner_needs(self, table: Component) -> tuple[str, ...]:
+        """What a behaviour's or the arbiter's table makes it need (``learn``, ``policy``)."""
+        if table.reward is None:
+            return ()
+        return ("learn", "policy") if "evaluate" in self.config.experiment.stages else ("learn",)
+
+    def arbiter_reward(self) -> Any | None:
+        """The reward the arbiter learns from (``[arbiter] reward = ...``), or ``None``."""
+        return self._reward("arbiter", self.config.arbiter)
+
+    def _reward(self, key: str, table: Component) -> Any | None:
+        """The reward a behaviour's or the arbiter's table names (``reward``, ``reward_params``)."""
+        if table.reward is None:
+            return None
+        return self._create("reward", f"{key}.reward", Component(table.reward,
+                                                                 table.reward_params))
+
+    def behaviours(self) -> dict[str, tuple[Any, Any | None]]:
+        """Label -> (behaviour, reward or None), in config order."""
+        out = {}
+        for label, table in self.config.behaviours.items():
+            key = f"behaviours.{label}"
+            needs = self._learner_needs(table) + \
+                (("load_policy",) if table.policy_from is not None else ())
+            out[label] = (self._create("behaviour", key, table, needs=needs),
+                          self._reward(key, table))
+        return out
+
+    def protocol_name(self, default: str | None = DEFAULT_PROTOCOL) -> str | None:
+        """The evaluation protocol the run's components name (``evaluation_protocol``).
+
+        A component asks for the protocol its behaviour is judged by with a
+        class attribute, e.g. ``evaluation_protocol = "goal-episodes"``; two
+        components naming different protocols are an input error; none: ``default``.
+        """
+        comps = [b for b, _r in self.behaviours().values()] + [self.arbiter()]
+        names = sorted({n for c in comps if (n := getattr(c, "evaluation_protocol", None))})
+        if len(names) > 1:
+            raise InputError(f"the components ask for different evaluation protocols "
+                             f"({', '.join(names)}); expected one", file=self.file,
+                             key="behaviours")
+        return names[0] if names else default
+
+    def protocol(self, name: str) -> Any:
+        """A fresh evaluation protocol ``name``, created from its config table (but ``worlds``)."""
+        table = self._protocol_table(name)
+        params = {k: v for k, v in self.config.tables.get(table, {}).items() if k != "worlds"}
+        return self._create("protocol", table, Component(name, params))
+
+    def _protocol_table(self, name: str) -> str:
+        """The config table holding protocol ``name``'s parameters."""
+        entry = self.registry.get("protocol", name, file=self.file, key="behaviours")
+        return str(getattr(entry.factory, "table", "evaluate"))
+
+    def protocol_worlds(self, name: str) -> list[str]:
+        """The worlds of protocol ``name``'s table, loaded and checked (``check_world``)."""
+        proto = self.protocol(name)
+        table = proto.table
+        names = self.config.tables[table].get("worlds")
+        if not isinstance(names, list) or not names or \
+                not all(isinstance(n, str) and n for n in names):
+            raise InputError(f"expected a non-empty list of world names, got {names!r}",
+                             file=self.file, key=f"{table}.worlds")
+        for j, wname in enumerate(names):
+            key = f"{table}.worlds[{j}]"
+            world = self.world(wname, key=key)
+            if hasattr(proto, "check_world"):
+                try:
+                    call(self.origins[table], "check_world", proto.check_world, world)
+                except InputError as exc:
+                    raise InputError(exc.message, file=self.file, key=key) from None
+        return names
+
+    def world(self, name: str, key: str = "experiment.world") -> World:
+        """The world ``name``: a shipped name, or a .toml path relative to :attr:`base_dir`
+        (the config file's folder)."""
+        if name not in self._worlds:
+            path: str | Path = name  # a shipped name
+            if name.endswith(".toml") or "/" in name:
+                path = Path(name)
+                if not path.is_absolute() and self.base_dir not in ("", "."):
+                    path = Path(self.base_dir) / path
+            try:
+                self._worlds[name] = load_world(path)
+            except InputError as exc:
+                if exc.file is None or (isinstance(path, Path) and not path.is_file()):
+                    # the path itself is wrong: the config's key is where to fix it
+                    where = f" ({exc.file})" if exc.file else ""
+                    raise InputError(f"{exc.message}{where}", file=self.file, key=key) from None
+                raise
+            w = self._worlds[name]
+            clear = float(w.clearance(w.start[None, :2])[0])
+            # (collection rooms are driven along their trajectories, not from the start pose)
+            if not key.startswith("collect") and clear < self.robot.radius:
+                raise InputError(f"the robot disc (radius {self.robot.radius:g} m) does not fit at "
+                                 f"the start pose of world '{name}' (clearance {clear:.3g} m); "
+                                 f"expected robot.radius <= {clear:.3g} or another world",
+                                 file=self.file, key="robot.radius")
+        return self._worlds[name]

@@ -1,0 +1,137 @@
+"""A log's tables as pandas DataFrames (:meth:`sitframe.logs.reader.Log.summary_frame`, ...).
+
+Tidy tables: one row per observation, one column per variable.
+
+* :func:`summary_frame` — one row per finished trial (the log's ``/summary``
+  table: ``trial`` and every summary scalar, e.g. ``convergence_iteration``,
+  ``eval.novel-1.coverage``).
+* :func:`iterations_frame` — one row per iteration of every learning trial
+  (``trial``, ``iteration``, then the per-iteration arrays, a 2-D array
+  spread over named columns: ``x, y, theta`` for the pose the iteration
+  started from, ``heading, speed`` for the command, ``contact_x,
+  contact_y``, ``reading_<i>``, ``membership_<i>``, ``weight_<label>``,
+  ``reward_<label>``, ``proposal_<label>_heading`` / ``_speed``).
+* :func:`evaluations_frame` — the same for the frozen-policy evaluations,
+  with a ``world`` column.
+
+pandas is an optional dependency (``pip install 'sitframe[pandas]'``); a
+clear :class:`ImportError` says so when it is missing. ``sitframe export``
+(:mod:`sitframe.analysis.export`) writes these tables as CSV or Parquet.
+
+This module imports nothing from sitframe (the reader imports it), so it
+takes the :class:`~sitframe.logs.reader.Log` it is given rather than a path.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from sitframe.logs.reader import Log, TrialLog
+
+__all__ = ["evaluations_frame", "iterations_frame", "summary_frame"]
+
+_NAMED = {"pose": ("x", "y", "theta"), "command": ("heading", "speed"),
+          "contact": ("contact_x", "contact_y")}
+_SINGULAR = {"reading": "reading", "memberships": "membership", "weights": "weight"}
+
+
+def _pandas() -> Any:
+    try:
+        import pandas as pd
+    except ImportError:
+        raise ImportError("pandas is needed for DataFrames and `sitframe export`; install it "
+                          "with pip install 'sitframe[pandas]'") from None
+    return pd
+
+
+def summary_frame(log: Log) -> Any:
+    """One row per finished trial: ``trial`` and every summary scalar (NaN = not logged)."""
+    pd = _pandas()
+    s = log.summary()
+    if s.size:  # rows of trials whose group is in the log
+        s = s[np.isin(s["trial"], log.trial_indices())]
+    frame = pd.DataFrame({n: s[n] for n in s.dtype.names or ()})
+    if "converged" in frame:
+        frame["converged"] = frame["converged"] > 0.5
+    return frame
+
+
+def _columns(name: str, a: np.ndarray, n: int, labels: list[str] | None) -> dict[str, Any]:
+    a = np.asarray(a)[:n]
+    if a.ndim == 1:
+        return {name.replace("/", "_"): a}
+    if a.ndim != 2:
+        return {}
+    if name in _NAMED and a.shape[1] == len(_NAMED[name]):
+        return dict(zip(_NAMED[name], a.T, strict=True))
+    head, _, tail = name.partition("/")
+    if head == "proposals" and a.shape[1] == 2:
+        return {f"proposal_{tail}_heading": a[:, 0], f"proposal_{tail}_speed": a[:, 1]}
+    base = _SINGULAR.get(head, head)
+    if labels is not None and len(labels) == a.shape[1]:
+        return {f"{base}_{lb}": a[:, j] for j, lb in enumerate(labels)}
+    return {f"{base}_{j}": a[:, j] for j in range(a.shape[1])}
+
+
+def _frame(arrays: dict[str, np.ndarray], columns: dict[str, Any], weights: list[str] | None
+           ) -> Any:
+    pd = _pandas()
+    if "collision" not in arrays:
+        return pd.DataFrame()
+    n = int(np.asarray(arrays["collision"]).shape[0])
+    cols: dict[str, Any] = {**{k: np.full(n, v) for k, v in columns.items()},
+                            "iteration": np.arange(n)}
+    first = ("pose", "reading", "memberships", "command", "collision", "contact", "nearest")
+    names = [k for k in first if k in arrays] + [k for k in arrays if k not in first]
+    for name in names:
+        a = arrays[name]
+        if name == "sonar" and "reading" in arrays:  # the pre-v2 alias of reading
+            continue
+        if np.ndim(a) >= 1 and np.shape(a)[0] in (n, n + 1):  # pose has L + 1 rows
+            cols.update(_columns(name, a, n, weights if name == "weights" else None))
+    return pd.DataFrame(cols)
+
+
+def _weight_labels(log: Log, k: int) -> list[str] | None:
+    with log._file() as f:
+        ds = f.get(f"trials/{k:04d}/weights")
+        raw = ds.attrs.get("columns") if ds is not None else None
+    try:
+        return list(json.loads(raw)) if raw is not None else None
+    except (TypeError, ValueError):
+        return None
+
+
+def _trials(log: Log, trials: Iterable[int] | None) -> list[TrialLog]:
+    return [log.trial(k) for k in (log.trial_indices() if trials is None else trials)]
+
+
+def iterations_frame(log: Log, trials: Iterable[int] | None = None) -> Any:
+    """One row per iteration of the learning trials (default all), with a ``trial`` column."""
+    pd = _pandas()
+    parts = [_frame(tr.arrays, {"trial": tr.index, "world": tr.world},
+                    _weight_labels(log, tr.index)) for tr in _trials(log, trials)]
+    return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
+
+
+def _evaluations(tr: TrialLog) -> dict[str, dict[str, np.ndarray]]:
+    """World -> arrays of each frozen-policy evaluation (``episodes/eval/<world>/<name>``)."""
+    out: dict[str, dict[str, np.ndarray]] = {}
+    for key, val in tr.episodes.items():
+        parts = key.split("/")
+        if len(parts) == 3 and parts[0] == "eval":
+            out.setdefault(parts[1], {})[parts[2]] = np.asarray(val)
+    return out
+
+
+def evaluations_frame(log: Log, trials: Iterable[int] | None = None) -> Any:
+    """One row per iteration of every frozen-policy evaluation (``trial``, ``world``, ...)."""
+    pd = _pandas()
+    parts = [_frame(arrays, {"trial": tr.index, "world": w}, None)
+             for tr in _trials(log, trials) for w, arrays in _evaluations(tr).items()]
+    return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()

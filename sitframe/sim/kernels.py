@@ -1,0 +1,75 @@
+"""Compiled kernels for the control loop, when numba is there: :func:`kernels`.
+
+The hot paths of the simulator and the situation controller -- ray casting,
+the robot's swept disc, memberships and the fuzzy controller's output -- have
+two implementations: numpy code (the reference) and scalar loops compiled by
+numba (:mod:`sitframe.sim.kernels_numba`), some ten times faster on the small
+arrays of one iteration. Both give bit-identical results: a kernel performs
+the same IEEE operations in the same order as the numpy code it shadows, and
+leaves every ``sin``, ``cos``, ``log``, ``exp`` and power to numpy (see
+:mod:`sitframe.sim.kernels_numba`).
+
+numba is an ordinary dependency. The numpy path runs when numba cannot be
+imported (a platform without wheels), when the environment variable
+``SITFRAME_NUMBA`` is ``0``, and for a process's first :data:`WARMUP_CALLS`
+calls (so a short job never pays numba's start-up); the tests compare the two.
+
+Costs: importing numba and loading the kernels from numba's on-disk cache
+(all of them, when :mod:`sitframe.sim.kernels_numba` is imported) takes some
+0.3-0.5 s once per process; a worker pool's forkserver preloads them, so its
+workers start with them loaded. Compiling them, the first time after an
+install, takes some 10 s (``benchmarks/bench_sim.py --first-call`` measures both).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from types import ModuleType
+
+__all__ = ["WARMUP_CALLS", "kernels", "load", "wanted"]
+
+#: Calls of :func:`kernels` answered with the numpy path before numba is loaded:
+#: a process that simulates only a few hundred iterations (a check of a config, a
+#: short test) never pays numba's start-up, one that simulates more pays it after
+#: some 30 ms of numpy work. Results are the same either way.
+WARMUP_CALLS = 2000
+
+_LOADED: list[ModuleType | None] = []
+_CALLS = [0]
+
+
+def wanted() -> bool:
+    """Whether the kernels are to be used (``SITFRAME_NUMBA`` is not ``0``)."""
+    return os.environ.get("SITFRAME_NUMBA", "1").strip() != "0"
+
+
+def load() -> ModuleType | None:
+    """Load the compiled kernels now; ``None`` when numba is missing or not :func:`wanted`."""
+    if not _LOADED:
+        k = None
+        if wanted():
+            try:  # imported here, not at the top: numba's import costs ~0.3 s of start-up,
+                from sitframe.sim import numba_cache  # paid only by processes that simulate;
+                # (importing it points numba's cache at the user's folder, first)
+                numba_cache.announce_compilation()
+                from sitframe.sim import kernels_numba as k  # (compiles or loads: seconds)
+            except ImportError:
+                k = None
+        _LOADED.append(k)
+    return _LOADED[0]
+
+
+def kernels() -> ModuleType | None:
+    """The compiled kernels (:mod:`sitframe.sim.kernels_numba`), or ``None`` for the numpy path.
+
+    ``None`` for the first :data:`WARMUP_CALLS` calls of a process, unless the
+    kernels are loaded already (a worker forked from a forkserver that preloaded
+    them); then :func:`load`.
+    """
+    if _LOADED:
+        return _LOADED[0]
+    if "sitframe.sim.kernels_numba" in sys.modules or _CALLS[0] >= WARMUP_CALLS:
+        return load()
+    _CALLS[0] += 1
+    return None

@@ -1,0 +1,619 @@
+"""Compiled kernels of the control loop (loaded through :func:`sitframe.sim.kernels.kernels`).
+
+Each kernel is the scalar-loop twin of numpy code kept in
+:mod:`sitframe.sim.geometry`, :mod:`sitframe.sim.robot`, :mod:`sitframe.situations.fcm` and
+:mod:`sitframe.learning.fcs` (the reference, and the path taken when numba is
+missing or ``SITFRAME_NUMBA=0``). A kernel performs
+the *same* IEEE operations in the same order as its numpy twin -- products,
+sums, quotients, comparisons, ``min``/``max`` -- so its results are
+bit-identical (``tests/test_kernels.py`` checks it). That rules out
+``fastmath`` (which would reorder and fuse operations); a sum follows numpy's
+pairwise summation (:func:`_pairwise_sum`). It is also why every ``sin``,
+``cos``, ``log`` and power stays in numpy, between kernels: numpy takes them
+from the C library on some CPUs and from its own vector library (SVML) on
+others (AVX-512), and the two differ in the last bit; a kernel calling the C
+library would then change results on those CPUs. Dot products stay in numpy
+too (BLAS).
+
+Why compiled: one sonar read is 40 rays against 40 wall edges and one robot
+step 31 substeps against the edges within reach; in numpy each costs some
+25 small-array calls (about 1 µs of overhead each), in a kernel one call.
+Kernels are compiled on first use and cached on disk in the user's cache folder
+(:mod:`sitframe.sim.numba_cache`; never inside the installed package), so only the first run
+after an install pays the compilation.
+
+Segment sets are passed as one ``(5, S)`` array :attr:`SegmentSet.packed
+<sitframe.sim.geometry.SegmentSet>`: rows ``ax, ay, ex, ey, inv_len2``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from numba.core import config as numba_config
+
+__all__ = ["arc_angles", "arc_poses", "backoff", "backoffs", "cast", "cast_each",
+           "contact_points", "fcm_ratios", "first_contact", "label_strengths", "linspace",
+           "near_segments", "nearest_point", "normalize", "ranges", "ranges_many", "refine",
+           "sweep_begin", "sweep_end"]
+
+_EPS = 1e-12  # the hit tolerance of sitframe.sim.geometry._raycast
+_INV_PI = 1.0 / math.pi
+_SINC_EPS = float(np.finfo(np.float64).eps)  # numpy.sinc's stand-in for 0
+
+#: ``cache``: only where :mod:`sitframe.sim.numba_cache` pointed numba at a writable folder of
+#: the user's (it sets ``CACHE_DIR`` when imported, before this module; with none, numba would
+#: cache beside this file, inside the installed package, so nothing is cached).
+_JIT = {"cache": bool(numba_config.CACHE_DIR), "nogil": True, "error_model": "numpy",
+        "fastmath": False}
+
+
+@njit(**_JIT)
+def _ray(ox: float, oy: float, ddx: float, ddy: float, seg: np.ndarray,
+         max_range: float) -> float:  # pragma: no cover - compiled
+    """Distance along one ray to the first segment (``max_range`` if none)."""
+    ax, ay, ex, ey = seg[0], seg[1], seg[2], seg[3]
+    best = max_range
+    for j in range(ax.size):
+        wx = ax[j] - ox
+        wy = ay[j] - oy
+        denom = ddx * ey[j] - ddy * ex[j]
+        u_num = wx * ddy - wy * ddx
+        if denom != 0.0:
+            t = (wx * ey[j] - wy * ex[j]) / denom
+            u = u_num / denom
+            if t >= -_EPS and u >= -_EPS and u <= 1.0 + _EPS:
+                d = t if t > 0.0 else 0.0
+                if d < best:
+                    best = d
+        elif -_EPS <= u_num <= _EPS:  # collinear: the nearest end ahead, 0 when on it
+            ta = wx * ddx + wy * ddy
+            tb = ta + ex[j] * ddx + ey[j] * ddy
+            # (numpy's max/min propagate NaN: a NaN end never hits)
+            if (ta >= 0.0 or tb >= 0.0) and ta == ta and tb == tb:
+                near = ta if ta < tb else tb
+                d = near if near > 0.0 else 0.0
+                if d < best:
+                    best = d
+    return best
+
+
+@njit(**_JIT)
+def cast(x: float, y: float, dx: np.ndarray, dy: np.ndarray, seg: np.ndarray,
+         max_range: float, out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """Rays from one origin ``(x, y)`` (twin of :func:`sitframe.sim.geometry._raycast`).
+
+    ``dx, dy`` are the (n,) unit directions, ``seg`` a packed ``(5, S)``
+    segment set; the (n,) distances go to ``out``.
+    """
+    for i in range(dx.size):
+        out[i] = _ray(x, y, dx[i], dy[i], seg, max_range)
+
+
+@njit(**_JIT)
+def cast_each(px: np.ndarray, py: np.ndarray, dx: np.ndarray, dy: np.ndarray, seg: np.ndarray,
+              max_range: float, out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """As :func:`cast`, with one origin ``(px[i], py[i])`` per ray."""
+    for i in range(dx.size):
+        out[i] = _ray(px[i], py[i], dx[i], dy[i], seg, max_range)
+
+
+@njit(**_JIT)
+def ranges(x: float, y: float, dx: np.ndarray, dy: np.ndarray, seg: np.ndarray, max_range: float,
+           radius: float, group: int, clip: bool,
+           out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """Range-finder readings (twin of :func:`sitframe.sim.geometry.rim_ranges`) into ``out``.
+
+    Rays of ``max_range + radius`` from ``(x, y)``; ``out[g]`` is the nearest hit of
+    rays ``g * group ... (g + 1) * group - 1`` less ``radius``, or ``max_range``;
+    with ``clip`` then clipped to ``[0, max_range]``.
+    """
+    reach = max_range + radius
+    for g in range(out.size):
+        best = reach
+        for i in range(g * group, (g + 1) * group):
+            d = _ray(x, y, dx[i], dy[i], seg, reach)
+            if d < best:
+                best = d
+        v = max_range if best >= reach else best - radius
+        if clip:  # numpy.clip's _NPY_MIN(_NPY_MAX(v, 0), max_range), NaN propagating
+            v = v if (v > 0.0 or v != v) else 0.0
+            v = v if (v < max_range or v != v) else max_range
+        out[g] = v
+
+
+#: :func:`ranges_many` leaves out the segments farther than this many times the rays' reach.
+CULL = 1.01
+
+
+@njit(**_JIT)
+def ranges_many(xy: np.ndarray, dx: np.ndarray, dy: np.ndarray, seg: np.ndarray,
+                max_range: float, radius: float, group: int, clip: bool,
+                out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """:func:`ranges` for N disc centres ``xy`` (N, 2) with their own (N, rays) directions
+    ``dx, dy``: row ``i`` of ``out`` (N, readings) is ``ranges`` of row ``i``.
+
+    Each centre's rays meet only the segments within :data:`CULL` times their reach
+    (``max_range + radius``): a segment farther away is hit, if at all, beyond the reach,
+    which :func:`ranges` ignores (the nearest hit is a minimum, in any order). Rounding
+    could only bring such a hit inside the reach for a ray within some 1e-13 rad of a
+    segment whose line passes within some 1e-13 m of the centre.
+    """
+    reach = max_range + radius
+    cull2 = (CULL * reach) * (CULL * reach)
+    idx = np.empty(seg.shape[1], dtype=np.intp)
+    for i in range(out.shape[0]):
+        c = near_segments(xy[i, 0], xy[i, 1], seg, cull2, idx)
+        ranges(xy[i, 0], xy[i, 1], dx[i], dy[i], _gather(seg, idx, c), max_range, radius, group,
+               clip, out[i])
+
+
+@njit(**_JIT)
+def _foot(px: float, py: float, seg: np.ndarray,
+          j: int) -> tuple[float, float, float]:  # pragma: no cover
+    """Segment ``j``'s parameter ``t`` of the point's foot (clamped to [0, 1]) and the offset
+    ``(dx, dy)`` from that foot to the point (twin of ``geometry._dist2``'s steps)."""
+    wx = px - seg[0, j]
+    wy = py - seg[1, j]
+    t = (wx * seg[2, j] + wy * seg[3, j]) * seg[4, j]
+    if t < 0.0:
+        t = 0.0
+    elif t > 1.0:
+        t = 1.0
+    return t, wx - t * seg[2, j], wy - t * seg[3, j]
+
+
+@njit(**_JIT)
+def _dist2(px: float, py: float, seg: np.ndarray, j: int) -> float:  # pragma: no cover
+    """Squared distance of a point to segment ``j`` (twin of ``geometry._dist2``)."""
+    _t, dx, dy = _foot(px, py, seg, j)
+    return dx * dx + dy * dy
+
+
+@njit(**_JIT)
+def near_segments(x: float, y: float, seg: np.ndarray, reach2: float,
+                  idx: np.ndarray) -> int:  # pragma: no cover - compiled
+    """Indices (into ``idx``) of the segments closer than ``sqrt(reach2)``; returns their count."""
+    m = 0
+    for j in range(seg.shape[1]):
+        if _dist2(x, y, seg, j) < reach2:
+            idx[m] = j
+            m += 1
+    return m
+
+
+@njit(**_JIT)
+def first_contact(xs: np.ndarray, ys: np.ndarray, seg: np.ndarray,
+                  r2: float) -> int:  # pragma: no cover - compiled
+    """The first point ``(xs[k], ys[k])`` closer than ``sqrt(r2)`` to a segment; -1 if none."""
+    for k in range(xs.size):
+        for j in range(seg.shape[1]):
+            if _dist2(xs[k], ys[k], seg, j) < r2:
+                return k
+    return -1
+
+
+@njit(**_JIT)
+def nearest_point(x: float, y: float, seg: np.ndarray) -> tuple[float, float]:  # pragma: no cover
+    """The point nearest ``(x, y)`` on the segments (twin of ``geometry.nearest_on_segments``)."""
+    best, bx, by = np.inf, np.nan, np.nan
+    for j in range(seg.shape[1]):
+        t, dx, dy = _foot(x, y, seg, j)
+        d2 = dx * dx + dy * dy
+        if d2 < best or j == 0:  # (argmin: the first of equal minima)
+            best, bx, by = d2, seg[0, j] + t * seg[2, j], seg[1, j] + t * seg[3, j]
+    return bx, by
+
+
+@njit(**_JIT)
+def linspace(start: float, stop: float, out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """``numpy.linspace(start, stop, out.size)`` into ``out``, the same operations."""
+    num = out.size
+    div = num - 1
+    delta = stop - start
+    step = delta / div if div > 0 else np.nan
+    for i in range(num):
+        if div <= 0:
+            v = i * delta
+        elif step == 0.0:
+            v = (i / div) * delta
+        else:
+            v = i * step
+        out[i] = v + start
+    if num > 1:
+        out[num - 1] = stop
+
+
+@njit(**_JIT)
+def arc_angles(t: np.ndarray, th0: float, omega: float, t_turn: float, sinc_arg: np.ndarray,
+               ang: np.ndarray) -> None:  # pragma: no cover - compiled
+    """First half of ``robot._poses_at``: the arguments of its ``sinc`` and ``cos``/``sin``."""
+    for i in range(t.size):
+        tt = t[i] if t[i] < t_turn else t_turn
+        half = (0.5 * omega) * tt
+        y = math.pi * (half * _INV_PI)  # numpy.sinc(half / pi) = sin(y) / y
+        sinc_arg[i] = _SINC_EPS if y == 0.0 else y
+        ang[i] = th0 + half
+
+
+@njit(**_JIT)
+def arc_poses(t: np.ndarray, plan: np.ndarray, sinc_arg: np.ndarray, sin_sinc: np.ndarray,
+              cos_ang: np.ndarray, sin_ang: np.ndarray,
+              out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """Second half of ``robot._poses_at``: poses (3, n) from the sines and cosines.
+
+    ``plan`` is ``x0, y0, th0, v, omega, t_turn, cos(th_end), sin(th_end)``.
+    """
+    x0, y0, th0, v, omega, t_turn, cos_end, sin_end = plan
+    for i in range(t.size):
+        tt = t[i] if t[i] < t_turn else t_turn
+        chord = (v * tt) * (sin_sinc[i] / sinc_arg[i])
+        ts = v * (t[i] - tt)
+        out[0, i] = x0 + chord * cos_ang[i] + ts * cos_end
+        out[1, i] = y0 + chord * sin_ang[i] + ts * sin_end
+        out[2, i] = th0 + omega * tt
+
+
+@njit(**_JIT)
+def _first_touch(xs: np.ndarray, ys: np.ndarray, seg: np.ndarray, idx: np.ndarray, count: int,
+                 r2: float) -> int:  # pragma: no cover - compiled
+    """:func:`first_contact` against the segments ``idx[:count]`` of ``seg``."""
+    for k in range(xs.size):
+        for jj in range(count):
+            if _dist2(xs[k], ys[k], seg, idx[jj]) < r2:
+                return k
+    return -1
+
+
+@njit(**_JIT)
+def sweep_begin(plans: np.ndarray, times: np.ndarray, period: float, margin: np.ndarray,
+                seg: np.ndarray, idx: np.ndarray, count: np.ndarray, slot: np.ndarray,
+                sinc_arg: np.ndarray, ang: np.ndarray) -> int:  # pragma: no cover - compiled
+    """Step 1 of ``robot.step_robot`` for N robots, and step 2 up to its sines and cosines.
+
+    ``plans`` (N, >= 6) rows start ``x0, y0, th0, v, omega, t_turn``; a robot's swept disc
+    reaches ``v * period + margin[0] + margin[1] + margin[2]`` (the radius, the back-off and
+    a hair, added one by one as there). Writes each robot's near segments to
+    ``idx[i, :count[i]]`` (:func:`near_segments`); a robot with any gets the next free row
+    ``slot[i]`` of ``sinc_arg, ang`` (B, n), where the arguments of its substeps' sines and
+    cosines at ``times`` go (:func:`arc_angles`); one in open space gets ``slot[i] = -1``.
+    Returns B, the number of robots near a wall, or -1 if a pose is not finite.
+    """
+    for i in range(plans.shape[0]):
+        for j in range(3):
+            if not math.isfinite(plans[i, j]):
+                return -1
+    b = 0
+    for i in range(plans.shape[0]):
+        reach = plans[i, 3] * period + margin[0] + margin[1] + margin[2]
+        count[i] = near_segments(plans[i, 0], plans[i, 1], seg, reach * reach, idx[i])
+        slot[i] = -1
+        if count[i] > 0:
+            slot[i] = b
+            arc_angles(times, plans[i, 2], plans[i, 4], plans[i, 5], sinc_arg[b], ang[b])
+            b += 1
+    return b
+
+
+@njit(**_JIT)
+def _refine_angles(plan: np.ndarray, state: np.ndarray, ts: np.ndarray, sinc_arg: np.ndarray,
+                   ang: np.ndarray) -> None:  # pragma: no cover - compiled
+    """One refinement round's samples ``ts`` between ``state``'s free time and bad time, and
+    the arguments of their sines and cosines (``robot.step_robot``, step 3)."""
+    linspace(state[0], state[4], ts)
+    arc_angles(ts, plan[2], plan[4], plan[5], sinc_arg, ang)
+
+
+@njit(**_JIT)
+def sweep_end(times: np.ndarray, plans: np.ndarray, slot: np.ndarray, sinc_arg: np.ndarray,
+              sin_sinc: np.ndarray, cos_ang: np.ndarray, sin_ang: np.ndarray, seg: np.ndarray,
+              idx: np.ndarray, count: np.ndarray, r2: float, poses: np.ndarray,
+              first: np.ndarray, hits: np.ndarray, state: np.ndarray, active: np.ndarray,
+              ts: np.ndarray, ref_arg: np.ndarray,
+              ref_ang: np.ndarray) -> int:  # pragma: no cover - compiled
+    """The rest of step 2 of ``robot.step_robot`` for the robots of :func:`sweep_begin`, and the
+    start of step 3 for those that touch a wall.
+
+    ``plans`` (N, 8) are :func:`arc_poses`' plans; the sines and cosines (B, n) are numpy's
+    of :func:`sweep_begin`'s arguments. Robot ``i`` near a wall gets its substep poses (3, n)
+    in ``poses[slot[i]]`` and the first substep that touches a wall in ``first[i]`` (-1 if
+    none, and for a robot in open space). The H robots that touch go to ``hits[:H]``, with
+    ``state[q]`` = ``t_c, cx, cy, cth, hi`` (the last free substep's time and pose, the first
+    bad one's time; ``t_c = 0`` at the start pose when it started inside, ``active[q]`` False:
+    nothing to refine) and the first refinement round's samples and arguments in ``ts[q],
+    ref_arg[q], ref_ang[q]`` (:func:`_refine_angles`). Returns H.
+    """
+    h = 0
+    for i in range(plans.shape[0]):
+        first[i] = -1
+        b = slot[i]
+        if b < 0:
+            continue
+        arc_poses(times, plans[i], sinc_arg[b], sin_sinc[b], cos_ang[b], sin_ang[b], poses[b])
+        k = _first_touch(poses[b, 0], poses[b, 1], seg, idx[i], count[i], r2)
+        first[i] = k
+        if k < 0:
+            continue
+        hits[h] = i
+        active[h] = k > 0
+        if k == 0:  # started inside: no forward motion
+            state[h, 0], state[h, 1], state[h, 2], state[h, 3] = 0.0, plans[i, 0], plans[i, 1], \
+                plans[i, 2]
+            state[h, 4] = 0.0
+            ref_arg[h, :] = 0.0
+            ref_ang[h, :] = 0.0
+        else:
+            j = k - 1
+            state[h, 0], state[h, 4] = times[j], times[k]
+            state[h, 1], state[h, 2], state[h, 3] = poses[b, 0, j], poses[b, 1, j], poses[b, 2, j]
+            _refine_angles(plans[i], state[h], ts[h], ref_arg[h], ref_ang[h])
+        h += 1
+    return h
+
+
+@njit(**_JIT)
+def refine(plans: np.ndarray, hits: np.ndarray, h: int, ts: np.ndarray, sinc_arg: np.ndarray,
+           ang: np.ndarray, sin_sinc: np.ndarray, cos_ang: np.ndarray, sin_ang: np.ndarray,
+           seg: np.ndarray, idx: np.ndarray, count: np.ndarray, r2: float, state: np.ndarray,
+           active: np.ndarray, poses: np.ndarray, more: bool) -> None:  # pragma: no cover
+    """One refinement round of ``robot.step_robot`` (step 3) for the robots ``hits[:h]`` of
+    :func:`sweep_end`: the poses (3, R) at the samples ``ts[q]`` (the sines and cosines are
+    numpy's of the arguments ``sinc_arg[q], ang[q]`` of the previous call), the first that
+    touches, and the narrowed ``state[q]``; with ``more``, the next round's samples and
+    arguments (overwriting ``ts, sinc_arg, ang``). A robot whose first sample touches (which
+    cannot happen) keeps its state and stops (``active[q]`` False), as there.
+    """
+    last = ts.shape[1] - 1
+    for q in range(h):
+        if not active[q]:
+            continue
+        i = hits[q]
+        arc_poses(ts[q], plans[i], sinc_arg[q], sin_sinc[q], cos_ang[q], sin_ang[q], poses[q])
+        j = _first_touch(poses[q, 0], poses[q, 1], seg, idx[i], count[i], r2)
+        if j < 0:
+            j = last  # the bad end of the interval
+        if j == 0:
+            active[q] = False
+            continue
+        state[q, 4] = ts[q, j]
+        j -= 1  # the last free sample: the disc touches there
+        state[q, 0], state[q, 1], state[q, 2], state[q, 3] = ts[q, j], poses[q, 0, j], \
+            poses[q, 1, j], poses[q, 2, j]
+        if more:
+            _refine_angles(plans[i], state[q], ts[q], sinc_arg[q], ang[q])
+
+
+@njit(**_JIT)
+def backoff(cx: float, cy: float, nx: float, ny: float, length: float, seg: np.ndarray,
+            r2: float, inside: bool, s: np.ndarray) -> tuple[int, float, float]:  # pragma: no cover
+    """The back-off of ``robot.step_robot`` (step 4) along ``(nx, ny)``, ``s.size`` samples.
+
+    Returns ``(m, x, y)``: the last sample ``m`` of the free prefix and its point.
+    """
+    linspace(0.0, length, s)
+    m = -1
+    x = y = 0.0
+    floor = 0.0
+    for i in range(s.size):
+        bx = cx + s[i] * nx
+        by = cy + s[i] * ny
+        d2 = np.inf
+        for j in range(seg.shape[1]):
+            d = _dist2(bx, by, seg, j)
+            if d < d2:
+                d2 = d
+        if i == 0:
+            floor = (d2 if d2 < r2 else r2) - 1e-15
+        if not (d2 >= (floor if inside else r2)):
+            break
+        m, x, y = i, bx, by
+    return m, x, y
+
+
+@njit(**_JIT)
+def _gather(seg: np.ndarray, idx: np.ndarray, count: int) -> np.ndarray:  # pragma: no cover
+    """The packed segments ``idx[:count]`` of ``seg``, (5, count) (``seg[:, idx[:count]]``)."""
+    sub = np.empty((5, count))
+    for jj in range(count):
+        for r in range(5):
+            sub[r, jj] = seg[r, idx[jj]]
+    return sub
+
+
+@njit(**_JIT)
+def contact_points(hits: np.ndarray, h: int, state: np.ndarray, seg: np.ndarray,
+                   idx: np.ndarray, count: np.ndarray,
+                   out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """:func:`nearest_point` of each contact pose ``state[q, 1:3]`` of the robots ``hits[:h]``
+    (:func:`refine`) on its near segments, into ``out`` (h, 2)."""
+    for q in range(h):
+        i = hits[q]
+        out[q, 0], out[q, 1] = nearest_point(state[q, 1], state[q, 2],
+                                             _gather(seg, idx[i], count[i]))
+
+
+@njit(**_JIT)
+def backoffs(hits: np.ndarray, h: int, state: np.ndarray, normals: np.ndarray, length: float,
+             seg: np.ndarray, idx: np.ndarray, count: np.ndarray, r2: float, first: np.ndarray,
+             s: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """:func:`backoff` of the robots ``hits[:h]`` from their contact poses along ``normals``
+    (h, 2) into ``out`` (h, 3): distance backed off, x, y (``robot._backoff``'s result; a
+    robot that started inside, ``first[i] == 0``, may back off from inside)."""
+    for q in range(h):
+        i = hits[q]
+        cx, cy = state[q, 1], state[q, 2]
+        m, x, y = backoff(cx, cy, normals[q, 0], normals[q, 1], length,
+                          _gather(seg, idx[i], count[i]), r2, first[i] == 0, s)
+        if m > 0:
+            out[q, 0], out[q, 1], out[q, 2] = s[m], x, y
+        else:
+            out[q, 0], out[q, 1], out[q, 2] = 0.0, cx, cy
+
+
+#: Longest array :func:`_pairwise_sum` sums (numpy's block; longer ones it splits
+#: recursively, which the callers leave to numpy).
+PAIRWISE_MAX = 128
+
+
+@njit(**_JIT)
+def _pairwise_sum(a: np.ndarray, n: int) -> float:  # pragma: no cover - compiled
+    """``a[:n].sum()`` in numpy's order (``pairwise_sum`` of ``add.reduce``), n <= 128."""
+    if n < 8:
+        res = -0.0
+        for i in range(n):
+            res += a[i]
+        return res
+    r0, r1, r2, r3, r4, r5, r6, r7 = a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]
+    i = 8
+    while i < n - n % 8:
+        r0 += a[i]
+        r1 += a[i + 1]
+        r2 += a[i + 2]
+        r3 += a[i + 3]
+        r4 += a[i + 4]
+        r5 += a[i + 5]
+        r6 += a[i + 6]
+        r7 += a[i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[i]
+        i += 1
+    return res
+
+
+@njit(**_JIT)
+def fcm_ratios(d2: np.ndarray, floor: float, out: np.ndarray) -> float:  # pragma: no cover
+    """``out = maximum(d2.min() / d2, floor)``; returns ``d2.min()`` (NaN propagates)."""
+    dmin = d2[0]
+    for i in range(1, d2.size):
+        v = d2[i]
+        if v < dmin or v != v:
+            if dmin == dmin:
+                dmin = v
+    for i in range(d2.size):
+        r = dmin / d2[i]
+        out[i] = r if (r >= floor or r != r) else floor
+    return dmin
+
+
+@njit(**_JIT)
+def normalize(w: np.ndarray) -> None:  # pragma: no cover - compiled
+    """``w /= w.sum()`` in place (``w.size <= PAIRWISE_MAX``)."""
+    total = _pairwise_sum(w, w.size)
+    for i in range(w.size):
+        w[i] /= total
+
+
+@njit(**_JIT)
+def label_strengths(onehot: np.ndarray, u: np.ndarray,
+                    out: np.ndarray) -> float:  # pragma: no cover - compiled
+    """``out = (onehot * u[:, None]).max(axis=0)`` (c, A) -> (A,); returns ``out.sum()``.
+
+    ``A <= PAIRWISE_MAX``.
+    """
+    c, n = onehot.shape
+    for a in range(n):
+        best = onehot[0, a] * u[0]
+        for i in range(1, c):
+            v = onehot[i, a] * u[i]
+            if (v > best or v != v) and best == best:
+                best = v
+        out[a] = best
+    return _pairwise_sum(out, n)
+
+
+@njit(**_JIT)
+def fcm_online_update(centers: np.ndarray, evidence: np.ndarray, diff: np.ndarray,
+                      um: np.ndarray) -> None:  # pragma: no cover - compiled
+    """``evidence += um; centers -= (um / evidence)[:, None] * diff`` in place."""
+    c, d = centers.shape
+    for i in range(c):
+        evidence[i] += um[i]
+        r = um[i] / evidence[i]
+        for j in range(d):
+            centers[i, j] -= r * diff[i, j]
+
+
+@njit(**_JIT)
+def accumulate_errors(errors: np.ndarray, x: np.ndarray, total: np.ndarray, count: np.ndarray,
+                      weighted: np.ndarray) -> None:  # pragma: no cover - compiled
+    """Where ``errors > 0``: ``total += errors``, ``count += 1``, ``weighted += errors * x``."""
+    for i in range(errors.size):
+        e = errors[i]
+        if e > 0.0:
+            total[i] += e
+            count[i] += 1.0
+            for j in range(x.size):
+                weighted[i, j] += e * x[j]
+
+
+@njit(**_JIT)
+def finite_nonnegative(a: np.ndarray) -> bool:  # pragma: no cover - compiled
+    """Whether every value of the 1-d ``a`` is finite and >= 0 (``0 <= a < inf``)."""
+    for i in range(a.size):
+        v = a[i]
+        if not (0.0 <= v < np.inf):
+            return False
+    return True
+
+
+@njit(**_JIT)
+def frozen_td(u: np.ndarray, activation: float, thesis: bool, reward: float, gamma: float,
+              v_next: float, q: np.ndarray, rules: np.ndarray,
+              td: np.ndarray) -> None:  # pragma: no cover - compiled
+    """``td[i] = |w r + gamma w V' - Q[i, rules[i]]|`` where ``u[i] >= activation`` (``w =
+    u[i]`` if ``thesis`` else 1), 0 elsewhere: the TD errors a frozen rule base would get."""
+    for i in range(u.size):
+        if u[i] >= activation:
+            w = u[i] if thesis else 1.0
+            td[i] = abs(w * reward + gamma * w * v_next - q[i, rules[i]])
+        else:
+            td[i] = 0.0
+
+
+def _warm() -> None:
+    """Load (or, the first time, compile) every kernel now, with the types the loop uses.
+
+    Run at import, so a process importing this module -- a worker pool's
+    forkserver preloads it -- has them all, and its forked workers inherit them.
+    """
+    seg = np.array([[0.0], [1.0], [1.0], [0.0], [1.0]])  # one segment (0, 1)-(1, 1)
+    one = np.ones(2)
+    out, idx = np.empty(2), np.empty(1, dtype=np.intp)
+    cast(0.0, 0.0, one, one, seg, 3.0, out)
+    cast_each(one, one, one, one, seg, 3.0, out)
+    ranges(0.0, 0.0, one, one, seg, 3.0, 0.1, 1, True, out)
+    two = np.ones((2, 2))
+    ranges_many(np.ones((2, 3))[:, :2], two, two, seg, 3.0, 0.1, 1, True, np.empty((2, 2)))
+    ints = [np.zeros(2, dtype=np.intp) for _ in range(4)]
+    idx2, act = np.zeros((2, 1), dtype=np.intp), np.zeros(2, dtype=np.bool_)
+    state, p3 = np.zeros((2, 5)), np.empty((2, 3, 2))
+    sweep_begin(np.ones((2, 8)), one, 1.5, np.ones(3), seg, idx2, ints[0], ints[1], two, two)
+    sweep_end(one, np.ones((2, 8)), ints[1], two, two, two, two, seg, idx2, ints[0], 0.01, p3,
+              ints[2], ints[3], state, act, two, two, two)
+    refine(np.ones((2, 8)), ints[3], 0, two, two, two, two, two, two, seg, idx2, ints[0], 0.01,
+           state, act, p3, True)
+    contact_points(ints[3], 0, state, seg, idx2, ints[0], two)
+    backoffs(ints[3], 0, state, two, 0.05, seg, idx2, ints[0], 0.01, ints[2], out, p3[0])
+    near_segments(0.0, 0.0, seg, 1.0, idx)
+    first_contact(one, one, seg, 0.01)
+    nearest_point(0.0, 0.0, seg)
+    linspace(0.0, 1.0, out)
+    arc_angles(one, 0.0, 1.0, 0.5, out, np.empty(2))
+    arc_poses(one, np.ones(8), one, one, one, one, np.empty((3, 2)))
+    backoff(0.0, 0.0, 1.0, 0.0, 0.05, seg, 0.01, False, np.empty(3))
+    fcm_ratios(one, 1e-9, out)
+    normalize(out)
+    label_strengths(np.ones((2, 2)), one, out)
+    fcm_online_update(np.ones((2, 2)), np.ones(2), two, one)
+    accumulate_errors(one, one, np.ones(2), np.ones(2), np.ones((2, 2)))
+    finite_nonnegative(one)
+    ro = np.ones(2)
+    ro.setflags(write=False)  # (memberships reach the learner read-only)
+    frozen_td(ro, 0.3, True, -1.0, 0.9, 0.5, two, np.zeros(2, dtype=np.intp), out)
+
+
+_warm()
