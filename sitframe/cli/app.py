@@ -67,22 +67,81 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
+class _Formatter(argparse.HelpFormatter):
+    """argparse's formatter, but an example (an epilog starting ``example``) and the
+    grouped command list keep their lines as written."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        if text.startswith(("example", "commands")):
+            return "".join(indent + line for line in text.splitlines(keepends=True))
+        return super()._fill_text(text, width, indent)
+
+
+#: The commands as ``sitframe --help`` groups them: what a user does with each.
+COMMAND_GROUPS: dict[str, tuple[str, ...]] = {
+    "run": ("run", "sweep", "evaluate", "pack"),
+    "analyse": ("analyse", "compare", "export", "replay"),
+    "inspect": ("presets", "world", "plugins"),
+}
+
+#: The example that ends each command's help (tested: each one parses).
+EXAMPLES: dict[str, str] = {
+    "run": "sitframe run obstacle-avoidance --trials 3 --seed 1 --out logs/oa.h5",
+    "sweep": "sitframe sweep sweeps/ablation.toml --workers 2",
+    "evaluate": "sitframe evaluate logs/obstacle-avoidance.h5 --world novel-1 --trial 3 --json",
+    "pack": "sitframe pack logs/obstacle-avoidance.h5",
+    "analyse": "sitframe analyse logs/obstacle-avoidance.h5 -o report",
+    "compare": "sitframe compare logs/a.h5 logs/b.h5",
+    "export": "sitframe export logs/obstacle-avoidance.h5 --format parquet",
+    "replay": "sitframe replay logs/obstacle-avoidance.h5 --trial 2 -o trial2.gif",
+    "presets": "sitframe presets",
+    "world": "sitframe world show training -o training.png",
+    "world show": "sitframe world show novel-1 -o novel-1.png",
+    "world list": "sitframe world list",
+    "plugins": "sitframe --plugins-dir myplugins plugins",
+}
+
+
+def _example(command: str) -> str:
+    return f"example:\n  {EXAMPLES[command]}"
+
+
+def _command_list(helps: dict[str, str]) -> str:
+    """The grouped list of commands that ``sitframe --help`` shows."""
+    lines = ["commands to learn robot behaviours over fuzzy situations and read the logs",
+             "(`sitframe COMMAND -h` shows a command's options and an example):"]
+    for group, names in COMMAND_GROUPS.items():
+        lines.append(f"  {group}:")
+        lines += [f"    {name:<10}{helps[name]}" for name in names]
+    return "\n".join(lines)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="sitframe", description="Situation-based robot behaviours: fuzzy c-means "
-                "situations, fuzzy Q-learning, pluggy plugins, HDF5 logs.")
+    """The ``sitframe`` argument parser: its commands grouped (:data:`COMMAND_GROUPS`),
+    each command's help ending with an example (:data:`EXAMPLES`)."""
+    p = _Parser(prog="sitframe", formatter_class=_Formatter,
+                usage="%(prog)s [-h] [--version] [--plugins-dir DIR] COMMAND ...")
     p.add_argument("--version", action="version", version=f"sitframe {__version__}")
     p.add_argument("--plugins-dir", action="append", default=[], metavar="DIR",
                    help="load loose *.py plugin modules from DIR (repeatable)")
-    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser,
+                           metavar="COMMAND", help=argparse.SUPPRESS)  # listed, grouped, above
+    helps: dict[str, str] = {}
 
-    r = sub.add_parser("run", help="run an experiment (preset name or TOML config)")
+    def command(name: str, help_text: str, **kw: Any) -> argparse.ArgumentParser:
+        helps[name] = help_text
+        return sub.add_parser(name, help=help_text, epilog=_example(name),
+                              formatter_class=_Formatter, **kw)
+
+    r = command("run", "run an experiment (a preset name or a TOML config)")
     r.add_argument("experiment", nargs="?",
                    help="preset name (see `sitframe presets`) or path to a .toml")
-    r.add_argument("--trials", type=int, help="number of learning trials")
-    r.add_argument("--seed", type=int, help="run seed (trial seeds are derived from it)")
-    r.add_argument("--world", help="learning world (shipped name or .toml path)")
-    r.add_argument("--iterations", type=int, help="iterations per trial (l)")
-    r.add_argument("--out", help="HDF5 log path (default logs/<name>.h5)")
+    r.add_argument("--trials", type=int, metavar="N", help="number of learning trials")
+    r.add_argument("--seed", type=int, metavar="S",
+                   help="run seed (trial seeds are derived from it)")
+    r.add_argument("--world", metavar="W", help="learning world (shipped name or .toml path)")
+    r.add_argument("--iterations", type=int, metavar="L", help="iterations per trial (l)")
+    r.add_argument("--out", metavar="LOG", help="HDF5 log path (default logs/<name>.h5)")
     r.add_argument("--clusters-from", metavar="LOG",
                    help="reuse the fitted situations of LOG (skips collect and cluster)")
     r.add_argument("--json", action="store_true", help="print machine-readable results")
@@ -91,12 +150,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="finish the unfinished run logged in LOG (config, seed and situations "
                    "come from the log; only the missing trials run)")
 
-    e = sub.add_parser("evaluate", help="run a log's frozen rule base in a world")
-    e.add_argument("log")
-    e.add_argument("--world", required=True, help="world to evaluate in")
-    e.add_argument("--trial", type=int, default=0, help="which learning trial's policy")
-    e.add_argument("--iterations", type=int, default=1000)
-    e.add_argument("--seed", type=int, default=0)
+    e = command("evaluate", "run a log's frozen rule base in a world")
+    e.add_argument("log", help="HDF5 log written by `sitframe run`")
+    e.add_argument("--world", required=True, metavar="W", help="world to evaluate in")
+    e.add_argument("--trial", type=int, default=0, metavar="K",
+                   help="which learning trial's policy (default 0)")
+    e.add_argument("--iterations", type=int, default=1000, metavar="N",
+                   help="iterations of the frozen run (default 1000)")
+    e.add_argument("--seed", type=int, default=0, metavar="S",
+                   help="seed of the evaluation (default 0)")
     e.add_argument("--goal-episodes", type=int, metavar="N",
                    help="run N random goal episodes: the log's learned rule base fused with "
                    "goal finding (see --fusion)")
@@ -105,21 +167,25 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--fusion", default="goal-finding", metavar="CONFIG",
                    help="preset or TOML whose behaviours, arbiter and [goal] table the goal "
                    "episodes use (default: goal-finding)")
-    e.add_argument("--json", action="store_true")
+    e.add_argument("--json", action="store_true", help="print the figures as JSON")
 
-    w = sub.add_parser("world", help="worlds: draw or list")
-    wsub = w.add_subparsers(dest="world_command", required=True, parser_class=_Parser)
-    ws = wsub.add_parser("show", help="draw a world to a PNG")
+    w = command("world", "list or draw the shipped worlds (or a world file)")
+    wsub = w.add_subparsers(dest="world_command", required=True, parser_class=_Parser,
+                            metavar="{show,list}")
+    ws = wsub.add_parser("show", help="draw a world to a PNG", epilog=_example("world show"),
+                         formatter_class=_Formatter)
     ws.add_argument("world", help="shipped name or .toml path")
-    ws.add_argument("-o", "--output", help="PNG path (default <name>.png)")
-    wsub.add_parser("list", help="list the shipped worlds")
+    ws.add_argument("-o", "--output", metavar="PNG", help="PNG path (default <name>.png)")
+    wsub.add_parser("list", help="list the shipped worlds", epilog=_example("world list"),
+                    formatter_class=_Formatter)
 
-    sub.add_parser("presets", help="list the shipped experiment presets")
-    sub.add_parser("plugins", help="list discovered plugins and their components")
+    command("presets", "list the shipped experiment presets")
+    command("plugins", "list the plugins found and the components they register")
     for name, module in EXTRA_COMMANDS.items():
         mod = pkgutil.resolve_name(module)
-        sp = sub.add_parser(name, help=mod.HELP, description=mod.__doc__)
+        sp = command(name, mod.HELP, description=mod.__doc__)
         mod.add_arguments(sp)
+    p.description = _command_list(helps)
     return p
 
 

@@ -32,7 +32,7 @@ class Analyse:
     on stderr.
     """
 
-    HELP = "write the figures and tables of a log (PNG, Markdown, CSV), index.html with a replay"
+    HELP = "a log's figures, tables and HTML report with a replay"
 
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -91,7 +91,7 @@ class Replay:
     ffmpeg on PATH.
     """
 
-    HELP = "animate a logged trial (robot, sonar rays, situation, command) as GIF or MP4"
+    HELP = "animate a logged trial as GIF or MP4"
 
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -140,7 +140,7 @@ class Compare:
     two or more sweep folders are compared as one run each (all points pooled).
     """
 
-    HELP = "compare runs (logs, or the settings of a sweep folder) with intervals and rank tests"
+    HELP = "compare runs or a sweep's settings: intervals, rank tests"
 
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -197,7 +197,7 @@ class Export:
     (``'sitframe[parquet]'``).
     """
 
-    HELP = "write a log's summary and per-iteration arrays as tidy CSV or Parquet tables"
+    HELP = "a log's summary and arrays as tidy CSV or Parquet tables"
 
     @staticmethod
     def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import argparse
 
-HELP = "pack an unfinished log's trial files into the log (one file to move or archive)"
+HELP = "pack an unfinished log's trial files into one file"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

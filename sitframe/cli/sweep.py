@@ -17,7 +17,7 @@ from sitframe.errors import InputError, note
 from sitframe.runs.summaries import markdown_table, pool_over_seeds, write_tables
 from sitframe.runs.sweep import load_sweep, run_sweep
 
-HELP = "run an experiment over a grid of config values; one log per point + a summary table"
+HELP = "run an experiment over a grid of config values and seeds"
 
 
 def _finite(obj: Any) -> Any:
