@@ -82,51 +82,10 @@ from typing import Any
 
 from sitframe import params as P
 from sitframe.errors import InputError, did_you_mean
+from sitframe.params import ABSENT, REQUIRED, Key, Table
 from sitframe.sim.robot import RobotParams
 
 STAGES = ("collect", "cluster", "learn", "evaluate")
-
-#: Defaults of the core sections; component tables are free-form.
-DEFAULTS: dict[str, dict[str, Any]] = {
-    "experiment": {
-        "name": "experiment",
-        "description": "",
-        "seed": 0,
-        "trials": 11,
-        "iterations": 5000,
-        "stages": list(STAGES),
-        "world": "training",
-        "default_speed": 0.15,
-        "clusters_from": "",
-    },
-    "robot": {},
-    "sensor": {"component": "pioneer-sonar"},
-    "collect": {
-        "mode": "trajectory",
-        "worlds": ["collect-1", "collect-2", "collect-3", "collect-4", "collect-5"],
-        "speed": 0.15,
-        "rate_hz": 2.0,
-        "wander_samples": 300,
-    },
-    "interpreter": {"component": "fcm"},
-    "behaviours": {},
-    "arbiter": {"component": "single"},
-    "evaluate": {"worlds": ["training", "novel-1", "novel-2"], "iterations": 1000},
-    # The goal-episodes protocol's table (plugins/goal_episodes.py checks its values when a
-    # run resolves; its defaults stay here so every config's text, and hash, keeps it).
-    "goal": {"episodes": 50, "timeout": 300, "min_distance": 3.0, "worlds": ["goal"],
-             "pairs": "random", "radius": 0.3, "margin": 0.1},
-    "plugins": {"dirs": []},
-}
-DEFAULT_PROTOCOL = "frozen"  # the evaluation protocol of a run whose components name none
-#: Optional sections without defaults (absent from a config that does not use them, so the
-#: config's text, and so its hash, stays what it was before they existed).
-OPTIONAL_SECTIONS = ("prerequisites",)
-#: Optional keys without defaults, for the same reason (checked by the component that reads
-#: them: ``goal.train...`` by the goal-episodes protocol).
-OPTIONAL_KEYS = {"goal": {"train", "train_detour", "detour_ratio"}}
-
-_CORE_KEYS = {s: set(v) for s, v in DEFAULTS.items() if s not in ("behaviours",)}
 
 #: Upper bounds of the counts (beyond them arrays do not fit in memory or the
 #: log's 64-bit integer attributes cannot hold the value).
@@ -135,10 +94,161 @@ MAX_TRIALS = 100_000
 MAX_ITERATIONS = 10_000_000
 MAX_RATE_HZ = 1000.0
 MIN_RATE_HZ = 0.01
+COLLECTION_ROOMS = ["collect-1", "collect-2", "collect-3", "collect-4", "collect-5"]
+
+
+def _run_name(value: str, key: str) -> str:
+    """A run name: no control characters, and a relative path inside logs/ (the default log
+    is logs/<name>.h5; a name may nest, as sweeps' "sweep/point" do)."""
+    if any(ord(ch) < 32 for ch in value):
+        raise InputError(f"expected a name without control characters, got {value!r}", key=key)
+    parts = value.replace("\\", "/").split("/")
+    if value.startswith(("/", "\\")) or any(p in ("", ".", "..") for p in parts) \
+            or ":" in value:
+        raise InputError(f"expected a name that is a relative path inside logs/ (no leading "
+                         f"'/', no empty, '.' or '..' part, no ':'), got {value!r}", key=key)
+    return value
+
+
+def _component(default: str | P._Marker, what: str) -> Key:
+    return Key("component", "string", default, f"the registered name of the {what}")
+
+
+_REWARD = Key("reward", "string", ABSENT, "a reward component: the behaviour (or arbiter) "
+              "learns from it")
+_REWARD_PARAMS = Key("reward_params", "table", ABSENT, "the reward's parameters (needs "
+                     "reward)")
+
+#: The tables of a run config, declared once: :func:`validate_config` checks a config with
+#: them, :data:`DEFAULTS` comes from them, and the documentation's config reference is made
+#: from them. A component table (``free``) takes the component's own parameters besides its
+#: declared keys; those are checked by the component, and listed with it
+#: (:func:`sitframe.params.declared_params`). ``[robot]`` is the fields of
+#: :class:`~sitframe.sim.robot.RobotParams`, which checks them.
+EXPERIMENT = Table("experiment", "What runs, how long and where.", (
+    Key("name", "string", "experiment", "the run's name; its log is logs/<name>.h5",
+        check=_run_name),
+    Key("description", "text", "", "one line on what the run is for"),
+    Key("seed", "integer", 0, "the run seed: every random choice of the run derives from it",
+        lo=0, hi=MAX_SEED),
+    Key("trials", "integer", 11, "independent learning trials", lo=1, hi=MAX_TRIALS),
+    Key("iterations", "integer", 5000, "iterations per learning trial (the thesis's l); one "
+        "iteration is one control period of the robot", lo=1, hi=MAX_ITERATIONS),
+    Key("stages", "choices", list(STAGES), "the stages to run, in this order",
+        choices=STAGES),
+    Key("world", "string", "training", "the learning world: a shipped world's name or a "
+        ".toml path"),
+    Key("default_speed", "number", 0.15, "the speed when no behaviour proposes one",
+        unit="m/s", lo=0.0, lo_open=True),
+    Key("clusters_from", "path", "", "a log whose fitted situations are reused (the collect "
+        "and cluster stages are skipped); empty: none"),
+))
+ROBOT = Table("robot", "The simulated robot: the fields of RobotParams, which checks them.",
+              (), free=True)
+SENSOR = Table("sensor", "The sensor: a component and its parameters.",
+               (_component("pioneer-sonar", "sensor"),), free=True)
+COLLECT = Table("collect", "How the sensor data for the cluster stage is recorded.", (
+    Key("mode", "choice", "trajectory", "follow each room's forced trajectories, wander with "
+        "a reflex, or both", choices=("trajectory", "wander", "both")),
+    Key("worlds", "names", COLLECTION_ROOMS, "the rooms data is collected in"),
+    Key("speed", "number", 0.15, "the speed while collecting", unit="m/s", lo=0.0,
+        lo_open=True),
+    Key("rate_hz", "number", 2.0, "readings recorded per second", unit="Hz", lo=MIN_RATE_HZ,
+        hi=MAX_RATE_HZ),
+    Key("wander_samples", "integer", 300, "readings recorded per room when wandering", lo=1,
+        hi=MAX_ITERATIONS),
+))
+INTERPRETER = Table("interpreter", "The situation interpreter: a component and its "
+                    "parameters.", (_component("fcm", "situation interpreter"),), free=True)
+BEHAVIOUR = Table("behaviours.LABEL", "One table per behaviour, LABEL naming it in the log "
+                  "and the arbiter (not empty, not '.', no '/'): a component, what it learns "
+                  "from, where it starts from, and its parameters.", (
+    _component(REQUIRED, "behaviour"),
+    _REWARD,
+    _REWARD_PARAMS,
+    Key("policy_from", "table", ABSENT, "start from a learned policy: {log = \"path.h5\", "
+        "trial = K, behaviour = \"LABEL\"} (the table below)"),
+), free=True)
+POLICY_FROM = Table("behaviours.LABEL.policy_from", "A learned policy to start from (or be "
+                    "frozen at).", (
+    Key("log", "string", REQUIRED, "the log that learned it (a path)"),
+    Key("trial", "", 0, "which trial's policy: an index; \"best\" (the smallest rank sum of "
+        "fewest collisions and most coverage, evaluated in the log's learning world); or a "
+        "selection table (below)"),
+    Key("behaviour", "string", ABSENT, "the behaviour's label in that log (default: this "
+        "table's LABEL)"),
+))
+SELECTION = Table("behaviours.LABEL.policy_from.trial", "The trial whose policy scores "
+                  "highest in a batch of evaluation-protocol episodes "
+                  "(sitframe.runs.evaluation.select_trial).", (
+    Key("world", "string", REQUIRED, "the world the trials are compared in (a learning room, "
+        "never a test room)"),
+    Key("episodes", "integer", 100, "episodes per trial", lo=1),
+    Key("score", "string", "collision_free_rate", "the figure to maximise (a key of "
+        "evaluate --goal-episodes --json)"),
+    Key("seed", "integer", 0, "seed of the episodes", lo=0),
+))
+ARBITER = Table("arbiter", "The arbiter that fuses the behaviours' proposals: a component, "
+                "what it learns from, and its parameters.",
+                (_component("single", "arbiter"), _REWARD, _REWARD_PARAMS), free=True)
+EVALUATE = Table("evaluate", "The default evaluation protocol (frozen): each trial's frozen "
+                 "policy run once from each world's start.", (
+    Key("worlds", "names", ["training", "novel-1", "novel-2"], "the evaluation worlds"),
+    Key("iterations", "integer", 1000, "iterations of each frozen run", lo=1,
+        hi=MAX_ITERATIONS),
+))
+#: The goal-episodes protocol's table: its values are checked by the protocol
+#: (``plugins/goal_episodes.py``) when a run resolves; its defaults stay here so that every
+#: config's text, and hash, keeps them (a test holds them equal to the protocol's).
+GOAL = Table("goal", "The goal-episodes evaluation protocol's parameters (used when a "
+             "behaviour names that protocol; checked by it: see the components page).", (
+    Key("episodes", "", 50, "episodes per batch"),
+    Key("timeout", "", 300, "iterations before an episode is cut"),
+    Key("min_distance", "", 3.0, "least straight-line distance of a start/goal pair",
+        unit="m"),
+    Key("worlds", "", ["goal"], "the worlds of the goal episodes"),
+    Key("pairs", "", "random", "random start/goal pairs, or the world's start and goal"),
+    Key("radius", "", 0.3, "the goal's radius", unit="m"),
+    Key("margin", "", 0.1, "free space beyond the robot's radius at a start or goal",
+        unit="m"),
+    Key("train", "", ABSENT, "how a learning trial runs: in the world, or as a chain of "
+        "episodes"),
+    Key("train_detour", "", ABSENT, "the share of training pairs drawn as detours"),
+    Key("detour_ratio", "", ABSENT, "the least shortest-path / straight-line ratio of a "
+        "detour pair"),
+))
+PREREQUISITES = Table("prerequisites", "Logs this config reads and the experiments that "
+                      "make them: \"LOG PATH\" = \"EXPERIMENT\" (a preset name or a .toml "
+                      "path); sitframe run makes a missing one first, or reuses a complete "
+                      "one of the same config. Optional; absent unless given.", (), free=True)
+PLUGINS = Table("plugins", "Loose plugin modules. Every *.py file in these folders is "
+                "imported, that is run, when the config is loaded: use only configs you "
+                "trust.", (
+    Key("dirs", "names", [], "folders of loose plugin modules, relative to the config file",
+        lo=0),
+))
+
+#: Every table of a run config, in the order of a config's text.
+TABLES: tuple[Table, ...] = (EXPERIMENT, ROBOT, SENSOR, COLLECT, INTERPRETER, BEHAVIOUR,
+                             ARBITER, EVALUATE, GOAL, PLUGINS)
+#: Defaults of the core sections (from :data:`TABLES`); component tables are free-form.
+DEFAULTS: dict[str, dict[str, Any]] = {
+    ("behaviours" if t is BEHAVIOUR else t.name): ({} if t is BEHAVIOUR else t.defaults())
+    for t in TABLES}
+DEFAULT_PROTOCOL = "frozen"  # the evaluation protocol of a run whose components name none
+#: Optional sections without defaults (absent from a config that does not use them, so the
+#: config's text, and so its hash, stays what it was before they existed).
+OPTIONAL_SECTIONS = ("prerequisites",)
+#: Optional keys without defaults, for the same reason (checked by the component that reads
+#: them: ``goal.train...`` by the goal-episodes protocol).
+OPTIONAL_KEYS = {t.name: {k.name for k in t.keys if k.default is ABSENT}
+                 for t in (GOAL,)}
+_CORE_TABLES = {t.name: t for t in (EXPERIMENT, COLLECT, EVALUATE, GOAL, PLUGINS)}
+_CORE_KEYS = {s: set(v) for s, v in DEFAULTS.items() if s not in ("behaviours",)}
 _COMPONENT_SECTIONS = ("sensor", "interpreter", "arbiter")
 #: Keys of a ``[behaviours.LABEL]`` (or ``[arbiter]``) table that the core reads and that
 #: are not the component's parameters (the one definition; resolve and sweep use it).
-META_KEYS = ("component", "reward", "reward_params", "policy_from")
+META_KEYS = tuple(k.name for k in BEHAVIOUR.keys)
 
 
 @dataclass(frozen=True)
@@ -430,9 +540,9 @@ def _validate_behaviours(value: dict[str, Any], file: str | None) -> dict[str, A
 
 
 #: Keys of a ``policy_from.trial`` selection table and their defaults
-#: (:func:`sitframe.runs.evaluation.select_trial`).
-SELECTION_DEFAULTS: dict[str, Any] = {"world": "", "episodes": 100,
-                                      "score": "collision_free_rate", "seed": 0}
+#: (:func:`sitframe.runs.evaluation.select_trial`), from :data:`SELECTION`.
+SELECTION_DEFAULTS: dict[str, Any] = {k.name: "" if k.default is REQUIRED else k.default
+                                      for k in SELECTION.keys}
 
 
 def _check_selection(sel: dict[str, Any], file: str | None, key: str) -> None:
@@ -441,71 +551,28 @@ def _check_selection(sel: dict[str, Any], file: str | None, key: str) -> None:
         raise InputError("expected the world the trials are compared in, e.g. world = "
                          "\"goal-training\"", file=file, key=f"{key}.world")
     sel = {**SELECTION_DEFAULTS, **sel}
-    _at(P.string, "world", sel["world"], file, key)
-    _at(P.string, "score", sel["score"], file, key)
-    _at(P.number, "episodes", sel["episodes"], file, key, lo=1, integer=True)
-    _at(P.number, "seed", sel["seed"], file, key, lo=0, integer=True)
+    for name in ("world", "score", "episodes", "seed"):
+        _at(lambda n, v: SELECTION.key(n).validate(v), name, sel[name], file, key)
+
+
+#: The order in which :func:`_check_core` checks the core tables' keys (the first wrong key
+#: is the one reported).
+_CHECK_ORDER = {"experiment": ("name", "description", "seed", "trials", "iterations",
+                               "default_speed", "world", "clusters_from", "stages"),
+                "collect": ("mode", "worlds", "speed", "rate_hz", "wander_samples"),
+                "evaluate": ("worlds", "iterations"), "plugins": ("dirs",)}
 
 
 def _check_core(cfg: dict[str, Any], file: str | None) -> None:
-    e = cfg["experiment"]
-    _at(P.string, "name", e["name"], file, "experiment")
-    if any(ord(ch) < 32 for ch in e["name"]):
-        raise InputError(f"expected a name without control characters, got {e['name']!r}",
-                         file=file, key="experiment.name")
-    # The default log is logs/<name>.h5: a name may nest (sweeps use "sweep/point")
-    # but must stay inside logs/.
-    parts = e["name"].replace("\\", "/").split("/")
-    if e["name"].startswith(("/", "\\")) or any(p in ("", ".", "..") for p in parts) \
-            or ":" in e["name"]:
-        raise InputError(f"expected a name that is a relative path inside logs/ (no leading "
-                         f"'/', no empty, '.' or '..' part, no ':'), got {e['name']!r}",
-                         file=file, key="experiment.name")
-    if not isinstance(e["description"], str):
-        raise InputError("expected a string", file=file, key="experiment.description")
-    e["seed"] = _count("seed", e["seed"], file, "experiment", 0, MAX_SEED)
-    e["trials"] = _count("trials", e["trials"], file, "experiment", 1, MAX_TRIALS)
-    e["iterations"] = _count("iterations", e["iterations"], file, "experiment", 1, MAX_ITERATIONS)
-    _at(P.number, "default_speed", e["default_speed"], file, "experiment", lo=0.0, lo_open=True)
-    _at(P.string, "world", e["world"], file, "experiment")
-    if not isinstance(e["clusters_from"], str):
-        raise InputError("expected a path to a log (string)", file=file,
-                         key="experiment.clusters_from")
-    stages = e["stages"]
-    if not isinstance(stages, list) or not stages:
-        raise InputError(f"expected a non-empty list of stages from {list(STAGES)}", file=file,
-                         key="experiment.stages")
-    for i, s in enumerate(stages):
-        _at(P.choice, f"stages[{i}]", s, file, "experiment", choices=STAGES)
-    c = cfg["collect"]
-    _at(P.choice, "mode", c["mode"], file, "collect", choices=("trajectory", "wander", "both"))
-    _check_names(c["worlds"], file, "collect.worlds")
-    _at(P.number, "speed", c["speed"], file, "collect", lo=0.0, lo_open=True)
-    _at(P.number, "rate_hz", c["rate_hz"], file, "collect", lo=MIN_RATE_HZ, hi=MAX_RATE_HZ)
-    c["wander_samples"] = _count("wander_samples", c["wander_samples"], file, "collect", 1,
-                                 MAX_ITERATIONS)
-    v = cfg["evaluate"]
-    _check_names(v["worlds"], file, "evaluate.worlds")
-    v["iterations"] = _count("iterations", v["iterations"], file, "evaluate", 1, MAX_ITERATIONS)
-    _check_names(cfg["plugins"]["dirs"], file, "plugins.dirs", allow_empty=True)
-
-
-def _count(name: str, value: Any, file: str | None, section: str, lo: int, hi: int) -> int:
-    """An integer in [lo, hi] (the upper bound checked apart, so the usual message stays)."""
-    v = int(_at(P.number, name, value, file, section, lo=lo, integer=True))
-    if v > hi:
-        raise InputError(f"expected an integer <= {hi}, got {v}", file=file,
-                         key=f"{section}.{name}")
-    return v
-
-
-def _check_names(value: Any, file: str | None, key: str, allow_empty: bool = False) -> None:
-    if not isinstance(value, list) or (not value and not allow_empty):
-        raise InputError(f"expected a {'' if allow_empty else 'non-empty '}list of names, "
-                         f"got {value!r}", file=file, key=key)
-    for i, v in enumerate(value):
-        if not isinstance(v, str) or not v:
-            raise InputError(f"expected a name (string), got {v!r}", file=file, key=f"{key}[{i}]")
+    """Every key of the core tables checked by its declaration (integers stored as int)."""
+    for section, names in _CHECK_ORDER.items():
+        table, values = _CORE_TABLES[section], cfg[section]
+        for name in names:
+            key = table.key(name)
+            checked = _at(lambda _n, v, k=key: k.validate(v), name, values[name], file,
+                          section)
+            if key.kind == "integer":
+                values[name] = checked
 
 
 def to_toml(cfg: dict[str, Any]) -> str:
