@@ -97,10 +97,12 @@ class FuzzyQBehaviour:
         alpha_visits: float = 0.0,
     ) -> None:
         self.singletons: dict[str, np.ndarray] = {
-            "heading": np.asarray(P.number_list("headings", list(headings), lo=-90, hi=90))
+            "heading": np.asarray(P.number_list("headings", list(headings), lo=-90, hi=90,
+                                                unit="deg"))
         }
         if len(speeds):
-            self.singletons["speed"] = np.asarray(P.number_list("speeds", list(speeds), lo=0.0))
+            self.singletons["speed"] = np.asarray(P.number_list("speeds", list(speeds), lo=0.0,
+                                                                unit="m/s"))
         if isinstance(learn, str):
             learn = [learn]
         self.learn_outputs = [P.choice(f"learn[{i}]", o, OUTPUTS) for i, o in enumerate(learn)]

@@ -49,7 +49,7 @@ class GoalBehaviour:
     evaluation_protocol = "goal-episodes"
 
     def __init__(self, *, max_turn_deg: float = 90.0) -> None:
-        self.max_turn_deg = P.number("max_turn_deg", max_turn_deg, lo=0.0, hi=90.0)
+        self.max_turn_deg = P.number("max_turn_deg", max_turn_deg, lo=0.0, hi=90.0, unit="deg")
 
     def reset(self, rng: np.random.Generator, n_situations: int, iterations: int) -> None:
         pass

@@ -199,10 +199,10 @@ class GoalEpisodes:
                  detour_ratio: float = 1.25) -> None:
         self.episodes = int(P.number("episodes", episodes, lo=1, hi=100_000, integer=True))
         self.iterations = int(P.number("timeout", timeout, lo=1, hi=10_000_000, integer=True))
-        self.min_distance = P.number("min_distance", min_distance, lo=0.0)
+        self.min_distance = P.number("min_distance", min_distance, lo=0.0, unit="m")
         self.pairs = P.choice("pairs", pairs, PAIR_MODES)
-        self.radius = P.number("radius", radius, lo=0.0, lo_open=True)
-        self.margin = P.number("margin", margin, lo=0.0)
+        self.radius = P.number("radius", radius, lo=0.0, lo_open=True, unit="m")
+        self.margin = P.number("margin", margin, lo=0.0, unit="m")
         self.train_in_episodes = P.choice("train", train, TRAIN_MODES) == "episodes"
         self.train_detour = P.number("train_detour", train_detour, lo=0.0, hi=1.0)
         self.detour_ratio = P.number("detour_ratio", detour_ratio, lo=1.0, lo_open=True)

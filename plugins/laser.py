@@ -104,15 +104,15 @@ class LaserScanner:
         dropout: float = 0.0,
         angle_offset_deg: float = 0.0,
     ):
-        self.fov_deg = P.number("fov_deg", fov_deg, lo=0, hi=360, lo_open=True)
+        self.fov_deg = P.number("fov_deg", fov_deg, lo=0, hi=360, lo_open=True, unit="deg")
         self.beams = P.number("beams", beams, lo=1, hi=MAX_BEAMS, integer=True)
-        self.max_range = P.number("max_range", max_range, lo=0, lo_open=True)
+        self.max_range = P.number("max_range", max_range, lo=0, lo_open=True, unit="m")
         self._radius_given = robot_radius is not None
         self.robot_radius = 0.15 if robot_radius is None else \
-            P.number("robot_radius", robot_radius, lo=0)
-        self.noise_std = P.number("noise_std", noise_std, lo=0)
+            P.number("robot_radius", robot_radius, lo=0, unit="m")
+        self.noise_std = P.number("noise_std", noise_std, lo=0, unit="m")
         self.dropout = P.number("dropout", dropout, lo=0, hi=1)
-        offset = P.number("angle_offset_deg", angle_offset_deg, lo=-180, hi=180)
+        offset = P.number("angle_offset_deg", angle_offset_deg, lo=-180, hi=180, unit="deg")
         n = self.beams
         if self.fov_deg == 360:  # a ring: n gaps, the first beam straight behind
             fan = -180.0 + 360.0 * np.arange(n) / n

@@ -319,7 +319,7 @@ class FuzzyQArbiter:
                              key="sectors")
         self.stall_iterations = int(P.number("stall_iterations", stall_iterations, lo=0,
                                              integer=True))
-        self.stall_margin = P.number("stall_margin", stall_margin, lo=0.0)
+        self.stall_margin = P.number("stall_margin", stall_margin, lo=0.0, unit="m")
         self.proximity = _near_far("proximity", proximity, "no proximity context")
         self.safety = _near_far("safety", safety, "no safety hand-over")
         self.safety_behaviour = None if safety_behaviour is None else \

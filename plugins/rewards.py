@@ -75,7 +75,7 @@ class SpeedReward:
         self.near = P.number("near", near, lo=0.0)
         self.base = P.number("base", base)
         self.per_mm_s = P.number("per_mm_s", per_mm_s)
-        self.near_time_s = P.number("near_time_s", near_time_s, lo=0.0)
+        self.near_time_s = P.number("near_time_s", near_time_s, lo=0.0, unit="s")
 
     def __call__(self, tr: Transition) -> float:
         if tr.outcome.collided:

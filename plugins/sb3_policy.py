@@ -59,8 +59,10 @@ class SB3PolicyBehaviour:
                  speeds: list[float] = (),  # type: ignore[assignment]
                  normalize: bool = True, diagonal: float = 0.0, sha256: str = "") -> None:
         P.choice("algorithm", algorithm, ALGORITHMS)
-        self.headings = np.asarray(P.number_list("headings", list(headings), lo=-90, hi=90))
-        self.speeds = np.asarray(P.number_list("speeds", list(speeds), lo=0.0)) if len(speeds) \
+        self.headings = np.asarray(P.number_list("headings", list(headings), lo=-90, hi=90,
+                                                 unit="deg"))
+        self.speeds = np.asarray(P.number_list("speeds", list(speeds), lo=0.0,
+                                               unit="m/s")) if len(speeds) \
             else np.empty(0)
         self.normalize = bool(normalize)
         self.diagonal = P.number("diagonal", diagonal, lo=0.0)

@@ -119,17 +119,18 @@ class SonarRing:
             raise ValueError(f"angles_deg: expected at least one finite angle, got {angles_deg!r}")
         self.angles_deg = angles
         self.angles_deg.setflags(write=False)
-        self.max_range = P.number("max_range", max_range, lo=0.0, lo_open=True)
+        self.max_range = P.number("max_range", max_range, lo=0.0, lo_open=True, unit="m")
         self.robot_radius = 0.15 if robot_radius is None else \
-            P.number("robot_radius", robot_radius, lo=0.0)
+            P.number("robot_radius", robot_radius, lo=0.0, unit="m")
         self._radius_given = robot_radius is not None
-        self.beam_width_deg = P.number("beam_width_deg", beam_width_deg, lo=0.0, hi=180.0)
+        self.beam_width_deg = P.number("beam_width_deg", beam_width_deg, lo=0.0, hi=180.0,
+                                       unit="deg")
         if isinstance(rays_per_beam, bool) or not isinstance(rays_per_beam, int | np.integer) \
                 or not 1 <= rays_per_beam <= MAX_RAYS_PER_BEAM:
             raise ValueError(f"rays_per_beam: expected an integer in [1, {MAX_RAYS_PER_BEAM}], "
                              f"got {rays_per_beam!r}")
         self.rays_per_beam = int(rays_per_beam)
-        self.noise_std = P.number("noise_std", noise_std, lo=0.0)
+        self.noise_std = P.number("noise_std", noise_std, lo=0.0, unit="m")
         self.dropout = P.number("dropout", dropout, lo=0.0, hi=1.0)
         # Ray bearings relative to the heading, beam by beam: (d * rays,)
         if self.rays_per_beam > 1:

@@ -117,7 +117,7 @@ class WallFollowingReward:
         self.explore = P.number("explore", explore)
         self.heading_cost = P.number("heading_cost", heading_cost, lo=0.0)
         self.side_min_angle = P.number("side_min_angle", side_min_angle, lo=0.0, hi=90.0,
-                                       lo_open=True)
+                                       lo_open=True, unit="deg")
         self.approach_min = P.number("approach_min", approach_min, lo=0.0)
         self.band_centre = 0.5 * (self.near + self.far)
         self._given = {"angles_deg": angles_deg, "robot_radius": robot_radius,
@@ -129,9 +129,10 @@ class WallFollowingReward:
 
     def _set_geometry(self, angles_deg: Sequence[float], robot_radius: float,
                       max_range: float) -> None:
-        angles = np.asarray(P.number_list("angles_deg", list(angles_deg), lo=-180, hi=180))
-        self.robot_radius = P.number("robot_radius", robot_radius, lo=0.0)
-        self.max_range = P.number("max_range", max_range, lo=0.0, lo_open=True)
+        angles = np.asarray(P.number_list("angles_deg", list(angles_deg), lo=-180, hi=180,
+                                          unit="deg"))
+        self.robot_radius = P.number("robot_radius", robot_radius, lo=0.0, unit="m")
+        self.max_range = P.number("max_range", max_range, lo=0.0, lo_open=True, unit="m")
         side = np.abs(angles) >= self.side_min_angle
         if not side.any():
             raise ValueError(f"no beam has |angle| >= side_min_angle ({self.side_min_angle} deg)"

@@ -261,7 +261,8 @@ def check_params(
 KINDS = {"integer": "integer", "number": "number", "numbers": "list of numbers",
          "choice": "string", "true/false": "true/false", "string": "string",
          "text": "string", "path": "string (a path)", "names": "list of names",
-         "choices": "list of strings", "table": "table"}
+         "choices": "list of strings", "table": "table",
+         "trial": "integer, \"best\" or table"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -484,7 +485,7 @@ def declared_params(factory: Any) -> list[Key]:
 
 
 def _kind_of(annotation: Any, default: Any) -> str:
-    text = str(annotation).replace("typing.", "")
+    text = str(annotation).replace("typing.", "").replace(" | None", "").replace("None | ", "")
     if isinstance(default, bool) or text == "bool":
         return "true/false"
     if isinstance(default, int) or text == "int":

@@ -65,6 +65,9 @@ ROOT = Path(__file__).resolve().parent.parent
 #: The pages whose examples run: README.md and every Markdown page under docs/ (the
 #: tables under docs/results/tables/ are written by scripts and hold no examples).
 PAGE_GLOBS = ("README.md", "docs/**/*.md")
+#: Pages whose blocks a test module runs instead of Sybil (it checks the folder they ran
+#: in): page -> the test module.
+RUN_ELSEWHERE = {"docs/tutorials/plugins.md": "tests/test_docs_plugins.py"}
 #: Languages of code blocks (what the share of blocks run is counted over).
 CODE = ("python", "pycon", "toml", "bash", "console")
 #: Languages of blocks that are not code.
@@ -452,4 +455,5 @@ def sybil() -> Any:
 
     return Sybil(parsers=[Parser()], patterns=["README.md", "docs/*.md", "docs/*/*.md",
                                                "docs/*/*/*.md"],
-                 excludes=["docs/results/tables/*.md"], path=str(ROOT), fixtures=["doc_env"])
+                 excludes=["docs/results/tables/*.md", *RUN_ELSEWHERE], path=str(ROOT),
+                 fixtures=["doc_env"])

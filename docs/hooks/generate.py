@@ -169,6 +169,145 @@ def cli_reference(_arg: str | None = None) -> str:
     return "\n".join(out)
 
 
+# -- config keys and components ----------------------------------------------------------
+
+
+def param_docs(obj: Any) -> dict[str, str]:
+    """``name -> description`` from the numpy ``Parameters`` / ``Attributes`` sections of
+    ``obj``'s docstring (``a, b`` entries describe both)."""
+    import inspect
+
+    doc = inspect.getdoc(obj) or ""
+    out: dict[str, str] = {}
+    lines = doc.splitlines()
+    i = 0
+    while i < len(lines):
+        if lines[i].strip() in ("Parameters", "Attributes") and i + 1 < len(lines) \
+                and set(lines[i + 1].strip()) == {"-"}:
+            i += 2
+            names: list[str] = []
+            while i < len(lines) and (not lines[i].strip() or lines[i].startswith(" ")
+                                      or not set(lines[i + 1:i + 2] and lines[i + 1].strip())
+                                      == {"-"}):
+                line = lines[i]
+                if line.strip() and not line.startswith(" "):
+                    names = [n.strip() for n in line.split(":")[0].split(",")]
+                    out.update(dict.fromkeys(names, ""))
+                elif line.strip() and names:
+                    for n in names:
+                        out[n] = (out[n] + " " + line.strip()).strip()
+                elif not line.strip() and names and i + 1 < len(lines) \
+                        and lines[i + 1].strip() and not lines[i + 1].startswith(" "):
+                    pass
+                i += 1
+                if i < len(lines) and lines[i].strip() and not lines[i].startswith(" ") \
+                        and i + 1 < len(lines) and set(lines[i + 1].strip()) == {"-"}:
+                    break
+        else:
+            i += 1
+    return {k: rst_to_md(v) for k, v in out.items()}
+
+
+def _default_text(key: Any) -> str:
+    from sitframe.params import ABSENT, REQUIRED
+
+    if key.default is REQUIRED:
+        return "required"
+    if key.default is ABSENT or key.default is None:
+        return ""
+    value = key.default
+    if isinstance(value, str):
+        return f'`"{value}"`'
+    if isinstance(value, bool):
+        return f"`{str(value).lower()}`"
+    if isinstance(value, list | tuple):
+        return "`[" + ", ".join(f'"{v}"' if isinstance(v, str) else f"{v:g}"
+                                if isinstance(v, float) else str(v) for v in value) + "]`"
+    if isinstance(value, float):
+        return f"`{value:g}`"
+    return f"`{value}`"
+
+
+def key_rows(keys: Any, docs: dict[str, str] | None = None) -> list[str]:
+    """Markdown rows (key, type, default, unit, range, meaning) of declared keys."""
+    docs = docs or {}
+    out = ["| key | type | default | unit | range | meaning |", "|---|---|---|---|---|---|"]
+    for k in keys:
+        meaning = k.doc or docs.get(k.name, "")
+        out.append(f"| `{k.name}` | {cell(k.type_text)} | {cell(_default_text(k))} | "
+                   f"{cell(k.unit)} | {cell(k.range_text)} | {cell(meaning)} |")
+    return out
+
+
+def _registry() -> Any:
+    from sitframe.contract.pluginmanager import Registry, get_plugin_manager
+
+    return Registry.collect(get_plugin_manager(), strict=False)
+
+
+def _protocol_for(table: str) -> Any:
+    return next((e.factory for e in _registry().entries["protocol"].values()
+                 if getattr(e.factory, "table", None) == table), None)
+
+
+def config_reference(_arg: str | None = None) -> str:
+    """Every table and key of a run config: type, default, unit, range and meaning."""
+    import dataclasses
+
+    from sitframe.contract import config as C
+    from sitframe.params import declared_params
+    from sitframe.sim.robot import RobotParams
+
+    tables = list(C.TABLES)
+    at = tables.index(C.BEHAVIOUR) + 1
+    tables[at:at] = [C.POLICY_FROM, C.SELECTION]
+    tables.insert(tables.index(C.PLUGINS), C.PREREQUISITES)
+    out = []
+    for t in tables:
+        out += [f"## `[{t.name}]`", "", rst_to_md(t.doc), ""]
+        keys: list[Any] = list(t.keys)
+        docs: dict[str, str] = {}
+        if t is C.ROBOT:
+            keys, docs = declared_params(RobotParams), param_docs(RobotParams)
+        elif t is C.GOAL and (protocol := _protocol_for("goal")) is not None:
+            checked = {k.name: k for k in declared_params(protocol)}
+            docs = param_docs(protocol)
+            keys = [dataclasses.replace(checked[k.name], default=k.default, doc=k.doc)
+                    if k.name in checked else k for k in t.keys]
+        if keys:
+            out += [*key_rows(keys, docs), ""]
+        if t.free and t not in (C.ROBOT, C.PREREQUISITES):
+            out += ["Besides these keys, the component's own parameters: "
+                    "[components](components.md).", ""]
+    return "\n".join(out)
+
+
+def components_reference(_arg: str | None = None) -> str:
+    """Every built-in component by kind, with its parameters."""
+    import inspect
+
+    from sitframe.params import declared_params
+
+    registry = _registry()
+    out = []
+    for kind, entries in registry.entries.items():
+        out += [f"## {kind.capitalize()}s", ""]
+        for name, entry in sorted(entries.items()):
+            factory = entry.factory
+            summary = (inspect.getdoc(factory) or "").split("\n\n")[0]
+            plugin = registry.describe_plugin(entry.plugin)
+            out += [f"### `{name}`", "", f"{cell(rst_to_md(summary))} (plugin {plugin};"
+                    f" `{factory.__module__}.{factory.__qualname__}`)", ""]
+            keys = declared_params(factory)
+            if getattr(factory, "table", None):
+                out += [f"Its parameters are the config table `[{factory.table}]`.", ""]
+            if keys:
+                out += [*key_rows(keys, param_docs(factory)), ""]
+            else:
+                out += ["No parameters.", ""]
+    return "\n".join(out)
+
+
 # -- the layers --------------------------------------------------------------------------
 
 
@@ -261,21 +400,27 @@ def subpackages_table(_arg: str | None = None) -> str:
 
 
 def face_page(_arg: str | None = None) -> str:
-    """The public face: every name ``from sitframe import ...`` serves, documented."""
+    """The public face: every name ``from sitframe import ...`` serves, with a link to its
+    documentation where it is defined (each subpackage's page)."""
     import sitframe
 
-    by_module: dict[str, list[str]] = {}
-    for name, module in sitframe._PUBLIC.items():
-        by_module.setdefault(module, []).append(name)
-    out = ["| name | defined in |", "|---|---|"]
-    out += [f"| [`{n}`](#sitframe.{m}.{n}) | `sitframe.{m}` |"
-            for m, names in by_module.items() for n in names]
-    out += ["", f"Modules used as namespaces: "
-            + ", ".join(f"`sitframe.{k}` (`sitframe.{v}`)" for k, v in sitframe._MODULES.items()),
-            "", "::: sitframe.hookimpl", "    options:", "      show_root_heading: true", ""]
-    for module, names in by_module.items():
-        for n in names:
-            out += [f"::: sitframe.{module}.{n}", "    options:", "      heading_level: 3", ""]
+    rows = []
+    for name in sitframe._PUBLIC:
+        home = getattr(getattr(sitframe, name), "__module__", None) or \
+            f"sitframe.{sitframe._PUBLIC[name]}"
+        page = home.split(".")[1] if home.count(".") > 1 else "ground"
+        summary = (getattr(getattr(sitframe, name), "__doc__", None) or "").strip()
+        summary = summary.split("\n\n")[0] if summary and callable(getattr(sitframe, name)) \
+            else ""
+        rows.append(f"| [`{name}`]({page}.md#{home}.{name}) | `{home}` | "
+                    f"{cell(rst_to_md(summary))} |")
+    out = ["| name | defined in | what it is |", "|---|---|---|", *rows, "",
+           "Modules used as namespaces: "
+           + ", ".join(f"`sitframe.{k}` (`sitframe.{v}`)" for k, v in sitframe._MODULES.items())
+           + ". `sitframe.hookimpl` is the pluggy marker of a hook implementation "
+           "(`@hookimpl def sitframe_rewards(): ...`).", "",
+           "::: sitframe", "    options:", "      members: false",
+           "      show_root_heading: false", ""]
     return "\n".join(out)
 
 
@@ -293,6 +438,8 @@ def api_page(package: str | None) -> str:
 
 GENERATORS: dict[str, Callable[[str | None], str]] = {
     "cli": cli_reference,
+    "config": config_reference,
+    "components": components_reference,
     "layers": layers_diagram,
     "subpackages": subpackages_table,
     "face": face_page,

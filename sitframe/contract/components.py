@@ -273,6 +273,8 @@ class EvaluationProtocol(Protocol):
     iterations
         The iteration limit of an episode (Gymnasium's *truncation*).
 
+    Notes
+    -----
     An optional ``check_world(world)`` raises :class:`sitframe.errors.InputError`
     for a world the protocol cannot use, before anything runs. A parameter
     ``episodes`` (episodes per batch) is what ``sitframe evaluate LOG

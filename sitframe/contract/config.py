@@ -172,7 +172,7 @@ BEHAVIOUR = Table("behaviours.LABEL", "One table per behaviour, LABEL naming it 
 POLICY_FROM = Table("behaviours.LABEL.policy_from", "A learned policy to start from (or be "
                     "frozen at).", (
     Key("log", "string", REQUIRED, "the log that learned it (a path)"),
-    Key("trial", "", 0, "which trial's policy: an index; \"best\" (the smallest rank sum of "
+    Key("trial", "trial", 0, "which trial's policy: an index; \"best\" (the smallest rank sum of "
         "fewest collisions and most coverage, evaluated in the log's learning world); or a "
         "selection table (below)"),
     Key("behaviour", "string", ABSENT, "the behaviour's label in that log (default: this "
@@ -206,7 +206,7 @@ GOAL = Table("goal", "The goal-episodes evaluation protocol's parameters (used w
     Key("timeout", "", 300, "iterations before an episode is cut"),
     Key("min_distance", "", 3.0, "least straight-line distance of a start/goal pair",
         unit="m"),
-    Key("worlds", "", ["goal"], "the worlds of the goal episodes"),
+    Key("worlds", "names", ["goal"], "the worlds of the goal episodes"),
     Key("pairs", "", "random", "random start/goal pairs, or the world's start and goal"),
     Key("radius", "", 0.3, "the goal's radius", unit="m"),
     Key("margin", "", 0.1, "free space beyond the robot's radius at a start or goal",

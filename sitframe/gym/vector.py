@@ -55,6 +55,8 @@ class SitframeVectorEnv(VectorEnv):
     **task_kw
         As :class:`SitframeEnv`.
 
+    Notes
+    -----
     ``infos`` holds ``pose`` (N, 3) and ``collided`` (N,) with their ``_`` masks.
     """
 

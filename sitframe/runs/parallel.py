@@ -248,6 +248,8 @@ class TrialPipeline:
         spec, ``evaluations(spec, result)`` the evaluations' specs once it finished,
         ``attach(result, world, evaluation)`` adds one to the trial's result.
 
+    Notes
+    -----
     Iterating yields ``("trial", tag, TrialResult)`` when a trial is complete
     and ``("call", tag, value)`` when a call added by :meth:`add_call` returns,
     in completion order. Use it as a context manager: leaving it early (an

@@ -187,6 +187,8 @@ class PathDistance:
     radius
         Disc radius [m] (the robot's), > 0.
 
+    Notes
+    -----
     Calling it with a point ``(2,)`` [m] returns the length of the shortest
     path of the disc from there to ``goal``: the straight line when it is
     clear, else through the arc points (within 2.3 % of each arc turned);

@@ -108,16 +108,16 @@ class RobotParams:
     recovery_turn_deg: float = 45.0
 
     def __post_init__(self) -> None:
-        number("radius", self.radius, lo=0.0, lo_open=True)
-        number("max_turn_rate_deg_s", self.max_turn_rate_deg_s, lo=0.0, lo_open=True)
-        number("control_period_s", self.control_period_s, lo=0.0, lo_open=True)
-        number("substep_s", self.substep_s, lo=0.0, lo_open=True)
-        number("min_speed", self.min_speed, lo=0.0)
-        number("max_speed", self.max_speed, lo=0.0, lo_open=True)
-        number("max_heading_change_deg", self.max_heading_change_deg, lo=0.0, hi=180.0)
+        number("radius", self.radius, lo=0.0, lo_open=True, unit="m")
+        number("max_turn_rate_deg_s", self.max_turn_rate_deg_s, lo=0.0, lo_open=True, unit="deg/s")
+        number("control_period_s", self.control_period_s, lo=0.0, lo_open=True, unit="s")
+        number("substep_s", self.substep_s, lo=0.0, lo_open=True, unit="s")
+        number("min_speed", self.min_speed, lo=0.0, unit="m/s")
+        number("max_speed", self.max_speed, lo=0.0, lo_open=True, unit="m/s")
+        number("max_heading_change_deg", self.max_heading_change_deg, lo=0.0, hi=180.0, unit="deg")
         choice("recovery", self.recovery, _RECOVERIES)
-        number("recovery_backoff_m", self.recovery_backoff_m, lo=0.0)
-        number("recovery_turn_deg", self.recovery_turn_deg, lo=0.0, hi=180.0)
+        number("recovery_backoff_m", self.recovery_backoff_m, lo=0.0, unit="m")
+        number("recovery_turn_deg", self.recovery_turn_deg, lo=0.0, hi=180.0, unit="deg")
         if self.min_speed > self.max_speed:
             raise ValueError(
                 f"min_speed ({self.min_speed}) must be <= max_speed ({self.max_speed})"

@@ -1,0 +1,139 @@
+"""The documentation's examples are run, and its generated reference misses nothing.
+
+The examples themselves run as tests collected by Sybil (the root ``conftest.py``; the
+rules in ``tests/doc_examples.py``). Here: the share of code blocks that run (at least
+90 %, the others listed with their reasons), and the generated reference pages
+(``docs/hooks/generate.py``) against the code they are made from.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import inspect
+import re
+from pathlib import Path
+
+import pytest
+from doc_examples import CODE, NOT_CODE, ROOT, blocks, pages
+
+from sitframe.cli import build_parser
+from sitframe.contract import config as C
+
+
+def _generate():
+    spec = importlib.util.spec_from_file_location("docs_generate",
+                                                  ROOT / "docs" / "hooks" / "generate.py")
+    assert spec and spec.loader
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module._importable()
+    return module
+
+
+@pytest.fixture(scope="module")
+def generate():
+    return _generate()
+
+
+def _all_blocks():
+    return [b for p in pages() for b in blocks(p.read_text("utf-8"),
+                                               p.relative_to(ROOT).as_posix())]
+
+
+def test_at_least_90_percent_of_the_code_blocks_run(capsys: pytest.CaptureFixture[str]) -> None:
+    bs = _all_blocks()
+    unknown = [f"{b.where}: ```{b.lang}" for b in bs if b.lang not in CODE + NOT_CODE]
+    assert not unknown, f"blocks of a language the runner does not know: {unknown}"
+    code = [b for b in bs if b.is_code]
+    skipped = [b for b in code if b.skip is not None]
+    assert all(b.skip.strip() for b in skipped), "a skip without a reason"
+    ran = len(code) - len(skipped)
+    listing = "\n".join(f"  {b.where} ({b.lang}): {b.skip}" for b in skipped)
+    with capsys.disabled():
+        print(f"\ndocs: {ran} of {len(code)} code blocks run ({ran / len(code):.0%}); "
+              f"left out:\n{listing}")
+    assert len(code) >= 60  # the pages are found
+    assert ran / len(code) >= 0.9, f"only {ran} of {len(code)} code blocks run:\n{listing}"
+
+
+def test_the_readme_keeps_its_two_lines_alone_in_bash_blocks() -> None:
+    """``.ci/run`` greps these two lines from README.md and runs them verbatim."""
+    readme = [b for b in _all_blocks() if b.page == "README.md"]
+    for pattern in (r"^python3 -m venv .* && sitframe run ", r"^python3 -m venv .* && pytest"):
+        (block,) = [b for b in readme if re.search(pattern, b.text, re.MULTILINE)]
+        assert block.lang == "bash" and len(block.text.strip().splitlines()) == 1
+
+
+def test_the_readme_is_short() -> None:
+    assert len((ROOT / "README.md").read_text("utf-8").splitlines()) <= 200
+
+
+def _options(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    out = {"": parser}
+    for a in parser._actions:
+        if isinstance(a, argparse._SubParsersAction):
+            for name, sub in a.choices.items():
+                out |= {f"{name} {k}".strip(): v for k, v in _options(sub).items()}
+    return out
+
+
+def test_the_cli_reference_has_every_command_and_option(generate) -> None:
+    text = generate.cli_reference()
+    for name, parser in _options(build_parser()).items():
+        if name:
+            assert f"`sitframe {name}`" in text, name
+        for action in parser._actions:
+            for option in action.option_strings:
+                if option not in ("-h", "--help"):
+                    assert f"`{option}" in text, f"sitframe {name} {option}"
+
+
+def test_the_config_reference_has_every_key(generate) -> None:
+    text = generate.config_reference()
+    for section, keys in C.DEFAULTS.items():
+        for key in keys:
+            assert re.search(rf"## `\[{section}\]`.*?\| `{key}` \|", text, re.S), \
+                f"{section}.{key}"
+    from sitframe.sim.robot import RobotParams
+
+    for name in inspect.signature(RobotParams).parameters:
+        assert f"| `{name}` |" in text, f"robot.{name}"
+    for table in (C.POLICY_FROM, C.SELECTION):
+        for k in table.keys:
+            assert f"| `{k.name}` |" in text
+
+
+def test_the_goal_tables_defaults_are_the_protocols() -> None:
+    """The [goal] defaults the core writes into every config are the goal-episodes
+    protocol's own (its parameters and checks are declared there)."""
+    from sitframe.plugins.goal_episodes import GoalEpisodes
+
+    sig = inspect.signature(GoalEpisodes).parameters
+    for key, value in C.DEFAULTS["goal"].items():
+        if key in sig:
+            default = sig[key].default
+            assert (list(default) if isinstance(default, tuple) else default) == value, key
+
+
+def test_the_components_reference_has_every_builtin_and_parameter(generate) -> None:
+    from sitframe.params import accepted_params
+
+    text = generate.components_reference()
+    registry = generate._registry()
+    for kind, entries in registry.entries.items():
+        for name, entry in entries.items():
+            section = text.split(f"### `{name}`", 1)[1].split("\n### ", 1)[0]
+            for param in accepted_params(entry.factory)[0]:
+                assert f"| `{param}` |" in section, f"{kind} {name}: {param}"
+
+
+def test_the_layers_picture_is_drawn_from_the_code(generate) -> None:
+    text = generate.layers_diagram()
+    assert text.startswith("```mermaid")
+    for name in generate.SUBPACKAGES:
+        assert f"<b>{name}</b>" in text
+    contracts = generate.import_contracts()
+    assert len(contracts) >= 5
+    for c in contracts:
+        assert c["name"] in text
