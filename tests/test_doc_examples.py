@@ -12,7 +12,6 @@ import argparse
 import importlib.util
 import inspect
 import re
-from pathlib import Path
 
 import pytest
 from doc_examples import CODE, NOT_CODE, ROOT, blocks, pages

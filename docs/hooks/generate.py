@@ -362,7 +362,8 @@ def layers_diagram(_arg: str | None = None) -> str:
         what = f"{count} modules" if hasattr(mod, "__path__") else "module"
         return f'{short.replace(".", "_")}["<b>{short}</b><br/>{what}"]'
 
-    out = ["```mermaid", "flowchart TB", '  plugins(["plugins/ (the built-ins)"]) -->|"from sitframe import ..."| face',
+    out = ["```mermaid", "flowchart TB",
+           '  plugins(["plugins/ (the built-ins)"]) -->|"from sitframe import ..."| face',
            '  face{{"sitframe: the public face"}}']
     for i, row in enumerate(rows):
         out.append(f'  subgraph L{i}[" "]')
@@ -428,7 +429,8 @@ def api_page(package: str | None) -> str:
     """A subpackage's modules, each documented from its docstrings."""
     assert package, "api needs a package: <!-- generated: api sitframe.sim -->"
     pkg = importlib.import_module(package)
-    out = [f"::: {package}", "    options:", "      members: false", "      show_root_heading: false", ""]
+    out = [f"::: {package}", "    options:", "      members: false",
+           "      show_root_heading: false", ""]
     for info in pkgutil.iter_modules(pkg.__path__):
         if info.name.startswith("_") or info.name == "__main__":
             continue
