@@ -12,7 +12,7 @@ what the vectorised step buys.
 
 Run::
 
-    python benchmarks/bench_sim.py [--world training] [--iterations 2000] [--repeats 5]
+    python benchmarks/sim/bench_sim.py [--world training] [--iterations 2000] [--repeats 5]
 
 ``--against REV`` times this checkout's loop and git revision ``REV``'s
 (exported to a temporary folder) in one run, alternating fresh processes of
@@ -22,26 +22,26 @@ iterations per second, twice the rate before the compiled kernels).
 importing numba and loading them from numba's cache, and compiling them with
 an empty cache (the first run after an install)::
 
-    python benchmarks/bench_sim.py --against ef46ff4 --repeats 11
-    python benchmarks/bench_sim.py --first-call
+    python benchmarks/sim/bench_sim.py --against ef46ff4 --repeats 11
+    python benchmarks/sim/bench_sim.py --first-call
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import statistics
 import subprocess
 import sys
-import tarfile
 import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
 import numpy as np
+from common import against  # noqa: E402
 
 from sitframe.plugins.sonar import SonarRing
 from sitframe.sim import geometry as geo
@@ -118,27 +118,8 @@ def _rates(world_name: str, iterations: int, repeats: int, seed: int) -> list[fl
 
 
 def _against(rev: str, args: argparse.Namespace) -> None:
-    with tempfile.TemporaryDirectory() as tmp:
-        old = Path(tmp) / "rev"
-        old.mkdir()
-        tar = Path(tmp) / "rev.tar"
-        tar.write_bytes(subprocess.run(["git", "-C", str(ROOT), "archive", rev], check=True,
-                                       capture_output=True).stdout)
-        with tarfile.open(tar) as tf:
-            tf.extractall(old, filter="data")
-        trees = {rev: old, "this checkout": ROOT}
-        rates: dict[str, list[float]] = {k: [] for k in trees}
-        for _ in range(args.repeats):
-            for name, tree in trees.items():  # alternate fresh processes of each
-                code = (f"import json, sys; sys.path.insert(0, {str(tree)!r}); "
-                        f"sys.path.insert(1, {str(ROOT / 'benchmarks')!r}); import bench_sim; "
-                        f"print(json.dumps(bench_sim._rates({args.world!r}, {args.iterations}, "
-                        f"3, {args.seed})))")
-                res = subprocess.run([sys.executable, "-c", code], cwd=tmp, capture_output=True,
-                                     text=True, env=dict(os.environ, PYTHONPATH=str(tree)))
-                if res.returncode:
-                    sys.exit(f"{name}: {res.stderr.strip().splitlines()[-1]}")
-                rates[name] += json.loads(res.stdout)
+    rates = against(rev, Path(__file__), lambda _tree, _old: f"m._rates({args.world!r}, "
+                    f"{args.iterations}, 3, {args.seed})", args.repeats)
     med = {k: statistics.median(v) for k, v in rates.items()}
     for k, v in med.items():
         print(f"{k:>14}: median {v:,.0f} control iterations/s ({len(rates[k])} runs of "

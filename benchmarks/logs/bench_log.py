@@ -2,8 +2,8 @@
 
 ::
 
-    python benchmarks/bench_log.py --trials 1000             # write cost, this code vs --old
-    python benchmarks/bench_log.py --kill 50                 # kill -9 / read / --resume tally
+    python benchmarks/logs/bench_log.py --trials 1000             # write cost, this code vs --old
+    python benchmarks/logs/bench_log.py --kill 50                 # kill -9 / read / --resume tally
 
 ``--trials N`` (default 1000) writes one short real trial (obstacle
 avoidance, 300 iterations, no evaluation) N times as trials 0..N-1 of
@@ -40,12 +40,10 @@ import argparse
 import dataclasses
 import importlib.util
 import os
-import shutil
 import signal
 import statistics
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 from types import ModuleType
@@ -53,17 +51,15 @@ from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_parallel import kill_config  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
+from common import ROOT as REPO  # noqa: E402
+from common import SITFRAME, kill_config, reference_run, scratch, start_run  # noqa: E402
 
 from sitframe.errors import InputError  # noqa: E402
 from sitframe.logs.compare import compare_logs  # noqa: E402
 from sitframe.logs.layout import shard_folder
 from sitframe.logs.reader import open_log
 from sitframe.logs.writer import LogWriter  # noqa: E402
-
-SITFRAME = [sys.executable, "-m", "sitframe.cli"]
-REPO = Path(__file__).resolve().parent.parent
 
 
 def old_logs_module(rev: str, tmp: Path) -> ModuleType:
@@ -214,19 +210,12 @@ def _stale(out: Path) -> list[str]:
 
 def kill_tally(n: int, tmp: Path, seed: int) -> int:
     rng = np.random.default_rng(seed)
-    cfg = tmp / "kill.toml"
-    cfg.write_text(KILL_CONFIG)
-    ref = tmp / "reference.h5"
-    t0 = time.perf_counter()
-    _run([str(cfg), "--out", str(ref), "--workers", "1"])
-    t_ref = time.perf_counter() - t0
+    cfg, ref, t_ref = reference_run(tmp, KILL_CONFIG)
     readable = identical = mid = dirty = 0
     for i in range(n):
         out = tmp / f"killed{i}.h5"
         workers = str(rng.choice([1, 2]))
-        proc = subprocess.Popen([*SITFRAME, "run", str(cfg), "--out", str(out), "--workers",
-                                 workers, "--json"], stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL)
+        proc = start_run(cfg, out, workers)
         t0 = time.perf_counter()
         while proc.poll() is None and not out.exists():
             time.sleep(0.005)
@@ -274,13 +263,10 @@ def main() -> int:
                     "(instead of the write cost)")
     ap.add_argument("--seed", type=int, default=0, help="seed of the kill moments")
     args = ap.parse_args()
-    tmp = Path(tempfile.mkdtemp(prefix="sitframe-bench-log-"))
-    try:
+    with scratch("sitframe-bench-log-") as tmp:
         if args.kill:
             return kill_tally(args.kill, tmp, args.seed)
         return write_cost(args.trials, None if args.no_old else args.old, args.old_trials, tmp)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 
 Run::
 
-    python benchmarks/auto_c_indices.py logs/sweeps/situations/*c=auto*.h5
+    python benchmarks/learning/auto_c_indices.py logs/sweeps/situations/*c=auto*.h5
 
 For every log given (it needs the ``collect`` stage), the collected readings
 are mapped to the interpreter's feature space (its ``transform`` and

@@ -2,8 +2,8 @@
 
 ::
 
-    python benchmarks/bench_hostile.py --concurrent 20     # two runs on one --out, 20 tries
-    python benchmarks/bench_hostile.py --sigterm 20        # SIGTERM / --resume, 20 runs
+    python benchmarks/scale/bench_hostile.py --concurrent 20     # two runs on one --out, 20 tries
+    python benchmarks/scale/bench_hostile.py --sigterm 20        # SIGTERM / --resume, 20 runs
 
 ``--concurrent N`` starts two ``sitframe run obstacle-avoidance --trials 2
 --iterations 300 --workers 1`` at the same moment on the same ``--out`` (run
@@ -37,8 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_parallel import _CLI, SITFRAME, reference_run  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
+from common import SITFRAME, reference_run, terminate_at  # noqa: E402
 
 from sitframe.errors import InputError  # noqa: E402
 from sitframe.logs.compare import compare_logs  # noqa: E402
@@ -94,20 +94,6 @@ trials = 4
 """
 
 
-def _terminate(cmd: list[str], at: float) -> tuple[int | None, str]:
-    proc = subprocess.Popen([sys.executable, "-c", _CLI, *cmd], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE)
-    time.sleep(at)
-    proc.send_signal(signal.SIGTERM)
-    try:
-        _, err = proc.communicate(timeout=60)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.communicate()
-        return None, "HUNG"
-    return proc.returncode, err.decode()
-
-
 def _settled(code: int | None, err: str, statuses: list[str]) -> bool:
     """Exit 143 with every log aborted or complete, or exit 0 with every log complete, or
     killed by the signal (exit -15) before sitframe's code ran, with nothing written."""
@@ -142,7 +128,7 @@ def sigterm_tally(n: int, tmp: Path, seed: int) -> int:
         if mode == "sweep":
             out = tmp / f"sweep{i}"
             at = float(rng.uniform(0.2, 1.1 * t_sweep))
-            code, err = _terminate(["sweep", str(tmp / "term.toml"), "--out", str(out),
+            code, err = terminate_at(["sweep", str(tmp / "term.toml"), "--out", str(out),
                                     "--workers", "2", "--json"], at)
             logs = sorted(out.glob("*.h5"))
             pairs = [(p, tmp / "ref-sweep" / p.name) for p in logs]
@@ -151,7 +137,7 @@ def sigterm_tally(n: int, tmp: Path, seed: int) -> int:
             workers = mode[-1]
             out = tmp / f"term{i}.h5"
             at = float(rng.uniform(0.2, 1.1 * t_ref / int(workers)))
-            code, err = _terminate(["run", str(cfg), "--out", str(out), "--workers", workers,
+            code, err = terminate_at(["run", str(cfg), "--out", str(out), "--workers", workers,
                                     "--json"], at)
             logs = [out] if out.exists() else []
             pairs = [(out, ref)]

@@ -15,7 +15,7 @@ success, collision-free success and SPL against the shortest path.
 
 Usage (where the log and its prerequisite logs are)::
 
-    python benchmarks/stalled_rules.py logs/goal-finding-learned.h5 --world u-trap \\
+    python benchmarks/learning/stalled_rules.py logs/goal-finding-learned.h5 --world u-trap \\
         --episodes 50 --workers 2
 """
 

@@ -11,7 +11,7 @@ change per metre, as a Markdown table; ``--json`` writes every batch's scores;
 
 Usage (from the repository root, with the logs of the presets in ``logs/``)::
 
-    nice -n 10 python benchmarks/compare_arbiters.py --seeds 10 --episodes 50 \\
+    nice -n 10 python benchmarks/learning/compare_arbiters.py --seeds 10 --episodes 50 \\
         --json compare.json --figure docs/figures/arbiters-multi-room.png
 
 The learned trial is ``--learned-trial`` or, by default, the one

@@ -2,7 +2,7 @@
 
 Run::
 
-    python benchmarks/pooled_table.py logs/sweeps/wall-following
+    python benchmarks/report/pooled_table.py logs/sweeps/wall-following
 
 For the README's tables: convergence (converged trials, median [IQR] of the
 iterations of those that converged), and per evaluation world the collisions

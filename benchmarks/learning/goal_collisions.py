@@ -17,7 +17,7 @@ the iteration that ended in it:
 
 Usage (from the folder holding the logs)::
 
-    python benchmarks/goal_collisions.py logs/goal-finding.h5 --episodes 200
+    python benchmarks/learning/goal_collisions.py logs/goal-finding.h5 --episodes 200
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # learning/: compare_arbiters
 from compare_arbiters import WORLDS, _batch  # noqa: E402
 
 UNSEEN_SONAR = 0.5  # m: the nearest reading above this ...

@@ -2,8 +2,8 @@
 
 Run::
 
-    python benchmarks/fuzz_loaders.py                  # 10,000 inputs per target (~2-4 min)
-    python benchmarks/fuzz_loaders.py -n 500 --target parse_world --show 3
+    python benchmarks/scale/fuzz_loaders.py                  # 10,000 inputs per target (~2-4 min)
+    python benchmarks/scale/fuzz_loaders.py -n 500 --target parse_world --show 3
 
 It runs the hypothesis strategies of ``tests/test_fuzz.py`` (the world and
 config TOML loaders on random text, near-miss edits of a valid file and
@@ -29,7 +29,7 @@ from typing import Any
 
 from hypothesis import HealthCheck, Phase, given, settings
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))
 import test_fuzz as F  # noqa: E402  (the strategies live with the tests)
 
 

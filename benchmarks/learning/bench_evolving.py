@@ -7,7 +7,7 @@ are timed alternately in this one process (so load drifts on a shared
 machine hit both alike). Prints the medians and their ratio; target (issue
 13): evolving / fixed <= 1.5::
 
-    python benchmarks/bench_evolving.py [--repeats 5] [--iterations 5000]
+    python benchmarks/learning/bench_evolving.py [--repeats 5] [--iterations 5000]
 """
 
 from __future__ import annotations

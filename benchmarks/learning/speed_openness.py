@@ -2,7 +2,7 @@
 
 Run::
 
-    python benchmarks/speed_openness.py logs/sweeps/speed logs/obstacle-avoidance.h5
+    python benchmarks/learning/speed_openness.py logs/sweeps/speed logs/obstacle-avoidance.h5
 
 Reads every log in the sweep folder, or every log a glob matches (all
 trials pooled), and the log the

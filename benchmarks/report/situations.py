@@ -5,7 +5,7 @@ per run seed). Every learning trial of every log is pooled; its frozen rule
 base is judged in the rooms it never saw (``--rooms``, default the two novel
 rooms), with that trial's own situations::
 
-    python sweeps/situations_report.py \\
+    python benchmarks/report/situations.py \\
         "c = 12::logs/sweeps/situations/interpreter=fcm-c=12-*_seed=*.h5" \\
         "evolving::logs/sweeps/situations/interpreter=*evolving*_seed=*.h5" \\
         --figure docs/situations.png

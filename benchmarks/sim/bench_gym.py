@@ -22,7 +22,7 @@ whether ``check_env`` passes for every registered id.
 
 Run::
 
-    python benchmarks/bench_gym.py [--steps 3000] [--num-envs 16] [--repeats 5]
+    python benchmarks/sim/bench_gym.py [--steps 3000] [--num-envs 16] [--repeats 5]
 """
 
 from __future__ import annotations

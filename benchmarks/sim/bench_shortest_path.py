@@ -10,7 +10,7 @@ hit both alike. Prints, per world, the median batch times, their ratio and
 the median cost per episode; and the shortest-path graph's build time (once
 per world and process)::
 
-    python benchmarks/bench_shortest_path.py [--repeats 5] [--episodes 50]
+    python benchmarks/sim/bench_shortest_path.py [--repeats 5] [--episodes 50]
 """
 
 from __future__ import annotations

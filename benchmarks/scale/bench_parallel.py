@@ -2,10 +2,10 @@
 
 ::
 
-    python benchmarks/bench_parallel.py                      # 11 trials, 1 vs 2 workers, 3 repeats
-    python benchmarks/bench_parallel.py --repeats 5 --dask   # also through a LocalCluster
-    python benchmarks/bench_parallel.py --kill 20            # kill -9 / --resume tally
-    python benchmarks/bench_parallel.py --interrupt 40       # Ctrl-C / --resume tally
+    python benchmarks/scale/bench_parallel.py                 # 11 trials, 1 vs 2 workers, 3 times
+    python benchmarks/scale/bench_parallel.py --repeats 5 --dask  # also through a LocalCluster
+    python benchmarks/scale/bench_parallel.py --kill 20       # kill -9 / --resume tally
+    python benchmarks/scale/bench_parallel.py --interrupt 40  # Ctrl-C / --resume tally
 
 Each timing is the whole ``sitframe run`` command (a fresh process: imports,
 collect, cluster, trials, log writing), so the ratio is what a user sees.
@@ -24,22 +24,20 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
 import signal
 import statistics
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
 import numpy as np
+from common import SITFRAME, reference_run, scratch, signal_at, start_run  # noqa: E402
 
 from sitframe.errors import InputError
 from sitframe.logs.compare import compare_logs
 from sitframe.logs.reader import open_log
-
-SITFRAME = [sys.executable, "-m", "sitframe.cli"]
 
 
 def timed_run(args: list[str]) -> float:
@@ -94,49 +92,6 @@ def bench_workers(experiment: str, trials: int, workers: int, repeats: int, tmp:
     print(f"load average during the benchmark: {os.getloadavg()}")
 
 
-def kill_config(trials: int = 10, iterations: int = 3000, fcm_trials: int = 4,
-                eval_iterations: int = 100) -> str:
-    """The kill/interrupt config: ``trials`` short obstacle-avoidance trials, 6 situations."""
-    return f"""
-[experiment]
-name = "kill"
-trials = {trials}
-iterations = {iterations}
-seed = 21
-
-[collect]
-worlds = ["collect-1", "collect-2"]
-
-[interpreter]
-component = "fcm"
-c = 6
-trials = {fcm_trials}
-
-[behaviours.avoid]
-component = "fuzzy-q"
-reward = "obstacle-avoidance"
-p = 5
-
-[evaluate]
-worlds = ["novel-1"]
-iterations = {eval_iterations}
-"""
-
-
-KILL_CONFIG = kill_config()
-
-
-def reference_run(tmp: Path) -> tuple[Path, Path, float]:
-    """Write KILL_CONFIG and run it uninterrupted with one worker: (config, log, seconds)."""
-    cfg = tmp / "kill.toml"
-    cfg.write_text(KILL_CONFIG)
-    ref = tmp / "reference.h5"
-    t0 = time.perf_counter()
-    subprocess.run([*SITFRAME, "run", str(cfg), "--out", str(ref), "--workers", "1", "--json"],
-                   check=True, stdout=subprocess.DEVNULL)
-    return cfg, ref, time.perf_counter() - t0
-
-
 def kill_tally(n: int, tmp: Path, seed: int) -> int:
     rng = np.random.default_rng(seed)
     cfg, ref, t_ref = reference_run(tmp)
@@ -144,9 +99,7 @@ def kill_tally(n: int, tmp: Path, seed: int) -> int:
     for i in range(n):
         out = tmp / f"killed{i}.h5"
         workers = str(rng.choice([1, 2]))
-        proc = subprocess.Popen([*SITFRAME, "run", str(cfg), "--out", str(out), "--workers",
-                                 workers, "--json"], stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL)
+        proc = start_run(cfg, out, workers)
         while proc.poll() is None:
             try:
                 if out.exists() and open_log(out).trial_indices():
@@ -179,12 +132,6 @@ def kill_tally(n: int, tmp: Path, seed: int) -> int:
     return 0 if opened == reproduced == n else 1
 
 
-#: Starts the CLI with Python's SIGINT handler even if this benchmark was
-#: started with SIGINT ignored (as background jobs of a shell are).
-_CLI = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-        "from sitframe.cli.app import console_main; sys.exit(console_main(sys.argv[1:]))")
-
-
 def interrupt_tally(n: int, tmp: Path, seed: int) -> int:
     rng = np.random.default_rng(seed)
     cfg, ref, t_ref = reference_run(tmp)
@@ -194,31 +141,24 @@ def interrupt_tally(n: int, tmp: Path, seed: int) -> int:
         out = tmp / f"interrupted{i}.h5"
         workers = str(rng.choice([1, 2]))
         at = float(rng.uniform(0.2, 1.1 * t_ref / int(workers)))
-        proc = subprocess.Popen([sys.executable, "-c", _CLI, "run", str(cfg), "--out", str(out),
-                                 "--workers", workers, "--json"], stdout=subprocess.DEVNULL,
-                                stderr=subprocess.PIPE)
-        time.sleep(at)
-        proc.send_signal(signal.SIGINT)
-        try:
-            _, err = proc.communicate(timeout=60)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.communicate()
+        code, err = signal_at(start_run(cfg, out, workers, stderr=subprocess.PIPE, cli=True),
+                              at, signal.SIGINT)
+        if code is None:
             print(f"run {i + 1}: HUNG after SIGINT at {at:.2f} s")
             outcomes["hung"] = outcomes.get("hung", 0) + 1
             continue
         status = open_log(out).status if out.exists() else "no log"
-        clean = b"Traceback" not in err and (proc.returncode, status) in (
+        clean = "Traceback" not in err and (code, status) in (
             (130, "aborted"), (130, "no log"), (0, "complete"))
         if clean and status == "aborted":
             subprocess.run([*SITFRAME, "run", "--resume", str(out), "--workers", workers,
                             "--json"], check=True, stdout=subprocess.DEVNULL)
             clean = compare_logs(ref, out) == []
-        key = f"exit {proc.returncode}, {status}" + ("" if clean else " (BAD)")
+        key = f"exit {code}, {status}" + ("" if clean else " (BAD)")
         outcomes[key] = outcomes.get(key, 0) + 1
         good += clean
         if not clean:
-            print(f"run {i + 1}: SIGINT at {at:.2f} s -> {key}\n{err.decode()[-2000:]}",
+            print(f"run {i + 1}: SIGINT at {at:.2f} s -> {key}\n{err[-2000:]}",
                   flush=True)
     print(f"Ctrl-C tally over {n} runs (reference run {t_ref:.2f} s): {outcomes}; "
           f"{good}/{n} clean (aborted logs resumed to the uninterrupted result)")
@@ -239,8 +179,7 @@ def main() -> int:
     ap.add_argument("--interrupt", type=int, metavar="N", help="Ctrl-C / resume tally of N runs")
     ap.add_argument("--seed", type=int, default=0, help="seed of the kill moments")
     args = ap.parse_args()
-    tmp = Path(tempfile.mkdtemp(prefix="sitframe-bench-"))
-    try:
+    with scratch("sitframe-bench-") as tmp:
         if args.kill:
             return kill_tally(args.kill, tmp, args.seed)
         if args.interrupt:
@@ -248,8 +187,6 @@ def main() -> int:
         bench_workers(args.experiment, args.trials, args.workers, args.repeats, tmp, args.dask,
                       args.trials_only)
         return 0
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
 
 
 if __name__ == "__main__":

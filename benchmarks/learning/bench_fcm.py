@@ -2,8 +2,8 @@
 
 Run::
 
-    python benchmarks/bench_fcm.py            # full run (~1 min)
-    python benchmarks/bench_fcm.py --repeats 3
+    python benchmarks/learning/bench_fcm.py            # full run (~1 min)
+    python benchmarks/learning/bench_fcm.py --repeats 3
 
 For n = 1500 with c = 8, 12, 16 and n = 100,000 with c = 8 (m = 1.2, 8-D
 sonar-like data clipped to [0, 3] m) it prints the time per FCM iteration of

@@ -12,23 +12,22 @@ fresh processes of each so that load drifts on a shared machine hit both
 alike, and prints the medians and their ratio (issue 11: the checked plugin
 boundary must cost nothing measurable, within 5 % of the previous commit)::
 
-    python benchmarks/bench_trial.py [--repeats 5] [--iterations 5000]
-    python benchmarks/bench_trial.py --against HEAD~1 [--repeats 7]
+    python benchmarks/learning/bench_trial.py [--repeats 5] [--iterations 5000]
+    python benchmarks/learning/bench_trial.py --against HEAD~1 [--repeats 7]
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
-import json
-import os
 import statistics
-import subprocess
 import sys
-import tarfile
 import tempfile
 import time
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
+from common import against  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 #: The built-in plugin modules a learning trial needs (loaded by module, so a
@@ -74,33 +73,12 @@ def _time_trials(iterations: int, repeats: int, config: str = "obstacle-avoidanc
 
 
 def _against(rev: str, iterations: int, repeats: int) -> None:
-    with tempfile.TemporaryDirectory() as tmp:
-        old = Path(tmp) / "rev"
-        old.mkdir()
-        archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev], check=True,
-                                 capture_output=True).stdout
-        tar = Path(tmp) / "rev.tar"
-        tar.write_bytes(archive)
-        with tarfile.open(tar) as tf:
-            tf.extractall(old, filter="data")
-        trees = {rev: old, "this checkout": ROOT}
-        # Both time the same config: the obstacle-avoidance preset as REV has it (a preset
-        # whose settings changed since would otherwise time another learning run).
-        config = Path(tmp) / "obstacle-avoidance.toml"
-        config.write_text((old / "sitframe/presets/obstacle-avoidance.toml").read_text())
-        times: dict[str, list[float]] = {k: [] for k in trees}
-        for _ in range(repeats):
-            for name, tree in trees.items():  # alternate fresh processes of each
-                env = dict(os.environ, PYTHONPATH=str(tree), SITFRAME_DISABLE_PLUGIN_AUTOLOAD="1")
-                code = (f"import json, sys; sys.path.insert(0, {str(tree)!r}); "
-                        f"sys.path.insert(1, {str(ROOT / 'benchmarks')!r}); import bench_trial; "
-                        f"print(json.dumps(bench_trial._time_trials({iterations}, 3, "
-                        f"{str(config)!r})))")
-                res = subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp,
-                                     capture_output=True, text=True)
-                if res.returncode:
-                    sys.exit(f"{name}: {res.stderr.strip().splitlines()[-1]}")
-                times[name] += json.loads(res.stdout)
+    # Both time the same config: the obstacle-avoidance preset as REV has it (a preset whose
+    # settings changed since would otherwise time another learning run).
+    times = against(rev, Path(__file__), lambda _tree, old: (
+        f"m._time_trials({iterations}, 3, "
+        f"{str(old / 'sitframe/presets/obstacle-avoidance.toml')!r})"), repeats,
+        env={"SITFRAME_DISABLE_PLUGIN_AUTOLOAD": "1"})
     med = {k: statistics.median(v) for k, v in times.items()}
     for k, v in med.items():
         print(f"{k:>14}: median {v:.3f} s per {iterations}-iteration learning trial "

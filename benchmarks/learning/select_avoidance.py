@@ -17,7 +17,7 @@ each picks.
 
 Usage::
 
-    nice -n 10 python benchmarks/select_avoidance.py logs/obstacle-avoidance-12.h5
+    nice -n 10 python benchmarks/learning/select_avoidance.py logs/obstacle-avoidance-12.h5
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ the size of ``index.html`` and how much of it is the replay's embedded data.
 Target (issue 16): an 11-trial log's report in <= 10 s::
 
     sitframe run obstacle-avoidance          # in an empty folder: logs/obstacle-avoidance.h5
-    python benchmarks/bench_report.py logs/obstacle-avoidance.h5 [--repeats 3]
+    python benchmarks/report/bench_report.py logs/obstacle-avoidance.h5 [--repeats 3]
 """
 
 from __future__ import annotations

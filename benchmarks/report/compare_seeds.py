@@ -11,7 +11,7 @@ setting, both would be about 5 %; they share the run's situations, so they
 are higher (measured: 2-11 % per metric, 9 % of 270 pairs with any Holm
 difference, for ``logs/sweeps/fuzzy-vs-crisp`` and ``oa12-optimism``)::
 
-    python benchmarks/compare_seeds.py logs/sweeps/fuzzy-vs-crisp [more sweep folders]
+    python benchmarks/report/compare_seeds.py logs/sweeps/fuzzy-vs-crisp [more sweep folders]
 """
 
 from __future__ import annotations
