@@ -15,7 +15,7 @@ Nothing else may escape: no ``KeyError``, ``IndexError``, ``AttributeError``,
 Each target is a ``classify_*`` function that returns ``"loaded"`` or
 ``"documented"`` and lets anything else propagate, and a hypothesis strategy
 of inputs. The tests run them with a moderate number of examples;
-``benchmarks/fuzz_loaders.py`` imports this module and runs the same
+``benchmarks/scale/fuzz_loaders.py`` imports this module and runs the same
 strategies with 10,000 examples each, tallying the outcomes.
 """
 

@@ -251,7 +251,7 @@ def test_5_15_bad_world_geometry_is_refused(tmp_path, capsys, edit, key, what):
 def test_14_extreme_worlds_are_refused_naming_the_limit(tmp_path, capsys, walls, key, what):
     (tmp_path / "w.toml").write_text(ROOM.replace(
         "[[0, 0], [6, 0], [6, 4], [0, 4], [0, 0]]", walls))
-    # (refused before any grid is built: benchmarks/bench_hostile.py times it, not this test)
+    # (refused before any grid is built: benchmarks/scale/bench_hostile.py times it, not this test)
     refused(capsys, ["world", "show", tmp_path / "w.toml"], f"w.toml: {key}:", what)
 
 

@@ -1,4 +1,4 @@
-"""``sweeps/situations_report.py``: the README's pooled situations table from sweep logs."""
+"""``benchmarks/report/situations.py``: the README's pooled situations table from sweep logs."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-SCRIPT = Path(__file__).resolve().parents[1] / "sweeps" / "situations_report.py"
+SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "report" / "situations.py"
 
 
 def _report(*args: str) -> subprocess.CompletedProcess[str]:

@@ -1,5 +1,8 @@
 """Which c would each cluster-validity index choose, run by run?
 
+Question: Which number of situations would each cluster-validity index choose, run by run?
+Output: one row per log with each index's pick, printed.
+
 Run::
 
     python benchmarks/learning/auto_c_indices.py logs/sweeps/situations/*c=auto*.h5

@@ -1,5 +1,9 @@
 """A learning trial with evolving situations against one with the fixed FCM.
 
+Question: How much longer does a learning trial take with evolving situations than with
+the fixed FCM?
+Output: the median time of each and their ratio, printed.
+
 Both start from the same off-line c = 12 clustering (``obstacle-avoidance-evolving``
 with its interpreter replaced by ``fcm`` for the fixed one), learn one
 obstacle-avoidance trial of ``--iterations`` iterations without a log, and

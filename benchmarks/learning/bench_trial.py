@@ -1,5 +1,10 @@
 """One learning trial end to end: simulation + FCS + fuzzy Q-learning + HDF5 logging.
 
+Question: How long does one 5000-iteration learning trial take end to end, with and
+without writing the log?
+Output: the median time per trial and the logging overhead printed (and the ratio to
+--against REV's).
+
 Prints the median wall time of a 5000-iteration obstacle-avoidance trial
 (situations fitted once beforehand and reused), with the HDF5 logger writing
 the trial and without a log, and the logging overhead as a ratio measured in

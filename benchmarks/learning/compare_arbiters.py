@@ -1,5 +1,11 @@
 """Goal reaching by arbiter: hand CDB, priority and the learned arbitration, on the same pairs.
 
+Question: On the same start/goal pairs, how do hand CDB, priority switching and the
+learned arbitration reach goals?
+Output: a Markdown table per world and arbiter (median over seeds, IQR, worst seed)
+printed, and --figure a typical pair drawn; with --publish NAME the table in
+docs/results/tables/NAME.md.
+
 For each world and seed, every arbiter runs the same ``--episodes`` random
 start/goal pairs (``sitframe evaluate LOG --world W --goal-episodes N --seed
 S``: the pairs depend only on the world and the seed). Prints, per arbiter and
@@ -12,7 +18,7 @@ change per metre, as a Markdown table; ``--json`` writes every batch's scores;
 Usage (from the repository root, with the logs of the presets in ``logs/``)::
 
     nice -n 10 python benchmarks/learning/compare_arbiters.py --seeds 10 --episodes 50 \\
-        --json compare.json --figure docs/figures/arbiters-multi-room.png
+        --json compare.json --figure docs/results/figures/arbiters-multi-room.png
 
 The learned trial is ``--learned-trial`` or, by default, the one
 :func:`select_trial` picks: the best of a short goal-episode run in the log's
@@ -23,7 +29,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -194,6 +202,8 @@ def main() -> None:
     ap.add_argument("--json", default=None, help="write every batch's scores here")
     ap.add_argument("--figure", default=None, help="PNG of one typical episode per arbiter")
     ap.add_argument("--figure-world", default="multi-room")
+    ap.add_argument("--publish", metavar="NAME",
+                    help="also write the table to docs/results/tables/NAME.md")
     args = ap.parse_args()
     k = args.learned_trial
     if k is None:
@@ -206,7 +216,13 @@ def main() -> None:
              for s in range(args.seeds) for name, log, trial, arb in runs]
     with ProcessPoolExecutor(args.workers) as pool:
         rows = list(pool.map(_evaluate, tasks))
-    print(table(rows, [r[0] for r in runs], args.worlds))
+    text = table(rows, [r[0] for r in runs], args.worlds)
+    print(text)
+    if args.publish:
+        sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
+        from common.publish import publish
+
+        publish(args.publish, text)
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"learned_trial": k, "rows": rows}, f, indent=1)

@@ -1,5 +1,10 @@
 """Where goal episodes collide: which behaviour was driving, and whether the sonars saw it.
 
+Question: When goal episodes collide, which behaviour was driving, and did the sonars see
+the obstacle?
+Output: a Markdown table of the collisions per world, sorted by the arbiter's weights,
+printed.
+
 Runs the goal episodes of a goal log's trial (exactly as ``sitframe evaluate
 LOG --world W --trial K --goal-episodes N --seed S`` does, via
 ``compare_arbiters``) and sorts every collision by the arbiter's weights at

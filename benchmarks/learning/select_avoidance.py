@@ -1,5 +1,10 @@
 """Which avoidance rule base to fuse with goal seeking: does a selection predict goal safety?
 
+Question: Does a short goal run in a training room predict which avoidance rule base fuses
+best with goal seeking?
+Output: a Markdown table of every trial's collision-free rates and the Spearman
+correlations, printed.
+
 For every trial (rule base) of an obstacle-avoidance log this runs the
 goal-finding fusion (CDB, ``sitframe evaluate LOG --trial K --goal-episodes N``)
 

@@ -1,5 +1,10 @@
 """Speed learning pooled over a sweep: convergence, and learned speed against clearance.
 
+Question: Does the learned speed rise with the clearance the robot senses?
+Output: convergence, the per-situation table and the per-iteration deciles, printed as
+Markdown; with --publish PREFIX the tables PREFIX-convergence, PREFIX-situations and
+PREFIX-clearance in docs/results/tables/.
+
 Run::
 
     python benchmarks/learning/speed_openness.py logs/sweeps/speed logs/obstacle-avoidance.h5
@@ -37,14 +42,18 @@ situations came from (the speed preset's ``clusters_from``). Prints:
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
 from scipy.stats import spearmanr
 
-from sitframe.analysis import situation_labels
-from sitframe.logs.reader import open_log
-from sitframe.situations.clustering import SECTORS_DEG
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
+from common.publish import publish  # noqa: E402
+
+from sitframe.analysis import situation_labels  # noqa: E402
+from sitframe.logs.reader import open_log  # noqa: E402
+from sitframe.situations.clustering import SECTORS_DEG  # noqa: E402
 
 AHEAD_DEG = SECTORS_DEG[0]
 DECILES = 10
@@ -87,45 +96,56 @@ def _rho(x: np.ndarray, y: np.ndarray) -> float:
 
 
 def per_situation(learned: dict[str, np.ndarray], centers: np.ndarray, labels: list[str],
-                  offset: float, angles: np.ndarray) -> None:
-    """Print the per-situation table and correlations (``learned`` from :func:`_pooled`)."""
+                  offset: float, angles: np.ndarray) -> str:
+    """The per-situation table and correlations (``learned`` from :func:`_pooled`)."""
     cl = _clearances(centers, offset, angles)
     S = learned["speed"]
     mean_speed = S.mean(axis=0)
-    print("| situation | openness (mean log range) | mean range | nearest range | "
-          "learned speed, mean over trials | updates, median | mean Q of each speed |")
-    print("|---|---|---|---|---|---|---|")
+    out = ["| situation | openness (mean log range) | mean range | nearest range | "
+           "learned speed, mean over trials | updates, median | mean Q of each speed |",
+           "|---|---|---|---|---|---|---|"]
     for i in np.argsort(cl["openness"]):
         q = " / ".join(f"{v:.0f}" for v in learned["q"][:, i].mean(axis=0))
-        print(f"| {labels[i]} | {cl['openness'][i]:.2f} | {centers[i].mean():.2f} m | "
-              f"{centers[i].min():.2f} m | {mean_speed[i]:.3f} m/s | "
-              f"{np.median(learned['updates'][:, i]):.0f} | {q} |")
+        out.append(f"| {labels[i]} | {cl['openness'][i]:.2f} | {centers[i].mean():.2f} m | "
+                   f"{centers[i].min():.2f} m | {mean_speed[i]:.3f} m/s | "
+                   f"{np.median(learned['updates'][:, i]):.0f} | {q} |")
     rng = np.random.default_rng(0)
     boot = [_rho(S[rng.integers(0, len(S), len(S))].mean(axis=0), cl["openness"])
             for _ in range(2000)]
     lo, hi = np.nanpercentile(boot, [2.5, 97.5])
+    out.append("")
     for name, x in cl.items():
         extra = f" (95 % bootstrap over trials: {lo:.2f} to {hi:.2f})" if name == "openness" else ""
-        print(f"per situation: Spearman(learned speed, {name}) = {_rho(mean_speed, x):.2f}{extra}")
+        out.append(f"- Spearman(learned speed, {name}) = {_rho(mean_speed, x):.2f}{extra}")
+    return "\n".join(out)
 
 
-def per_iteration(cmd: list, reading: list, offset: float, angles: np.ndarray) -> None:
-    """Print the speed-against-clearance curves of the frozen evaluations."""
+def per_iteration(cmd: list, reading: list, offset: float, angles: np.ndarray) -> str:
+    """The speed-against-clearance curves of the frozen evaluations, as a table."""
     if not cmd:
-        print("per iteration: no evaluation in these logs (run the sweep with 'evaluate')")
-        return
+        return "per iteration: no evaluation in these logs (run the sweep with 'evaluate')"
     v = np.concatenate(cmd)
     cl = _clearances(np.concatenate(reading), offset, angles)
-    print(f"per iteration: {v.size} iterations of {len(cmd)} evaluations; mean commanded "
-          f"speed per decile of the clearance (lowest first)")
+    out = [f"| clearance at the iteration ({v.size:,} iterations of {len(cmd)} evaluations) | "
+           "mean commanded speed per decile, lowest clearance first (m/s) | "
+           "Spearman of the curve | raw per iteration |", "|---|---|---|---|"]
     for name, x in cl.items():
         edges = np.quantile(x, np.linspace(0.0, 1.0, DECILES + 1))
         b = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, DECILES - 1)
         curve = np.array([v[b == i].mean() for i in range(DECILES)])
-        print(f"  {name} (deciles {edges[0]:.2f} .. {edges[-1]:.2f}): "
-              + " ".join(f"{c:.3f}" for c in curve)
-              + f"; Spearman(curve) = {_rho(curve, np.arange(DECILES)):.2f}, "
-              f"raw per iteration = {_rho(v, x):.2f}")
+        out.append(f"| {name} ({edges[0]:.2f} .. {edges[-1]:.2f}) | "
+                   + " ".join(f"{c:.3f}" for c in curve)
+                   + f" | {_rho(curve, np.arange(DECILES)):.2f} | {_rho(v, x):.2f} |")
+    return "\n".join(out)
+
+
+def convergence(conv: np.ndarray) -> str:
+    """Converged trials and the iterations to convergence (not converged: slower than any)."""
+    q25, med, q75 = np.percentile(conv, [25, 50, 75], method="lower")
+    return ("| trials | converged | iterations to convergence, median [IQR] |\n"
+            "|---|---|---|\n"
+            f"| {len(conv)} | {np.isfinite(conv).sum()}/{len(conv)} | "
+            f"{med:.0f} [{q25:.0f}, {q75:.0f}] |")
 
 
 def main() -> None:
@@ -134,17 +154,26 @@ def main() -> None:
                     "glob of logs relative to here, e.g. 'logs/sweeps/S/activation=0.3_seed=?.h5'")
     ap.add_argument("situations", help="the log the situations came from (clusters_from)")
     ap.add_argument("--behaviour", default="avoid")
+    ap.add_argument("--publish", action="append", default=[], metavar="PART=NAME",
+                    help="also write a part (convergence, situations, clearance) to "
+                    "docs/results/tables/NAME.md (repeatable)")
     args = ap.parse_args()
     src = open_log(args.situations)
     centers = np.asarray(src.interpreter_state()["centers"], dtype=np.float64)
     offset = float(src.config["interpreter"].get("offset", 0.1))
     angles = (np.asarray(src.sensor.angles_deg) + 180.0) % 360.0 - 180.0
     conv, learned, cmd, reading = _pooled(args.folder, args.behaviour)
-    q25, med, q75 = np.percentile(conv, [25, 50, 75], method="lower")
-    print(f"{len(conv)} trials, {np.isfinite(conv).sum()} converged; iterations to "
-          f"convergence median {med:.0f} [IQR {q25:.0f}, {q75:.0f}]")
-    per_situation(learned, centers, situation_labels(src), offset, angles)
-    per_iteration(cmd, reading, offset, angles)
+    parts = {"convergence": convergence(conv),
+             "situations": per_situation(learned, centers, situation_labels(src), offset,
+                                         angles),
+             "clearance": per_iteration(cmd, reading, offset, angles)}
+    print("\n\n".join(parts.values()))
+    for spec in args.publish:
+        part, _, name = spec.partition("=")
+        if part not in parts or not name:
+            sys.exit(f"speed_openness: --publish {spec}: expected PART=NAME with PART one of "
+                     f"{', '.join(parts)}")
+        publish(name, parts[part])
 
 
 if __name__ == "__main__":

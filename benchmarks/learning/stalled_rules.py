@@ -1,5 +1,10 @@
 """What the learned arbitration's stalled contexts are worth: learned, or set by hand.
 
+Question: What are the learned arbitration's stalled contexts worth: learned, or set by
+hand?
+Output: success and collision-free rates per trial with the rules as learned and as set,
+printed.
+
 The ``fuzzy-q-arbiter`` of ``goal-finding-learned`` has one block of rules per
 goal context; the ``*_stalled`` blocks fire when the robot has not come closer
 to the goal for ``stall_iterations``. This runs every trial of a log's learned

@@ -1,5 +1,10 @@
 """Cost of writing a trial to the log as the log grows, and kill -9 at random moments.
 
+Question: Does writing a trial cost more as the log grows, and does a log survive kill -9
+at any moment?
+Output: the write-cost ratios, or the kill tally, printed; exit 1 if a killed log does not
+read or resume bit for bit.
+
 ::
 
     python benchmarks/logs/bench_log.py --trials 1000             # write cost, this code vs --old

@@ -1,5 +1,8 @@
 """Time ``sitframe analyse`` (figures, tables and ``index.html``) on a log, and size the page.
 
+Question: How long does `sitframe analyse` take on a log, and how large is its page?
+Output: median wall and CPU time and the page's size, printed.
+
 Runs ``sitframe analyse LOG -o TMP`` in fresh processes ``--repeats`` times and
 prints the median wall time, the median CPU time of the process (user + system,
 which a loaded shared machine inflates less than wall time), the load average,

@@ -1,5 +1,8 @@
 """How often does ``sitframe compare`` call two runs of the same setting different?
 
+Question: How often does `sitframe compare` call two runs of the same setting different?
+Output: the share of same-setting seed pairs with a significant metric, printed.
+
 For each setting of a sweep folder that was run with several seeds
 (``experiment.seed`` in the grid), every pair of its seeds is compared as two
 runs (:func:`sitframe.analysis.compare.compare_logs`): same config, different

@@ -1,5 +1,10 @@
 """Pool the logs of several settings and print the README's situations table (and a figure).
 
+Question: How do fixed, automatic, evolving and on-line situations compare, pooled over
+their seeds?
+Output: the situations table printed as Markdown and --figure the figure; with --publish
+NAME the table in docs/results/tables/NAME.md.
+
 Each argument is ``NAME::GLOB``: a setting's name and a glob of its logs (one
 per run seed). Every learning trial of every log is pooled; its frozen rule
 base is judged in the rooms it never saw (``--rooms``, default the two novel
@@ -8,7 +13,7 @@ rooms), with that trial's own situations::
     python benchmarks/report/situations.py \\
         "c = 12::logs/sweeps/situations/interpreter=fcm-c=12-*_seed=*.h5" \\
         "evolving::logs/sweeps/situations/interpreter=*evolving*_seed=*.h5" \\
-        --figure docs/situations.png
+        --figure docs/results/figures/situations.png
 
 Columns: trials converged; final number of situations, median [IQR] (a
 fixed interpreter's c); evaluation collisions per 1000 iterations, median
@@ -25,11 +30,15 @@ from __future__ import annotations
 import argparse
 import glob
 import sys
+from pathlib import Path
 
 import numpy as np
 
-from sitframe.logs.reader import open_log
-from sitframe.sim.metrics import frontal_between_prototypes
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
+from common.publish import publish  # noqa: E402
+
+from sitframe.logs.reader import open_log  # noqa: E402
+from sitframe.sim.metrics import frontal_between_prototypes  # noqa: E402
 
 
 def pool(paths: list[str], rooms: list[str]) -> dict[str, np.ndarray]:
@@ -66,11 +75,18 @@ def _miq(x: np.ndarray, fmt: str = "{:.1f}") -> str:
     return f"{fmt.format(q2)} [{fmt.format(q1)}, {fmt.format(q3)}]"
 
 
-def table(results: dict[str, dict[str, np.ndarray]], rooms: list[str]) -> str:
+def table(results: dict[str, dict[str, np.ndarray]], rooms: list[str],
+          against: str | None = None) -> str:
+    """The situations table; with ``against`` a column testing whether each setting's
+    evaluation collisions are worse than that setting's (Mann-Whitney U, one-sided)."""
+    from scipy.stats import mannwhitneyu
+
     head = ["setting", "converged", "situations, median [IQR]",
             "eval coll./1000, median [IQR] (worst)",
             *[f"{w}: median" for w in rooms], "evals > 10/1000", "coverage",
             "frontal between prototypes"]
+    if against:
+        head.append(f"worse than {against}? (Mann-Whitney, one-sided)")
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for name, r in results.items():
         c = r["collisions"]
@@ -80,6 +96,11 @@ def table(results: dict[str, dict[str, np.ndarray]], rooms: list[str]) -> str:
                *[f"{np.median(c[r['room'] == w]):g}" for w in rooms],
                f"{np.mean(c > 10):.1%}", f"{np.median(r['coverage']):.2f}",
                f"{fb}/{n} ({fb / n:.0%})" if n else "0/0"]
+        if against:
+            p_value = mannwhitneyu(c, results[against]["collisions"],
+                                   alternative="greater").pvalue
+            row.append("--" if name == against else
+                       "p < 0.001" if p_value < 0.001 else f"p = {p_value:.2f}")
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines)
 
@@ -121,6 +142,10 @@ def main() -> int:
     ap.add_argument("settings", nargs="+", metavar="NAME::GLOB")
     ap.add_argument("--rooms", nargs="+", default=["novel-1", "novel-2"])
     ap.add_argument("--figure", metavar="PNG")
+    ap.add_argument("--against", metavar="NAME",
+                    help="add a column: is each setting worse than setting NAME?")
+    ap.add_argument("--publish", metavar="NAME",
+                    help="also write the table to docs/results/tables/NAME.md")
     args = ap.parse_args()
     results: dict[str, dict[str, np.ndarray]] = {}
     owner: dict[str, str] = {}  # log -> the setting that matched it first
@@ -141,7 +166,13 @@ def main() -> int:
         owner.update(dict.fromkeys(paths, name))
         results[name] = pool(paths, args.rooms)
         print(f"{name}: {len(paths)} logs", file=sys.stderr)
-    print(table(results, args.rooms))
+    if args.against and args.against not in results:
+        print(f"situations_report: --against {args.against}: no such setting", file=sys.stderr)
+        return 2
+    text = table(results, args.rooms, args.against)
+    print(text)
+    if args.publish:
+        publish(args.publish, text)
     if args.figure:
         figure(results, args.figure)
     return 0

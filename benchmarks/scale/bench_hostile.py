@@ -1,5 +1,9 @@
 """Two writers on one log, and SIGTERM at random moments: tallies (issue 19).
 
+Question: Do two writers on one log, and SIGTERM at any moment, leave one valid log and
+resumable runs?
+Output: the tallies printed; exit 1 on any run that did not end cleanly.
+
 ::
 
     python benchmarks/scale/bench_hostile.py --concurrent 20     # two runs on one --out, 20 tries

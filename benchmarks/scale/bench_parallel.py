@@ -1,5 +1,10 @@
 """Wall time of ``sitframe run`` with 1 vs K workers (and a Dask cluster); identical logs?
 
+Question: How much faster do trials run on K workers (and a Dask cluster), with identical
+logs? Do logs survive kill -9 and Ctrl-C at random moments?
+Output: median wall times and the speed-up, or the kill / Ctrl-C tally, printed; exit 1 on
+a log that differs.
+
 ::
 
     python benchmarks/scale/bench_parallel.py                 # 11 trials, 1 vs 2 workers, 3 times

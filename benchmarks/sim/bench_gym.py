@@ -1,5 +1,10 @@
 """Benchmark: steps per second of the Gymnasium envs against the plain simulator.
 
+Question: How fast are the Gymnasium environments against the plain simulator, and the
+vector env against the single one?
+Output: steps per second of each loop and their ratios, printed; with --publish NAME also
+a table in docs/results/tables/NAME.md.
+
 Three loops, alternated ``--repeats`` times in one run (medians reported):
 
 plain
@@ -29,14 +34,19 @@ from __future__ import annotations
 
 import argparse
 import statistics
+import sys
 import time
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 from gymnasium.utils.env_checker import check_env
 
-import sitframe.gym as sg
-from sitframe.sim.robot import Command, step_robot
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
+from common.publish import publish  # noqa: E402
+
+import sitframe.gym as sg  # noqa: E402
+from sitframe.sim.robot import Command, step_robot  # noqa: E402
 
 
 def plain(env: sg.SitframeEnv, steps: int, seed: int) -> float:
@@ -78,6 +88,8 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=3000, help="(robot-)steps per timed loop")
     ap.add_argument("--num-envs", type=int, default=16)
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--publish", metavar="NAME",
+                    help="also write the figures as a table to docs/results/tables/NAME.md")
     a = ap.parse_args()
     for env_id in sg.ENV_IDS:
         check_env(gym.make(env_id).unwrapped, skip_render_check=True)
@@ -105,6 +117,15 @@ def main() -> None:
           f"{m['vector'] / m['single']:.2f}  (target >= 3)")
     print("median of the per-repeat ratios: " + ", ".join(f"{k} = {v:.2f}"
                                                           for k, v in paired.items()))
+    if a.publish:
+        publish(a.publish, "\n".join([
+            f"| loop ({steps} steps, medians of {a.repeats} alternated repeats) | rate | "
+            "ratio (of the medians / median of the repeats' ratios) |", "|---|---|---|",
+            f"| plain simulator | {m['plain']:,.0f} iterations/s | |",
+            f"| `SitframeEnv` | {m['single']:,.0f} steps/s | single ÷ plain "
+            f"{m['single'] / m['plain']:.2f} / {paired['single/plain']:.2f} |",
+            f"| `SitframeVectorEnv`, N = {a.num_envs} | {m['vector']:,.0f} robot-steps/s | "
+            f"vector ÷ single {m['vector'] / m['single']:.2f} / {paired['vector/single']:.2f} |"]))
 
 
 if __name__ == "__main__":

@@ -1,5 +1,9 @@
 """What the shortest-path reference of SPL costs a batch of goal episodes.
 
+Question: What does the shortest-path reference of SPL cost a batch of goal episodes?
+Output: the median time per episode with and without the shortest path, and its share of
+the batch, printed.
+
 A goal-only controller (no log needed) runs the same batch of ``--episodes``
 random goal episodes in each world (at most 60 iterations each, about the
 length of a CDB episode, so the simulation's share is not inflated by

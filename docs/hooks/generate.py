@@ -375,7 +375,7 @@ def layers_diagram(_arg: str | None = None) -> str:
     out += [f"    {node(m)}" for m in ground]
     out.append("  end")
     order = [f"L{i}" for i in range(len(rows))] + ["G"]
-    out += [f"  {a} ~~~ {b}" for a, b in zip(order, order[1:])]  # the rows, top to bottom
+    out += [f"  {a} ~~~ {b}" for a, b in zip(order, order[1:], strict=False)]  # row order
     for a, b in sorted(edges):
         out.append(f"  {a.removeprefix('sitframe.').replace('.', '_')} --> "
                    f"{b.removeprefix('sitframe.').replace('.', '_')}")

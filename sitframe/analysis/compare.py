@@ -22,7 +22,7 @@ collision-free episodes, SPL, mean time to goal and heading change per metre.
 Two logs are two runs: the test asks whether *these runs'* trials differ.
 Trials of one run share its situations (the clustering of its seed), so two
 runs of one setting with different seeds differ more often than chance
-(``benchmarks/compare_seeds.py``: 9 % of 270 same-setting seed pairs had a
+(``benchmarks/report/compare_seeds.py``: 9 % of 270 same-setting seed pairs had a
 Holm-significant metric); to compare *settings*, run each with several seeds.
 
 A sweep folder (``sitframe sweep`` output) is compared per setting: points

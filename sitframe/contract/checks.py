@@ -12,7 +12,7 @@ naming the plugin, the component, the method, the trial and the iteration.
 The per-iteration checks are a type test, a shape test and one
 ``math.isfinite`` per value (the reading's and memberships' full range checks
 run once per trial, vectorised, on the logged arrays), so they cost nothing
-measurable in the loop (``benchmarks/bench_trial.py``).
+measurable in the loop (``benchmarks/learning/bench_trial.py``).
 """
 
 from __future__ import annotations

@@ -62,7 +62,7 @@ never written through):
   changed copy-on-write: copied to a scratch file, opened, changed, closed
   and renamed over the log. It holds no trial data, so a trial costs the
   same to write whether it is the first or the thousandth (see
-  ``benchmarks/bench_log.py``).
+  ``benchmarks/logs/bench_log.py``).
 * The run's end (any status but ``running``: ``complete``, ``aborted``,
   ``failed``) *packs* the log: one transaction copies every linked trial
   file into the run file and publishes it, then the trial files and the

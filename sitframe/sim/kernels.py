@@ -18,7 +18,7 @@ Costs: importing numba and loading the kernels from numba's on-disk cache
 (all of them, when :mod:`sitframe.sim.kernels_numba` is imported) takes some
 0.3-0.5 s once per process; a worker pool's forkserver preloads them, so its
 workers start with them loaded. Compiling them, the first time after an
-install, takes some 10 s (``benchmarks/bench_sim.py --first-call`` measures both).
+install, takes some 10 s (``benchmarks/sim/bench_sim.py --first-call`` measures both).
 """
 
 from __future__ import annotations

@@ -1,0 +1,297 @@
+"""Regenerate the results tables of the documentation: each table's runs and its script.
+
+Question: none; this is the one place that knows which sweeps and which script make each
+table of ``docs/results/tables/`` (so each results page gives one command).
+Output: the tables (``docs/results/tables/NAME.md``, written by the scripts through
+``common.publish``) and the logs they were made from (``logs/`` in the working folder).
+
+::
+
+    python benchmarks/report/regenerate.py --list              # every table, its cost
+    python benchmarks/report/regenerate.py oa-presets ablation # make these
+    python benchmarks/report/regenerate.py --cheap             # every one under ~10 minutes
+    python benchmarks/report/regenerate.py --dry-run speed     # print the commands only
+    python benchmarks/report/regenerate.py --pending           # mark the tables not yet made
+
+A sweep whose folder already holds its complete logs is reused (``sitframe sweep
+--reuse``). Runs use one worker unless ``--workers K``. The figures of a table depend on the
+CPU arithmetic of the machine that made its logs (the table's last line says which; see
+docs/explanation/determinism.md): the tables shipped were made with AVX2 arithmetic, on an
+AVX-512 machine with ``NPY_DISABLE_CPU_FEATURES="X86_V4 AVX512_ICL AVX512_SPR"
+OPENBLAS_CORETYPE=Haswell`` set.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import subprocess
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
+from common import ROOT  # noqa: E402
+from common.publish import pending, publish, tables_dir  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # report/: pooled_table
+
+S = "logs/sweeps"
+PY = "python"
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """How a table is made: the sweeps it needs, then the commands that write it (a command
+    starting with ``capture`` has its printed Markdown table published as the table)."""
+
+    sweeps: tuple[str, ...]
+    commands: tuple[str, ...]
+    minutes: int  # with one worker, sweeps included, on the 2-core machine of the results
+    runs: tuple[str, ...] = field(default=())  # presets to run first (sitframe run)
+
+    @property
+    def cheap(self) -> bool:
+        return self.minutes <= 10
+
+
+def _glob(name: str, folder: str, pattern: str) -> str:
+    return shlex.quote(f"{name}::{S}/{folder}/{pattern}")
+
+
+def _situations_c(c: str) -> str:
+    return (f"fixed c = {c}::{S}/situations-c*/*fcm-c={c}-*.h5" if c != "auto" else
+            f"c = auto::{S}/situations-c*/*c=auto*.h5")
+
+
+OA = ("obstacle-avoidance", "obstacle-avoidance-q150-t5", "obstacle-avoidance-12",
+      "obstacle-avoidance-16", "obstacle-avoidance-thesis")
+POOLED = f"{PY} benchmarks/report/pooled_table.py"
+SPEED = f"{PY} benchmarks/learning/speed_openness.py"
+SITUATIONS = f"{PY} benchmarks/report/situations.py"
+ARBITERS = f"{PY} benchmarks/learning/compare_arbiters.py --seeds 10 --episodes 50"
+OWN_ROOMS = " ".join(f"benchmarks/worlds/{w}.toml"
+                     for w in ("office", "pillars", "deep-trap", "l-room"))
+
+#: Every table of docs/results/tables/, by name.
+RECIPES: dict[str, Recipe] = {
+    "oa-presets": Recipe(OA, (f"{POOLED} --publish oa-presets " +
+                              " ".join(f"{S}/{s}" for s in OA),), 10),
+    "oa-q250-vs-q150": Recipe(OA[:2], (
+        f"capture sitframe compare {S}/obstacle-avoidance {S}/obstacle-avoidance-q150-t5 "
+        f"-o logs/compare-q250-q150",), 4),
+    "oa12-optimism": Recipe(("oa12-optimism",), (
+        f"{POOLED} --publish oa12-optimism " + " ".join(
+            _glob(f"{q}, {t}{' (the preset)' if (q, t) == (250, 2) else ''}", "oa12-optimism",
+                  f"*q_init_value={q}_temperature={t}_*.h5")
+            for q, t in ((150, 5), (150, 2), (250, 5), (250, 2))),), 6),
+    "fuzzy-vs-crisp": Recipe(("fuzzy-vs-crisp",), (
+        f"{POOLED} --publish fuzzy-vs-crisp "
+        + _glob("fuzzy-q", "fuzzy-vs-crisp", "*component=fuzzy-q_*.h5") + " "
+        + _glob("crisp-q", "fuzzy-vs-crisp", "*component=crisp-q_*.h5"),), 7),
+    "fuzzy-vs-crisp-compare": Recipe(("fuzzy-vs-crisp",), (
+        f"capture sitframe compare {S}/fuzzy-vs-crisp -o logs/compare-fuzzy-vs-crisp",), 7),
+    "sensors": Recipe(("sensors",), (
+        f"{POOLED} --publish sensors " + _glob("sonar ring (8 cones)", "sensors",
+                                               "*sensor=pioneer-sonar*.h5")
+        + " " + _glob("laser (16 rays, 180°)", "sensors", "*sensor=laser*.h5"),), 5),
+    "sensors-beams": Recipe(("sensors-beams",), (
+        f"{POOLED} --publish sensors-beams " + _glob("8 beams", "sensors-beams", "*beams=8_*.h5")
+        + " " + _glob("32 beams", "sensors-beams", "*beams=32_*.h5"),), 4),
+    "ablation": Recipe(("ablation",), (
+        f"{PY} benchmarks/common/publish.py {S}/ablation/summary-pooled.md --name ablation "
+        "--command 'sitframe sweep sweeps/ablation.toml'",), 10),
+    "situations": Recipe(("situations", "situations-online"), (
+        f"{SITUATIONS} --publish situations --figure docs/results/figures/situations.png "
+        + " ".join(_glob(n, "situations", g) for n, g in (
+            ("fixed c = 8", "*fcm-c=8-*.h5"), ("fixed c = 12", "*fcm-c=12-*.h5"),
+            ("fixed c = 16", "*fcm-c=16-*.h5"), ("c = auto", "*c=auto*.h5"),
+            ("evolving from c = 12 (the preset)", "*evolving*.h5")))
+        + " " + _glob("online (the preset)", "situations-online", "*.h5"),), 17),
+    "wall-following-evolving": Recipe(("wall-following", "wall-following-evolving"), (
+        f"{POOLED} --publish wall-following-evolving "
+        + _glob("fixed c = 16", "wall-following", "*.h5") + " "
+        + _glob("evolving (the preset)", "wall-following-evolving", "*.h5"),), 9),
+    "situations-c": Recipe(("situations-c", "situations-c-heldout"), (
+        f"{SITUATIONS} --publish situations-c --against 'fixed c = 10' "
+        + " ".join(shlex.quote(_situations_c(c)) for c in ("8", "10", "12", "14", "16")),),
+        30),
+    "speed-convergence": Recipe(("speed-convergence",), (
+        f"{SPEED} {S}/speed-convergence logs/obstacle-avoidance.h5 "
+        "--publish convergence=speed-convergence",), 3),
+    "speed": Recipe(("speed",), (
+        f"{SPEED} {S}/speed logs/obstacle-avoidance.h5 --publish situations=speed-situations "
+        "--publish clearance=speed-clearance",
+        f"{POOLED} --publish speed-safety {S}/speed"), 4),
+    "wall-following": Recipe(("wall-following",), (
+        f"{POOLED} --publish wall-following {S}/wall-following",), 3),
+    "goal-finding": Recipe(("goal-finding",), (
+        f"{POOLED} --publish goal-finding {S}/goal-finding",), 4),
+    "gym-speed": Recipe((), (
+        f"{PY} benchmarks/sim/bench_gym.py --steps 3200 --repeats 5 --publish gym-speed",), 2),
+    "goal-finding-learned": Recipe(("goal-finding-learned",), (
+        f"{POOLED} --publish goal-finding-learned {S}/goal-finding-learned",), 35),
+    "arbiters": Recipe((), (
+        f"{ARBITERS} --figure docs/results/figures/arbiters-multi-room.png "
+        "--publish arbiters",), 30, runs=("goal-finding-learned", "goal-finding")),
+    "arbiters-own-rooms": Recipe((), (
+        f"{ARBITERS} --worlds {OWN_ROOMS} --publish arbiters-own-rooms",), 20,
+        runs=("goal-finding-learned", "goal-finding")),
+    "select-avoidance": Recipe((), (
+        f"capture {PY} benchmarks/learning/select_avoidance.py logs/obstacle-avoidance-12.h5 "
+        "--short 100 --short-world goal-training --test 100 --worlds goal novel-1 novel-2 "
+        "multi-room u-trap",), 25, runs=("obstacle-avoidance-12",)),
+}
+def headline() -> str:
+    """The README's and the results index's short table, from the sweeps' logs (a row
+    whose logs are missing says how to make them)."""
+    import numpy as np
+    from pooled_table import BAD, pool
+
+    def logs(folder: str) -> dict | None:
+        return pool(f"{S}/{folder}") if list(Path(S, folder).glob("*.h5")) else None
+
+    rows = ["| experiment | result, pooled over 10 seeds × 11 trials | details |",
+            "|---|---|---|"]
+    for label, folder, page in (
+            ("Obstacle avoidance, 8 situations", "obstacle-avoidance", "obstacle-avoidance"),
+            ("Obstacle avoidance, 12 situations", "obstacle-avoidance-12",
+             "obstacle-avoidance"),
+            ("The thesis's method as printed", "obstacle-avoidance-thesis",
+             "obstacle-avoidance"),
+            ("Wall following (15–35 cm)", "wall-following", "wall-following"),
+            ("Goal finding, CDB", "goal-finding", "goal-finding"),
+            ("Learned arbitration", "goal-finding-learned", "learned-arbitration")):
+        p = logs(folder)
+        if p is None:
+            result = f"not yet regenerated: `sitframe sweep sweeps/{folder}.toml`"
+        elif "goal" in p["per"] and "success_rate" in p["per"]["goal"]:
+            g = p["per"]["goal"]
+            result = (f"goal room: success {np.mean(g['success_rate']):.2f}, collision-free in "
+                      f"{np.mean(g['collision_free_rate']):.2f} of the episodes")
+        else:
+            conv = p["conv"]
+            result = f"converged {np.isfinite(conv).sum()}/{conv.size}"
+            unseen = [w for w in ("novel-1", "novel-2") if w in p["per"]]
+            coll = np.concatenate([p["per"][w]["collisions_per_1000"] for w in unseen])
+            result += (f"; unseen rooms: median {np.median(coll):g} collisions per 1000 "
+                       f"iterations, {np.mean(coll > BAD):.0%} of the evaluations above "
+                       f"{BAD:.0f}")
+            band = [p["per"][w]["wall_band_fraction"] for w in p["per"]
+                    if "wall_band_fraction" in p["per"][w] and w not in unseen]
+            if band:
+                result += f"; wall in the band {np.median(band[0]):.0%} of the time (median)"
+        rows.append(f"| {label} | {result} | [{page}]({page}.md) |")
+    rows.append("| The duel: fuzzy Q vs DQN and PPO | its own tables, made by "
+                "`python benchmarks/duel.py report` | [duel](duel.md) |")
+    return "\n".join(rows)
+
+
+def publish_headline() -> None:
+    """``headline.md``, and the same table in README.md between its markers."""
+    table = headline()
+    publish("headline", table, command="python benchmarks/report/regenerate.py headline")
+    readme = ROOT / "README.md"
+    text = readme.read_text("utf-8")
+    start, end = "<!-- headline:start -->\n", "<!-- headline:end -->"
+    before, _, rest = text.partition(start)
+    _, _, after = rest.partition(end)
+    readme.write_text(before + start + readme_table(table) + "\n" + end + after, "utf-8")
+
+
+def readme_table(table: str) -> str:
+    """The headline table with its links from README.md (the results pages in docs/)."""
+    import re
+
+    return re.sub(r"\]\(([\w-]+\.md)\)", r"](docs/results/\1)", table)
+
+
+#: Tables another script makes on its own (not from here): name -> how.
+ELSEWHERE = {
+    "duel-tuning": "python benchmarks/duel.py report --out duel (docs/results/duel.md)",
+    "duel": "python benchmarks/duel.py report --out duel (docs/results/duel.md)",
+}
+#: The table each sub-table is made with (a recipe may write several tables).
+WRITES = {"speed": ("speed-situations", "speed-clearance", "speed-safety")}
+
+
+def commands(name: str, workers: int) -> list[str]:
+    """The shell commands that make table ``name``, in order."""
+    r = RECIPES[name]
+    out = [f"sitframe run {p} --workers {workers}" for p in r.runs]
+    out += [f"sitframe sweep sweeps/{s}.toml --reuse --workers {workers}" for s in r.sweeps]
+    return out + list(r.commands)
+
+
+def run(name: str, workers: int, dry_run: bool) -> None:
+    for cmd in commands(name, workers):
+        print(f"$ {cmd}", flush=True)
+        if dry_run:
+            continue
+        capture = cmd.startswith("capture ")
+        argv = shlex.split(cmd.removeprefix("capture "))
+        argv = [_here(a) for a in argv]
+        if argv[0] == "sitframe":
+            argv = [sys.executable, "-m", "sitframe.cli", *argv[1:]]
+        elif argv[0] == PY:
+            argv[0] = sys.executable
+        res = subprocess.run(argv, check=True, text=True,
+                             stdout=subprocess.PIPE if capture else None)
+        if capture:
+            table = "\n".join(line for line in res.stdout.splitlines()
+                              if line.startswith("|"))
+            publish(name, table, command=cmd.removeprefix("capture "))
+
+
+def _here(arg: str) -> str:
+    """A repository path (sweeps/, benchmarks/) made absolute, so this runs from anywhere;
+    logs stay relative to the working folder."""
+    for top in ("sweeps/", "benchmarks/"):
+        if arg.startswith(top) and (ROOT / arg).exists():
+            return str(ROOT / arg)
+    return arg
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("names", nargs="*", metavar="NAME", help="tables to make")
+    ap.add_argument("--list", action="store_true", help="list every table and its cost")
+    ap.add_argument("--cheap", action="store_true", help="make every table of <= 10 minutes")
+    ap.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
+    ap.add_argument("--pending", action="store_true",
+                    help="mark every table not yet made with its one line")
+    ap.add_argument("--workers", type=int, default=1)
+    args = ap.parse_args()
+    if args.list:
+        for name, r in RECIPES.items():
+            print(f"{name:<26} ~{r.minutes:>3} min{'' if r.cheap else '  (expensive)'}")
+        for name, how in ELSEWHERE.items():
+            print(f"{name:<26} made by {how}")
+        return 0
+    if args.pending:
+        for name in [*RECIPES, *ELSEWHERE]:
+            for table in WRITES.get(name, (name,)):
+                if not (tables_dir() / f"{table}.md").exists():
+                    how = ELSEWHERE.get(name) or f"~{RECIPES[name].minutes} min with one worker"
+                    pending(table, how)
+        return 0
+    made_by = {t: r for r, tables in WRITES.items() for t in tables}
+    names = [made_by.get(n, n) for n in args.names] or \
+        ([n for n, r in RECIPES.items() if r.cheap] if args.cheap else [])
+    names = list(dict.fromkeys(names))
+    unknown = [n for n in names if n not in RECIPES and n != "headline"]
+    if unknown or not names:
+        print(f"regenerate: {'unknown table ' + ', '.join(unknown) if unknown else 'no table'}"
+              f"; expected some of: {', '.join(RECIPES)}", file=sys.stderr)
+        return 2
+    for name in names:
+        if name == "headline":
+            if not args.dry_run:
+                publish_headline()
+            continue
+        run(name, args.workers, args.dry_run)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
