@@ -136,3 +136,19 @@ def test_the_layers_picture_is_drawn_from_the_code(generate) -> None:
     assert len(contracts) >= 5
     for c in contracts:
         assert c["name"] in text
+
+
+def test_the_readme_headline_table_is_the_published_one() -> None:
+    """README.md's results table is the one the script wrote (docs/results/tables/headline.md),
+    links pointing into docs/: never edited by hand."""
+    import sys
+
+    sys.path.insert(0, str(ROOT / "benchmarks" / "report"))
+    from regenerate import readme_table
+
+    published = (ROOT / "docs" / "results" / "tables" / "headline.md").read_text("utf-8")
+    table = "\n".join(line for line in published.splitlines()
+                      if not line.startswith("*Made by")).strip()  # (or the pending line)
+    readme = (ROOT / "README.md").read_text("utf-8")
+    block = readme.split("<!-- headline:start -->\n", 1)[1].split("<!-- headline:end -->")[0]
+    assert block.strip() == readme_table(table).strip()

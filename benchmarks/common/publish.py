@@ -77,12 +77,13 @@ def publish(name: str, table: str, *, command: str | None = None) -> Path:
     return path
 
 
-def pending(name: str, command: str) -> Path:
-    """The line a results page shows until ``NAME.md`` is made."""
+def pending(name: str, command: str, note: str = "") -> Path:
+    """The one line a results page shows until ``NAME.md`` is made: the command that makes
+    it."""
     path = tables_dir() / f"{name}.md"
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(f"*Table not yet regenerated: `python benchmarks/report/regenerate.py "
-                    f"{name}` ({command}).*\n", "utf-8")
+    path.write_text(f"*Table not yet regenerated: `{command}`{f' ({note})' if note else ''}.*\n",
+                    "utf-8")
     return path
 
 
@@ -90,12 +91,13 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("source", nargs="?", help="a Markdown file holding the table")
     ap.add_argument("--name", required=True, help="the table's name (NAME.md)")
-    ap.add_argument("--command", help="the command that made the source")
+    ap.add_argument("--command", help="the command that made (or will make) the table")
+    ap.add_argument("--note", default="", help="with --pending: what it costs")
     ap.add_argument("--pending", action="store_true",
                     help="write the not-yet-regenerated line instead")
     args = ap.parse_args()
     if args.pending:
-        pending(args.name, args.command or "")
+        pending(args.name, args.command or "", args.note)
         return 0
     if not args.source:
         ap.error("a source file, or --pending")

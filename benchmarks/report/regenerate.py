@@ -12,6 +12,7 @@ Output: the tables (``docs/results/tables/NAME.md``, written by the scripts thro
     python benchmarks/report/regenerate.py --cheap             # every one under ~10 minutes
     python benchmarks/report/regenerate.py --dry-run speed     # print the commands only
     python benchmarks/report/regenerate.py --pending           # mark the tables not yet made
+    python benchmarks/report/regenerate.py --tables-only speed # the logs are there
 
 A sweep whose folder already holds its complete logs is reused (``sitframe sweep
 --reuse``). Runs use one worker unless ``--workers K``. The figures of a table depend on the
@@ -208,23 +209,26 @@ def readme_table(table: str) -> str:
 
 #: Tables another script makes on its own (not from here): name -> how.
 ELSEWHERE = {
-    "duel-tuning": "python benchmarks/duel.py report --out duel (docs/results/duel.md)",
-    "duel": "python benchmarks/duel.py report --out duel (docs/results/duel.md)",
+    "duel-tuning": "python benchmarks/duel.py report --out duel",
+    "duel": "python benchmarks/duel.py report --out duel",
 }
 #: The table each sub-table is made with (a recipe may write several tables).
 WRITES = {"speed": ("speed-situations", "speed-clearance", "speed-safety")}
 
 
-def commands(name: str, workers: int) -> list[str]:
-    """The shell commands that make table ``name``, in order."""
+def commands(name: str, workers: int, tables_only: bool = False) -> list[str]:
+    """The shell commands that make table ``name``, in order (``tables_only``: the logs are
+    there; only the table's script)."""
     r = RECIPES[name]
-    out = [f"sitframe run {p} --workers {workers}" for p in r.runs]
-    out += [f"sitframe sweep sweeps/{s}.toml --reuse --workers {workers}" for s in r.sweeps]
+    out = [] if tables_only else [f"sitframe run {p} --workers {workers}" for p in r.runs]
+    if not tables_only:
+        out += [f"sitframe sweep sweeps/{s}.toml --reuse --workers {workers}"
+                for s in r.sweeps]
     return out + list(r.commands)
 
 
-def run(name: str, workers: int, dry_run: bool) -> None:
-    for cmd in commands(name, workers):
+def run(name: str, workers: int, dry_run: bool, tables_only: bool = False) -> None:
+    for cmd in commands(name, workers, tables_only):
         print(f"$ {cmd}", flush=True)
         if dry_run:
             continue
@@ -246,7 +250,7 @@ def run(name: str, workers: int, dry_run: bool) -> None:
 def _here(arg: str) -> str:
     """A repository path (sweeps/, benchmarks/) made absolute, so this runs from anywhere;
     logs stay relative to the working folder."""
-    for top in ("sweeps/", "benchmarks/"):
+    for top in ("sweeps/", "benchmarks/", "docs/"):
         if arg.startswith(top) and (ROOT / arg).exists():
             return str(ROOT / arg)
     return arg
@@ -261,6 +265,8 @@ def main() -> int:
     ap.add_argument("--pending", action="store_true",
                     help="mark every table not yet made with its one line")
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--tables-only", action="store_true",
+                    help="the logs are made: run only the tables' scripts")
     args = ap.parse_args()
     if args.list:
         for name, r in RECIPES.items():
@@ -269,11 +275,20 @@ def main() -> int:
             print(f"{name:<26} made by {how}")
         return 0
     if args.pending:
-        for name in [*RECIPES, *ELSEWHERE]:
+        for name in ["headline", *RECIPES, *ELSEWHERE]:
             for table in WRITES.get(name, (name,)):
-                if not (tables_dir() / f"{table}.md").exists():
-                    how = ELSEWHERE.get(name) or f"~{RECIPES[name].minutes} min with one worker"
-                    pending(table, how)
+                if (tables_dir() / f"{table}.md").exists():
+                    continue
+                if name in ELSEWHERE:
+                    pending(table, ELSEWHERE[name], "after the duel's runs: see the page")
+                elif name == "headline":
+                    pending(table, f"python {Path(__file__).relative_to(ROOT)} headline",
+                            "after the sweeps of the rows")
+                else:
+                    r = RECIPES[name]
+                    pending(table, f"python {Path(__file__).relative_to(ROOT)} {table}",
+                            f"{'expensive: ' if not r.cheap else ''}about {r.minutes} min "
+                            "with one worker")
         return 0
     made_by = {t: r for r, tables in WRITES.items() for t in tables}
     names = [made_by.get(n, n) for n in args.names] or \
@@ -289,7 +304,7 @@ def main() -> int:
             if not args.dry_run:
                 publish_headline()
             continue
-        run(name, args.workers, args.dry_run)
+        run(name, args.workers, args.dry_run, args.tables_only)
     return 0
 
 
