@@ -75,7 +75,8 @@ def rst_to_md(text: str) -> str:
 
 def cell(text: Any) -> str:
     """``text`` fit for one Markdown table cell."""
-    return " ".join(str(text).split()).replace("|", "\\|")
+    text = " ".join(str(text).split()).replace("|", "\\|")
+    return text.replace("<", "&lt;").replace(">", "&gt;")
 
 
 def docstring_sections(doc: str) -> tuple[str, dict[str, str]]:
