@@ -36,7 +36,7 @@ partition entropy rises with c for any data, and the objective J_m always
 falls. Sonar readings form a continuum, not separate groups, so no index of
 compactness or crispness has a stable optimum on them either (sitframe's
 first rule, the smallest relative fuzziness R_f, picked anything from 6 to
-20 from one run seed to the next: README, "Situations").
+20 from one run seed to the next: docs/results/evolving-situations.md).
 
 The rule (``auto_rule = "cardinality"``, the default) reads the **minimum
 cardinality** (Eq. 4.8: the readings of the smallest situation) against c.
@@ -53,7 +53,8 @@ the larger half of ``auto_cs``. ("Stays": one unlucky clustering that
 isolates a few readings early must not end the search.) Candidates with an
 empty cluster do not count. On the
 obstacle-avoidance readings the plateau starts at c = 10-12, which is where
-the fixed-c sweep's frozen rule bases collide least (README). On data made
+the fixed-c sweep's frozen rule bases collide least
+(docs/results/evolving-situations.md). On data made
 of a few well-separated groups the minimum cardinality has no plateau (it
 keeps falling once the groups are split); for such data
 ``auto_rule = "rf"`` takes the crispest partition instead: the c whose

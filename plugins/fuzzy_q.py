@@ -235,7 +235,7 @@ class CrispQBehaviour(FuzzyQBehaviour):
     rule is updated, with strength 1, towards ``r + gamma max_a Q(s', a)``
     where ``s'`` is the next dominant situation -- ordinary Q-learning on a
     discretised state. Comparing it with ``fuzzy-q`` under the same config
-    answers "is the fuzzy part needed?" (README, ``sweeps/fuzzy-vs-crisp.toml``).
+    answers "is the fuzzy part needed?" (docs/results/fuzzy-vs-crisp.md).
     """
 
     name = "crisp-q"

@@ -458,7 +458,7 @@ def _finite(x: Any) -> Any:
 
 
 def run_json(result: Any) -> dict[str, Any]:
-    """The ``run --json`` document (keys are a contract; see the README)."""
+    """The ``run --json`` document (keys are a contract; docs/reference/json.md)."""
     from sitframe.contract.records import summary_key  # (light; the parser never needs it)
 
     trials, head = [], summary_key("eval", "")

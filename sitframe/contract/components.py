@@ -4,7 +4,7 @@ Plugins contribute *factories* (usually classes) through the registration
 hooks in :mod:`sitframe.contract.hookspecs`; the core creates one instance per trial
 from the run config and calls the methods below directly in its loop. These
 are :class:`typing.Protocol` classes: implement the methods, no inheritance
-needed. See ``plugins/`` for a worked example of each, and ``docs/plugins.md``.
+needed. See ``plugins/`` for a worked example of each, and ``docs/tutorials/plugins.md``.
 
 Lifecycle, for every kind (each step optional unless the protocol lists it)::
 

@@ -7,7 +7,7 @@ goal task (a config whose components ask for the ``goal-episodes``
 protocol) — that protocol's start/goal pairs and its ``terminated`` test.
 Nothing here imports Gymnasium; the envs build their spaces from it.
 
-Choices the issue leaves open (also in the README, "Gymnasium"):
+Choices the issue leaves open (also in docs/how-to/gymnasium.md):
 
 - **Actions** are the headings (and speeds, if configured) of the config's
   *task behaviour*: the first behaviour with a ``reward``, else the first with

@@ -212,7 +212,7 @@ def select_trial(path: str, selection: dict[str, Any], *,
     ``collision_free_rate``) wins, ties to the lowest index. Choose ``world``
     among the rooms the robot *learns* in, never a test room: a short
     goal-episode run in ``goal-training`` predicts the collision-free rate in
-    unseen rooms far better than :func:`best_trial`'s rank sum (README,
+    unseen rooms far better than :func:`best_trial`'s rank sum (docs/results/learned-arbitration.md,
     "Choosing the avoidance rule base"). The result is kept for the process
     (same log file, unchanged, and same selection), so a sweep whose points
     share the selection runs it once.

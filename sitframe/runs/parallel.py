@@ -542,7 +542,8 @@ class DaskExecutor(PoolExecutor):
         if scheme not in ("tls", "wss", "inproc"):
             print(f"sitframe: warning: --scheduler {address}: plain {scheme}; Dask unpickles "
                   "what it receives, so whoever can reach the scheduler can run code here and "
-                  "on the workers: use tls:// on a shared network (see README)", file=sys.stderr)
+                  "on the workers: use tls:// on a shared network (see docs/how-to/dask.md)",
+                  file=sys.stderr)
 
     @property
     def capacity(self) -> int:  # type: ignore[override]
