@@ -175,8 +175,8 @@ def headline() -> str:
             result = f"converged {np.isfinite(conv).sum()}/{conv.size}"
             unseen = [w for w in ("novel-1", "novel-2") if w in p["per"]]
             coll = np.concatenate([p["per"][w]["collisions_per_1000"] for w in unseen])
-            result += (f"; unseen rooms: median {np.median(coll):g} collisions per 1000 "
-                       f"iterations, {np.mean(coll > BAD):.0%} of the evaluations above "
+            result += (f"; unseen rooms: {np.median(coll):g} collisions / 1000 iterations "
+                       f"(median), {np.mean(coll > BAD):.0%} of the evaluations above "
                        f"{BAD:.0f}")
             band = [p["per"][w]["wall_band_fraction"] for w in p["per"]
                     if "wall_band_fraction" in p["per"][w] and w not in unseen]
