@@ -71,7 +71,8 @@ def publish(name: str, table: str, *, command: str | None = None) -> Path:
     when = datetime.date.today().isoformat()
     path.write_text(f"{table.strip()}\n\n*Made by `{command or this_command()}` (sitframe "
                     f"{__version__}, {_commit()}; numpy {arith['numpy']} with SIMD "
-                    f"{arith['numpy_simd']}, {arith['blas']}) on {when}; regenerate with "
+                    f"{arith['numpy_simd']}, {arith['blas']}) on {when}, load average "
+                    f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; regenerate with "
                     f"`python benchmarks/report/regenerate.py {name}`.*\n", "utf-8")
     print(f"published {path}", file=sys.stderr)
     return path
