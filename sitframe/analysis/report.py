@@ -42,6 +42,7 @@ from sitframe.analysis.report_html import write_report_html
 from sitframe.contract.records import summary_key
 from sitframe.errors import InputError
 from sitframe.logs.reader import Log, TrialLog
+from sitframe.situations.labels import describe_prototypes
 
 __all__ = ["AnalysisReport", "analyse", "log_problems"]
 
@@ -480,7 +481,8 @@ def _situation_figures(W: _Writer, lg: Log, trials: dict[int, TrialLog], chosen:
                      f"Final situations of trial {k}: prototypes (ids as in the log)",
                      lambda s=state, i=ids: CP.plot_prototypes(
                          np.asarray(s["centers"]), spec.angles_deg, max_range=spec.max_range,
-                         labels=[f"id {j}" for j in i]))
+                         labels=[f"id {j}, {w}" for j, w in zip(i, describe_prototypes(
+                             np.asarray(s["centers"]), spec.angles_deg), strict=True)]))
 
 
 def _count(tr: TrialLog, s: int, e: int) -> int:

@@ -44,7 +44,7 @@ from sitframe.runs.loop import (
     simulate,
     stage_seed,
 )
-from sitframe.situations.clustering import describe_prototype
+from sitframe.situations.labels import describe_prototypes
 
 
 def evaluate_log(
@@ -341,11 +341,11 @@ def rule_base_table(result: Any) -> Any:
     rows: Any = range(outs[0][2].rules.size)
     if own := getattr(best, "situations", {}).get("state"):  # evolving: the best trial's ids
         rows, centers = [int(i) for i in own["ids"]], own["centers"]
+    angles = result.sensor_angles_deg
+    descs = describe_prototypes(centers, angles) if centers is not None and \
+        np.ndim(centers) == 2 and len(angles) == np.shape(centers)[1] else []
     for n, i in enumerate(rows):
-        desc = describe_prototype(centers[n], result.sensor_angles_deg) \
-            if centers is not None and len(result.sensor_angles_deg) == np.shape(centers)[1] \
-            else ""
-        row = [f"S{i + 1}", desc]
+        row = [f"S{i + 1}", descs[n] if n < len(descs) else ""]
         for label, out, o in outs:
             votes = Counter(int(t.policies[label].outputs[out].rules[i]) for t in trials
                             if label in t.policies)
