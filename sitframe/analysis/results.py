@@ -435,8 +435,11 @@ def collision_points(pose: np.ndarray, iterations: np.ndarray,
     return np.where(np.isfinite(at).all(axis=1)[:, None], at, after)
 
 
-def _summary(lg: Log) -> np.ndarray:
-    """The root summary table, restricted to trials whose group is in the log."""
+def _summary(lg: Log, *, plugins: bool = False) -> np.ndarray:
+    """The root summary table, restricted to trials whose group is in the log (with
+    ``plugins``, and the plugins' per-trial scalars: :meth:`Log.summary`)."""
+    if plugins:
+        return lg.summary(plugins=True)
     s = lg.summary()
     if s.size:
         s = s[np.isin(s["trial"], lg.trial_indices())]
