@@ -349,9 +349,9 @@ class Log:
         :meth:`summary_frame` read), every per-trial scalar a plugin logged follows as a
         column of its own (:meth:`plugin_scalars`: ``plugins.<plugin>.<key>``,
         ``behaviours.<label>.<key>``), restricted to the trials whose group is in the log;
-        a column is ``bool`` when every trial logged a bool, else ``float64`` with NaN where
-        a trial logged none. The log's own table is not changed: the columns are read from
-        the trial groups.
+        a column is ``bool`` (``int64``) when every trial logged a bool (an integer), else
+        ``float64`` with NaN where a trial logged none. The log's own table is not changed:
+        the columns are read from the trial groups.
         """
         with self._file() as f:
             table = f["summary"][()] if "summary" in f else np.zeros(0, dtype=[("trial", "i4")])
@@ -417,18 +417,21 @@ def _scalars(g: h5py.Group, prefix: str, out: dict[str, bool | int | float]) -> 
 
 def _with_columns(table: np.ndarray, rows: list[dict[str, bool | int | float]]) -> np.ndarray:
     """``table`` with one more column per key of ``rows`` (one row per table row): ``bool``
-    where every row holds a bool, else ``float64`` (NaN where a row holds none)."""
+    (``int64``) where every row holds a bool (an integer), else ``float64`` (NaN where a row
+    holds none)."""
     have = set(table.dtype.names or ())
     keys = [k for k in dict.fromkeys(k for r in rows for k in r) if k not in have]
     if not keys:
         return table
-    kinds = {k: "?" if all(isinstance(r.get(k), bool) for r in rows) else "f8" for k in keys}
+    kinds = {k: "?" if all(isinstance(r.get(k), bool) for r in rows) else "i8" if all(
+        isinstance(r.get(k), int) and not isinstance(r.get(k), bool) for r in rows) else "f8"
+        for k in keys}
     base = [(n, table.dtype[n]) for n in table.dtype.names or ()]
     out = np.zeros(table.size, dtype=base + [(k, kinds[k]) for k in keys])
     for name in table.dtype.names or ():
         out[name] = table[name]
     for k in keys:
-        out[k] = [r[k] if kinds[k] == "?" else float(r.get(k, np.nan)) for r in rows]
+        out[k] = [r[k] if kinds[k] != "f8" else float(r.get(k, np.nan)) for r in rows]
     return out
 
 
