@@ -148,7 +148,7 @@ def test_the_built_in_tables_are_declared_by_their_plugins():
                          "behaviours", "arbiter", "evaluate", "goal", "plugins"]
     assert cfg["evaluate"] == {"worlds": ["training", "novel-1", "novel-2"], "iterations": 1000}
     assert "train" not in cfg["goal"] and cfg["goal"]["episodes"] == 50
-    with pytest.raises(InputError, match=r"f.toml: goal.train: expected one of 'world', 'episodes'"):
+    with pytest.raises(InputError, match=r"f.toml: goal.train: expected one of 'world', 'ep"):
         parse_config('[behaviours.a]\ncomponent = "fuzzy-q"\n[goal]\ntrain = "epsiodes"\n',
                      file="f.toml")
     ref = tables_reference(index, reg)
@@ -314,3 +314,54 @@ def test_every_preset_keeps_its_text():
                                       'worlds = ["goal", "novel-1", "novel-2", "multi-room", '
                                       '"u-trap"]', 'pairs = "random"', "radius = 0.3",
                                       "margin = 0.3", 'train = "episodes"']
+
+
+def test_a_protocol_without_a_table_gets_its_defaults(tmp_path):
+    """No table at all: its parameters' defaults, and the default protocol's worlds."""
+    import numpy as np
+
+    from sitframe import Proposal, hookimpl
+    from sitframe.contract.config import validate_config
+    from sitframe.runs.experiment import Experiment
+
+    class Twice:
+        name = "twice"
+
+        def __init__(self, *, length: int = 7) -> None:
+            self.iterations = length
+
+        def episode_starts(self, world, rng, robot):
+            return np.tile(world.start, (2, 1)), None
+
+        def terminated(self, context) -> bool:
+            return False
+
+    class Still:
+        name = "still"
+        evaluation_protocol = "twice"
+
+        def reset(self, rng, n_situations, iterations) -> None:
+            pass
+
+        def propose(self, context):
+            return Proposal(0.0, 0.0)
+
+    class Plugin:
+        @hookimpl
+        def sitframe_protocols(self) -> list:
+            return [Twice]
+
+        @hookimpl
+        def sitframe_behaviours(self) -> list:
+            return [Still]
+
+    pm = get_plugin_manager(plugins=[Plugin()])
+    cfg = validate_config({"experiment": {"stages": ["evaluate"]},
+                           "interpreter": {"component": "fcm", "c": 2},
+                           "behaviours": {"s": {"component": "still"}},
+                           "evaluate": {"worlds": ["novel-1"]}})
+    exp = Experiment(cfg, pm=pm)
+    assert exp.protocol == "twice" and exp.eval_worlds == ["novel-1"]
+    state = {"centers": np.array([[0.5] * 8, [3.0] * 8]), "m": 1.2}
+    (trial,) = exp.run(interpreter_state=state).trials
+    assert trial.episodes["first_iteration"].tolist() == [0, 7]

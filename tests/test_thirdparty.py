@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 from wheel import build_wheel, pip_install
 
+import sitframe
 from sitframe.logs.reader import open_log
 
 PROJECT = Path(__file__).parent / "thirdparty" / "sitframe-thirdparty"
@@ -90,7 +91,10 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Installed:
     assert done.returncode == 0, done.stderr
     env = {k: v for k, v in os.environ.items()
            if k not in ("SITFRAME_TRACEBACK", "SITFRAME_DISABLE_PLUGIN_AUTOLOAD")}
-    env["PYTHONPATH"] = str(site)
+    # the package's folder, then the sitframe this test imports (the tree under test)
+    tree = str(Path(sitframe.__file__).resolve().parents[1])
+    env["PYTHONPATH"] = os.pathsep.join([str(site), tree, *filter(None, [
+        os.environ.get("PYTHONPATH")])])
     (root / "tp.toml").write_text(CONFIG + SPRINTS)
     (root / "defaults.toml").write_text(CONFIG.replace('"tp"', '"defaults"'))
     for case, (good, bad, _msg) in BAD.items():

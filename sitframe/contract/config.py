@@ -392,7 +392,7 @@ def _with_plugin_tables(cfg: dict[str, Any], given: dict[str, Any], index: Plugi
                  *(n for n, t in index.tables.items() if t.always)]:
         if name not in tables:
             tables[name] = index.tables[name].validate({}, file=file)
-    out = {k: cfg[k] for k in _BEFORE_PLUGIN_TABLES}
+    out = {k: cfg[k] for k in _BEFORE_PLUGIN_TABLES if k in cfg}
     out |= {name: tables[name] for name in sorted(tables)}
     out |= {k: v for k, v in cfg.items() if k not in out}
     return out

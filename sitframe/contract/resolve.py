@@ -249,9 +249,13 @@ class Resolved:
         return None
 
     def protocol_worlds(self, name: str) -> list[str]:
-        """The worlds of protocol ``name``'s table, loaded and checked (``check_world``)."""
+        """The worlds of protocol ``name``'s table, loaded and checked (``check_world``); a
+        protocol that declares no table runs in the default protocol's (``[evaluate]``)."""
         proto = self.protocol(name)
         table = self.protocol_table(name)
+        if table is None and name != DEFAULT_PROTOCOL and \
+                DEFAULT_PROTOCOL in self.registry.entries.get("protocol", {}):
+            table = self.protocol_table(DEFAULT_PROTOCOL)  # no table: the default's worlds
         names = self.config.tables.get(table or "", {}).get("worlds")
         if table is None:
             raise InputError(f"the evaluation protocol '{name}' declares no config table, so "
