@@ -25,8 +25,18 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from sitframe import Context, RobotParams, World, hookimpl
+from sitframe import ConfigKey, ConfigTable, Context, RobotParams, World, hookimpl
 from sitframe import params as P
+
+#: The ``[evaluate]`` table: declared here, as a third-party protocol declares its own.
+#: ``always``: every config holds it (it did before protocols declared their tables).
+EVALUATE = ConfigTable("evaluate", (
+    ConfigKey("worlds", "names", ["training", "novel-1", "novel-2"],
+              "the worlds each learning trial's frozen rule base is evaluated in"),
+    ConfigKey("iterations", "integer", 1000, "the length of each evaluation run", lo=1,
+              hi=10_000_000),
+), "The default evaluation: one run of the frozen behaviours from each world's start "
+   "(the frozen protocol).", always=True)
 
 
 class FrozenEvaluation:
@@ -40,6 +50,7 @@ class FrozenEvaluation:
 
     name = "frozen"
     table: ClassVar[str] = "evaluate"
+    config_table: ClassVar[ConfigTable] = EVALUATE
     episodic: ClassVar[bool] = False
 
     def __init__(self, *, iterations: int = 1000) -> None:

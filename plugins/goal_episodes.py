@@ -57,6 +57,9 @@ from typing import Any, ClassVar
 import numpy as np
 
 from sitframe import (
+    ABSENT,
+    ConfigKey,
+    ConfigTable,
     Context,
     InputError,
     RobotParams,
@@ -75,6 +78,32 @@ TRAIN_MODES = ("world", "episodes")
 AGGREGATE_KEYS = ("episodes", "success_rate", "collisions_per_episode", "collision_free_rate",
                   "spl", "spl_shortest", "mean_time_s", "heading_change_per_m",
                   "mean_path_length_m")
+
+
+#: The ``[goal]`` table: declared here, as a third-party protocol declares its own.
+#: ``always``: every config holds it (it did before protocols declared their tables), with
+#: ``train``, ``train_detour`` and ``detour_ratio`` only when given (so that a config's
+#: text, and hash, stays what it was before they existed).
+GOAL = ConfigTable("goal", (
+    ConfigKey("episodes", "integer", 50, "episodes per world", lo=1, hi=100_000),
+    ConfigKey("timeout", "integer", 300, "iterations before an episode is given up", lo=1,
+              hi=10_000_000),
+    ConfigKey("min_distance", "number", 3.0, "the least start-goal distance of random pairs",
+              unit="m", lo=0.0),
+    ConfigKey("worlds", "names", ["goal"], "the worlds a batch of goal episodes runs in"),
+    ConfigKey("pairs", "choice", "random", "random start/goal pairs, or the world's own",
+              choices=PAIR_MODES),
+    ConfigKey("radius", "number", 0.3, "the goal radius of random goals", unit="m", lo=0.0,
+              lo_open=True),
+    ConfigKey("margin", "number", 0.1, "clearance beyond the robot's radius at random starts "
+              "and goals", unit="m", lo=0.0),
+    ConfigKey("train", "choice", ABSENT, "how a learning trial runs (default \"world\": from "
+              "the world's start with its [goal])", choices=TRAIN_MODES),
+    ConfigKey("train_detour", "number", ABSENT, "share of a learning trial's pairs drawn as "
+              "detours (default 0)", lo=0.0, hi=1.0),
+    ConfigKey("detour_ratio", "number", ABSENT, "shortest path over straight distance of a "
+              "detour pair (default 1.25)", lo=1.0, lo_open=True),
+), "The goal-episodes protocol's parameters (a goal run's evaluate stage).", always=True)
 
 
 def goal_pairs(
@@ -192,6 +221,7 @@ class GoalEpisodes:
 
     name = "goal-episodes"
     table: ClassVar[str] = "goal"
+    config_table: ClassVar[ConfigTable] = GOAL
 
     def __init__(self, *, episodes: int = 50, timeout: int = 300, min_distance: float = 3.0,
                  pairs: str = "random", radius: float = 0.3, margin: float = 0.1,

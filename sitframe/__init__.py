@@ -42,6 +42,8 @@ _PUBLIC: dict[str, str] = {
     **dict.fromkeys(("Context", "Proposal", "Transition", "StepRecord", "RunInfo",
                      "TrialResult", "RunContext", "TrialInfo", "SensorSpec", "LearnedPolicy",
                      "PolicyOutput"), "contract.records"),
+    # config tables a plugin declares
+    **dict.fromkeys(("ConfigKey", "ConfigTable", "ABSENT", "REQUIRED"), "contract.tables"),
     # errors
     **dict.fromkeys(("InputError", "PluginError", "PluginFault"), "errors"),
     # worlds, robot and geometry

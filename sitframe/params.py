@@ -28,7 +28,7 @@ import dataclasses
 import inspect
 import math
 import numbers
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any
 
 from sitframe.errors import InputError, InputTypeError, did_you_mean
@@ -257,12 +257,27 @@ def check_params(
 
 # -- declarations ------------------------------------------------------------------------
 
-#: What a :class:`Key` of each kind holds, as the documentation says it.
+class _Marker:
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+    def __repr__(self) -> str:
+        return self.name
+
+
+#: :attr:`Key.default` of a key a table must give.
+REQUIRED = _Marker("REQUIRED")
+#: :attr:`Key.default` of a key that stays out of a config that does not give it.
+ABSENT = _Marker("ABSENT")
+
+
+#: What a :class:`Key` of each kind holds, as the documentation says it (``"any"``: checked
+#: by the component itself).
 KINDS = {"integer": "integer", "number": "number", "numbers": "list of numbers",
          "choice": "string", "true/false": "true/false", "string": "string",
          "text": "string", "path": "string (a path)", "names": "list of names",
          "choices": "list of strings", "table": "table",
-         "trial": "integer, \"best\" or table"}
+         "trial": "integer, \"best\" or table", "any": "any"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -278,10 +293,12 @@ class Key:
         ``"numbers"`` (a list of them), ``"choice"`` (one of ``choices``), ``"choices"``
         (a non-empty list of them), ``"true/false"``, ``"string"`` (non-empty), ``"text"``
         (any string), ``"path"`` (a string, empty for none), ``"names"`` (a list of
-        non-empty strings; non-empty unless ``lo = 0``), ``"table"`` (any table).
+        non-empty strings; non-empty unless ``lo = 0``), ``"table"`` (any table), ``"any"``
+        (not checked here: the component checks it).
     default
         The value a config that leaves the key out gets (:data:`REQUIRED`: none, the key
-        must be given; :data:`ABSENT`: none, the key stays out of the config).
+        must be given; :data:`ABSENT`, the default: none, the key stays out of the config
+        and the component's own default applies).
     doc
         What the key means, in one sentence.
     unit
@@ -297,7 +314,7 @@ class Key:
 
     name: str
     kind: str
-    default: Any = None
+    default: Any = ABSENT
     doc: str = ""
     unit: str = ""
     lo: float | None = None
@@ -314,8 +331,9 @@ class Key:
             integer = kind == "integer"
             if integer and self.hi is not None:  # the upper bound apart: the usual message
                 v = int(number(name, value, lo=self.lo, lo_open=self.lo_open, integer=True))
-                if v > self.hi:
-                    raise InputError(f"expected an integer <= {self.hi}, got {v}", key=name)
+                if v > self.hi or (self.hi_open and v == self.hi):
+                    raise InputError(f"expected an integer {'<' if self.hi_open else '<='} "
+                                     f"{_num(self.hi)}, got {v}", key=name)
                 value = v
             else:
                 checked = number(name, value, lo=self.lo, hi=self.hi, lo_open=self.lo_open,
@@ -369,20 +387,6 @@ def _num(x: float) -> str:
     return str(int(x)) if float(x).is_integer() else f"{x:g}"
 
 
-class _Marker:
-    def __init__(self, name: str) -> None:
-        self.name = name
-
-    def __repr__(self) -> str:
-        return self.name
-
-
-#: :attr:`Key.default` of a key a table must give.
-REQUIRED = _Marker("REQUIRED")
-#: :attr:`Key.default` of a key that stays out of a config that does not give it.
-ABSENT = _Marker("ABSENT")
-
-
 def _names(name: str, value: Any, allow_empty: bool) -> None:
     if not isinstance(value, list) or (not value and not allow_empty):
         raise InputError(f"expected a {'' if allow_empty else 'non-empty '}list of names, "
@@ -396,33 +400,52 @@ def _names(name: str, value: Any, allow_empty: bool) -> None:
 class Table:
     """A config table, declared once: its keys, checked and documented from one place.
 
-    ``free`` tables take keys beyond the declared ones (a component table: the component's
-    parameters, which the component checks).
+    The core's tables are declared so (:mod:`sitframe.contract.config`), and so is a
+    plugin's (its class attribute ``config_table``, :mod:`sitframe.contract.tables`).
+
+    Attributes
+    ----------
+    name
+        The table's name in the config (``[name]``).
+    keys
+        Its keys (:class:`Key`), in the order a config lists them.
+    doc
+        What the table configures, in a sentence or two.
+    free
+        The table takes keys beyond the declared ones (a component table: the component's
+        parameters, which the component checks).
+    always
+        (A plugin's table) fill it into every config, used or not (for tables every config
+        held before plugins declared them: the built-in ``[evaluate]`` and ``[goal]``);
+        default: only into configs that give it or whose components use it.
     """
 
     name: str
-    doc: str
     keys: tuple[Key, ...]
+    doc: str = ""
     free: bool = False
+    always: bool = False
 
     def key(self, name: str) -> Key:
         return next(k for k in self.keys if k.name == name)
 
     def defaults(self) -> dict[str, Any]:
-        """The values a config that leaves keys out gets (a fresh dict)."""
+        """The values a config that leaves keys out gets (a fresh dict, declaration order)."""
         return {k.name: _copy(k.default) for k in self.keys
                 if k.default is not REQUIRED and k.default is not ABSENT}
 
-    def validate(self, table: dict[str, Any], *, file: str | None = None) -> dict[str, Any]:
-        """``table`` with its defaults filled in, every key checked (an :class:`InputError`
-        naming ``file`` and ``<table>.<key>``)."""
+    def validate(self, table: Mapping[str, Any], *, file: str | None = None
+                 ) -> dict[str, Any]:
+        """``table`` with its defaults filled in, every key checked: an unknown key (with a
+        did-you-mean; unless :attr:`free`), a missing required one, a wrong value is an
+        :class:`InputError` naming ``file`` and ``<table>.<key>``."""
         if not self.free:
-            known_keys(table, [k.name for k in self.keys], prefix=self.name, file=file)
+            known_keys(dict(table), [k.name for k in self.keys], prefix=self.name, file=file)
         out = {**self.defaults(), **table}
         for k in self.keys:
             if k.default is REQUIRED and k.name not in out:
-                raise InputError(f"missing '{k.name}' ({k.doc})", file=file,
-                                 key=f"{self.name}.{k.name}")
+                raise InputError(f"missing '{k.name}'" + (f" ({k.doc})" if k.doc else ""),
+                                 file=file, key=f"{self.name}.{k.name}")
             if k.name in out:
                 try:
                     out[k.name] = k.validate(out[k.name])
@@ -432,7 +455,7 @@ class Table:
 
 
 def _copy(value: Any) -> Any:
-    return list(value) if isinstance(value, list) else dict(value) \
+    return list(value) if isinstance(value, list | tuple) else dict(value) \
         if isinstance(value, dict) else value
 
 

@@ -82,6 +82,38 @@ def test_holm_adjustment():
     assert adj[[0, 3, 2, 4]] == pytest.approx([0.04, 0.09, 0.09, 0.5])
 
 
+def _with_plugins(s: np.ndarray, near: np.ndarray, happy: np.ndarray) -> np.ndarray:
+    out = np.zeros(s.size, dtype=s.dtype.descr + [("plugins.obs.near_misses", "f8"),
+                                                  ("behaviours.avoid.happy", "?")])
+    for n in s.dtype.names:
+        out[n] = s[n]
+    out["plugins.obs.near_misses"], out["behaviours.avoid.happy"] = near, happy
+    return out
+
+
+def test_plugin_figures_are_compared_in_a_family_of_their_own():
+    """A plugin's per-trial scalars are metrics (a bool as a share), Holm-adjusted among
+    themselves: the core metrics' verdicts are those of a run without the plugin."""
+    rng = np.random.default_rng(3)
+    a = _summary(rng.normal(1000, 100, 20).round(), rng.poisson(2, 20).astype(float))
+    b = _summary(rng.normal(1100, 100, 20).round(), rng.poisson(2, 20).astype(float))
+    pa = _with_plugins(a, rng.poisson(3, 20), rng.random(20) < 0.2)
+    pb = _with_plugins(b, rng.poisson(9, 20), rng.random(20) < 0.9)
+    core = _compare(["a", "b"], ["a", "b"], [[a], [b]], seed=0)
+    both = _compare(["a", "b"], ["a", "b"], [[pa], [pb]], seed=0)
+    m = {r.key: r for r in both.metrics}
+    near, happy = m["plugins.obs.near_misses"], m["behaviours.avoid.happy"]
+    assert near.family == happy.family == "plugin" and near.different and happy.different
+    assert happy.statistic == "share" and near.statistic == "median"
+    assert near.label == "plugin obs: near_misses" and happy.label == "behaviour avoid: happy"
+    assert [r.key for r in both.metrics][-2:] == [near.key, happy.key]  # after the core's
+    for r in core.metrics:
+        assert m[r.key].family == "core"
+        np.testing.assert_equal(m[r.key].p_holm, r.p_holm)  # (NaN: not tested)
+    assert "2 tested plugin figures" in " ".join(both.table().notes)
+    assert {x["key"]: x["family"] for x in both.to_json()["metrics"]}[near.key] == "plugin"
+
+
 def test_compare_command_on_two_logs(two_runs, tmp_path, capsys):
     a, b = two_runs
     out = tmp_path / "cmp"
@@ -196,9 +228,15 @@ def test_dataframes_and_export(two_runs, tmp_path, capsys, monkeypatch):
     lg = open_log(a)
     s = lg.summary_frame()
     assert list(s["trial"]) == [0, 1] and s["converged"].dtype == bool
+    # a behaviour's per-trial scalars (its trial_data), namespaced, bools as bools
+    assert s["behaviours.avoid.converged"].dtype == bool
+    assert list(s["behaviours.avoid.heading.convergence_iteration"]) == \
+        [lg.trial(k).behaviours["avoid"]["heading/convergence_iteration"] for k in (0, 1)]
     it = lg.iterations_frame()
     assert len(it) == 600 and list(it.columns[:6]) == ["trial", "world", "iteration", "x", "y",
                                                        "theta"]
+    rules = lg.trial(1).behaviours["avoid"]["heading/rule_base"]  # a per-iteration series
+    assert np.array_equal(it[it.trial == 1]["behaviours.avoid.heading.rule_base.2"], rules[:, 2])
     assert np.allclose(it[it.trial == 1][["x", "y"]], lg.trial(1).arrays["pose"][:300, :2])
     assert main(["export", str(a), "--out", str(tmp_path / "csv")]) == 0
     assert capsys.readouterr().out.split() == [str(tmp_path / "csv" / f"{n}.csv") for n in

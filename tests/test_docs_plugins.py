@@ -169,3 +169,33 @@ def test_same_log_with_two_workers(tutorial: Page, monkeypatch: pytest.MonkeyPat
             assert data.keys() == b.plugins[plugin].keys(), plugin
             for key, value in data.items():
                 np.testing.assert_array_equal(value, b.plugins[plugin][key])
+
+
+def test_plugin_data_is_everywhere_a_user_looks(tutorial: Tutorial) -> None:
+    """The observer's and the reward's per-trial scalars are columns of the exported summary,
+    its per-iteration series a column of the iterations, and the report has a section per
+    plugin with its scalars and a plot of the series."""
+    import csv
+
+    export = tutorial.root / "tutorial-export"
+    rows = list(csv.DictReader(open(export / "summary.csv", encoding="utf-8")))
+    log = open_log(tutorial.root / "logs" / "tutorial.h5")
+    for row in rows:
+        t = log.trial(int(row["trial"]))
+        assert int(float(row["plugins.collisions.collisions"])) == \
+            t.plugins["collisions"]["collisions"]
+        assert int(float(row["plugins.bumper.hits"])) == t.plugins["bumper"]["hits"]
+    with open(export / "iterations.csv", encoding="utf-8") as fh:
+        head = next(csv.reader(fh))
+    assert "plugins.collisions.clearance" in head
+    assert "plugins.collisions.iterations" not in head  # an array, not a series
+    report = tutorial.root / "tutorial-report"
+    page = (report / "index.html").read_text("utf-8")
+    for sec in ("Plugin &#x27;collisions&#x27;: what it logged",
+                "Plugin &#x27;bumper&#x27;: what it logged"):
+        assert sec in page
+    index = (report / "index.md").read_text("utf-8")
+    plots = [line for line in index.splitlines() if "series" in line and "clearance" in line]
+    assert len(plots) == 1 and (report / plots[0].split("](")[1].split(")")[0]).stat().st_size
+    scalars = (report / "plugin_collisions_scalars.csv").read_text("utf-8")
+    assert scalars.splitlines()[0] == "Trial,collisions"

@@ -102,10 +102,13 @@ def test_batch_is_deterministic_and_scored():
 def test_episode_config_validation():
     with pytest.raises(InputError, match="pairs"):
         GoalEpisodes(pairs="fixed")
-    # the protocol checks its own table when any run resolves (a goal run or not)
-    cfg = validate_config({"behaviours": {"a": {"component": "fuzzy-q"}},
-                           "goal": {"timeout": 0}})
-    with pytest.raises(InputError, match=r"goal\.timeout.*expected an integer"):
+    # the protocol's table is declared (plugins/goal_episodes.py), so the config checks it,
+    # a goal run or not; and the protocol checks it again when any run resolves
+    with pytest.raises(InputError, match=r"goal\.timeout: expected an integer in \[1, inf\)"):
+        validate_config({"behaviours": {"a": {"component": "fuzzy-q"}}, "goal": {"timeout": 0}})
+    cfg = validate_config({"behaviours": {"a": {"component": "fuzzy-q"}}})
+    cfg["goal"]["pairs"] = "fixed"  # (past the config's check)
+    with pytest.raises(InputError, match=r"goal\.pairs.*expected one of"):
         Resolved.build(cfg, Registry.collect(get_plugin_manager()))
 
 

@@ -217,7 +217,8 @@ def test_prototype_plot_draws_the_layout() -> None:
     V = np.array([ring.read(CORRIDOR, np.array(p), None) for p in ([3, 0.7, 0], [0.5, 0.7, 0])])
     fig = plot_prototypes(V, ring.angles_deg, max_range=ring.max_range)
     ax = fig.axes[1]
-    assert ax.get_title() == "S2: corridor"
+    assert ax.get_title() == "S2: corridor"  # with the end wall close behind
+    assert fig.axes[0].get_title() == "S1: corridor, open behind"  # two corridors told apart
     assert (ax.get_thetamin(), ax.get_thetamax()) == (-180, 180)  # the whole ring is shown
     # the beams' end points sit at the layout's bearings, ranges unchanged
     dots = ax.lines[-2].get_xydata()

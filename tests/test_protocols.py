@@ -147,7 +147,7 @@ def test_a_protocol_breaking_the_contract_is_one_fault(monkeypatch, attr, value,
 
 
 @pytest.mark.parametrize("attr, value, match", [
-    ("table", None, "table is None, expected the name of the config table"),
+    ("table", 3, "table is 3, expected the name of the config table"),
     ("__init__", lambda self, **kw: None, "has no attribute 'iterations'"),
     ("__init__", lambda self, **kw: setattr(self, "iterations", 2.5),
      "iterations is 2.5, expected an integer >= 1"),

@@ -246,16 +246,10 @@ def _registry() -> Any:
     return Registry.collect(get_plugin_manager(), strict=False)
 
 
-def _protocol_for(table: str) -> Any:
-    return next((e.factory for e in _registry().entries["protocol"].values()
-                 if getattr(e.factory, "table", None) == table), None)
-
-
 def config_reference(_arg: str | None = None) -> str:
     """Every table and key of a run config: type, default, unit, range and meaning."""
-    import dataclasses
-
     from sitframe.contract import config as C
+    from sitframe.contract.tables import plugin_tables, tables_reference
     from sitframe.params import declared_params
     from sitframe.sim.robot import RobotParams
 
@@ -270,16 +264,17 @@ def config_reference(_arg: str | None = None) -> str:
         docs: dict[str, str] = {}
         if t is C.ROBOT:
             keys, docs = declared_params(RobotParams), param_docs(RobotParams)
-        elif t is C.GOAL and (protocol := _protocol_for("goal")) is not None:
-            checked = {k.name: k for k in declared_params(protocol)}
-            docs = param_docs(protocol)
-            keys = [dataclasses.replace(checked[k.name], default=k.default, doc=k.doc)
-                    if k.name in checked else k for k in t.keys]
         if keys:
             out += [*key_rows(keys, docs), ""]
         if t.free and t not in (C.ROBOT, C.PREREQUISITES):
             out += ["Besides these keys, the component's own parameters: "
                     "[components](components.md).", ""]
+    registry = _registry()
+    out += ["## Tables the plugins declare", "",
+            "A plugin's component may declare a table of its own (`config_table`, see the "
+            "plugin guide); these are the tables the plugins installed when this page was "
+            "built declare (`sitframe plugins --tables` prints them for yours).", "",
+            tables_reference(plugin_tables(registry), registry)]
     return "\n".join(out)
 
 

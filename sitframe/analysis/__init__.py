@@ -7,8 +7,9 @@ What it holds
     (:mod:`~sitframe.analysis.report`, :mod:`~sitframe.analysis.report_html`,
     :mod:`~sitframe.analysis.replay_data`), animations (:mod:`~sitframe.analysis.replay`),
     comparisons of runs and sweeps with rank tests (:mod:`~sitframe.analysis.compare`,
-    :mod:`~sitframe.analysis.compare_report`) and tidy exports
-    (:mod:`~sitframe.analysis.export`).
+    :mod:`~sitframe.analysis.compare_report`), tidy exports
+    (:mod:`~sitframe.analysis.export`) and what plugins logged, for the report
+    (:mod:`~sitframe.analysis.plugin_data`).
 
 What it may import
     :mod:`sitframe.logs` (it reads what runs wrote), :mod:`sitframe.contract` (records),

@@ -9,14 +9,16 @@ Colours are from the Okabe-Ito colour-blind-safe palette.
 from __future__ import annotations
 
 import math
+import textwrap
 from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from sitframe.situations.clustering import ClusteringTrials, SweepResult, describe_prototype
+from sitframe.situations.clustering import ClusteringTrials, SweepResult
 from sitframe.situations.fcm import MEASURE_DIRECTIONS
+from sitframe.situations.labels import describe_prototypes
 
 __all__ = ["OKABE_ITO", "plot_auto_c", "plot_measures_by_c", "plot_measures_by_trial",
            "plot_prototypes"]
@@ -89,7 +91,8 @@ def plot_prototypes(
     max_range : float, metres
         The sensor's maximum range = radial axis limit.
     labels : list of str, optional
-        One description per prototype; default :func:`describe_prototype`.
+        One description per prototype; default
+        :func:`~sitframe.situations.labels.describe_prototypes` (no two alike).
     ncols : int, optional
         Columns of the grid (default ``min(c, 4)``).
     first_index : int, default 1
@@ -108,7 +111,7 @@ def plot_prototypes(
         raise ValueError(f"max_range must be > 0 (metres), got {max_range}")
     c = V.shape[0]
     if labels is None:
-        labels = [describe_prototype(v, a) for v in V]
+        labels = describe_prototypes(V, a)
     elif len(labels) != c:
         raise ValueError(f"labels must have one entry per prototype ({c}), got {len(labels)}")
     ncols = min(c, 4) if ncols is None else int(ncols)
@@ -145,7 +148,8 @@ def plot_prototypes(
         ax.tick_params(axis="y", labelsize=_FONT - 2, pad=0)
         ax.set_rlabel_position(-146 if ring else -97)
         ax.grid(lw=0.4, alpha=0.6)
-        ax.set_title(f"S{i + first_index}: {labels[i]}", fontsize=_FONT, pad=2)
+        ax.set_title("\n".join(textwrap.wrap(f"S{i + first_index}: {labels[i]}", 26)),
+                     fontsize=_FONT, pad=2)
     fig.suptitle("Cluster prototypes: range per beam (m), front up, left on the left",
                  fontsize=_FONT + 1)
     return fig

@@ -19,6 +19,13 @@ evaluation world the collisions per 1000 iterations and the coverage of the
 frozen rule base; for goal-episode evaluations the success rate, the share of
 collision-free episodes, SPL, mean time to goal and heading change per metre.
 
+Plugin figures: every per-trial scalar a plugin logged (the summary columns
+``plugins.<plugin>.<key>`` and ``behaviours.<label>.<key>``,
+:meth:`sitframe.logs.reader.Log.plugin_scalars`) is compared the same way, a
+bool as a share, after the core metrics. They are a family of their own for
+Holm's adjustment: the core metrics' verdicts do not depend on how much the
+run's plugins log (each family holds its error rate at 5 %).
+
 Two logs are two runs: the test asks whether *these runs'* trials differ.
 Trials of one run share its situations (the clustering of its seed), so two
 runs of one setting with different seeds differ more often than chance
@@ -79,9 +86,11 @@ class MetricResult:
     p : float
         Rank-test p-value across runs (NaN if fewer than two runs have data).
     p_holm : float
-        ``p`` Holm-adjusted over the metrics of the comparison.
+        ``p`` Holm-adjusted over the metrics of its family in the comparison.
     diff : tuple of float or None
         Two runs: (median of run 2 - median of run 1, low, high).
+    family : str
+        ``"core"`` (the metrics above) or ``"plugin"`` (a plugin's per-trial scalar).
     """
 
     key: str
@@ -95,6 +104,7 @@ class MetricResult:
     p_holm: float = math.nan
     diff: tuple[float, float, float] | None = None
     runs: list[int] = field(default_factory=list)  # per compared run: seeds pooled in it
+    family: str = "core"  # "core" or "plugin": Holm adjusts within each
 
     @property
     def different(self) -> bool:
@@ -138,9 +148,15 @@ class Comparison:
                  f"{LEVEL:.0%} bootstrap interval ({RESAMPLES} resamples, percentile method, "
                  f"{unit}); n = trials with a value. p: {self.test}, "
                  f"{'two-sided' if two else 'across all runs'}; Holm-adjusted over the "
-                 f"{sum(np.isfinite(m.p) for m in self.metrics)} tested metrics."]
+                 f"{self._tested('core')} tested metrics"
+                 + (f", and the {self._tested('plugin')} tested plugin figures (the rows "
+                    "named after a plugin or behaviour) among themselves."
+                    if any(m.family == "plugin" for m in self.metrics) else ".")]
         return Table(f"Per run: median (share for convergence) [{LEVEL:.0%} CI] (trials); "
                      f"{self.test} across runs", cols, rows, notes=notes)
+
+    def _tested(self, family: str) -> int:
+        return int(sum(np.isfinite(m.p) for m in self.metrics if m.family == family))
 
     def to_json(self) -> dict[str, Any]:
         """Plain data (NaN as None) for ``--json``."""
@@ -153,6 +169,7 @@ class Comparison:
                      "n": [int(v.size) for v in m.values], "estimate": [f(x) for x in m.estimate],
                      "low": [f(x) for x in m.low], "high": [f(x) for x in m.high],
                      "p": f(m.p), "p_holm": f(m.p_holm), "different": m.different,
+                     "family": m.family,
                      **({"difference": [f(x) for x in m.diff]} if m.diff else {})}
                     for m in self.metrics]}
 
@@ -201,7 +218,17 @@ def trial_metrics(summary: np.ndarray) -> dict[str, tuple[str, str, np.ndarray]]
         for k, lab in _GOAL.items():
             if (key := summary_key("eval", w, k, sep=".")) in names:
                 out[key] = (f"{w}: {lab} (goal episodes)", "median", col(key))
+    for name in names:  # plugins' per-trial scalars (Log.summary(plugins=True))
+        if name.startswith(PLUGIN_PREFIXES):
+            kind, owner, key = name.split(".", 2)
+            share = summary[name].dtype.kind == "b"
+            out[name] = (f"{kind[:-1]} {owner}: {key}", "share" if share else "median",
+                         col(name))
     return out
+
+
+#: Summary columns that are plugins' per-trial scalars (the plugin family of metrics).
+PLUGIN_PREFIXES = ("plugins.", "behaviours.")
 
 
 def _boot(runs: list[list[np.ndarray]], statistic: str,
@@ -297,13 +324,18 @@ def _compare(names: list[str], sources: list[str], tables: list[list[np.ndarray]
     clustered = all(len(t) >= 2 for t in tables)
     per = [[trial_metrics(s) for s in t] for t in tables]
     keys = list(dict.fromkeys(k for run in per for m in run for k in m))
+    keys = [k for k in keys if not k.startswith(PLUGIN_PREFIXES)] + \
+        [k for k in keys if k.startswith(PLUGIN_PREFIXES)]  # the core metrics first
     metrics = []
     for k in keys:
         label, statistic = next((m[k][0], m[k][1]) for run in per for m in run if k in m)
         runs = [[m[k][2][np.isfinite(m[k][2])] for m in run if k in m] for run in per]
         metrics.append(_metric(k, label, statistic, runs, clustered, rng))
-    for m, ph in zip(metrics, _holm(np.array([m.p for m in metrics])), strict=True):
-        m.p_holm = float(ph)
+        metrics[-1].family = "plugin" if k.startswith(PLUGIN_PREFIXES) else "core"
+    for family in ("core", "plugin"):
+        ms = [m for m in metrics if m.family == family]
+        for m, ph in zip(ms, _holm(np.array([m.p for m in ms])), strict=True):
+            m.p_holm = float(ph)
     test = "Mann-Whitney U" if len(names) == 2 else "Kruskal-Wallis"
     return Comparison(names, sources, test, metrics, unit="run" if clustered else "trial")
 
@@ -332,7 +364,7 @@ def compare_logs(paths: list[str | os.PathLike[str]], *, seed: int = 0) -> Compa
     tables = []
     for p in paths:
         lg = as_log(p)
-        s = _summary(lg)
+        s = _summary(lg, plugins=True)
         if s.size == 0:
             raise InputError("the log has no finished trial to compare", file=lg.path,
                              key="summary")
@@ -360,7 +392,8 @@ def compare_sweeps(folders: list[str | os.PathLike[str]], *, seed: int = 0) -> C
     if len(folders) < 2:
         raise InputError(f"compare needs at least two sweep folders, got {len(folders)}",
                          key="LOG")
-    tables = [[_summary(as_log(p["log"])) for p in read_sweep(f)[1]] for f in folders]
+    tables = [[_summary(as_log(p["log"]), plugins=True) for p in read_sweep(f)[1]]
+              for f in folders]
     src = [os.fspath(f) for f in folders]
     names = _run_names(src)
     sources = [f"{len(t)} point(s) of {s}, pooled" for t, s in zip(tables, src, strict=True)]
@@ -405,7 +438,7 @@ def compare_sweep(folder: str | os.PathLike[str], *, seed: int = 0) -> Compariso
     axes = [k for k in keys if k != SEED_KEY]
     groups: dict[tuple[str, ...], list[np.ndarray]] = {}
     for p in points:
-        s = _summary(as_log(p["log"]))
+        s = _summary(as_log(p["log"]), plugins=True)
         groups.setdefault(tuple(p[k] for k in axes), []).append(s)
     names = [", ".join(f"{k.rsplit('.', 1)[-1]}={v}" for k, v in zip(axes, g, strict=True))
              or "all" for g in groups]

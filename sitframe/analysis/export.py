@@ -3,7 +3,10 @@
 ``summary`` (one row per trial), ``iterations`` (one row per iteration of
 every learning trial, with a ``trial`` column) and ``evaluations`` (one row
 per iteration of every frozen-policy evaluation, with ``trial`` and
-``world``). Needs pandas (``pip install 'sitframe[pandas]'``); Parquet also
+``world``). What plugins logged is in them too: every per-trial scalar as a
+``summary`` column, every per-iteration series as columns of ``iterations``
+(or ``evaluations``), named ``plugins.<plugin>.<key>`` or
+``behaviours.<label>.<key>``. Needs pandas (``pip install 'sitframe[pandas]'``); Parquet also
 needs pyarrow (``'sitframe[parquet]'``).
 """
 

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import tempfile
 import time
@@ -42,6 +43,7 @@ from sitframe.analysis.report_html import write_report_html
 from sitframe.contract.records import summary_key
 from sitframe.errors import InputError
 from sitframe.logs.reader import Log, TrialLog
+from sitframe.situations.labels import describe_prototypes
 
 __all__ = ["AnalysisReport", "analyse", "log_problems"]
 
@@ -251,6 +253,7 @@ def analyse(
         if idx:
             _learning_section(W, lg, rep, trials, idx, get, window, path_iterations,
                               radius, LP)
+            _plugin_sections(W, lg, {k: get(k) for k in idx})
         rep.seconds = time.perf_counter() - t0
         write_report_html(rep, lg, {k: get(k) for k in idx}, W.tables)
         rep.seconds = time.perf_counter() - t0
@@ -361,6 +364,36 @@ def _learning_section(W: _Writer, lg: Log, rep: AnalysisReport, trials: Any, idx
         _situation_figures(W, lg, {k: get(k) for k in idx}, chosen, worlds, radius)
     for k in chosen:
         _trial_figures(W, lg, get(k), worlds, window, path_iterations, radius, LP)
+
+
+def _plugin_sections(W: _Writer, lg: Log, trials: dict[int, TrialLog]) -> None:
+    """A section per plugin (and per behaviour) that logged per-trial data: what it logged,
+    its per-trial scalars, a figure of each per-iteration series
+    (:mod:`sitframe.analysis.plugin_data`)."""
+    from sitframe.analysis import plugin_data as PD  # matplotlib: start-up time
+
+    stems: set[str] = set()
+    for j, owner in enumerate(PD.owners(lg, trials)):
+        sec = owner.title
+        stem = f"{owner.kind[:-1]}_{_safe(owner.name)}"
+        stem = stem if stem not in stems else f"{stem}_{j}"  # (two names alike as files)
+        stems.add(stem)
+        W.table(sec, f"{stem}_logged", f"What {owner.kind[:-1]} '{owner.name}' logged, key by "
+                "key", lambda o=owner: PD.inventory(o, trials))
+        if (t := PD.scalar_table(owner, trials)) is not None:
+            W.table(sec, f"{stem}_scalars", f"Per-trial scalars of {owner.kind[:-1]} "
+                    f"'{owner.name}' (columns {owner.kind}.{owner.name}.<key> of the summary "
+                    "table: sitframe export, compare)", lambda t=t: t)
+        for i, (key, values) in enumerate(PD.series(owner, trials).items()):
+            what = f"{owner.kind[:-1]} '{owner.name}': {key}"
+            W.figure(sec, f"{stem}_series{i}_{_safe(key)}.png",
+                     f"Per-iteration series {key} of {owner.kind[:-1]} '{owner.name}'",
+                     lambda k=key, v=values, w=what: PD.plot_series(w, k, v))
+
+
+def _safe(name: str) -> str:
+    """``name`` as part of a file name."""
+    return re.sub(r"[^A-Za-z0-9_-]+", "_", name).strip("_") or "_"
 
 
 def _reward_label(tr: TrialLog) -> str:
@@ -480,7 +513,8 @@ def _situation_figures(W: _Writer, lg: Log, trials: dict[int, TrialLog], chosen:
                      f"Final situations of trial {k}: prototypes (ids as in the log)",
                      lambda s=state, i=ids: CP.plot_prototypes(
                          np.asarray(s["centers"]), spec.angles_deg, max_range=spec.max_range,
-                         labels=[f"id {j}" for j in i]))
+                         labels=[f"id {j}, {w}" for j, w in zip(i, describe_prototypes(
+                             np.asarray(s["centers"]), spec.angles_deg), strict=True)]))
 
 
 def _count(tr: TrialLog, s: int, e: int) -> int:

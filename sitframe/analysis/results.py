@@ -45,10 +45,10 @@ from sitframe.situations.clustering import (
     SELECTION_RULE,
     ClusteringTrials,
     SweepResult,
-    describe_prototype,
     rank_trials,
 )
 from sitframe.situations.fcm import MEASURE_DIRECTIONS
+from sitframe.situations.labels import describe_prototypes
 
 __all__ = [
     "CollisionIntervals",
@@ -130,11 +130,13 @@ def robot_radius(log: LogLike) -> float:
 
 
 def situation_labels(log: LogLike, *, numbered: bool = True) -> list[str]:
-    """One short label per situation, derived from the fitted prototypes.
+    """One short label per situation, derived from the fitted prototypes, no two alike.
 
-    Uses :func:`sitframe.situations.clustering.describe_prototype` on
-    ``/cluster/state/centers`` with the log's sensor angles. Without prototypes
-    (another interpreter) the labels are just ``S1 ... Sc``.
+    Uses :func:`sitframe.situations.labels.describe_prototypes` on
+    ``/cluster/state/centers`` with the log's sensor angles (each prototype's shape,
+    with the open sides, the nearest direction, how close and at last a number where
+    two would read alike). Without prototypes (another interpreter) the labels are just
+    ``S1 ... Sc``. Labels are derived here, at analysis time; they are not in the log.
 
     Parameters
     ----------
@@ -155,7 +157,7 @@ def situation_labels(log: LogLike, *, numbered: bool = True) -> list[str]:
     angles = sensor_angles(lg)
     if centers.ndim != 2 or centers.shape[1] != angles.size:
         return [f"S{i + 1}" for i in range(centers.shape[0])]
-    words = [describe_prototype(v, angles) for v in centers]
+    words = describe_prototypes(centers, angles)
     return [f"S{i}: {w}" if numbered else w for i, w in enumerate(words, start=1)]
 
 
@@ -433,8 +435,11 @@ def collision_points(pose: np.ndarray, iterations: np.ndarray,
     return np.where(np.isfinite(at).all(axis=1)[:, None], at, after)
 
 
-def _summary(lg: Log) -> np.ndarray:
-    """The root summary table, restricted to trials whose group is in the log."""
+def _summary(lg: Log, *, plugins: bool = False) -> np.ndarray:
+    """The root summary table, restricted to trials whose group is in the log (with
+    ``plugins``, and the plugins' per-trial scalars: :meth:`Log.summary`)."""
+    if plugins:
+        return lg.summary(plugins=True)
     s = lg.summary()
     if s.size:
         s = s[np.isin(s["trial"], lg.trial_indices())]

@@ -180,7 +180,10 @@ def build_parser() -> argparse.ArgumentParser:
                     formatter_class=_Formatter)
 
     command("presets", "list the shipped experiment presets")
-    command("plugins", "list the plugins found and the components they register")
+    command("plugins", "list the plugins found and the components they register").add_argument(
+        "--tables", action="store_true",
+        help="print the config tables the plugins declare (keys, types, defaults, ranges) "
+             "as Markdown")
     for name, module in EXTRA_COMMANDS.items():
         mod = pkgutil.resolve_name(module)
         sp = command(name, mod.HELP, description=mod.__doc__)
@@ -413,7 +416,7 @@ def _prepare_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
     _count("trials", args.trials)
     _count("iterations", args.iterations)
     _count("seed", args.seed, lo=0)
-    cfg, source, base_dir = load_config(args.experiment)
+    cfg, source, base_dir = load_config(args.experiment, plugin_folders=bool(args.plugins_dir))
     e = cfg["experiment"]
     for key in ("trials", "seed", "world", "iterations", "clusters_from"):
         val = getattr(args, key)
@@ -587,16 +590,25 @@ def cmd_presets() -> int:
 
 def cmd_plugins(args: argparse.Namespace) -> int:
     from sitframe.contract.pluginmanager import Registry, get_plugin_manager
+    from sitframe.contract.tables import plugin_tables, tables_reference
 
     pm = get_plugin_manager(plugins_dirs=args.plugins_dir)
     reg = Registry.collect(pm, strict=False)  # list everything, clashes marked
+    tables = plugin_tables(reg, strict=False)
+    if args.tables:
+        print(tables_reference(tables, reg))
+        return 0
     for info, comps in reg.plugins_table():
         print(info.describe())
         for kind, names in comps.items():
             print(f"    {kind:12} {', '.join(names)}")
+        own = sorted({t for t, owners in tables.owners.items()
+                      for _k, _n, plugin in owners if plugin == info.name})
+        if own:
+            print(f"    {'table':12} {', '.join(f'[{t}]' for t in own)}")
         if not comps:
             print("    (observer hooks only)")
-    for msg in [*getattr(pm, "sitframe_clashes", []), *reg.clashes]:
+    for msg in [*getattr(pm, "sitframe_clashes", []), *reg.clashes, *tables.clashes]:
         print(f"CLASH: {msg}")
     return 0
 

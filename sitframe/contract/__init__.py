@@ -6,7 +6,9 @@ What it holds
     SituationInterpreter, Reward, Behaviour, Arbiter, EvaluationProtocol),
     :mod:`~sitframe.contract.records` (the immutable records that cross the plugin
     boundary), :mod:`~sitframe.contract.config` (the typed run config: TOML files and
-    presets validated), :mod:`~sitframe.contract.pluginmanager` (discovery by entry points
+    presets validated), :mod:`~sitframe.contract.tables` (the config tables plugins declare:
+    checked, filled in, logged and listed like the core's),
+    :mod:`~sitframe.contract.pluginmanager` (discovery by entry points
     and plugin folders, the component registry), :mod:`~sitframe.contract.resolve` (a
     config resolved against the registry into fresh, bound components), and
     :mod:`~sitframe.contract.checks` (the contract enforced: protocol checks at creation,

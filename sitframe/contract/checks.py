@@ -35,7 +35,7 @@ REQUIRED: dict[str, tuple[str, ...]] = {
     "reward": ("__call__",),
     "behaviour": ("reset", "propose"),
     "arbiter": ("combine",),
-    "protocol": ("episode_starts", "terminated", "table", "iterations"),
+    "protocol": ("episode_starts", "terminated", "iterations"),
 }
 
 #: The members of :data:`REQUIRED` that are attributes (the rest are methods).
@@ -128,13 +128,14 @@ def check_protocol(obj: Any, origin: Origin, *, needs: tuple[str, ...] = ()) -> 
             raise PluginError(f"{origin}: '{member}' is not a method")
     _check_signatures(obj, origin)
     if origin.kind == "protocol":
-        it, table = obj.iterations, obj.table
+        it, table = obj.iterations, getattr(obj, "table", None)
         if isinstance(it, bool) or not isinstance(it, int | np.integer) or it < 1:
             raise PluginError(f"{origin}: iterations is {it!r}, expected an integer >= 1 (the "
                               "episodes' iteration limit)")
-        if not isinstance(table, str) or not table:
+        if table is not None and (not isinstance(table, str) or not table):
             raise PluginError(f"{origin}: table is {table!r}, expected the name of the config "
-                              "table of its parameters")
+                              "table of its parameters (or no attribute 'table': a protocol "
+                              "with no table, or one declared by config_table)")
 
 
 def _check_signatures(obj: Any, origin: Origin) -> None:

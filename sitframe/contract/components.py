@@ -254,8 +254,12 @@ class EvaluationProtocol(Protocol):
 
     A run uses the protocol a component names in its class attribute
     ``evaluation_protocol``, else ``frozen`` (``plugins/frozen_evaluation.py``).
-    The protocol is created from the config table :attr:`table` (its keys but
-    ``worlds``); the evaluate stage runs one *batch* of episodes in each world
+    The protocol is created from its config table (its keys but ``worlds``), declared
+    with the class attribute ``config_table`` (:class:`sitframe.contract.tables.ConfigTable`:
+    the config checks each key, fills in the defaults and logs the table; the built-in
+    ``[evaluate]`` and ``[goal]`` are declared so) or named by :attr:`table` alone (its
+    keys are then the keyword arguments); a protocol with no table gets its defaults.
+    The evaluate stage runs one *batch* of episodes in each world
     of that table's ``worlds``: a trial of its own in a run that does not
     learn, else an evaluation of each learning trial with that trial's learned
     policies. The core runs every episode through the one simulation loop,
@@ -269,7 +273,10 @@ class EvaluationProtocol(Protocol):
     name
         Unique registry name, e.g. ``"goal-episodes"``.
     table
-        The config table holding the parameters, e.g. ``"goal"``.
+        Optional: the config table holding the parameters, e.g. ``"goal"`` (the name of
+        its ``config_table``, if it declares one).
+    config_table
+        Optional: the declaration of that table (keys, types, defaults, ranges).
     iterations
         The iteration limit of an episode (Gymnasium's *truncation*).
 
@@ -287,7 +294,6 @@ class EvaluationProtocol(Protocol):
     """
 
     name: ClassVar[str]
-    table: ClassVar[str]
     iterations: int
 
     def episode_starts(self, world: World, rng: np.random.Generator,

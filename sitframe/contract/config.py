@@ -35,16 +35,14 @@ thesis's Table A.1):
     behaviour's own parameters.
 ``[arbiter]``
     ``component`` (default ``"single"``) and its parameters.
-``[evaluate]``
-    ``worlds`` (default: the shipped novel rooms and the learning world),
-    ``iterations``: the default ``frozen`` evaluation protocol's.
-``[goal]``
-    ``episodes``, ``timeout``, ``min_distance``, ``worlds``, ``pairs``
-    (``"random"`` or ``"world"``), ``radius``, ``margin``, optionally ``train``
-    (``"world"`` or ``"episodes"``: how a learning trial runs), ``train_detour`` and
-    ``detour_ratio`` (a share of detour pairs in training): the parameters of
-    the ``goal-episodes`` evaluation protocol (``plugins/goal_episodes.py``)
-    that a goal run's evaluate stage uses.
+Plugins' tables
+    Any other table is a plugin's: a component declares it (:mod:`sitframe.contract.tables`),
+    and it is checked, filled in and logged like the core's. The built-in evaluation
+    protocols declare theirs so: ``[evaluate]`` (``worlds``, ``iterations``) is the
+    ``frozen`` protocol's (``plugins/frozen_evaluation.py``), ``[goal]`` (``episodes``,
+    ``timeout``, ``min_distance``, ``worlds``, ``pairs``, ``radius``, ``margin``, optionally
+    ``train``, ``train_detour``, ``detour_ratio``) the ``goal-episodes`` protocol's
+    (``plugins/goal_episodes.py``).
 ``[prerequisites]``
     ``"LOG PATH" = "EXPERIMENT"``: a log this config reads (``clusters_from``,
     ``policy_from.log``) and the experiment (preset name or .toml path) that
@@ -64,16 +62,21 @@ groups and may not be empty, ``.`` or contain ``/``.
 
 Component parameters are checked against the component's signature when the
 run resolves its components (unknown names get a did-you-mean); everything
-else is checked here. Every error is an :class:`~sitframe.errors.InputError`
-naming the file and the key path.
+else is checked here: the core tables, and the plugins' tables that the installed
+(entry-point) plugins declare. A table only a plugin folder (``--plugins-dir``,
+``[plugins] dirs``) declares is checked when the run resolves its components
+(:func:`complete_tables`), as its plugins are loaded only then. Every error is an
+:class:`~sitframe.errors.InputError` naming the file and the key path.
 """
 
 from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import hashlib
 import importlib.resources
+import os
 import re
 import tomllib
 from dataclasses import dataclass
@@ -81,6 +84,8 @@ from pathlib import Path
 from typing import Any
 
 from sitframe import params as P
+from sitframe.contract.pluginmanager import DISABLE_AUTOLOAD_ENV, Registry, get_plugin_manager
+from sitframe.contract.tables import PluginTables, plugin_tables, unknown_table
 from sitframe.errors import InputError, did_you_mean
 from sitframe.params import ABSENT, REQUIRED, Key, Table
 from sitframe.sim.robot import RobotParams
@@ -125,7 +130,7 @@ _REWARD_PARAMS = Key("reward_params", "table", ABSENT, "the reward's parameters 
 #: declared keys; those are checked by the component, and listed with it
 #: (:func:`sitframe.params.declared_params`). ``[robot]`` is the fields of
 #: :class:`~sitframe.sim.robot.RobotParams`, which checks them.
-EXPERIMENT = Table("experiment", "What runs, how long and where.", (
+EXPERIMENT = Table("experiment", doc="What runs, how long and where.", keys=(
     Key("name", "string", "experiment", "the run's name; its log is logs/<name>.h5",
         check=_run_name),
     Key("description", "text", "", "one line on what the run is for"),
@@ -143,11 +148,11 @@ EXPERIMENT = Table("experiment", "What runs, how long and where.", (
     Key("clusters_from", "path", "", "a log whose fitted situations are reused (the collect "
         "and cluster stages are skipped); empty: none"),
 ))
-ROBOT = Table("robot", "The simulated robot: the fields of RobotParams, which checks them.",
-              (), free=True)
-SENSOR = Table("sensor", "The sensor: a component and its parameters.",
-               (_component("pioneer-sonar", "sensor"),), free=True)
-COLLECT = Table("collect", "How the sensor data for the cluster stage is recorded.", (
+ROBOT = Table("robot", doc="The simulated robot: the fields of RobotParams, which checks them.",
+              keys=(), free=True)
+SENSOR = Table("sensor", doc="The sensor: a component and its parameters.",
+               keys=(_component("pioneer-sonar", "sensor"),), free=True)
+COLLECT = Table("collect", doc="How the sensor data for the cluster stage is recorded.", keys=(
     Key("mode", "choice", "trajectory", "follow each room's forced trajectories, wander with "
         "a reflex, or both", choices=("trajectory", "wander", "both")),
     Key("worlds", "names", COLLECTION_ROOMS, "the rooms data is collected in"),
@@ -158,19 +163,19 @@ COLLECT = Table("collect", "How the sensor data for the cluster stage is recorde
     Key("wander_samples", "integer", 300, "readings recorded per room when wandering", lo=1,
         hi=MAX_ITERATIONS),
 ))
-INTERPRETER = Table("interpreter", "The situation interpreter: a component and its "
-                    "parameters.", (_component("fcm", "situation interpreter"),), free=True)
-BEHAVIOUR = Table("behaviours.LABEL", "One table per behaviour, LABEL naming it in the log "
+INTERPRETER = Table("interpreter", doc="The situation interpreter: a component and its "
+                    "parameters.", keys=(_component("fcm", "situation interpreter"),), free=True)
+BEHAVIOUR = Table("behaviours.LABEL", doc="One table per behaviour, LABEL naming it in the log "
                   "and the arbiter (not empty, not '.', no '/'): a component, what it learns "
-                  "from, where it starts from, and its parameters.", (
+                  "from, where it starts from, and its parameters.", keys=(
     _component(REQUIRED, "behaviour"),
     _REWARD,
     _REWARD_PARAMS,
     Key("policy_from", "table", ABSENT, "start from a learned policy: {log = \"path.h5\", "
         "trial = K, behaviour = \"LABEL\"} (the table below)"),
 ), free=True)
-POLICY_FROM = Table("behaviours.LABEL.policy_from", "A learned policy to start from (or be "
-                    "frozen at).", (
+POLICY_FROM = Table("behaviours.LABEL.policy_from", doc="A learned policy to start from (or be "
+                    "frozen at).", keys=(
     Key("log", "string", REQUIRED, "the log that learned it (a path)"),
     Key("trial", "trial", 0, "which trial's policy: an index; \"best\" (the smallest rank sum of "
         "fewest collisions and most coverage, evaluated in the log's learning world); or a "
@@ -178,9 +183,9 @@ POLICY_FROM = Table("behaviours.LABEL.policy_from", "A learned policy to start f
     Key("behaviour", "string", ABSENT, "the behaviour's label in that log (default: this "
         "table's LABEL)"),
 ))
-SELECTION = Table("behaviours.LABEL.policy_from.trial", "The trial whose policy scores "
+SELECTION = Table("behaviours.LABEL.policy_from.trial", doc="The trial whose policy scores "
                   "highest in a batch of evaluation-protocol episodes "
-                  "(sitframe.runs.evaluation.select_trial).", (
+                  "(sitframe.runs.evaluation.select_trial).", keys=(
     Key("world", "string", REQUIRED, "the world the trials are compared in (a learning room, "
         "never a test room)"),
     Key("episodes", "integer", 100, "episodes per trial", lo=1),
@@ -188,49 +193,23 @@ SELECTION = Table("behaviours.LABEL.policy_from.trial", "The trial whose policy 
         "evaluate --goal-episodes --json)"),
     Key("seed", "integer", 0, "seed of the episodes", lo=0),
 ))
-ARBITER = Table("arbiter", "The arbiter that fuses the behaviours' proposals: a component, "
+ARBITER = Table("arbiter", doc="The arbiter that fuses the behaviours' proposals: a component, "
                 "what it learns from, and its parameters.",
-                (_component("single", "arbiter"), _REWARD, _REWARD_PARAMS), free=True)
-EVALUATE = Table("evaluate", "The default evaluation protocol (frozen): each trial's frozen "
-                 "policy run once from each world's start.", (
-    Key("worlds", "names", ["training", "novel-1", "novel-2"], "the evaluation worlds"),
-    Key("iterations", "integer", 1000, "iterations of each frozen run", lo=1,
-        hi=MAX_ITERATIONS),
-))
-#: The goal-episodes protocol's table: its values are checked by the protocol
-#: (``plugins/goal_episodes.py``) when a run resolves; its defaults stay here so that every
-#: config's text, and hash, keeps them (a test holds them equal to the protocol's).
-GOAL = Table("goal", "The goal-episodes evaluation protocol's parameters (used when a "
-             "behaviour names that protocol; checked by it: see the components page).", (
-    Key("episodes", "", 50, "episodes per batch"),
-    Key("timeout", "", 300, "iterations before an episode is cut"),
-    Key("min_distance", "", 3.0, "least straight-line distance of a start/goal pair",
-        unit="m"),
-    Key("worlds", "names", ["goal"], "the worlds of the goal episodes"),
-    Key("pairs", "", "random", "random start/goal pairs, or the world's start and goal"),
-    Key("radius", "", 0.3, "the goal's radius", unit="m"),
-    Key("margin", "", 0.1, "free space beyond the robot's radius at a start or goal",
-        unit="m"),
-    Key("train", "", ABSENT, "how a learning trial runs: in the world, or as a chain of "
-        "episodes"),
-    Key("train_detour", "", ABSENT, "the share of training pairs drawn as detours"),
-    Key("detour_ratio", "", ABSENT, "the least shortest-path / straight-line ratio of a "
-        "detour pair"),
-))
-PREREQUISITES = Table("prerequisites", "Logs this config reads and the experiments that "
+                keys=(_component("single", "arbiter"), _REWARD, _REWARD_PARAMS), free=True)
+PREREQUISITES = Table("prerequisites", doc="Logs this config reads and the experiments that "
                       "make them: \"LOG PATH\" = \"EXPERIMENT\" (a preset name or a .toml "
                       "path); sitframe run makes a missing one first, or reuses a complete "
-                      "one of the same config. Optional; absent unless given.", (), free=True)
-PLUGINS = Table("plugins", "Loose plugin modules. Every *.py file in these folders is "
+                      "one of the same config. Optional; absent unless given.", keys=(), free=True)
+PLUGINS = Table("plugins", doc="Loose plugin modules. Every *.py file in these folders is "
                 "imported, that is run, when the config is loaded: use only configs you "
-                "trust.", (
+                "trust.", keys=(
     Key("dirs", "names", [], "folders of loose plugin modules, relative to the config file",
         lo=0),
 ))
 
 #: Every table of a run config, in the order of a config's text.
 TABLES: tuple[Table, ...] = (EXPERIMENT, ROBOT, SENSOR, COLLECT, INTERPRETER, BEHAVIOUR,
-                             ARBITER, EVALUATE, GOAL, PLUGINS)
+                             ARBITER, PLUGINS)
 #: Defaults of the core sections (from :data:`TABLES`); component tables are free-form.
 DEFAULTS: dict[str, dict[str, Any]] = {
     ("behaviours" if t is BEHAVIOUR else t.name): ({} if t is BEHAVIOUR else t.defaults())
@@ -239,11 +218,11 @@ DEFAULT_PROTOCOL = "frozen"  # the evaluation protocol of a run whose components
 #: Optional sections without defaults (absent from a config that does not use them, so the
 #: config's text, and so its hash, stays what it was before they existed).
 OPTIONAL_SECTIONS = ("prerequisites",)
-#: Optional keys without defaults, for the same reason (checked by the component that reads
-#: them: ``goal.train...`` by the goal-episodes protocol).
-OPTIONAL_KEYS = {t.name: {k.name for k in t.keys if k.default is ABSENT}
-                 for t in (GOAL,)}
-_CORE_TABLES = {t.name: t for t in (EXPERIMENT, COLLECT, EVALUATE, GOAL, PLUGINS)}
+#: The core's tables, in the order a config lists them; plugins' tables go between
+#: ``arbiter`` and ``plugins``, by name.
+_BEFORE_PLUGIN_TABLES = ("experiment", "robot", "sensor", "collect", "interpreter",
+                         "behaviours", "arbiter")
+_CORE_TABLES = {t.name: t for t in (EXPERIMENT, COLLECT, PLUGINS)}
 _CORE_KEYS = {s: set(v) for s, v in DEFAULTS.items() if s not in ("behaviours",)}
 _COMPONENT_SECTIONS = ("sensor", "interpreter", "arbiter")
 #: Keys of a ``[behaviours.LABEL]`` (or ``[arbiter]``) table that the core reads and that
@@ -299,19 +278,13 @@ class CollectSection:
 
 
 @dataclass(frozen=True)
-class EvaluateSection:
-    """``[evaluate]``: the worlds of the default evaluation (``iterations``: the protocol's)."""
-
-    worlds: tuple[str, ...]
-
-
-@dataclass(frozen=True)
 class Config:
     """A validated config, typed: what the core reads (built by :meth:`of`).
 
     The plain dict it is built from stays the config's serial form (the
     log's TOML, sweep keys); ``tables`` holds every table as validated, for
-    plugins that read a table by name (an evaluation protocol's, e.g. ``[goal]``).
+    plugins that read a table by name (an evaluation protocol's, e.g. ``[goal]``,
+    and any table a plugin declares).
     """
 
     experiment: ExperimentSection
@@ -321,7 +294,6 @@ class Config:
     interpreter: Component
     behaviours: dict[str, Component]
     arbiter: Component
-    evaluate: EvaluateSection
     plugin_dirs: tuple[str, ...]
     prerequisites: dict[str, str]
     tables: dict[str, dict[str, Any]]
@@ -329,7 +301,7 @@ class Config:
     @classmethod
     def of(cls, cfg: dict[str, Any]) -> Config:
         """The typed view of a config validated by :func:`validate_config`."""
-        e, c, v = cfg["experiment"], cfg["collect"], cfg["evaluate"]
+        e, c = cfg["experiment"], cfg["collect"]
         return cls(
             ExperimentSection(e["name"], e["description"], int(e["seed"]), int(e["trials"]),
                               int(e["iterations"]), tuple(e["stages"]), e["world"],
@@ -340,19 +312,17 @@ class Config:
             Component.of(cfg["interpreter"]),
             {label: Component.of(t) for label, t in cfg["behaviours"].items()},
             Component.of(cfg["arbiter"]),
-            EvaluateSection(tuple(v["worlds"])),
             tuple(cfg["plugins"]["dirs"]), dict(cfg.get("prerequisites", {})),
             {k: t for k, t in cfg.items() if isinstance(t, dict)})
 
     def worlds(self) -> list[str]:
-        """The worlds the stages name, once each: the learning world, then the collection
-        rooms (if it collects) and the evaluation rooms (if it evaluates)."""
+        """The worlds the core's tables name, once each: the learning world, then the
+        collection rooms (if it collects); the evaluation protocols' worlds are their tables'
+        (:meth:`sitframe.contract.resolve.Resolved.stage_worlds`)."""
         e = self.experiment
         names = [e.world]
         if "collect" in e.stages:
             names += self.collect.worlds
-        if "evaluate" in e.stages:
-            names += self.evaluate.worlds
         return list(dict.fromkeys(names))
 
 
@@ -367,8 +337,13 @@ def preset_text(name: str) -> str:
     return (importlib.resources.files("sitframe.presets") / f"{name}.toml").read_text("utf-8")
 
 
-def load_config(experiment: str) -> tuple[dict[str, Any], str, str]:
+def load_config(experiment: str, *, plugin_folders: bool = False
+                ) -> tuple[dict[str, Any], str, str]:
     """Load a preset name or a TOML path.
+
+    ``plugin_folders``: plugins will also be loaded from folders (``--plugins-dir``), so a
+    table no installed plugin declares is left for the run to check
+    (:func:`complete_tables`); a config's own ``[plugins] dirs`` do the same.
 
     Returns
     -------
@@ -390,7 +365,8 @@ def load_config(experiment: str) -> tuple[dict[str, Any], str, str]:
             text = path.read_text("utf-8")
         except (OSError, UnicodeDecodeError) as exc:
             raise InputError(f"cannot read config: {exc}", file=experiment) from None
-        return parse_config(text, file=str(path)), str(path), str(path.parent)
+        return parse_config(text, file=str(path), pending=plugin_folders), str(path), \
+            str(path.parent)
     presets = list_presets()
     if experiment not in presets:
         raise InputError(
@@ -401,28 +377,53 @@ def load_config(experiment: str) -> tuple[dict[str, Any], str, str]:
         f"preset:{experiment}", "."
 
 
-def parse_config(text: str, *, file: str | None = None) -> dict[str, Any]:
-    """Parse and validate config TOML text; fill in defaults."""
+def parse_config(text: str, *, file: str | None = None, pending: bool = False
+                 ) -> dict[str, Any]:
+    """Parse and validate config TOML text; fill in defaults (``pending``:
+    :func:`validate_config`)."""
     if not text.strip():
         raise InputError("config is empty (expected TOML with at least [behaviours])", file=file)
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"not valid TOML: {exc}", file=file) from None
-    return validate_config(raw, file=file)
+    return validate_config(raw, file=file, pending=pending)
 
 
-def validate_config(raw: dict[str, Any], *, file: str | None = None) -> dict[str, Any]:
-    """Validate a config dict and return a new dict with defaults filled in."""
+def validate_config(raw: dict[str, Any], *, file: str | None = None,
+                    tables: PluginTables | None = None, pending: bool = False
+                    ) -> dict[str, Any]:
+    """Validate a config dict and return a new dict with defaults filled in.
+
+    Parameters
+    ----------
+    raw
+        The config as parsed.
+    file
+        Named in every error.
+    tables
+        The plugins' declared tables (:func:`~sitframe.contract.tables.plugin_tables`);
+        default: those of the installed (entry-point) plugins.
+    pending
+        Keep a table no plugin of ``tables`` declares as it is, for the run to check once
+        it has loaded its plugin folders (:func:`complete_tables`); else it is an unknown
+        section. Also a config whose ``[plugins] dirs`` name folders keeps them.
+    """
+    index = installed_tables() if tables is None else tables
+    pending = pending or bool((raw.get("plugins") or {}).get("dirs")
+                              if isinstance(raw.get("plugins"), dict) else False)
     cfg = copy.deepcopy(DEFAULTS)
     sections = {*DEFAULTS, *OPTIONAL_SECTIONS}
+    plugin_tables_given: dict[str, Any] = {}
     for section, value in raw.items():
+        if section not in sections and not isinstance(value, dict):
+            raise InputError(f"expected a table, got {type(value).__name__}", file=file,
+                             key=section)
         if section not in sections:
-            raise InputError(
-                f"unknown section{did_you_mean(section, sections)}; "
-                f"expected one of {', '.join(sorted(sections))}",
-                file=file, key=section,
-            )
+            if section not in index.tables and not pending:
+                raise unknown_table(section, index, file=file)
+            plugin_tables_given[section] = value
+            continue
         if not isinstance(value, dict):
             raise InputError(f"expected a table, got {type(value).__name__}", file=file,
                              key=section)
@@ -443,15 +444,61 @@ def validate_config(raw: dict[str, Any], *, file: str | None = None) -> dict[str
             cfg[section] = {log: _at(P.string, log, run, file, section)
                             for log, run in value.items()}
         else:
-            P.known_keys(value, sorted(_CORE_KEYS[section] | OPTIONAL_KEYS.get(section, set())),
-                         prefix=section, file=file)
+            P.known_keys(value, sorted(_CORE_KEYS[section]), prefix=section, file=file)
             cfg[section].update(value)
     _check_core(cfg, file)
-    _check_utf8(cfg, file, "")
     if not cfg["behaviours"]:
         raise InputError("no behaviours configured (expected at least one [behaviours.LABEL] "
                          "table with a 'component')", file=file, key="behaviours")
+    cfg = _with_plugin_tables(cfg, plugin_tables_given, index, file)
+    _check_utf8(cfg, file, "")
     return cfg
+
+
+def installed_tables() -> PluginTables:
+    """The tables the installed (entry-point) plugins declare (read once per process and
+    setting of ``SITFRAME_DISABLE_PLUGIN_AUTOLOAD``; bad declarations are found by the run)."""
+    return _installed_tables(bool(os.environ.get(DISABLE_AUTOLOAD_ENV)))
+
+
+@functools.cache
+def _installed_tables(disabled: bool) -> PluginTables:
+    if disabled:
+        return PluginTables()
+    return plugin_tables(Registry.collect(get_plugin_manager(autoload=True), strict=False),
+                         strict=False)
+
+
+def _with_plugin_tables(cfg: dict[str, Any], given: dict[str, Any], index: PluginTables,
+                        file: str | None) -> dict[str, Any]:
+    """``cfg`` with the plugins' tables: those given (checked against their declarations,
+    defaults filled; a table no plugin of ``index`` declares kept as given), those the
+    config's components use and those declared ``always`` (their defaults), in order."""
+    tables = {name: index.tables[name].validate(value, file=file) if name in index.tables
+              else copy.deepcopy(value) for name, value in given.items()}
+    for name in [*index.used(cfg, DEFAULT_PROTOCOL),
+                 *(n for n, t in index.tables.items() if t.always)]:
+        if name not in tables:
+            tables[name] = index.tables[name].validate({}, file=file)
+    out = {k: cfg[k] for k in _BEFORE_PLUGIN_TABLES if k in cfg}
+    out |= {name: tables[name] for name in sorted(tables)}
+    out |= {k: v for k, v in cfg.items() if k not in out}
+    return out
+
+
+def complete_tables(cfg: dict[str, Any], index: PluginTables, *,
+                    file: str | None = None) -> None:
+    """Check ``cfg``'s plugin tables against every plugin's declaration, ``index`` (those
+    of plugin folders too), and fill in those its components use: in place, before the
+    run's config is written. A table no plugin declares is an unknown section."""
+    given = {k: v for k, v in cfg.items() if k not in DEFAULTS and k not in OPTIONAL_SECTIONS}
+    for name in given:
+        if name not in index.tables:
+            raise unknown_table(name, index, file=file)
+    done = _with_plugin_tables({k: v for k, v in cfg.items() if k not in given}, given,
+                               index, file)
+    cfg.clear()
+    cfg.update(done)
 
 
 def _check_utf8(value: Any, file: str | None, key: str) -> None:
@@ -560,7 +607,7 @@ def _check_selection(sel: dict[str, Any], file: str | None, key: str) -> None:
 _CHECK_ORDER = {"experiment": ("name", "description", "seed", "trials", "iterations",
                                "default_speed", "world", "clusters_from", "stages"),
                 "collect": ("mode", "worlds", "speed", "rate_hz", "wander_samples"),
-                "evaluate": ("worlds", "iterations"), "plugins": ("dirs",)}
+                "plugins": ("dirs",)}
 
 
 def _check_core(cfg: dict[str, Any], file: str | None) -> None:

@@ -151,9 +151,12 @@ def sitframe_protocols() -> list[Any]:
     ``"goal-episodes"``); without one, the built-in ``frozen``: one run from
     the start of each ``[evaluate] worlds`` world.
 
-    :return: A list of factories with unique ``name`` attributes and a class
-        attribute ``table``: the config table whose keys (except ``worlds``,
-        the worlds to run a batch of episodes in) are the parameters.
+    :return: A list of factories with unique ``name`` attributes. A protocol's
+        parameters are the keys of its config table (except ``worlds``, the worlds
+        to run a batch of episodes in), which it declares with the class attribute
+        ``config_table`` (a :class:`sitframe.contract.tables.ConfigTable`: the config
+        checks, fills in and logs it) or, in the older form, names with the class
+        attribute ``table``; a protocol with neither gets its defaults.
 
     All implementations are called; their lists are merged.
     """

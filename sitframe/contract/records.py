@@ -282,6 +282,10 @@ class RunContext:
         The config key of the component being bound (``"sensor"``,
         ``"behaviours.avoid"``, ``"behaviours.avoid.reward"``, ``"arbiter"``),
         so one class can serve several roles.
+    tables
+        The run's plugin-declared config tables, as validated with their defaults
+        (table name -> key -> value; :mod:`sitframe.contract.tables`): where a component
+        that declares a ``config_table`` reads it.
     """
 
     robot: Any
@@ -293,6 +297,7 @@ class RunContext:
     iterations: int
     default_speed: float
     component: str = ""
+    tables: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

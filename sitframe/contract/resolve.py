@@ -26,9 +26,10 @@ from sitframe.contract.checks import (
     sensor_geometry,
     sensor_spec_mismatch,
 )
-from sitframe.contract.config import DEFAULT_PROTOCOL, Component, Config
+from sitframe.contract.config import DEFAULT_PROTOCOL, Component, Config, complete_tables
 from sitframe.contract.pluginmanager import Registry
 from sitframe.contract.records import RunContext, SensorSpec
+from sitframe.contract.tables import PluginTables, plugin_tables, protocol_key
 from sitframe.errors import PLUGIN_ERRORS, InputError, PluginError, PluginFault
 from sitframe.sim.robot import RobotParams
 from sitframe.sim.world import World, load_world
@@ -52,6 +53,7 @@ class Resolved:
     origins: dict[str, Origin] = field(default_factory=dict)
     run: RunContext | None = None
     base_dir: str = "."
+    tables: PluginTables = field(default_factory=PluginTables)
 
     @cached_property
     def config(self) -> Config:
@@ -70,6 +72,10 @@ class Resolved:
         first reading that breaks the sensor's spec) fails before anything
         runs or is written: it is a :class:`PluginError` (CLI exit 2), not a
         :class:`PluginFault` of a run (exit 3, a log marked failed).
+
+        ``cfg``'s plugin tables are checked against every declaration of the registry's
+        plugins and completed in place (:func:`~sitframe.contract.config.complete_tables`):
+        the config a run writes holds every table it uses.
         """
         try:
             return cls._build(cfg, registry, file, worlds, base_dir)
@@ -79,13 +85,15 @@ class Resolved:
     @classmethod
     def _build(cls, cfg: dict[str, Any], registry: Registry, file: str | None,
                worlds: tuple[str, ...], base_dir: str) -> Resolved:
+        tables = plugin_tables(registry)
+        complete_tables(cfg, tables, file=file)
         try:
             robot = RobotParams(**cfg["robot"])
         except InputError as exc:
             raise exc.at(file=file, key_prefix="robot") from None
         except (ValueError, TypeError) as exc:
             raise InputError(str(exc), file=file, key="robot") from None
-        res = cls(cfg, registry, file, robot, base_dir=base_dir)
+        res = cls(cfg, registry, file, robot, base_dir=base_dir, tables=tables)
         sensor = res._create("sensor", "sensor", res.config.sensor, bind=False)
         o = res.origins["sensor"]
         try:
@@ -103,20 +111,34 @@ class Resolved:
                               method="n_situations") from None
         e = res.config.experiment
         loaded = {n: res.world(n, "experiment.world" if n == e.world else "worlds")
-                  for n in dict.fromkeys([*res.config.worlds(), *worlds])}
+                  for n in dict.fromkeys([*res.stage_worlds(), *worlds])}
         res.run = RunContext(robot, spec, tuple(res.config.behaviours),
                              None if c is None else int(c), loaded, e.seed, e.iterations,
-                             e.default_speed)
+                             e.default_speed,
+                             tables={t: dict(res.cfg[t]) for t in tables.tables if t in res.cfg})
         res._bind(sensor, "sensor")
         res._check_sensor(sensor, spec, loaded[e.world])
         res._bind(interp, "interpreter")
         res.behaviours()
         res.arbiter()
         for name in registry.names("protocol"):  # a protocol's own table is checked now
-            if getattr(registry.get("protocol", name).factory, "table", None) in \
-                    res.config.tables:
+            if res.protocol_table(name) in res.config.tables:
                 res.protocol(name)
         return res
+
+    def stage_worlds(self) -> list[str]:
+        """The worlds of the run's stages, once each: the learning world, the collection
+        rooms (if it collects) and, if it evaluates, the worlds of the default protocol's
+        table (``[evaluate] worlds``, loaded for every run that evaluates, whichever protocol
+        it uses, as before protocols declared their tables)."""
+        names = self.config.worlds()
+        if "evaluate" in self.config.experiment.stages and \
+                DEFAULT_PROTOCOL in self.registry.entries.get("protocol", {}):
+            table = self.protocol_table(DEFAULT_PROTOCOL)
+            worlds = self.config.tables.get(table or "", {}).get("worlds")
+            if isinstance(worlds, list):
+                names += [w for w in worlds if isinstance(w, str)]
+        return list(dict.fromkeys(names))
 
     def _check_sensor(self, sensor: Any, spec: SensorSpec, world: World) -> None:
         """Read once at the learning world's start: the reading must match the declared spec."""
@@ -210,21 +232,40 @@ class Resolved:
         return names[0] if names else default
 
     def protocol(self, name: str) -> Any:
-        """A fresh evaluation protocol ``name``, created from its config table (but ``worlds``)."""
-        table = self._protocol_table(name)
-        params = {k: v for k, v in self.config.tables.get(table, {}).items() if k != "worlds"}
-        return self._create("protocol", table, Component(name, params))
+        """A fresh evaluation protocol ``name``, created from its config table (but
+        ``worlds``); a protocol that declares no table gets its defaults."""
+        table = self.protocol_table(name)
+        params = {k: v for k, v in self.config.tables.get(table or "", {}).items()
+                  if k != "worlds"}
+        key = table or protocol_key(self.registry.get("protocol", name).factory)
+        return self._create("protocol", key, Component(name, params))
 
-    def _protocol_table(self, name: str) -> str:
-        """The config table holding protocol ``name``'s parameters."""
-        entry = self.registry.get("protocol", name, file=self.file, key="behaviours")
-        return str(getattr(entry.factory, "table", "evaluate"))
+    def protocol_table(self, name: str) -> str | None:
+        """The config table holding protocol ``name``'s parameters (``None``: it has none)."""
+        self.registry.get("protocol", name, file=self.file, key="behaviours")
+        for table, owners in self.tables.owners.items():
+            if ("protocol", name) in ((k, n) for k, n, _p in owners):
+                return table
+        return None
 
     def protocol_worlds(self, name: str) -> list[str]:
-        """The worlds of protocol ``name``'s table, loaded and checked (``check_world``)."""
+        """The worlds of protocol ``name``'s table, loaded and checked (``check_world``); a
+        protocol that declares no table runs in the default protocol's (``[evaluate]``)."""
         proto = self.protocol(name)
-        table = proto.table
-        names = self.config.tables[table].get("worlds")
+        table = self.protocol_table(name)
+        if table is None and name != DEFAULT_PROTOCOL and \
+                DEFAULT_PROTOCOL in self.registry.entries.get("protocol", {}):
+            table = self.protocol_table(DEFAULT_PROTOCOL)  # no table: the default's worlds
+        names = self.config.tables.get(table or "", {}).get("worlds")
+        if table is None:
+            raise InputError(f"the evaluation protocol '{name}' declares no config table, so "
+                             "it names no worlds to run its episodes in; expected a protocol "
+                             "whose table has 'worlds' (or no evaluate stage)", file=self.file,
+                             key="experiment.stages")
+        if names is None:
+            raise InputError(f"missing: the worlds the evaluation protocol '{name}' runs its "
+                             f"episodes in (expected worlds = [\"...\"] in [{table}])",
+                             file=self.file, key=f"{table}.worlds")
         if not isinstance(names, list) or not names or \
                 not all(isinstance(n, str) and n for n in names):
             raise InputError(f"expected a non-empty list of world names, got {names!r}",

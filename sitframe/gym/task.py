@@ -125,7 +125,7 @@ class Task:
         if isinstance(config, dict):
             cfg, source, base = copy.deepcopy(config), None, "."
         else:
-            cfg, source, base = load_config(str(config))
+            cfg, source, base = load_config(str(config), plugin_folders=bool(plugins_dirs))
         label = _task_behaviour(cfg, source)
         table = cfg["behaviours"][label]
         registry = Registry.collect(get_plugin_manager(plugins_dirs=plugins_dirs))

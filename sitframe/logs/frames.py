@@ -4,15 +4,23 @@ Tidy tables: one row per observation, one column per variable.
 
 * :func:`summary_frame` — one row per finished trial (the log's ``/summary``
   table: ``trial`` and every summary scalar, e.g. ``convergence_iteration``,
-  ``eval.novel-1.coverage``).
+  ``eval.novel-1.coverage``; then every per-trial scalar a plugin logged,
+  namespaced by where the log keeps it: ``plugins.<plugin>.<key>`` for a
+  component's ``trial_end`` and an observer's ``sitframe_trial_data``,
+  ``behaviours.<label>.<key>`` for a behaviour's ``trial_data``; see
+  :meth:`sitframe.logs.reader.Log.plugin_scalars`).
 * :func:`iterations_frame` — one row per iteration of every learning trial
   (``trial``, ``iteration``, then the per-iteration arrays, a 2-D array
   spread over named columns: ``x, y, theta`` for the pose the iteration
   started from, ``heading, speed`` for the command, ``contact_x,
   contact_y``, ``reading_<i>``, ``membership_<i>``, ``weight_<label>``,
-  ``reward_<label>``, ``proposal_<label>_heading`` / ``_speed``).
+  ``reward_<label>``, ``proposal_<label>_heading`` / ``_speed``; then every
+  per-iteration series a plugin logged, one row per iteration, as
+  ``plugins.<plugin>.<key>`` / ``behaviours.<label>.<key>``, a 2-D one as
+  ``<name>.<j>``).
 * :func:`evaluations_frame` — the same for the frozen-policy evaluations,
-  with a ``world`` column.
+  with a ``world`` column (plugin series logged for the evaluation:
+  ``plugins.<plugin>.<key>``).
 
 pandas is an optional dependency (``pip install 'sitframe[pandas]'``); a
 clear :class:`ImportError` says so when it is missing. ``sitframe export``
@@ -33,7 +41,8 @@ import numpy as np
 if TYPE_CHECKING:
     from sitframe.logs.reader import Log, TrialLog
 
-__all__ = ["evaluations_frame", "iterations_frame", "summary_frame"]
+__all__ = ["evaluations_frame", "is_series", "iterations_frame", "plugin_series",
+           "summary_frame"]
 
 _NAMED = {"pose": ("x", "y", "theta"), "command": ("heading", "speed"),
           "contact": ("contact_x", "contact_y")}
@@ -50,11 +59,10 @@ def _pandas() -> Any:
 
 
 def summary_frame(log: Log) -> Any:
-    """One row per finished trial: ``trial`` and every summary scalar (NaN = not logged)."""
+    """One row per finished trial: ``trial``, every summary scalar and every plugin's
+    per-trial scalar (NaN = not logged)."""
     pd = _pandas()
-    s = log.summary()
-    if s.size:  # rows of trials whose group is in the log
-        s = s[np.isin(s["trial"], log.trial_indices())]
+    s = log.summary(plugins=True)  # rows of trials whose group is in the log
     frame = pd.DataFrame({n: s[n] for n in s.dtype.names or ()})
     if "converged" in frame:
         frame["converged"] = frame["converged"] > 0.5
@@ -78,8 +86,8 @@ def _columns(name: str, a: np.ndarray, n: int, labels: list[str] | None) -> dict
     return {f"{base}_{j}": a[:, j] for j in range(a.shape[1])}
 
 
-def _frame(arrays: dict[str, np.ndarray], columns: dict[str, Any], weights: list[str] | None
-           ) -> Any:
+def _frame(arrays: dict[str, np.ndarray], columns: dict[str, Any], weights: list[str] | None,
+           series: dict[str, Any] | None = None) -> Any:
     pd = _pandas()
     if "collision" not in arrays:
         return pd.DataFrame()
@@ -94,7 +102,46 @@ def _frame(arrays: dict[str, np.ndarray], columns: dict[str, Any], weights: list
             continue
         if np.ndim(a) >= 1 and np.shape(a)[0] in (n, n + 1):  # pose has L + 1 rows
             cols.update(_columns(name, a, n, weights if name == "weights" else None))
+    for name, a in (series or {}).items():  # plugins' per-iteration series
+        if is_series(a, n):
+            a = np.asarray(a)[:n]
+            cols.update({name: a} if a.ndim == 1 else
+                        {f"{name}.{j}": a[:, j] for j in range(a.shape[1])})
     return pd.DataFrame(cols)
+
+
+#: What a behaviour's group holds besides its ``trial_data``: the learned policy the core
+#: logs (not a plugin's series).
+POLICY_KEYS = ("policy/", "actions/", "units/", "q/")
+
+
+def is_series(a: Any, n: int) -> bool:
+    """Whether ``a`` is a per-iteration series of a trial of ``n`` iterations: a numeric
+    1-D or 2-D array of ``n`` (or ``n + 1``, as the pose) rows."""
+    a = np.asarray(a)
+    return a.ndim in (1, 2) and n > 0 and a.shape[0] in (n, n + 1) and a.dtype.kind in "biuf"
+
+
+def plugin_series(tr: TrialLog, world: str | None = None) -> dict[str, np.ndarray]:
+    """The arrays the plugins logged for a trial (``world``: for its evaluation there), by
+    namespaced name (``plugins.<plugin>.<key>``, ``behaviours.<label>.<key>``); whether
+    each is per iteration is for the caller to check (:func:`is_series`)."""
+    out: dict[str, np.ndarray] = {}
+    scope = f"eval/{world}/" if world is not None else None
+    for plugin, data in tr.plugins.items():
+        for key, v in data.items():
+            if not isinstance(v, np.ndarray):
+                continue
+            if scope is None and not key.startswith("eval/"):
+                out[f"plugins.{plugin}.{key.replace('/', '.')}"] = v
+            elif scope is not None and key.startswith(scope):
+                out[f"plugins.{plugin}.{key[len(scope):].replace('/', '.')}"] = v
+    if scope is None:
+        for label, data in tr.behaviours.items():
+            for key, v in data.items():
+                if isinstance(v, np.ndarray) and not key.startswith(POLICY_KEYS):
+                    out[f"behaviours.{label}.{key.replace('/', '.')}"] = v
+    return out
 
 
 def _weight_labels(log: Log, k: int) -> list[str] | None:
@@ -115,7 +162,8 @@ def iterations_frame(log: Log, trials: Iterable[int] | None = None) -> Any:
     """One row per iteration of the learning trials (default all), with a ``trial`` column."""
     pd = _pandas()
     parts = [_frame(tr.arrays, {"trial": tr.index, "world": tr.world},
-                    _weight_labels(log, tr.index)) for tr in _trials(log, trials)]
+                    _weight_labels(log, tr.index), plugin_series(tr))
+             for tr in _trials(log, trials)]
     return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
 
 
@@ -132,6 +180,6 @@ def _evaluations(tr: TrialLog) -> dict[str, dict[str, np.ndarray]]:
 def evaluations_frame(log: Log, trials: Iterable[int] | None = None) -> Any:
     """One row per iteration of every frozen-policy evaluation (``trial``, ``world``, ...)."""
     pd = _pandas()
-    parts = [_frame(arrays, {"trial": tr.index, "world": w}, None)
+    parts = [_frame(arrays, {"trial": tr.index, "world": w}, None, plugin_series(tr, w))
              for tr in _trials(log, trials) for w, arrays in _evaluations(tr).items()]
     return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()

@@ -342,12 +342,52 @@ class Log:
             return TrialLog(int(g.attrs["index"]), int(g.attrs["seed"]), str(g.attrs["world"]),
                             summary, arrays, behaviours, episodes, plugins, situations)
 
-    def summary(self) -> np.ndarray:
-        """The root summary table (structured array, one row per finished trial)."""
+    def summary(self, *, plugins: bool = False) -> np.ndarray:
+        """The root summary table (structured array, one row per finished trial).
+
+        With ``plugins=True`` (what ``sitframe export``, ``sitframe compare`` and
+        :meth:`summary_frame` read), every per-trial scalar a plugin logged follows as a
+        column of its own (:meth:`plugin_scalars`: ``plugins.<plugin>.<key>``,
+        ``behaviours.<label>.<key>``), restricted to the trials whose group is in the log;
+        a column is ``bool`` (``int64``) when every trial logged a bool (an integer), else
+        ``float64`` with NaN where a trial logged none. The log's own table is not changed:
+        the columns are read from the trial groups.
+        """
         with self._file() as f:
-            if "summary" not in f:
-                return np.zeros(0, dtype=[("trial", "i4")])
-            return f["summary"][()]
+            table = f["summary"][()] if "summary" in f else np.zeros(0, dtype=[("trial", "i4")])
+        if not plugins:
+            return table
+        extra = self.plugin_scalars()
+        if table.size:
+            table = table[np.isin(table["trial"], sorted(extra))]
+        rows = [extra.get(int(k), {}) for k in table["trial"]]
+        return _with_columns(table, rows)
+
+    def plugin_scalars(self) -> dict[int, dict[str, bool | int | float]]:
+        """Trial index -> every per-trial scalar its plugins logged, by namespaced name.
+
+        ``plugins.<plugin>.<key>`` for what a plugin's components returned from
+        ``trial_end`` and its observers from ``sitframe_trial_data``
+        (``/trials/NNNN/plugins/<plugin>/<key>``; an evaluation's as
+        ``plugins.<plugin>.eval.<world>.<key>``), ``behaviours.<label>.<key>`` for what a
+        behaviour (or the learning arbiter, label ``arbiter``) returned from
+        ``trial_data``: the log's path below the trial with ``/`` as ``.``. Scalars are
+        numbers and bools (strings and arrays are not); arrays are in
+        :attr:`TrialLog.plugins` and :attr:`TrialLog.behaviours`. Read from the groups'
+        attributes only, so it is quick for any length of trial.
+        """
+        out: dict[int, dict[str, bool | int | float]] = {}
+        with self._file() as f:
+            for name in _trial_names(f, self.path):
+                g = _trial_group(f, name, self.path)
+                if not isinstance(g, h5py.Group):
+                    continue
+                row: dict[str, bool | int | float] = {}
+                for part in ("plugins", "behaviours"):
+                    if isinstance(g.get(part), h5py.Group):
+                        _scalars(g[part], part, row)
+                out[int(g.attrs.get("index", int(name)))] = row
+        return out
 
     def summary_frame(self) -> Any:
         """The summary table as a pandas DataFrame (needs pandas; see
@@ -362,6 +402,37 @@ class Log:
         from sitframe.logs.frames import iterations_frame  # pandas is optional: loaded on use
 
         return iterations_frame(self, trials)
+
+
+def _scalars(g: h5py.Group, prefix: str, out: dict[str, bool | int | float]) -> None:
+    """The numeric and bool attributes below ``g`` into ``out``, as ``prefix.<path>``."""
+    for k, v in g.attrs.items():
+        v = _attr(v)
+        if isinstance(v, bool | int | float):
+            out[f"{prefix}.{k}"] = v
+    for k, item in g.items():
+        if isinstance(item, h5py.Group):
+            _scalars(item, f"{prefix}.{k}", out)
+
+
+def _with_columns(table: np.ndarray, rows: list[dict[str, bool | int | float]]) -> np.ndarray:
+    """``table`` with one more column per key of ``rows`` (one row per table row): ``bool``
+    (``int64``) where every row holds a bool (an integer), else ``float64`` (NaN where a row
+    holds none)."""
+    have = set(table.dtype.names or ())
+    keys = [k for k in dict.fromkeys(k for r in rows for k in r) if k not in have]
+    if not keys:
+        return table
+    kinds = {k: "?" if all(isinstance(r.get(k), bool) for r in rows) else "i8" if all(
+        isinstance(r.get(k), int) and not isinstance(r.get(k), bool) for r in rows) else "f8"
+        for k in keys}
+    base = [(n, table.dtype[n]) for n in table.dtype.names or ()]
+    out = np.zeros(table.size, dtype=base + [(k, kinds[k]) for k in keys])
+    for name in table.dtype.names or ():
+        out[name] = table[name]
+    for k in keys:
+        out[k] = [r[k] if kinds[k] != "f8" else float(r.get(k, np.nan)) for r in rows]
+    return out
 
 
 def _trial_names(f: h5py.File, path: str) -> list[str]:

@@ -44,7 +44,7 @@ from sitframe.runs.loop import (
     simulate,
     stage_seed,
 )
-from sitframe.situations.clustering import describe_prototype
+from sitframe.situations.labels import describe_prototypes
 
 
 def evaluate_log(
@@ -101,7 +101,7 @@ def evaluate_log(
     if log is None:
         log = open_log(log_path)
         log.check()
-    cfg = validate_config(log.config, file=log_path)
+    cfg = validate_config(log.config, file=log_path, pending=True)  # (checked as it resolves)
     tl = log.trial(trial)
     policies = {label: p for label in tl.behaviours
                 if (p := logged_policy(tl, label, log_path)) is not None}
@@ -145,7 +145,11 @@ def evaluate_log(
     if name is None:
         raise InputError("no component names an evaluation_protocol to run episodes of; "
                          "expected a behaviour such as 'goal'", file=source, key="behaviours")
-    table = res.protocol(name).table
+    table = res.protocol_table(name)
+    if table is None:
+        raise InputError(f"the evaluation protocol '{name}' declares no config table, so "
+                         f"{'--goal-episodes' if goal_episodes else '--iterations'} has "
+                         "nothing to set", file=source, key="behaviours")
     cfg[table] = {**cfg[table], **({"episodes": goal_episodes} if goal_episodes
                                    else {"iterations": iterations})}
     res = Resolved.build(cfg, registry, source)
@@ -288,7 +292,7 @@ def _fusion_config(log_cfg: dict[str, Any], policies: dict[str, LearnedPolicy],
     for section in ("sensor", "interpreter", "robot"):
         fcfg[section] = log_cfg[section]
     fcfg["experiment"]["clusters_from"] = ""
-    return (validate_config(fcfg, file=fsource),
+    return (validate_config(fcfg, file=fsource, pending=True),
             {slot: policies[src]} if src in policies else {}, fsource)
 
 
@@ -341,11 +345,11 @@ def rule_base_table(result: Any) -> Any:
     rows: Any = range(outs[0][2].rules.size)
     if own := getattr(best, "situations", {}).get("state"):  # evolving: the best trial's ids
         rows, centers = [int(i) for i in own["ids"]], own["centers"]
+    angles = result.sensor_angles_deg
+    descs = describe_prototypes(centers, angles) if centers is not None and \
+        np.ndim(centers) == 2 and len(angles) == np.shape(centers)[1] else []
     for n, i in enumerate(rows):
-        desc = describe_prototype(centers[n], result.sensor_angles_deg) \
-            if centers is not None and len(result.sensor_angles_deg) == np.shape(centers)[1] \
-            else ""
-        row = [f"S{i + 1}", desc]
+        row = [f"S{i + 1}", descs[n] if n < len(descs) else ""]
         for label, out, o in outs:
             votes = Counter(int(t.policies[label].outputs[out].rules[i]) for t in trials
                             if label in t.policies)

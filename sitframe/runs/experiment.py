@@ -110,7 +110,7 @@ class Experiment:
         self.out = out
         text = to_toml(cfg)
         e = self.config.experiment
-        names = self.config.worlds()
+        names = self.res.stage_worlds()
         #: The run's evaluation protocol (:meth:`Resolved.protocol_name`) and its worlds.
         self.protocol = self.res.protocol_name()
         self.eval_worlds = self.res.protocol_worlds(self.protocol) \

@@ -68,6 +68,7 @@ from sitframe.contract.records import (
     TrialResult,
     summary_key,
 )
+from sitframe.contract.tables import protocol_key
 from sitframe.errors import PLUGIN_ERRORS, InputError, PluginFault, TaskCancelled
 from sitframe.runs.tracker import SituationTracker
 from sitframe.sim.metrics import collisions_per_1000, coverage, path_length
@@ -417,7 +418,7 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
     at_learn = [(lb, beh, rew, _Step(ob, "learn"), _Step(orw, "__call__"))
                 for lb, beh, rew, ob, orw in parts.learners]
     at_end = None if protocol is None else _Step(
-        og.get(protocol.table) or f"protocol '{protocol.name}'", "terminated")
+        og.get(protocol_key(protocol)) or f"protocol '{protocol.name}'", "terminated")
     step_at = at_read
     t = 0
     pose = env.start
@@ -578,7 +579,7 @@ def _training_episodes(res: Resolved, spec: TrialSpec, world: World) -> _Trainin
     proto = res.protocol(str(spec.protocol))
     if not getattr(proto, "train_in_episodes", False):
         return None
-    return _TrainingEpisodes(proto, world, spec.seed, res.robot, res.origins[proto.table],
+    return _TrainingEpisodes(proto, world, spec.seed, res.robot, res.origins[protocol_key(proto)],
                              spec.index)
 
 
@@ -601,8 +602,8 @@ def run_batch(res: Resolved, spec: TrialSpec, *,
     k = spec.index
     with _in_trial(k):
         proto = res.protocol(str(spec.protocol))
-    o = res.origins[proto.table]
-    world = res.world(spec.world, key=f"{proto.table}.worlds")
+    o = res.origins[protocol_key(proto)]
+    world = res.world(spec.world, key=f"{protocol_key(proto)}.worlds")
     episodic = bool(getattr(proto, "episodic", True))
     ss = np.random.SeedSequence(spec.seed % 2**64)
     rng = np.random.default_rng(ss.spawn(1)[0])

@@ -100,7 +100,7 @@ def prepare_experiment(
     (experiment, run_kwargs)
         Call ``experiment.run(**run_kwargs)``.
     """
-    cfg = validate_config(cfg, file=source)
+    cfg = validate_config(cfg, file=source, pending=True)  # (all checked as it resolves)
     dirs = tuple(_resolve_path(d, base_dir) for d in cfg["plugins"]["dirs"]) \
         if config_plugins else ()
     dirs += plugins_dirs
@@ -127,7 +127,7 @@ def prepare_experiment(
         path = _resolve_path(clusters_from, base_dir)
         log = source_log(path, "experiment.clusters_from")
         state = log.interpreter_state()
-        logged_sensor = validate_config(log.config, file=path)["sensor"]
+        logged_sensor = validate_config(log.config, file=path, pending=True)["sensor"]
         if logged_sensor != cfg["sensor"]:
             raise InputError(
                 f"its situations were fitted on readings of sensor {logged_sensor}, but this "
@@ -390,7 +390,7 @@ def prepare_resume(
     log.check()  # never append to a damaged log (checksums catch damaged data too)
     raw = log.config
     try:
-        cfg = validate_config(raw, file=p)
+        cfg = validate_config(raw, file=p, pending=True)  # (all checked as it resolves)
     except InputError as exc:
         raise InputError(f"the log's config is no longer valid: {exc.message}", file=p,
                          key=f"config.{exc.key}" if exc.key else "config") from None

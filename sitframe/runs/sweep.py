@@ -70,11 +70,11 @@ from typing import Any
 from sitframe.contract.config import (
     DEFAULTS,
     META_KEYS,
-    OPTIONAL_KEYS,
     Component,
     load_config,
     validate_config,
 )
+from sitframe.contract.tables import plugin_tables
 from sitframe.errors import InputError, did_you_mean, note
 from sitframe.params import accepted_params, known_keys
 from sitframe.runs.summaries import format_value, summarise_log
@@ -141,7 +141,7 @@ def load_sweep(path: str, *, out: str | None = None, plugins_dirs: tuple[str, ..
     if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_.=-]+", name):
         raise InputError(f"expected a name of letters, digits, '_', '-', '.', got {name!r}",
                          file=path, key="sweep.name")
-    base_cfg, base_source, base_dir = _load_base(head["base"], p, path)
+    base_cfg, base_source, base_dir = _load_base(head["base"], p, path, bool(plugins_dirs))
     fixed: dict[str, Any] = dict(raw.get("set", {}))
     for key, short in (("trials", "experiment.trials"), ("seed", "experiment.seed")):
         if key in head:
@@ -203,14 +203,15 @@ def _check_head(head: dict[str, Any], path: str, out: str | None) -> dict[str, A
     return head
 
 
-def _load_base(base: str, p: Path, path: str) -> tuple[dict[str, Any], str, str]:
+def _load_base(base: str, p: Path, path: str, plugin_folders: bool = False
+               ) -> tuple[dict[str, Any], str, str]:
     """The base experiment: a preset name, or a .toml path relative to the sweep file."""
     base_arg = base
     if base.endswith(".toml") or "/" in base:
         bp = Path(base)
         base_arg = str(bp if bp.is_absolute() else p.parent / bp)
     try:
-        return load_config(base_arg)
+        return load_config(base_arg, plugin_folders=plugin_folders)
     except InputError as exc:
         if exc.file in (None, base_arg) and exc.key is None:
             raise InputError(exc.message, file=path, key="sweep.base") from None
@@ -256,7 +257,7 @@ def check_key(key: str, cfg: dict[str, Any], registry: Any, *, file: str | None 
               where: str = "grid") -> None:
     """Check that dotted ``key`` names a setting of ``cfg`` (the resolved base config).
 
-    Core sections accept their known keys; component tables (sensor,
+    Core sections and plugins' declared tables accept their known keys; component tables (sensor,
     interpreter, arbiter, behaviours.LABEL) accept ``component`` and the
     parameters the component's factory accepts; the arbiter's and a
     behaviour's also the core's keys (reward, reward_params, policy_from)
@@ -283,8 +284,9 @@ def check_key(key: str, cfg: dict[str, Any], registry: Any, *, file: str | None 
             return set(), True
         return accepted_params(entry.factory)
 
-    sections = list(DEFAULTS)
-    if parts[0] not in DEFAULTS:
+    declared = plugin_tables(registry, strict=False).tables
+    sections = [*DEFAULTS, *declared]
+    if parts[0] not in sections:
         fail(sections, "", parts[0])
     sec = parts[0]
     if key in ("sensor", "interpreter", "arbiter") or (
@@ -311,8 +313,10 @@ def check_key(key: str, cfg: dict[str, Any], registry: Any, *, file: str | None 
         return
     if sec == "robot":
         valid, _ = accepted_params(RobotParams)
+    elif sec in declared:  # a plugin's table: the keys it declares
+        valid = {k.name for k in declared[sec].keys}
     else:
-        valid = set(DEFAULTS[sec]) | OPTIONAL_KEYS.get(sec, set())
+        valid = set(DEFAULTS[sec])
     if len(parts) != 2 or parts[1] not in valid:
         fail(valid, f"{sec}.", ".".join(parts[1:]))
 
@@ -391,7 +395,7 @@ def _check_points(sweep: Sweep, registry: Any) -> None:
     cheaply and before any prerequisite run is made."""
     for name, _values, cfg, where in _point_configs(sweep):
         with _at_point(sweep, name, where):
-            cfg = validate_config(cfg, file=where)
+            cfg = validate_config(cfg, file=where, tables=plugin_tables(registry))
             tables = [("sensor", "sensor", cfg["sensor"]),
                       ("interpreter", "interpreter", cfg["interpreter"]),
                       ("arbiter", "arbiter", cfg["arbiter"]),
@@ -412,7 +416,7 @@ def _prepare_points(sweep: Sweep, plugins_dirs: tuple[str, ...]) -> list[Point]:
     for name, values, cfg, where in _point_configs(sweep):
         log = sweep.out / f"{name}.h5"
         with _at_point(sweep, name, where):
-            cfg = validate_config(cfg, file=where)
+            cfg = validate_config(cfg, file=where, pending=True)  # (checked as it resolves)
             exp, kwargs = prepare_experiment(cfg, source=where, base_dir=sweep.base_dir,
                                              out=str(log), plugins_dirs=plugins_dirs)
         # Relative paths in the config resolve from the base config's folder

@@ -4,6 +4,7 @@ What it holds
     :mod:`~sitframe.situations.fcm` (fuzzy c-means, memberships, validity measures),
     :mod:`~sitframe.situations.clustering` (the clustering stage: FCM trials, trial
     selection, sweeps over c, prototype descriptions),
+    :mod:`~sitframe.situations.labels` (labels of a set of situations, no two alike),
     :mod:`~sitframe.situations.events` (situations that change during a trial: the
     events an evolving interpreter reports and the arrays that record them).
 

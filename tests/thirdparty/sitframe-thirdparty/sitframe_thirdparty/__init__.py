@@ -1,0 +1,1 @@
+"""A third-party sitframe plugin package (tests/test_thirdparty.py installs it as a wheel)."""
