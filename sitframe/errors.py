@@ -51,6 +51,25 @@ class InputError(SitframeError, ValueError):
         return type(self)(self.message, file=file or self.file, key=key)
 
 
+class DiskFullError(InputError):
+    """A log could not be written because its disk is full (or the user's quota is used up).
+
+    The message names the folder, what is free there and what the log needs, and says
+    what was kept. ``folder`` and ``free`` (bytes) are kept for callers that write several
+    logs (a sweep) and say what all of them need.
+    """
+
+    def __init__(self, message: str, *, file: str | None = None, key: str | None = None,
+                 folder: str = "", free: int = 0) -> None:
+        super().__init__(message, file=file, key=key)
+        self.folder, self.free = folder, free
+
+    def at(self, *, file: str | None = None, key_prefix: str | None = None) -> InputError:
+        moved = super().at(file=file, key_prefix=key_prefix)
+        return DiskFullError(moved.message, file=moved.file, key=moved.key,
+                             folder=self.folder, free=self.free)
+
+
 class InputTypeError(InputError, TypeError):
     """An :class:`InputError` for a value of the wrong type: also a :class:`TypeError`,
     as numpy and scikit-learn style callers expect."""

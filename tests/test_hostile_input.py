@@ -424,21 +424,22 @@ def test_10_disk_full_mid_run_keeps_the_published_log(tmp_path, capsys, monkeypa
 
     (tmp_path / "c.toml").write_text(SMALL)
     out = tmp_path / "full.h5"
-    real = L.shutil.copyfile
+    real = L.write_bytes
     calls = {"n": 0}
 
-    def copy(a, b):
+    def write(fd, image):
         calls["n"] += 1
         if calls["n"] >= 3:  # after the collect stage is in the log
+            os.close(fd)
             raise OSError(errno.ENOSPC, "No space left on device")
-        return real(a, b)
+        return real(fd, image)
 
-    monkeypatch.setattr(L.shutil, "copyfile", copy)
+    monkeypatch.setattr(L, "write_bytes", write)
     refused(capsys, ["run", tmp_path / "c.toml", "--out", out, "--workers", "1"],
-            "full.h5: --out:", "no space left on device")
+            "full.h5: the disk is full: ", f"{tmp_path} has ", "no finished trial yet")
     log = open_log(out)
     log.check()
-    assert log.has("cluster") and not log.trial_indices()
+    assert log.has("collect") and not log.trial_indices()
     assert not list(tmp_path.glob("*.part")) and not list(tmp_path.glob("*.lock"))
 
 
@@ -446,16 +447,14 @@ def test_13_disk_full_at_start_leaves_nothing(tmp_path, capsys, monkeypatch):
     import sitframe.logs.writer as L
 
     (tmp_path / "c.toml").write_text(SMALL)
-    real = h5py.File
 
-    def full(name, mode="r", *a, **k):
-        if mode == "w":
-            raise OSError(errno.ENOSPC, "No space left on device")
-        return real(name, mode, *a, **k)
+    def full(fd, image):
+        os.close(fd)
+        raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(L.h5py, "File", full)
+    monkeypatch.setattr(L, "write_bytes", full)
     refused(capsys, ["run", tmp_path / "c.toml", "--out", tmp_path / "x.h5", "--workers", "1"],
-            "x.h5: --out:", "No space left")
+            "x.h5: the disk is full:", "nothing was written")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c.toml"]
 
 

@@ -318,12 +318,13 @@ def test_a_full_disk_is_one_clear_refusal_and_keeps_the_published_log(tmp_path, 
         raise OSError(errno.ENOSPC, "No space left on device")
 
     with monkeypatch.context() as m:
-        m.setattr(L.shutil, "copyfile", full)
+        m.setattr(L, "write_bytes", full)
         with pytest.raises(InputError) as e:
             w.stage("collect", {"samples": np.ones(3)})
-    assert e.value.message == ("cannot write the log (no space left on device); the log "
-                                    "keeps its last complete transaction")
-    assert (e.value.file, e.value.key) == (str(path), "--out")
+    assert e.value.message.startswith(f"the disk is full: {tmp_path} has ")
+    assert "the log holds no finished trial yet: make space there and run the command " \
+        "again" in e.value.message
+    assert (e.value.file, e.value.key) == (str(path), None)
 
     def denied(*_a):
         raise OSError(errno.EACCES, "Permission denied")
@@ -333,7 +334,7 @@ def test_a_full_disk_is_one_clear_refusal_and_keeps_the_published_log(tmp_path, 
 
     for fault, why in ((denied, "Permission denied"), (odd, "device went away")):
         with monkeypatch.context() as m:
-            m.setattr(L.shutil, "copyfile", fault)
+            m.setattr(L, "write_bytes", fault)
             with pytest.raises(InputError) as e:
                 w.set_status("complete")
         assert e.value.message.startswith(f"cannot write the log ({why}); ")

@@ -157,7 +157,7 @@ def shard_file(path: str, name: str, link: h5py.ExternalLink) -> Path:
         raise InputError(f"links to '{link.filename}:{link.path}'; expected the trial's own "
                          f"file <log>.trials/{name}.h5 beside the log", file=path,
                          key=f"trials/{name}")
-    target = Path(path).parent / link.filename
+    target = Path(os.path.realpath(path)).parent / link.filename  # (beside the real log)
     try:
         mode = os.stat(target, follow_symlinks=False).st_mode
     except OSError:

@@ -396,14 +396,22 @@ class _Runs:
         self.runs[i][0].finish(status)
 
     def stop(self, exc: BaseException) -> None:
-        """Mark every run still running ``aborted`` (Ctrl-C) or ``failed``."""
+        """Mark every run still running ``aborted`` (Ctrl-C) or ``failed``.
+
+        Each run is told, whatever the others do: an observer that cannot record the end
+        (a full disk fails the failed run's log as it failed the trial) does not keep the
+        later runs from being told, nor hide ``exc``, the reason the runs stop."""
         status = "aborted" if isinstance(exc, KeyboardInterrupt) else "failed"
         for i, st in enumerate(self.status):
             if st != "running":
                 continue
             if isinstance(exc, PluginFault):
                 self.runs[i][0].info.extra["failure"] = str(exc)
-            self.finish(i, status)
+            try:
+                self.finish(i, status)
+            except (InputError, PluginError):
+                if not isinstance(exc, InputError | PluginError):
+                    raise
 
 
 def _check_plugin_data(data: dict[str, Any], before: dict[str, Any], plugin: str) -> None:
