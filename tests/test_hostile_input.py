@@ -324,12 +324,12 @@ def test_6_replacing_a_complete_log_is_said_in_one_line(base, tmp_path, capsys):
     out = tmp_path / "again.h5"
     shutil.copyfile(base, out)
     err = ok(capsys, ["run", base.with_suffix(".toml"), "--out", out, "--workers", "1", "--json"])
-    assert err.strip().splitlines() == [f"sitframe: note: {out}: replacing the existing log "
-                                        "(status complete)"]
+    said = [f"sitframe: note: {out}: replacing the existing log (status complete) once this "
+            "run has finished a trial of its own; until then it is kept as it is"]
+    assert err.strip().splitlines() == said
     # a note is said once per command, and every command says its own
     err = ok(capsys, ["run", base.with_suffix(".toml"), "--out", out, "--workers", "1", "--json"])
-    assert err.strip().splitlines() == [f"sitframe: note: {out}: replacing the existing log "
-                                        "(status complete)"]
+    assert err.strip().splitlines() == said
 
 
 def test_6_a_note_is_said_once_per_command(capsys):

@@ -24,6 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from sitframe.errors import one_line
     from sitframe.logs.layout import shard_folder  # h5py: start-up time
     from sitframe.logs.reader import open_log  # h5py: start-up time
     from sitframe.logs.writer import LogWriter, lock_log  # h5py: start-up time
@@ -39,5 +40,6 @@ def main(args: argparse.Namespace) -> int:
     finally:
         writer.release()
     what = "packed its trial files into it" if had else "already one file"
-    print(f"{args.log}: {what} ({len(log.trial_indices())} trials, status {log.status})")
+    print(one_line(f"{args.log}: {what} ({len(log.trial_indices())} trials, status "
+                   f"{log.status})"))
     return 0

@@ -36,6 +36,7 @@ from sitframe.errors import (
     TaskCancelled,
     located,
     located_in,
+    warn,
 )
 from sitframe.runs.arithmetic import arithmetic_versions
 from sitframe.runs.collect import (
@@ -221,7 +222,13 @@ class Experiment:
             "source": collected.source, "worlds": list(collected.worlds)})
 
     def record_clusters(self, fit: dict[str, Any], state: dict[str, Any]) -> None:
-        """Hand the cluster stage's output to observers."""
+        """Hand the cluster stage's output to observers (and say, naming the config and
+        key, when no clustering trial filled every situation)."""
+        if "[fallback" in str(fit.get("rule", "")):
+            c = len(np.asarray(state.get("centers", ())))
+            warn(f"{self.source}: interpreter.c: every clustering trial left one of the {c} "
+                 "situations empty (more situations than the collected samples fill); the "
+                 "best-ranked trial is used anyway: lower c, or collect more samples")
         self._notify("sitframe_stage_end", run=self.info, stage="cluster",
                                         data={**fit, "state": state})
 

@@ -43,14 +43,16 @@ from __future__ import annotations
 import concurrent.futures as cf
 import multiprocessing as mp
 import os
+import re
 import signal
-import sys
 import threading
+import warnings
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import suppress
 from typing import TYPE_CHECKING, Any
 
-from sitframe.errors import InputError, PluginFault, TaskCancelled
+from sitframe.errors import InputError, PluginFault, TaskCancelled, show_warning, warn
 from sitframe.logs.interrupts import deferred_interrupt
 from sitframe.runs.arithmetic import arithmetic, check_same_arithmetic
 from sitframe.sim import kernels
@@ -102,6 +104,7 @@ def _worker_init(lifeline: Any = None, inherited_writer: Any = None) -> None:
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _on_sigterm)
+    warnings.showwarning = show_warning  # (a worker writes to the command's stderr)
     if inherited_writer is not None:
         inherited_writer.close()
     if lifeline is None:
@@ -526,7 +529,7 @@ class DaskExecutor(PoolExecutor):
         self.address = address
         scheme = _check_address(address)
         try:
-            self.client = Client(address, timeout=timeout, set_as_default=False)
+            self.client = _connect(Client, address, timeout)
         except Exception as exc:  # noqa: BLE001 - OSError, TimeoutError, ValueError (bad address)
             msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             raise InputError(f"cannot reach the Dask scheduler at '{address}' within "
@@ -538,9 +541,9 @@ class DaskExecutor(PoolExecutor):
             self.shutdown()
             raise
         if scheme not in ("tls", "wss", "inproc"):
-            print(f"sitframe: warning: --scheduler {address}: plain {scheme}; Dask unpickles "
-                  "what it receives, so whoever can reach the scheduler can run code here and "
-                  "on the workers: use tls:// on a shared network (see README)", file=sys.stderr)
+            warn(f"--scheduler {address}: plain {scheme}; Dask unpickles what it receives, so "
+                 "whoever can reach the scheduler can run code here and on the workers: use "
+                 "tls:// on a shared network (see README)")
 
     @property
     def capacity(self) -> int:  # type: ignore[override]
@@ -582,23 +585,64 @@ def _same_arithmetic_task(expected: str, fn: Callable[..., Any], *args: Any) -> 
     return fn(*args)
 
 
+def _connect(client_class: Any, address: str, timeout: float) -> Any:
+    """``client_class(address, ...)``; a client that fails half-way is closed at once, quietly.
+
+    Left to the garbage collector, such a client tries to close itself when the error
+    that holds it is dropped, waits twice the connect timeout for a scheduler it never
+    reached and prints a ``TimeoutError`` traceback, seconds after sitframe's one line.
+    """
+    made: list[Any] = []
+
+    class _Client(client_class):  # type: ignore[misc, valid-type]
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            made.append(self)
+            super().__init__(*args, **kwargs)
+
+    try:
+        return _Client(address, timeout=timeout, set_as_default=False)
+    except BaseException:
+        for client in made:
+            with suppress(Exception):
+                client.status = "closed"  # (its __del__ then does nothing)
+                client._loop_runner.stop()
+        raise
+
+
 def _check_address(address: str) -> str:
     """The scheme of a Dask address, or an InputError for a malformed one (checked before a
-    Client exists: a Client that fails half-way prints a traceback when collected)."""
+    Client exists: a Client that fails half-way prints a traceback when collected). A host
+    and a port are required (a Client does not default the port), and ``tls://`` or
+    ``wss://`` needs the client's certificates in the Dask configuration."""
     from distributed.comm.addressing import parse_address, parse_host_port
     from distributed.comm.registry import backends
 
     try:
+        if not address.strip():
+            raise ValueError("it is empty")
         scheme, loc = parse_address(address)
         if scheme not in backends:
             raise ValueError(f"unknown scheme '{scheme}'; known: {', '.join(sorted(backends))}")
         if scheme in ("tcp", "tls", "ws", "wss"):
-            _host, port = parse_host_port(loc, default_port=8786)
+            if not re.search(r":\d+$", loc):
+                raise ValueError("no port number")
+            host, port = parse_host_port(loc)
+            if not host:
+                raise ValueError("no host")
             if not 0 < int(port) < 65536:
                 raise ValueError(f"port {port} out of range 1-65535")
     except (ValueError, TypeError) as exc:
         raise InputError(f"malformed Dask scheduler address '{address}' ({exc}); expected e.g. "
                          "tls://host:8786", key="--scheduler") from None
+    if scheme in ("tls", "wss"):
+        from distributed.security import Security
+
+        if Security().get_connection_args("client").get("ssl_context") is None:
+            raise InputError(f"'{address}' is a {scheme}:// address, but the Dask configuration "
+                             "gives this client no TLS certificates; expected "
+                             "distributed.comm.tls.ca-file, .client.cert and .client.key set "
+                             "(e.g. DASK_DISTRIBUTED__COMM__TLS__CA_FILE=...), or a tcp:// "
+                             "address", key="--scheduler")
     return str(scheme)
 
 
