@@ -402,6 +402,9 @@ def test_9_scheduler_address_checks_and_plain_tcp_warning(tmp_path, capsys, monk
             FakeClient.closed += 1
 
     monkeypatch.setattr(distributed, "Client", FakeClient)
+    from distributed.security import Security  # (as if the Dask config held certificates)
+
+    monkeypatch.setattr(Security, "get_connection_args", lambda self, role: {"ssl_context": 1})
     DaskExecutor("tcp://10.0.0.5:8786")
     assert "Dask unpickles" in capsys.readouterr().err
     DaskExecutor("tls://10.0.0.5:8786")
