@@ -552,25 +552,82 @@ class DaskExecutor(PoolExecutor):
         except Exception:  # noqa: BLE001 - a scheduler that cannot tell: assume one slot
             return 1
 
-    def submit(self, fn: Callable[..., Any], *args: Any) -> Any:
+    def submit(self, fn: Callable[..., Any], *args: Any) -> _DaskTask:
+        return _DaskTask(self, fn, args)
+
+    def _remote(self, fn: Callable[..., Any], args: tuple[Any, ...]) -> Any:
         return self.client.submit(_same_arithmetic_task, self.arithmetic, fn, *args, pure=False)
 
     def wait_first(self, futures: Iterable[Any]) -> set[Any]:
         from distributed import as_completed
 
         futures = list(futures)
-        done = {f for f in futures if f.done()}
-        if not done:  # our client, not a global default one
-            done = {next(iter(as_completed(futures, loop=self.client.loop)))}
-        return done | {f for f in futures if f.done()}
+        while not any(f.done() for f in futures):
+            remote = {f.remote: f for f in futures}
+            first = next(iter(as_completed(list(remote), loop=self.client.loop)))  # (our client)
+            self._settle([remote[first], *(f for f in futures if f.remote.done())])
+        return {f for f in futures if f.done()}
+
+    def _settle(self, tasks: list[_DaskTask]) -> None:
+        """Fetch the results of the finished ``tasks`` now, in one transfer, and release their
+        copies on the workers: a worker killed later then loses no finished work (the
+        scheduler would run every finished task it held again). A task lost with its worker
+        more often than the scheduler retries (``KilledWorker``) is submitted again, up to
+        :data:`DASK_RESUBMITS` times."""
+        from distributed import KilledWorker
+
+        tasks = [t for t in dict.fromkeys(tasks) if not t.done() and t.remote.done()]
+        ok = {i: t.remote for i, t in enumerate(tasks) if t.remote.status == "finished"}
+        for i, value in (self.client.gather(ok, errors="skip") if ok else {}).items():
+            tasks[i].remote.release()  # (one lost since is computed again; gathered later)
+            tasks[i].set_result(value)
+        for t in tasks:
+            if t.done() or t.remote.status == "cancelled":
+                continue
+            exc = t.remote.exception()
+            if isinstance(exc, KilledWorker) and t.lost < DASK_RESUBMITS:
+                t.lost += 1
+                t.remote.release()
+                t.remote = self._remote(t.fn, t.args)
+                continue
+            if isinstance(exc, KilledWorker):
+                exc = InputError(f"a task was lost with its Dask worker {t.lost + 1} times over "
+                                 f"(the workers of '{self.address}' keep dying); the finished "
+                                 "trials are in the log: finish it with `sitframe run --resume "
+                                 "LOG` (or the sweep with --reuse)", key="--scheduler")
+            t.remote.release()
+            t.set_exception(exc)
 
     def cancel(self, futures: Iterable[Any]) -> None:
-        self.client.cancel(list(futures))
+        futures = list(futures)
+        self.client.cancel([f.remote for f in futures])
+        for f in futures:
+            f.cancel()
 
     def shutdown(self, cancel: bool = False) -> None:
         client, self.client = self.client, None
         if client is not None:
             client.close()
+
+
+#: Times a task lost with its worker more often than the scheduler retries is submitted again.
+DASK_RESUBMITS = 5
+
+
+class _DaskTask(cf.Future):  # type: ignore[type-arg]
+    """A task on the Dask cluster, seen as a local future: its result is fetched once the
+    task is done (:meth:`DaskExecutor._settle`) and kept here, not on a worker."""
+
+    def __init__(self, executor: DaskExecutor, fn: Callable[..., Any],
+                 args: tuple[Any, ...]) -> None:
+        super().__init__()
+        self.executor, self.fn, self.args, self.lost = executor, fn, args, 0
+        self.remote = executor._remote(fn, args)
+
+    def result(self, timeout: float | None = None) -> Any:
+        while not self.done():
+            self.executor.wait_first([self])
+        return super().result(timeout)
 
 
 def _same_arithmetic_task(expected: str, fn: Callable[..., Any], *args: Any) -> Any:
