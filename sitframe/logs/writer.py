@@ -715,9 +715,11 @@ def code_fingerprint(plugins: list[dict[str, Any]] | None = None) -> str:
     h = hashlib.sha256()
     files: list[Path] = []
     for pkg in ("sitframe", "sitframe.plugins"):
+        # (the package's own folder: in a source checkout sitframe's __path__ also holds
+        # the checkout's root, which would hash every file below it, a venv's too)
         spec = importlib.util.find_spec(pkg)
-        for folder in (spec.submodule_search_locations or []) if spec else []:
-            files += sorted(Path(folder).rglob("*.py"))
+        if spec is not None and spec.origin:
+            files += sorted(Path(spec.origin).parent.rglob("*.py"))
     for info in plugins or []:
         if info.get("file"):
             files.append(Path(info["file"]))
