@@ -67,8 +67,9 @@ class Cluster:
         File the workers' output goes to (default: discarded).
     """
 
-    def __init__(self, workers: int, log: Path | None = None) -> None:
-        self.n = workers
+    def __init__(self, workers: int, log: Path | None = None, allowed_failures: int = 50
+                 ) -> None:
+        self.n, self.allowed_failures = workers, allowed_failures
         self.log = log
         self.procs: list[subprocess.Popen[bytes]] = []
         self.kills = 0
@@ -116,9 +117,9 @@ class Cluster:
 
         # A task whose worker is killed is run again elsewhere; under steady churn one task
         # may lose several workers in a row, more than Dask's default three.
-        dask.config.set({"distributed.scheduler.allowed-failures": 50})
-        self.cluster = LocalCluster(n_workers=0, processes=False, protocol="tcp",
-                                    host="127.0.0.1", dashboard_address=None)
+        with dask.config.set({"distributed.scheduler.allowed-failures": self.allowed_failures}):
+            self.cluster = LocalCluster(n_workers=0, processes=False, protocol="tcp",
+                                        host="127.0.0.1", dashboard_address=None)
         for _ in range(self.n):
             self._start_worker()
         self.wait_for_workers()

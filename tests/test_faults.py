@@ -607,3 +607,31 @@ def test_a_sweep_on_a_churning_dask_cluster_finishes_every_point_identically(tmp
         log = tmp_path / "churn" / name
         assert open_log(log).complete, name
         assert compare_logs(tmp_path / "calm" / name, log) == [], name
+
+
+def test_a_task_lost_with_its_worker_more_often_than_dask_retries_is_submitted_again():
+    """With no retries left to the scheduler (allowed-failures 0), a task whose worker is
+    killed fails with KilledWorker; the executor submits it again (to the replacement)."""
+    if not os.environ.get("CI"):
+        pytest.importorskip("distributed")
+    import random
+
+    from churn import Cluster
+
+    from sitframe.runs.parallel import DaskExecutor
+
+    with Cluster(1, allowed_failures=0) as cluster:
+        ex = DaskExecutor(cluster.address)
+        try:
+            task = ex.submit(time.sleep, 3.0)
+            t0 = time.monotonic()
+            while task.remote.status == "pending" and time.monotonic() - t0 < 30:
+                if cluster.cluster.scheduler.tasks.get(task.remote.key) is not None and \
+                        cluster.cluster.scheduler.tasks[task.remote.key].state == "processing":
+                    break
+                time.sleep(0.05)
+            time.sleep(0.5)
+            cluster.kill_one(random.Random(0))
+            assert task.result() is None and task.lost == 1
+        finally:
+            ex.shutdown()

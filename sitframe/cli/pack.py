@@ -9,7 +9,8 @@ resuming it: the trials are copied into the log in one crash-safe
 transaction, then the folder is removed. The log's status is unchanged, so
 it can still be resumed later. Packing a log that is already one file does
 nothing. A log another process is writing is refused (one log has one
-writer).
+writer). A log behind a symbolic link is packed where the link points; a full
+disk is one line (the log and its folder stay as they were).
 """
 
 from __future__ import annotations
