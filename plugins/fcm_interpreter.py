@@ -73,6 +73,7 @@ one trial chosen per c as usual), then the chosen c is clustered with
 from __future__ import annotations
 
 import math
+import warnings
 from typing import Any
 
 import numpy as np
@@ -157,8 +158,19 @@ class FCMInterpreter:
         """Cluster ``X (n, d)`` [m]: ``trials`` FCM runs, one chosen by the validity measures.
 
         ``pmap`` (given by the run when it has a worker pool) spreads the FCM
-        trials over the workers; the result is the same without it.
+        trials over the workers; the result is the same without it. When no
+        trial fills every situation, the rule in the result says so (``[fallback``)
+        and the run says it in one line naming the config key, instead of the
+        clustering's Python warning (raised in a worker, it would reach the
+        terminal as two raw lines).
         """
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=r".*no trial .*has min_card > 0",
+                                    category=RuntimeWarning)
+            return self._fit(X, rng, pmap)
+
+    def _fit(self, X: np.ndarray, rng: np.random.Generator,
+             pmap: TaskMap | None) -> dict[str, Any]:
         auto: dict[str, Any] = {}
         if self.auto:
             auto = self.choose_c(X, rng)

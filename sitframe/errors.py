@@ -40,8 +40,7 @@ class InputError(SitframeError, ValueError):
 
     def __str__(self) -> str:
         where = ": ".join(_printable(p) for p in (self.file, self.key) if p)
-        text = f"{where}: {self.message}" if where else self.message
-        return text.replace("\r", "\\r").replace("\n", "\\n")  # always one line
+        return one_line(f"{where}: {self.message}" if where else self.message)
 
     def at(self, *, file: str | None = None, key_prefix: str | None = None) -> InputError:
         """Return a copy located in ``file`` and/or below ``key_prefix``."""
@@ -49,6 +48,25 @@ class InputError(SitframeError, ValueError):
         if key_prefix:
             key = f"{key_prefix}.{key}" if key else key_prefix
         return type(self)(self.message, file=file or self.file, key=key)
+
+
+class DiskFullError(InputError):
+    """A log could not be written because its disk is full (or the user's quota is used up).
+
+    The message names the folder, what is free there and what the log needs, and says
+    what was kept. ``folder`` and ``free`` (bytes) are kept for callers that write several
+    logs (a sweep) and say what all of them need.
+    """
+
+    def __init__(self, message: str, *, file: str | None = None, key: str | None = None,
+                 folder: str = "", free: int = 0) -> None:
+        super().__init__(message, file=file, key=key)
+        self.folder, self.free = folder, free
+
+    def at(self, *, file: str | None = None, key_prefix: str | None = None) -> InputError:
+        moved = super().at(file=file, key_prefix=key_prefix)
+        return DiskFullError(moved.message, file=moved.file, key=moved.key,
+                             folder=self.folder, free=self.free)
 
 
 class InputTypeError(InputError, TypeError):
@@ -99,8 +117,7 @@ class PluginFault(PluginError):
         self.trial, self.iteration = trial, iteration
         at = "" if trial is None else f" in trial {trial}" + (
             "" if iteration is None else f", iteration {iteration}")
-        text = f"{where}: {method}(){at}: {message}"
-        super().__init__(text.replace("\r", "\\r").replace("\n", "\\n"))
+        super().__init__(one_line(f"{where}: {method}(){at}: {message}"))
 
     def __reduce__(self) -> tuple[Any, ...]:  # picklable across worker processes
         return (_fault, (self.message, self.where, self.method, self.trial, self.iteration))
@@ -123,7 +140,33 @@ def note(message: str) -> None:
     """
     if message not in _SAID:
         _SAID.add(message)
-        print(f"sitframe: note: {message}", file=sys.stderr)
+        print(f"sitframe: note: {one_line(message)}", file=sys.stderr)
+
+
+def warn(message: str) -> None:
+    """One ``sitframe: warning:`` line on stderr: something the user should know about an
+    accepted input (it names the source: file and key, option, log), escaped onto one line."""
+    print(f"sitframe: warning: {one_line(message)}", file=sys.stderr)
+
+
+def show_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                 file: Any = None, line: str | None = None) -> None:
+    """``warnings.showwarning`` of the command line and its worker processes: a Python
+    warning that reaches the user (none should: an accepted input's edge cases are checked
+    or said by a sitframe warning of their own) is one ``sitframe: warning:`` line naming the
+    code that warned, not Python's two lines with the source code."""
+    where = filename.replace("\\", "/").rsplit("/", 1)[-1]
+    warn(f"{category.__name__} in {where}:{lineno}: {message}")
+
+
+def one_line(text: str) -> str:
+    """``text`` with every character that is not printable escaped (a newline as ``\\n``, an
+    escape sequence as ``\\x1b``): text from files (a log's status, a TOML string) reaches
+    the terminal on one line and cannot move the cursor or change colours."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii")
+                   for c in text)
 
 
 def forget_notes() -> None:

@@ -324,12 +324,12 @@ def test_6_replacing_a_complete_log_is_said_in_one_line(base, tmp_path, capsys):
     out = tmp_path / "again.h5"
     shutil.copyfile(base, out)
     err = ok(capsys, ["run", base.with_suffix(".toml"), "--out", out, "--workers", "1", "--json"])
-    assert err.strip().splitlines() == [f"sitframe: note: {out}: replacing the existing log "
-                                        "(status complete)"]
+    said = [f"sitframe: note: {out}: replacing the existing log (status complete) once this "
+            "run has finished a trial of its own; until then it is kept as it is"]
+    assert err.strip().splitlines() == said
     # a note is said once per command, and every command says its own
     err = ok(capsys, ["run", base.with_suffix(".toml"), "--out", out, "--workers", "1", "--json"])
-    assert err.strip().splitlines() == [f"sitframe: note: {out}: replacing the existing log "
-                                        "(status complete)"]
+    assert err.strip().splitlines() == said
 
 
 def test_6_a_note_is_said_once_per_command(capsys):
@@ -402,6 +402,9 @@ def test_9_scheduler_address_checks_and_plain_tcp_warning(tmp_path, capsys, monk
             FakeClient.closed += 1
 
     monkeypatch.setattr(distributed, "Client", FakeClient)
+    from distributed.security import Security  # (as if the Dask config held certificates)
+
+    monkeypatch.setattr(Security, "get_connection_args", lambda self, role: {"ssl_context": 1})
     DaskExecutor("tcp://10.0.0.5:8786")
     assert "Dask unpickles" in capsys.readouterr().err
     DaskExecutor("tls://10.0.0.5:8786")
@@ -424,21 +427,22 @@ def test_10_disk_full_mid_run_keeps_the_published_log(tmp_path, capsys, monkeypa
 
     (tmp_path / "c.toml").write_text(SMALL)
     out = tmp_path / "full.h5"
-    real = L.shutil.copyfile
+    real = L.write_bytes
     calls = {"n": 0}
 
-    def copy(a, b):
+    def write(fd, image):
         calls["n"] += 1
         if calls["n"] >= 3:  # after the collect stage is in the log
+            os.close(fd)
             raise OSError(errno.ENOSPC, "No space left on device")
-        return real(a, b)
+        return real(fd, image)
 
-    monkeypatch.setattr(L.shutil, "copyfile", copy)
+    monkeypatch.setattr(L, "write_bytes", write)
     refused(capsys, ["run", tmp_path / "c.toml", "--out", out, "--workers", "1"],
-            "full.h5: --out:", "no space left on device")
+            "full.h5: the disk is full: ", f"{tmp_path} has ", "no finished trial yet")
     log = open_log(out)
     log.check()
-    assert log.has("cluster") and not log.trial_indices()
+    assert log.has("collect") and not log.trial_indices()
     assert not list(tmp_path.glob("*.part")) and not list(tmp_path.glob("*.lock"))
 
 
@@ -446,16 +450,14 @@ def test_13_disk_full_at_start_leaves_nothing(tmp_path, capsys, monkeypatch):
     import sitframe.logs.writer as L
 
     (tmp_path / "c.toml").write_text(SMALL)
-    real = h5py.File
 
-    def full(name, mode="r", *a, **k):
-        if mode == "w":
-            raise OSError(errno.ENOSPC, "No space left on device")
-        return real(name, mode, *a, **k)
+    def full(fd, image):
+        os.close(fd)
+        raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(L.h5py, "File", full)
+    monkeypatch.setattr(L, "write_bytes", full)
     refused(capsys, ["run", tmp_path / "c.toml", "--out", tmp_path / "x.h5", "--workers", "1"],
-            "x.h5: --out:", "No space left")
+            "x.h5: the disk is full:", "nothing was written")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c.toml"]
 
 

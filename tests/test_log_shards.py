@@ -9,6 +9,7 @@ the reader open a file that is not one of its own trial files.
 from __future__ import annotations
 
 import errno
+import os
 import shutil
 
 import h5py
@@ -85,13 +86,19 @@ def test_the_end_of_the_run_packs_and_a_failed_commit_leaves_no_trial_file(unpac
 
     w = LogWriter(unpacked)
 
-    def full(*_a):
+    real, calls = L.write_bytes, []
+
+    def full(fd, image):  # the trial file is written, the run file is not
+        calls.append(len(image))
+        if len(calls) == 1:
+            return real(fd, image)
+        os.close(fd)
         raise OSError(errno.ENOSPC, "No space left on device")
 
     before = unpacked.read_bytes()
     with monkeypatch.context() as m:
-        m.setattr(L.shutil, "copyfile", full)
-        with pytest.raises(InputError, match="no space left"):
+        m.setattr(L, "write_bytes", full)
+        with pytest.raises(InputError, match="the disk is full"):
             w.trial(_trial(4))
     assert unpacked.read_bytes() == before
     assert not (shard_folder(unpacked) / "0004.h5").exists()

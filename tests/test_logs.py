@@ -318,12 +318,13 @@ def test_a_full_disk_is_one_clear_refusal_and_keeps_the_published_log(tmp_path, 
         raise OSError(errno.ENOSPC, "No space left on device")
 
     with monkeypatch.context() as m:
-        m.setattr(L.shutil, "copyfile", full)
+        m.setattr(L, "write_bytes", full)
         with pytest.raises(InputError) as e:
             w.stage("collect", {"samples": np.ones(3)})
-    assert e.value.message == ("cannot write the log (no space left on device); the log "
-                                    "keeps its last complete transaction")
-    assert (e.value.file, e.value.key) == (str(path), "--out")
+    assert e.value.message.startswith(f"the disk is full: {tmp_path} has ")
+    assert "the log holds no finished trial yet: make space there and run the command " \
+        "again" in e.value.message
+    assert (e.value.file, e.value.key) == (str(path), None)
 
     def denied(*_a):
         raise OSError(errno.EACCES, "Permission denied")
@@ -333,7 +334,7 @@ def test_a_full_disk_is_one_clear_refusal_and_keeps_the_published_log(tmp_path, 
 
     for fault, why in ((denied, "Permission denied"), (odd, "device went away")):
         with monkeypatch.context() as m:
-            m.setattr(L.shutil, "copyfile", fault)
+            m.setattr(L, "write_bytes", fault)
             with pytest.raises(InputError) as e:
                 w.set_status("complete")
         assert e.value.message.startswith(f"cannot write the log ({why}); ")
@@ -371,7 +372,10 @@ def test_the_code_fingerprint_covers_every_source_file_of_sitframe_and_its_plugi
         (f / "sub").mkdir(parents=True)
         (f / "a.py").write_text("A = 1\n")
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: SimpleNamespace(
-        submodule_search_locations=[str(folders[name])]) if name in folders else real(name, *a))
+        origin=str(folders[name] / "__init__.py"), submodule_search_locations=[
+            str(folders[name]), str(tmp_path)]) if name in folders else real(name, *a))
+    (tmp_path / "checkout.py").write_text("# in a source checkout sitframe's __path__ also "
+                                          "holds the root, whose other files are not sitframe")
     seen = [code_fingerprint()]
     for f in folders.values():
         for edit in ("a.py", "sub/b.py"):  # an edited file, a new file in a subfolder
@@ -379,6 +383,8 @@ def test_the_code_fingerprint_covers_every_source_file_of_sitframe_and_its_plugi
             seen.append(code_fingerprint())
         (f / "notes.txt").write_text("not code")
         assert code_fingerprint() == seen[-1]
+    (tmp_path / "checkout.py").write_text("# changed")
+    assert code_fingerprint() == seen[-1]
     assert len(set(seen)) == 5
 
 def test_a_flipped_byte_in_the_data_is_an_input_error_not_a_wrong_number(written, tmp_path):

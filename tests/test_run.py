@@ -87,7 +87,7 @@ def test_evaluate_json_contract(small_run, capsys):
         (["run", "nope.toml"], r"nope.toml: config file not found"),
         (["run", "obstacle-avoidance", "--trials", "0"],
          r"--trials: expected an integer in \[1, inf\), got 0"),
-        (["run", "obstacle-avoidance", "--world", "narnia"], r"experiment.world: unknown world"),
+        (["run", "obstacle-avoidance", "--world", "narnia"], r"error: --world: unknown world"),
         (["evaluate", "missing.h5", "--world", "training"], r"missing.h5: log file not found"),
         (["world", "show", "narnia"], r"unknown world 'narnia'"),
     ],

@@ -42,6 +42,9 @@ import os
 import pkgutil
 import signal
 import sys
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -55,6 +58,8 @@ from sitframe.errors import (
     PluginFault,
     forget_notes,
     note,
+    show_warning,
+    warn,
 )
 
 # start-up time: this module is imported whenever the command line builds its parser
@@ -141,7 +146,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run seed (trial seeds are derived from it)")
     r.add_argument("--world", metavar="W", help="learning world (shipped name or .toml path)")
     r.add_argument("--iterations", type=int, metavar="L", help="iterations per trial (l)")
-    r.add_argument("--out", metavar="LOG", help="HDF5 log path (default logs/<name>.h5)")
+    r.add_argument("--out", metavar="LOG", help="HDF5 log path (default logs/<name>.h5). A log "
+                   "already there is kept until this run has finished a trial of its own, then "
+                   "replaced; a run that fails or is stopped before keeps it as it was. A "
+                   "symbolic link is followed: the log is written where it points")
     r.add_argument("--clusters-from", metavar="LOG",
                    help="reuse the fitted situations of LOG (skips collect and cluster)")
     r.add_argument("--json", action="store_true", help="print machine-readable results")
@@ -222,7 +230,8 @@ def main(argv: list[str] | None = None) -> int:
     args = None
     forget_notes()
     try:
-        with terminate_as_interrupt():
+        with terminate_as_interrupt(), warnings.catch_warnings():
+            warnings.showwarning = show_warning
             args = build_parser().parse_args(argv)
             return _dispatch(args)
     except (InputError, PluginError) as exc:
@@ -339,7 +348,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _claim(out: str, *, replacing: bool = False, key: str = "--out") -> None:
     """Become the log's only writer now (refused, one line, if another process is); with
-    ``replacing``, say on stderr that an existing log will be replaced."""
+    ``replacing``, say on stderr that an existing log will be replaced (only once the new
+    run has a trial of its own: :meth:`sitframe.logs.writer.LogWriter.start`)."""
     from sitframe.logs.reader import open_log
     from sitframe.logs.writer import lock_log
 
@@ -349,7 +359,8 @@ def _claim(out: str, *, replacing: bool = False, key: str = "--out") -> None:
             what = f"the existing log (status {open_log(out).status})"
         except InputError:
             what = "the existing file (not a readable sitframe log)"
-        note(f"{out}: replacing {what}")
+        note(f"{out}: replacing {what} once this run has finished a trial of its own; until "
+             "then it is kept as it is")
 
 
 def _execute(exp: Any, kwargs: dict[str, Any], *, replacing: bool = False,
@@ -357,7 +368,7 @@ def _execute(exp: Any, kwargs: dict[str, Any], *, replacing: bool = False,
     """Claim the log (:func:`_claim`), ``exp.run(**kwargs)``, releasing the executor's
     workers however it ends."""
     for msg in getattr(exp.pm, "sitframe_clashes", []):
-        print(f"sitframe: warning: {msg}", file=sys.stderr)
+        warn(msg)
     failed = True
     try:
         _claim(exp.out, replacing=replacing, key=key)
@@ -393,9 +404,8 @@ def _run_resume(args: argparse.Namespace) -> int:
             print(f"{args.resume}: already complete; nothing to resume")
         return 0
     if exp.info.extra.get("code_changed"):
-        print(f"sitframe: warning: {args.resume}: the code of sitframe or its plugins changed "
-              "since this run started; the resumed trials may differ from the logged ones",
-              file=sys.stderr)
+        warn(f"{args.resume}: the code of sitframe or its plugins changed since this run "
+             "started; the resumed trials may differ from the logged ones")
     exp.executor = make_executor(args.workers, args.scheduler, len(missing))
     result = _execute(exp, kwargs, key="--resume")
     if args.json:
@@ -426,15 +436,39 @@ def _prepare_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
         raise InputError(f"expected the path of the log to write, got {args.out!r}",
                          key="--out")
     out = args.out or str(Path("logs") / f"{e['name']}.h5")
-    make_prerequisites(cfg, base_dir,
-                       executor_for=partial(make_executor, args.workers, args.scheduler),
-                       plugins_dirs=tuple(args.plugins_dir),
-                       progress=not args.json and sys.stderr.isatty(), say=note)
-    exp, kwargs = prepare_experiment(cfg, source=source, base_dir=base_dir, out=out,
-                                     plugins_dirs=tuple(args.plugins_dir),
-                                     progress=not args.json and sys.stderr.isatty())
+    with _options_blamed(args, e):
+        make_prerequisites(cfg, base_dir,
+                           executor_for=partial(make_executor, args.workers, args.scheduler),
+                           plugins_dirs=tuple(args.plugins_dir),
+                           progress=not args.json and sys.stderr.isatty(), say=note)
+        exp, kwargs = prepare_experiment(cfg, source=source, base_dir=base_dir, out=out,
+                                         plugins_dirs=tuple(args.plugins_dir),
+                                         progress=not args.json and sys.stderr.isatty())
     exp.needs_clusters(kwargs.get("interpreter_state"))  # stages that cannot run: fail now
     return exp, kwargs
+
+
+#: ``run`` options that set a key of the config's ``[experiment]`` table.
+_OVERRIDES = ("trials", "seed", "world", "iterations", "clusters_from")
+
+
+@contextmanager
+def _options_blamed(args: argparse.Namespace, e: dict[str, Any]) -> Iterator[None]:
+    """An input error about a value given on the command line names the option (``--seed``),
+    not the config key it overrode (which the config file may not even hold); a log named
+    by ``--clusters-from`` that cannot be used names the option too."""
+    given = {f"experiment.{k}": f"--{k.replace('_', '-')}" for k in _OVERRIDES
+             if getattr(args, k) is not None}
+    try:
+        yield
+    except InputError as exc:
+        option = given.get(exc.key or "")
+        if option is not None:
+            raise InputError(exc.message, key=option) from None
+        if args.clusters_from is not None and exc.key is None and \
+                exc.file == e.get("clusters_from"):
+            raise InputError(exc.message, file=exc.file, key="--clusters-from") from None
+        raise
 
 
 def _abspath(path: str) -> str:

@@ -10,10 +10,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import sys
 from pathlib import Path
 
-from sitframe.errors import InputError
+from sitframe.errors import InputError, warn
 
 # start-up time: this module is imported whenever the command line builds its parser
 # (``sitframe --help`` and every command), so what only one command needs is imported
@@ -67,8 +66,8 @@ class Analyse:
         rep = analyse(log, args.output, trials=trials, window=args.window,
                       path_iterations=args.path_iterations, dpi=args.dpi)
         if rep.problems:
-            print(f"sitframe: warning: {log.path}: incomplete log, analysed what is there: "
-                  + "; ".join(rep.problems), file=sys.stderr)
+            warn(f"{log.path}: incomplete log, analysed what is there: "
+                 + "; ".join(rep.problems))
         n_fig = sum(1 for _s, f, _c in rep.files if f.endswith(".png"))
         n_tab = len(rep.files) - n_fig
         print(f"{rep.html}  ({n_fig} figures, {n_tab} tables, replay, {rep.seconds:.1f} s; "

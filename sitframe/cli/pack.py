@@ -9,7 +9,8 @@ resuming it: the trials are copied into the log in one crash-safe
 transaction, then the folder is removed. The log's status is unchanged, so
 it can still be resumed later. Packing a log that is already one file does
 nothing. A log another process is writing is refused (one log has one
-writer).
+writer). A log behind a symbolic link is packed where the link points; a full
+disk is one line (the log and its folder stay as they were).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from sitframe.errors import one_line
     from sitframe.logs.layout import shard_folder  # h5py: start-up time
     from sitframe.logs.reader import open_log  # h5py: start-up time
     from sitframe.logs.writer import LogWriter, lock_log  # h5py: start-up time
@@ -39,5 +41,6 @@ def main(args: argparse.Namespace) -> int:
     finally:
         writer.release()
     what = "packed its trial files into it" if had else "already one file"
-    print(f"{args.log}: {what} ({len(log.trial_indices())} trials, status {log.status})")
+    print(one_line(f"{args.log}: {what} ({len(log.trial_indices())} trials, status "
+                   f"{log.status})"))
     return 0

@@ -40,7 +40,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reuse", action="store_true",
                         help="keep a point's log that is complete and was made by the same "
                         "config and the same code instead of running the point again (e.g. "
-                        "after adding a value to the grid)")
+                        "after adding a value to the grid), and finish an unfinished one of the "
+                        "same config and code (a sweep stopped by Ctrl-C, a kill or a full "
+                        "disk) keeping its finished trials")
     add_parallel_arguments(parser)
 
 

@@ -183,13 +183,18 @@ def softmax_choice(
     stream consumed is always ``c`` numbers.
     """
     tau = params.temperature if temperature is None else temperature
-    if params.temperature_mode == "relative":
-        top = q.max(axis=1, keepdims=True)
-        spread = top - q.min(axis=1, keepdims=True)
-        logits = (q - top) / (tau * np.where(spread > 0, spread, 1.0))
-    else:
-        logits = (q - q.max(axis=1, keepdims=True)) / tau
-    w = np.exp(logits)
+    # A tiny temperature makes the logits of all but the best actions overflow to -inf
+    # (exp: 0, the greedy limit, exactly); an infinite Q (a reward that overflowed it)
+    # makes NaN, which the contract reports at the trial's end ('expected finite values').
+    # Neither is a Python warning on the user's terminal.
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore", under="ignore"):
+        if params.temperature_mode == "relative":
+            top = q.max(axis=1, keepdims=True)
+            spread = top - q.min(axis=1, keepdims=True)
+            logits = (q - top) / (tau * np.where(spread > 0, spread, 1.0))
+        else:
+            logits = (q - q.max(axis=1, keepdims=True)) / tau
+        w = np.exp(logits)
     cdf = np.cumsum(w, axis=1)
     draws = rng.random(q.shape[0]) * cdf[:, -1]
     return np.minimum((cdf < draws[:, None]).sum(axis=1), q.shape[1] - 1)

@@ -55,12 +55,21 @@ ever publishes a complete, closed file by an atomic rename
 created with :func:`tempfile.mkstemp`, so a pre-existing file or symlink is
 never written through):
 
+* Every file is built in memory (HDF5's core driver, no backing store) and
+  reaches the disk as plain bytes, written to the scratch file by one
+  ordinary ``write`` (:func:`sitframe.logs.writer.write_bytes`, the writer's
+  one boundary with the disk). A full disk then fails that write, which
+  leaves the published log as it was and is one
+  :class:`~sitframe.errors.DiskFullError` line naming the folder, what is
+  free and what the log needs; HDF5 itself never meets a failing write (it
+  used to, and left its library state broken: the next call crashed the
+  process, SIGSEGV, with the log still ``running``).
 * A finished trial is written to its own file, ``LOG.trials/NNNN.h5`` (the
   trial group's contents at the file's root), and then linked from the run
   file as ``/trials/NNNN`` by an HDF5 external link; its row is appended to
   ``/summary``. The run file (root attributes, stages, links, summary) is
-  changed copy-on-write: copied to a scratch file, opened, changed, closed
-  and renamed over the log. It holds no trial data, so a trial costs the
+  changed copy-on-write: read into memory, changed, and its bytes written to
+  a scratch file renamed over the log. It holds no trial data, so a trial costs the
   same to write whether it is the first or the thousandth (see
   ``benchmarks/logs/bench_log.py``).
 * The run's end (any status but ``running``: ``complete``, ``aborted``,
@@ -80,13 +89,29 @@ complete. Until it is packed, such a log is the file *and* its
 reader follows a trial's link only to ``<log>.trials/NNNN.h5`` beside the
 log, for trial NNNN, and only if it is a regular file. A write that fails
 (e.g. a full disk) removes its scratch files and leaves the published log
-as it was. Readers never block the writer (it never opens a published file
+as it was: every finished trial stays, and ``run --resume`` finishes the run
+once there is space (in place, or after moving the log with its folder).
+Readers never block the writer (it never opens a published file
 for writing; a reader that opened the log just before packing published it
 may find a trial file gone, and reading again sees the packed log). The
 rename protects against process death, not against power loss (no fsync).
 
+A new run whose ``--out`` holds a log already (complete, say) does not
+replace it at once: its run file is a scratch file beside the log until the
+transaction that links its first trial (or, without trials, the one that
+marks it complete) publishes it over the old log. A run that fails, is
+stopped or is killed before that leaves the old log as it was (a killed
+one's scratch file is removed by the next writer). An unfinished old log
+(trial files in ``LOG.trials``) is packed first, so that it stays whole
+and the new run's trial files do not meet its own.
+
+A log reached through a symbolic link is written where the link points: the
+writer, its scratch and trial files and the lock work beside the real file
+(:func:`~sitframe.logs.writer.real_path`), and readers follow a trial's link
+beside it; the link itself is never replaced.
+
 One log has one writer: the writing process holds an exclusive
-:func:`fcntl.flock` on ``LOG.lock`` (beside the log) from its first
+:func:`fcntl.flock` on ``LOG.lock`` (beside the real log) from its first
 transaction to the end of the run (:func:`lock_log`). A second run, or a
 ``run --resume``, on the same log while it is held is refused with an
 :class:`InputError`. The operating system releases the lock when the
@@ -157,7 +182,7 @@ def shard_file(path: str, name: str, link: h5py.ExternalLink) -> Path:
         raise InputError(f"links to '{link.filename}:{link.path}'; expected the trial's own "
                          f"file <log>.trials/{name}.h5 beside the log", file=path,
                          key=f"trials/{name}")
-    target = Path(path).parent / link.filename
+    target = Path(os.path.realpath(path)).parent / link.filename  # (beside the real log)
     try:
         mode = os.stat(target, follow_symlinks=False).st_mode
     except OSError:

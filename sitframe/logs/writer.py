@@ -12,6 +12,7 @@ import fcntl
 import glob
 import hashlib
 import importlib.util
+import itertools
 import json
 import os
 import re
@@ -30,7 +31,7 @@ from sitframe.contract.records import (
     RunInfo,
     TrialResult,
 )
-from sitframe.errors import InputError
+from sitframe.errors import DiskFullError, InputError
 from sitframe.logs.interrupts import deferred_interrupt
 from sitframe.logs.layout import (
     SCHEMA,
@@ -77,33 +78,53 @@ def _write_value(group: h5py.Group, name: str, value: Any) -> None:
         ds.attrs["units"] = UNITS[name]
 
 
-#: Logs this process is the writer of: resolved log path -> (fd of its flocked
-#: ``LOG.lock``, lock file path).
-_held: dict[str, tuple[int, Path]] = {}
+#: Logs this process is the writer of: real log path -> (fd of its flocked ``LOG.lock``, lock
+#: file path, the option or key the log's path came from, for messages).
+_held: dict[str, tuple[int, Path, str]] = {}
+
+#: Runs that replace an existing log: real log path -> the scratch file holding the new
+#: run's file until it has a trial of its own (:meth:`LogWriter.start`).
+_staged: dict[str, Path] = {}
+
+_names = itertools.count()
+
+
+def real_path(path: str | os.PathLike[str]) -> Path:
+    """The file a log path names, symbolic links followed: a log reached through a link
+    (``logs/`` pointing into a store) is written, locked and packed where the link points."""
+    return Path(os.path.realpath(path))
 
 
 def lock_log(path: str | os.PathLike[str], key: str = "--out") -> None:
     """Become the only writer of the log at ``path`` (no-op if this process already is).
 
     Takes an exclusive, non-blocking :func:`fcntl.flock` on ``LOG.lock``
-    (opened with ``O_NOFOLLOW``: a symlink planted there is refused), held
-    until :func:`unlock_log` or the end of the process (the OS releases it
-    when the process dies, even by SIGKILL).
+    beside the real log (symbolic links followed: two paths to one log share
+    one lock; the lock file itself is opened with ``O_NOFOLLOW``, so a
+    symlink planted there is refused), held until :func:`unlock_log` or the
+    end of the process (the OS releases it when the process dies, even by
+    SIGKILL). ``key`` is where the path came from (``--out``, ``--resume``,
+    ``LOG``), named by the messages about this log.
 
     Raises
     ------
     InputError
         Another process holds the lock, or the lock file cannot be created.
     """
-    real = os.path.realpath(path)
+    real = str(real_path(path))
     if real in _held:
         return
-    lock = Path(str(path) + ".lock")
+    lock = Path(real + ".lock")
     while True:
         try:
             lock.parent.mkdir(parents=True, exist_ok=True)
             fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
         except OSError as exc:
+            if exc.errno in _FULL:
+                raise InputError(f"cannot create the log: the disk is full ({lock.parent} has "
+                                 f"{human_size(_free(lock.parent))} free; its lock file "
+                                 f"'{lock.name}' cannot be made)", file=str(path),
+                                 key=key) from None
             raise InputError(f"cannot create the log: {exc.strerror or exc} (its lock file "
                              f"'{lock.name}')", file=str(path), key=key) from None
         try:
@@ -118,26 +139,114 @@ def lock_log(path: str | os.PathLike[str], key: str = "--out") -> None:
         except OSError:
             same = False
         if same:
-            _held[real] = (fd, lock)
+            _held[real] = (fd, lock, key)
             return
         os.close(fd)
 
 
 def unlock_log(path: str | os.PathLike[str] | None = None) -> None:
-    """Stop being the writer of the log at ``path`` (every log if ``path`` is None)."""
-    keys = list(_held) if path is None else [os.path.realpath(path)]
+    """Stop being the writer of the log at ``path`` (every log if ``path`` is None).
+
+    A new run that had not yet replaced the log it was to replace (no trial of its own)
+    leaves that log as it was: its scratch run file is removed."""
+    keys = list(_held) if path is None else [str(real_path(path))]
     for key in keys:
+        staged = _staged.pop(key, None)
+        if staged is not None:
+            staged.unlink(missing_ok=True)
         entry = _held.pop(key, None)
         if entry is not None:
-            fd, lock = entry
+            fd, lock, _key = entry
             lock.unlink(missing_ok=True)  # while still held, so no one else holds this file
             os.close(fd)
 
 
-def _write_error(exc: OSError, path: Path) -> InputError:
-    why = "no space left on device" if exc.errno == errno.ENOSPC else (exc.strerror or str(exc))
-    return InputError(f"cannot write the log ({why}); the log keeps its last complete "
-                      "transaction", file=str(path), key="--out")
+#: ``errno`` values of a full disk (space, or the user's quota).
+_FULL = (errno.ENOSPC, errno.EDQUOT)
+
+
+def _free(folder: Path) -> int:
+    """Bytes free for this user in ``folder``'s file system (0 if it cannot be told)."""
+    try:
+        return int(shutil.disk_usage(folder).free)
+    except OSError:
+        return 0
+
+
+def human_size(n: float) -> str:
+    """A byte count for people: ``512 B``, ``96 kB``, ``1.4 MB``, ``2.1 GB``."""
+    for unit in ("B", "kB", "MB", "GB"):
+        if n < 1000 or unit == "GB":
+            return f"{n:.0f} {unit}" if unit in ("B", "kB") or n >= 100 else f"{n:.1f} {unit}"
+        n /= 1000
+    raise AssertionError  # pragma: no cover
+
+
+def space_to_finish(logs: list[tuple[Path, int]]) -> int:
+    """About how many bytes finishing the logs ``(path, trials the run has)`` needs on
+    their disk (a sweep's points): every trial still to come, at the mean size of the
+    trials written so far, and each log packed at its end (written while its trial files
+    still exist). Complete logs need nothing; logs not begun count as the mean run file."""
+    seen = []  # (run file bytes, trials in it, trial file sizes, complete)
+    for path, _n in logs:
+        try:
+            with h5py.File(path, "r") as f:
+                trials = f.get("trials")
+                names = list(trials) if isinstance(trials, h5py.Group) else []
+                done = f.attrs.get("status") == "complete"
+            folder = shard_folder(path)
+            sizes = [p.stat().st_size for p in folder.glob("*.h5")] if folder.is_dir() else []
+            seen.append((Path(path).stat().st_size, len(names), sizes, done))
+        except (OSError, ValueError, TypeError):
+            seen.append(None)
+    sizes = [x for s in seen if s for x in s[2]]
+    packed = [s[0] / s[1] for s in seen if s and s[1] and not s[2]]
+    mean = sum(sizes) / len(sizes) if sizes else (sum(packed) / len(packed) if packed else 0.0)
+    runs = [s[0] - (s[1] - len(s[2])) * mean for s in seen if s and not s[3]]
+    base = max(sum(runs) / len(runs), 0.0) if runs else 0.0
+    need = 0.0
+    for s, (_path, n) in zip(seen, logs, strict=True):
+        if s is not None and s[3]:
+            continue
+        run, have = (s[0], s[1]) if s else (base, 0)
+        to_come = max(n - have, 0)
+        need += to_come * mean + run + (len(s[2]) if s else 0) * mean + to_come * mean
+    return int(need)
+
+
+def _memory_file(near: Path, image: bytes | None = None) -> h5py.File:
+    """A writable HDF5 file held in memory only: new, or opened from the bytes ``image``.
+
+    Every file the writer makes is built in memory and reaches the disk as plain bytes
+    (:meth:`LogWriter._put`): a full disk then fails one ordinary ``write``, which leaves
+    the published log as it was, instead of failing HDF5 half-way through its own writes,
+    which leaves the library's state broken (a later call crashes the process). The file
+    is named beside ``near`` (under a name no file has), so that external links in it
+    resolve as for a file there.
+    """
+    name = near.parent / f".{near.name}.{os.getpid()}-{next(_names)}.in-memory"
+    fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
+    fapl.set_fclose_degree(h5py.h5f.CLOSE_STRONG)
+    fapl.set_fapl_core(block_size=1 << 20, backing_store=False)
+    if image is None:
+        fid = h5py.h5f.create(os.fsencode(name), h5py.h5f.ACC_EXCL, fapl=fapl)
+    else:
+        fapl.set_file_image(image)
+        fid = h5py.h5f.open(os.fsencode(name), h5py.h5f.ACC_RDWR, fapl=fapl)
+    return h5py.File(fid)
+
+
+def _image(f: h5py.File) -> bytes:
+    """The bytes of the in-memory file ``f``, everything flushed into them."""
+    f.flush()
+    return bytes(f.id.get_file_image())
+
+
+def write_bytes(fd: int, image: bytes) -> None:
+    """The writer's one boundary with the disk: ``image`` written to the open file ``fd``
+    (closed here). An ``OSError`` (a full disk: ``ENOSPC``) leaves nothing published."""
+    with os.fdopen(fd, "wb") as fh:
+        fh.write(image)
 
 
 class LogWriter:
@@ -147,38 +256,72 @@ class LogWriter:
     ----------
     path
         The HDF5 run file. Created by :meth:`start`; its folder is created if needed.
+        A symbolic link is followed: the log is written where it points.
 
     Notes
     -----
     Trials go to their own files in :func:`shard_folder`, linked from the run
     file; :meth:`set_status` with a final status packs them into it. Only the
     process holding the log's lock (:func:`lock_log`) replaces the published
-    file, and only by a complete, closed one.
+    file, and only by a complete, closed one. Files are built in memory and
+    written as plain bytes (:func:`_memory_file`, :func:`write_bytes`), so a full
+    disk is one :class:`InputError` that names the folder and the space needed.
     """
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
-        self.path = Path(path)
+        self.given = str(path)
+        self.path = real_path(path)
         self.shards = shard_folder(self.path)
         self.part = self.path.with_name(self.path.name + ".part")  # the last scratch file used
+        self._doing = "run"
+        self._replacing = False  # (creating a new run's file beside an existing log)
 
-    def _scratch(self, folder: Path | None = None) -> Path:
+    @property
+    def key(self) -> str:
+        """Where the log's path came from (as its lock was taken: ``--out``, ``--resume``)."""
+        held = _held.get(str(self.path))
+        return held[2] if held else "--out"
+
+    @property
+    def _pending(self) -> Path | None:
+        """The new run's scratch run file while it has not yet replaced the existing log."""
+        return _staged.get(str(self.path))
+
+    def _mkstemp(self, folder: Path | None = None) -> tuple[int, Path]:
         """A new, empty scratch file in ``folder`` (default: beside the log; unique name,
-        never a symlink)."""
+        never a symlink), open."""
         lock_log(self.path)
         prefix = self.path.name if folder is None else ""
         fd, name = tempfile.mkstemp(prefix=prefix + ".", suffix=".part",
                                     dir=folder or self.path.parent)
-        os.close(fd)
         self.part = Path(name)
-        return self.part
+        return fd, self.part
+
+    def _scratch(self, folder: Path | None = None) -> Path:
+        """A new, empty scratch file in ``folder`` (default: beside the log), closed."""
+        fd, path = self._mkstemp(folder)
+        os.close(fd)
+        return path
+
+    def _put(self, image: bytes, dest: Path, folder: Path | None = None) -> None:
+        """Publish ``image`` as ``dest``: written to a scratch file beside it, renamed over it."""
+        self._want = len(image)
+        fd, tmp = self._mkstemp(folder)
+        try:
+            write_bytes(fd, image)
+            os.replace(tmp, dest)
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
 
     def remove_stale(self) -> None:
         """Remove what a killed writer left (call holding the lock): scratch files, and
         trial files the published log does not link (written, but never committed)."""
         lock_log(self.path)
         mine = re.compile(re.escape(self.path.name) + r"(\.[a-z0-9_]{8})?\.part")
+        staged = self._pending
         for name in glob.glob(glob.escape(str(self.path)) + "*.part"):
-            if mine.fullmatch(Path(name).name):
+            if mine.fullmatch(Path(name).name) and Path(name) != staged:
                 Path(name).unlink(missing_ok=True)
         self._clear_shards(keep=self._linked())
 
@@ -211,24 +354,27 @@ class LogWriter:
             try:
                 yield
             except OSError as exc:
-                raise _write_error(exc, self.path) from None
+                raise self._write_error(exc) from None
 
     @contextmanager
-    def _open(self) -> Iterator[h5py.File]:
-        """Copy the run file, open the copy for appending, publish it atomically on success."""
+    def _open(self, *, publish: bool = False) -> Iterator[h5py.File]:
+        """The run file, in memory, open for changes; published atomically on success.
+
+        A run replacing an existing log changes its scratch run file instead, until
+        ``publish``: then the changed file replaces the log (the run has a trial of its
+        own, or ended complete)."""
         with self._transaction():
-            tmp: Path | None = None
+            staged = self._pending
+            f = _memory_file(self.path, (staged or self.path).read_bytes())
             try:
-                tmp = self._scratch()
-                shutil.copyfile(self.path, tmp)
-                with h5py.File(tmp, "a") as f:
-                    yield f
-                    f.flush()
-                os.replace(tmp, self.path)
-            except BaseException:
-                if tmp is not None:
-                    tmp.unlink(missing_ok=True)
-                raise
+                yield f
+                image = _image(f)
+            finally:
+                f.close()
+            self._put(image, self.path if staged is None or publish else staged)
+            if staged is not None and publish:
+                _staged.pop(str(self.path), None)
+                staged.unlink(missing_ok=True)
 
     def start(self, info: RunInfo, *, resume: bool = False) -> None:
         """Create the file with the run's attributes (``status = "running"``).
@@ -236,47 +382,122 @@ class LogWriter:
         Takes the log's lock first (:func:`lock_log`). With ``resume=True``
         the existing log is kept (what a killed writer left is removed,
         :meth:`remove_stale`) and only its status is set to ``running``.
-        Otherwise the trial files of a log this one replaces are removed once
-        the new log is published.
+
+        A file already at the path (a complete log, say) is not replaced yet: the
+        new run's file is kept beside it (a scratch file) and replaces it only with
+        the run's first trial (:meth:`trials`), or when the run ends complete
+        without trials; a run that fails or is interrupted before leaves it as it
+        was. An unfinished log there (its trials in ``LOG.trials``) is first packed
+        into one file, so that it stays whole until then.
         """
         self.remove_stale()
-        if not resume:
-            with deferred_interrupt():
-                self._create(info)
-            self._clear_shards()
-        else:
+        if resume:
             self.set_status("running")
+            return
+        if self.path.exists() and not self.path.is_file():
+            why = os.strerror(errno.EISDIR) if self.path.is_dir() else "not a regular file"
+            raise InputError(f"cannot create the log: {why}", file=self.given, key=self.key)
+        if self.path.exists() and self._linked():
+            self.pack()  # (the new run's trial files go where the old log's are)
+        with self._transaction():
+            self._create(info, replacing=self.path.exists())
+        self._clear_shards()
 
-    def _create(self, info: RunInfo) -> None:
-        """Write the new log's root attributes to a scratch file and publish it."""
-        tmp: Path | None = None
+    def _create(self, info: RunInfo, *, replacing: bool) -> None:
+        """Write the new log's root attributes in memory and publish them (beside an
+        existing file, ``replacing`` it later)."""
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        f = _memory_file(self.path)
         try:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = self._scratch()
-            with h5py.File(tmp, "w") as f:
-                ex = info.extra
-                f.attrs.update({
-                    "schema": SCHEMA, "schema_version": SCHEMA_VERSION, "status": "running",
-                    "name": info.name, "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-                    "config": info.config_text, "config_hash": info.config_hash,
-                    "seed": info.seed, "n_trials": info.n_trials, "iterations": info.iterations,
-                    "source": str(ex.get("source", "")),
-                    "versions": json.dumps(ex.get("versions", {})),
-                    "plugins": json.dumps(info.plugins), "worlds": json.dumps(info.worlds),
-                    **({"evaluation": json.dumps(ex["evaluation"])} if ex.get("evaluation")
-                       else {}),
-                    **({"sensor": json.dumps(ex["sensor"])} if ex.get("sensor") else {}),
-                    "inputs": json.dumps(ex.get("inputs", {})),
-                    **({"code_hash": str(ex["code_hash"])} if ex.get("code_hash") else {})})
-                f.create_group("trials")
-            os.replace(tmp, self.path)
-        except BaseException as exc:
-            if tmp is not None:
-                tmp.unlink(missing_ok=True)
-            if isinstance(exc, OSError):
-                raise InputError(f"cannot create the log: {exc.strerror or exc}",
-                                 file=str(self.path), key="--out") from None
+            ex = info.extra
+            f.attrs.update({
+                "schema": SCHEMA, "schema_version": SCHEMA_VERSION, "status": "running",
+                "name": info.name, "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                "config": info.config_text, "config_hash": info.config_hash,
+                "seed": info.seed, "n_trials": info.n_trials, "iterations": info.iterations,
+                "source": str(ex.get("source", "")),
+                "versions": json.dumps(ex.get("versions", {})),
+                "plugins": json.dumps(info.plugins), "worlds": json.dumps(info.worlds),
+                **({"evaluation": json.dumps(ex["evaluation"])} if ex.get("evaluation")
+                   else {}),
+                **({"sensor": json.dumps(ex["sensor"])} if ex.get("sensor") else {}),
+                "inputs": json.dumps(ex.get("inputs", {})),
+                **({"code_hash": str(ex["code_hash"])} if ex.get("code_hash") else {})})
+            f.create_group("trials")
+            image = _image(f)
+        finally:
+            f.close()
+        if not replacing:
+            self._put(image, self.path)
+            return
+        self._replacing = True
+        self._want = len(image)
+        fd, staged = self._mkstemp()
+        try:
+            write_bytes(fd, image)
+        except BaseException:
+            staged.unlink(missing_ok=True)
             raise
+        old = _staged.pop(str(self.path), None)
+        if old is not None:
+            old.unlink(missing_ok=True)
+        _staged[str(self.path)] = staged
+        self._replacing = False
+
+    def _write_error(self, exc: OSError) -> InputError:
+        """The one line for a write that failed: a full disk names the folder, what is free
+        and what the log needs; anything else says why."""
+        if exc.errno not in _FULL:
+            what = "create" if not self.path.exists() else "write"
+            return InputError(f"cannot {what} the log ({exc.strerror or exc}); the log keeps its "
+                              "last complete transaction", file=self.given, key=self.key)
+        folder = self.path.parent
+        want = getattr(self, "_want", 0)
+        trials, total = self._space_needed(want)
+        need = f"this write needs {human_size(want)}" if want else "it needs more space"
+        if total > want:
+            need += f" and finishing the run about {human_size(total)}"
+        replacing = self._pending is not None or self._replacing
+        if replacing or not self.path.exists() or not trials:
+            kept = ("the existing log there is kept as it was" if replacing
+                    else "nothing was written" if not self.path.exists()
+                    else "the log holds no finished trial yet")
+            how = "make space there and run the command again"
+        else:
+            kept = f"the log keeps its {trials} finished trial{'s' * (trials != 1)}"
+            here = self.path.name + (f" and its folder {self.shards.name}"
+                                     if self.shards.is_dir() else "")
+            how = (f"make space there, or move {here} to a disk with space, then run "
+                   + (f"`sitframe pack {self.given}`" if self._doing == "pack" else
+                      f"`sitframe run --resume {self.given}`"))
+        free = _free(folder)
+        return DiskFullError(f"the disk is full: {folder} has {human_size(free)} free; "
+                             f"{need}; {kept}: {how}", file=self.given, folder=str(folder),
+                             free=free)
+
+    def _space_needed(self, want: int) -> tuple[int, int]:
+        """(trials in the log, bytes the rest of the run needs on its disk): the trials
+        still to come at the mean size of those written, and the packed log at the end
+        (written while the trial files still exist); at least ``want``, the write that
+        failed (all that is known while the log holds no trial)."""
+        if self._pending is not None or self._replacing:
+            return 0, want
+        try:
+            with h5py.File(self.path, "r") as f:
+                n_total = int(f.attrs.get("n_trials", 0))
+                trials = f.get("trials")
+                names = list(trials) if isinstance(trials, h5py.Group) else []
+        except (OSError, ValueError, TypeError):
+            return 0, want
+        if not names:
+            return 0, want
+        sizes = [p.stat().st_size for p in self.shards.glob("*.h5") if p.is_file()] \
+            if self.shards.is_dir() else []
+        run = self.path.stat().st_size
+        mean = sum(sizes) / len(sizes) if sizes else run / len(names)
+        to_come = max(n_total - len(names), 0)
+        packed = run + (len(sizes) + to_come) * mean  # (packed trials are in the run file)
+        return len(names), int(max(want, to_come * mean + packed))
 
     def release(self) -> None:
         """Stop being the log's writer (:func:`unlock_log`)."""
@@ -296,7 +517,8 @@ class LogWriter:
         self.trials([trial], behaviour_labels)
 
     def trials(self, trials: list[TrialResult], behaviour_labels: list[str] | None = None) -> None:
-        """Write several finished trials: one file each, linked in one transaction."""
+        """Write several finished trials: one file each, linked in one transaction (which
+        also replaces the log a new run replaces: the run now has trials of its own)."""
         if not trials:
             return
         written: list[Path] = []
@@ -307,7 +529,7 @@ class LogWriter:
                     shard, row = self._write_shard(trial, behaviour_labels)
                     written.append(shard)
                     rows.append(row)
-                with self._open() as f:
+                with self._open(publish=True) as f:
                     links = f.require_group("trials")
                     for row, shard in zip(rows, written, strict=True):
                         name = f"{row['trial']:04d}"
@@ -324,41 +546,51 @@ class LogWriter:
 
     def _write_shard(self, trial: TrialResult, behaviour_labels: list[str] | None
                      ) -> tuple[Path, dict[str, Any]]:
-        """Write one trial to its own file (scratch name, renamed when closed); return the
-        file and the trial's row of the summary table."""
+        """Write one trial to its own file (built in memory, published by a rename); return
+        the file and the trial's row of the summary table."""
         if self.shards.is_symlink():
             raise InputError(f"'{self.shards.name}' beside the log is a symlink; refusing to "
-                             "write the log's trials through it", file=str(self.path),
-                             key="--out")
+                             "write the log's trials through it", file=self.given,
+                             key=self.key)
         self.shards.mkdir(exist_ok=True)
-        tmp = self._scratch(self.shards)
+        shard = self.shards / f"{trial.index:04d}.h5"
+        f = _memory_file(shard)
         try:
-            with h5py.File(tmp, "w") as f:
-                _write_trial(f, trial, behaviour_labels)
-                row = _summary_row(f)
-            shard = self.shards / f"{trial.index:04d}.h5"
-            os.replace(tmp, shard)
-        except BaseException:
-            tmp.unlink(missing_ok=True)
-            raise
+            _write_trial(f, trial, behaviour_labels)
+            row = _summary_row(f)
+            image = _image(f)
+        finally:
+            f.close()
+        self._put(image, shard, self.shards)
         return shard, row
 
     def set_status(self, status: str, failure: str | None = None) -> None:
         """Set the root ``status`` (and ``failure``, the one-line reason a run failed).
 
         Any status but ``running`` ends the run: the trial files are packed
-        into the run file in the same transaction (:meth:`pack`).
+        into the run file in the same transaction (:meth:`pack`). A new run that
+        ends ``failed`` or ``aborted`` before it replaced an existing log (no trial
+        of its own) leaves that log as it was.
         """
+        if self._pending is not None and status in ("failed", "aborted"):
+            self._pending.unlink(missing_ok=True)
+            _staged.pop(str(self.path), None)
+            self._clear_shards(keep=self._linked())
+            return
         self._commit(status, failure, pack=status != "running")
 
     def pack(self) -> None:
         """Copy every linked trial file into the run file (one transaction), then remove
         the trial files: the log becomes one self-contained HDF5 file."""
-        self._commit(None, None, pack=True)
+        self._doing = "pack"
+        try:
+            self._commit(None, None, pack=True)
+        finally:
+            self._doing = "run"
 
     def _commit(self, status: str | None, failure: str | None, *, pack: bool) -> None:
         packed: list[Path] = []
-        with self._open() as f:
+        with self._open(publish=pack) as f:
             if status is not None:
                 f.attrs["status"] = status
             if failure:
@@ -483,9 +715,11 @@ def code_fingerprint(plugins: list[dict[str, Any]] | None = None) -> str:
     h = hashlib.sha256()
     files: list[Path] = []
     for pkg in ("sitframe", "sitframe.plugins"):
+        # (the package's own folder: in a source checkout sitframe's __path__ also holds
+        # the checkout's root, which would hash every file below it, a venv's too)
         spec = importlib.util.find_spec(pkg)
-        for folder in (spec.submodule_search_locations or []) if spec else []:
-            files += sorted(Path(folder).rglob("*.py"))
+        if spec is not None and spec.origin:
+            files += sorted(Path(spec.origin).parent.rglob("*.py"))
     for info in plugins or []:
         if info.get("file"):
             files.append(Path(info["file"]))

@@ -36,6 +36,7 @@ from sitframe.errors import (
     TaskCancelled,
     located,
     located_in,
+    warn,
 )
 from sitframe.runs.arithmetic import arithmetic_versions
 from sitframe.runs.collect import (
@@ -221,7 +222,13 @@ class Experiment:
             "source": collected.source, "worlds": list(collected.worlds)})
 
     def record_clusters(self, fit: dict[str, Any], state: dict[str, Any]) -> None:
-        """Hand the cluster stage's output to observers."""
+        """Hand the cluster stage's output to observers (and say, naming the config and
+        key, when no clustering trial filled every situation)."""
+        if "[fallback" in str(fit.get("rule", "")):
+            c = len(np.asarray(state.get("centers", ())))
+            warn(f"{self.source}: interpreter.c: every clustering trial left one of the {c} "
+                 "situations empty (more situations than the collected samples fill); the "
+                 "best-ranked trial is used anyway: lower c, or collect more samples")
         self._notify("sitframe_stage_end", run=self.info, stage="cluster",
                                         data={**fit, "state": state})
 
@@ -396,14 +403,22 @@ class _Runs:
         self.runs[i][0].finish(status)
 
     def stop(self, exc: BaseException) -> None:
-        """Mark every run still running ``aborted`` (Ctrl-C) or ``failed``."""
+        """Mark every run still running ``aborted`` (Ctrl-C) or ``failed``.
+
+        Each run is told, whatever the others do: an observer that cannot record the end
+        (a full disk fails the failed run's log as it failed the trial) does not keep the
+        later runs from being told, nor hide ``exc``, the reason the runs stop."""
         status = "aborted" if isinstance(exc, KeyboardInterrupt) else "failed"
         for i, st in enumerate(self.status):
             if st != "running":
                 continue
             if isinstance(exc, PluginFault):
                 self.runs[i][0].info.extra["failure"] = str(exc)
-            self.finish(i, status)
+            try:
+                self.finish(i, status)
+            except (InputError, PluginError):
+                if not isinstance(exc, InputError | PluginError):
+                    raise
 
 
 def _check_plugin_data(data: dict[str, Any], before: dict[str, Any], plugin: str) -> None:

@@ -43,14 +43,16 @@ from __future__ import annotations
 import concurrent.futures as cf
 import multiprocessing as mp
 import os
+import re
 import signal
-import sys
 import threading
+import warnings
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import suppress
 from typing import TYPE_CHECKING, Any
 
-from sitframe.errors import InputError, PluginFault, TaskCancelled
+from sitframe.errors import InputError, PluginFault, TaskCancelled, show_warning, warn
 from sitframe.logs.interrupts import deferred_interrupt
 from sitframe.runs.arithmetic import arithmetic, check_same_arithmetic
 from sitframe.sim import kernels
@@ -102,6 +104,7 @@ def _worker_init(lifeline: Any = None, inherited_writer: Any = None) -> None:
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _on_sigterm)
+    warnings.showwarning = show_warning  # (a worker writes to the command's stderr)
     if inherited_writer is not None:
         inherited_writer.close()
     if lifeline is None:
@@ -528,7 +531,7 @@ class DaskExecutor(PoolExecutor):
         self.address = address
         scheme = _check_address(address)
         try:
-            self.client = Client(address, timeout=timeout, set_as_default=False)
+            self.client = _connect(Client, address, timeout)
         except Exception as exc:  # noqa: BLE001 - OSError, TimeoutError, ValueError (bad address)
             msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             raise InputError(f"cannot reach the Dask scheduler at '{address}' within "
@@ -540,10 +543,9 @@ class DaskExecutor(PoolExecutor):
             self.shutdown()
             raise
         if scheme not in ("tls", "wss", "inproc"):
-            print(f"sitframe: warning: --scheduler {address}: plain {scheme}; Dask unpickles "
-                  "what it receives, so whoever can reach the scheduler can run code here and "
-                  "on the workers: use tls:// on a shared network (see docs/how-to/dask.md)",
-                  file=sys.stderr)
+            warn(f"--scheduler {address}: plain {scheme}; Dask unpickles what it receives, so "
+                 "whoever can reach the scheduler can run code here and on the workers: use "
+                 "tls:// on a shared network (see docs/how-to/dask.md)")
 
     @property
     def capacity(self) -> int:  # type: ignore[override]
@@ -552,25 +554,82 @@ class DaskExecutor(PoolExecutor):
         except Exception:  # noqa: BLE001 - a scheduler that cannot tell: assume one slot
             return 1
 
-    def submit(self, fn: Callable[..., Any], *args: Any) -> Any:
+    def submit(self, fn: Callable[..., Any], *args: Any) -> _DaskTask:
+        return _DaskTask(self, fn, args)
+
+    def _remote(self, fn: Callable[..., Any], args: tuple[Any, ...]) -> Any:
         return self.client.submit(_same_arithmetic_task, self.arithmetic, fn, *args, pure=False)
 
     def wait_first(self, futures: Iterable[Any]) -> set[Any]:
         from distributed import as_completed
 
         futures = list(futures)
-        done = {f for f in futures if f.done()}
-        if not done:  # our client, not a global default one
-            done = {next(iter(as_completed(futures, loop=self.client.loop)))}
-        return done | {f for f in futures if f.done()}
+        while not any(f.done() for f in futures):
+            remote = {f.remote: f for f in futures}
+            first = next(iter(as_completed(list(remote), loop=self.client.loop)))  # (our client)
+            self._settle([remote[first], *(f for f in futures if f.remote.done())])
+        return {f for f in futures if f.done()}
+
+    def _settle(self, tasks: list[_DaskTask]) -> None:
+        """Fetch the results of the finished ``tasks`` now, in one transfer, and release their
+        copies on the workers: a worker killed later then loses no finished work (the
+        scheduler would run every finished task it held again). A task lost with its worker
+        more often than the scheduler retries (``KilledWorker``) is submitted again, up to
+        :data:`DASK_RESUBMITS` times."""
+        from distributed import KilledWorker
+
+        tasks = [t for t in dict.fromkeys(tasks) if not t.done() and t.remote.done()]
+        ok = {i: t.remote for i, t in enumerate(tasks) if t.remote.status == "finished"}
+        for i, value in (self.client.gather(ok, errors="skip") if ok else {}).items():
+            tasks[i].remote.release()  # (one lost since is computed again; gathered later)
+            tasks[i].set_result(value)
+        for t in tasks:
+            if t.done() or t.remote.status == "cancelled":
+                continue
+            exc = t.remote.exception()
+            if isinstance(exc, KilledWorker) and t.lost < DASK_RESUBMITS:
+                t.lost += 1
+                t.remote.release()
+                t.remote = self._remote(t.fn, t.args)
+                continue
+            if isinstance(exc, KilledWorker):
+                exc = InputError(f"a task was lost with its Dask worker {t.lost + 1} times over "
+                                 f"(the workers of '{self.address}' keep dying); the finished "
+                                 "trials are in the log: finish it with `sitframe run --resume "
+                                 "LOG` (or the sweep with --reuse)", key="--scheduler")
+            t.remote.release()
+            t.set_exception(exc)
 
     def cancel(self, futures: Iterable[Any]) -> None:
-        self.client.cancel(list(futures))
+        futures = list(futures)
+        self.client.cancel([f.remote for f in futures])
+        for f in futures:
+            f.cancel()
 
     def shutdown(self, cancel: bool = False) -> None:
         client, self.client = self.client, None
         if client is not None:
             client.close()
+
+
+#: Times a task lost with its worker more often than the scheduler retries is submitted again.
+DASK_RESUBMITS = 5
+
+
+class _DaskTask(cf.Future):  # type: ignore[type-arg]
+    """A task on the Dask cluster, seen as a local future: its result is fetched once the
+    task is done (:meth:`DaskExecutor._settle`) and kept here, not on a worker."""
+
+    def __init__(self, executor: DaskExecutor, fn: Callable[..., Any],
+                 args: tuple[Any, ...]) -> None:
+        super().__init__()
+        self.executor, self.fn, self.args, self.lost = executor, fn, args, 0
+        self.remote = executor._remote(fn, args)
+
+    def result(self, timeout: float | None = None) -> Any:
+        while not self.done():
+            self.executor.wait_first([self])
+        return super().result(timeout)
 
 
 def _same_arithmetic_task(expected: str, fn: Callable[..., Any], *args: Any) -> Any:
@@ -585,23 +644,64 @@ def _same_arithmetic_task(expected: str, fn: Callable[..., Any], *args: Any) -> 
     return fn(*args)
 
 
+def _connect(client_class: Any, address: str, timeout: float) -> Any:
+    """``client_class(address, ...)``; a client that fails half-way is closed at once, quietly.
+
+    Left to the garbage collector, such a client tries to close itself when the error
+    that holds it is dropped, waits twice the connect timeout for a scheduler it never
+    reached and prints a ``TimeoutError`` traceback, seconds after sitframe's one line.
+    """
+    made: list[Any] = []
+
+    class _Client(client_class):  # type: ignore[misc, valid-type]
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            made.append(self)
+            super().__init__(*args, **kwargs)
+
+    try:
+        return _Client(address, timeout=timeout, set_as_default=False)
+    except BaseException:
+        for client in made:
+            with suppress(Exception):
+                client.status = "closed"  # (its __del__ then does nothing)
+                client._loop_runner.stop()
+        raise
+
+
 def _check_address(address: str) -> str:
     """The scheme of a Dask address, or an InputError for a malformed one (checked before a
-    Client exists: a Client that fails half-way prints a traceback when collected)."""
+    Client exists: a Client that fails half-way prints a traceback when collected). A host
+    and a port are required (a Client does not default the port), and ``tls://`` or
+    ``wss://`` needs the client's certificates in the Dask configuration."""
     from distributed.comm.addressing import parse_address, parse_host_port
     from distributed.comm.registry import backends
 
     try:
+        if not address.strip():
+            raise ValueError("it is empty")
         scheme, loc = parse_address(address)
         if scheme not in backends:
             raise ValueError(f"unknown scheme '{scheme}'; known: {', '.join(sorted(backends))}")
         if scheme in ("tcp", "tls", "ws", "wss"):
-            _host, port = parse_host_port(loc, default_port=8786)
+            if not re.search(r":\d+$", loc):
+                raise ValueError("no port number")
+            host, port = parse_host_port(loc)
+            if not host:
+                raise ValueError("no host")
             if not 0 < int(port) < 65536:
                 raise ValueError(f"port {port} out of range 1-65535")
     except (ValueError, TypeError) as exc:
         raise InputError(f"malformed Dask scheduler address '{address}' ({exc}); expected e.g. "
                          "tls://host:8786", key="--scheduler") from None
+    if scheme in ("tls", "wss"):
+        from distributed.security import Security
+
+        if Security().get_connection_args("client").get("ssl_context") is None:
+            raise InputError(f"'{address}' is a {scheme}:// address, but the Dask configuration "
+                             "gives this client no TLS certificates; expected "
+                             "distributed.comm.tls.ca-file, .client.cert and .client.key set "
+                             "(e.g. DASK_DISTRIBUTED__COMM__TLS__CA_FILE=...), or a tcp:// "
+                             "address", key="--scheduler")
     return str(scheme)
 
 

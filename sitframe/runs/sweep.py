@@ -75,7 +75,7 @@ from sitframe.contract.config import (
     validate_config,
 )
 from sitframe.contract.tables import plugin_tables
-from sitframe.errors import InputError, did_you_mean, note
+from sitframe.errors import DiskFullError, InputError, did_you_mean, note
 from sitframe.params import accepted_params, known_keys
 from sitframe.runs.summaries import format_value, summarise_log
 from sitframe.sim.robot import RobotParams
@@ -116,6 +116,10 @@ class Sweep:
     out: Path
     description: str = ""
     points: list[Point] = field(default_factory=list)
+    #: Where the output folder came from: ``--out`` (the command line) or ``sweep.out``
+    #: (the sweep file, also when it is the default folder).
+    out_key: str = "sweep.out"
+    plugins_dirs: tuple[str, ...] = ()
 
 
 # ---------------------------------------------------------------------------
@@ -153,9 +157,14 @@ def load_sweep(path: str, *, out: str | None = None, plugins_dirs: tuple[str, ..
         for key in keys:
             check_key(key, base_cfg, plugins, file=path, where=where)
     out_dir = Path(out or head.get("out") or Path("logs") / "sweeps" / name)
+    if out_dir.exists() and not out_dir.is_dir():
+        where = {"file": None, "key": "--out"} if out else {"file": path, "key": "sweep.out"}
+        raise InputError(f"'{out_dir}' is a file; expected the folder for the points' logs",
+                         **where)
     desc = head.get("description", "")
     sweep = Sweep(name, str(p), head["base"], base_cfg, base_source, base_dir, fixed,
-                  dict(grid), out_dir, desc if isinstance(desc, str) else "")
+                  dict(grid), out_dir, desc if isinstance(desc, str) else "",
+                  out_key="--out" if out else "sweep.out", plugins_dirs=tuple(plugins_dirs))
     _check_points(sweep, plugins)
     if prerequisites is not None:
         prerequisites(base_cfg, base_dir)
@@ -447,19 +456,27 @@ def run_sweep(sweep: Sweep, executor: Any, *, progress: bool = False,
     loose plugin files), and says so on stderr. A log of the same config
     made by other code is run again, and said: a grid whose points came
     from two versions of a plugin would compare the versions, not the grid.
+    With ``reuse``, an unfinished log of the point's config and code (a sweep
+    stopped by Ctrl-C, a kill or a full disk) is finished as ``run --resume``
+    finishes it: its finished trials are kept and only the missing ones run.
+
+    A full disk ends the sweep in one :class:`~sitframe.errors.DiskFullError`
+    line naming the folder, what is free there and about what finishing every
+    point needs; every finished trial stays in the points' logs, and running the
+    sweep again with ``--reuse`` in a place with space finishes it.
 
     Returns
     -------
     dict
         ``{"name", "out", "wall_seconds", "points": [summary row per point],
-        "reused": [names of the points whose logs were kept]}``.
+        "reused": [names of the points whose logs were kept], "finished": [names of the
+        points whose unfinished logs were resumed]}``.
     """
-    from sitframe.logs.writer import lock_log
     from sitframe.runs.experiment import RunPlan, drive
 
     t0 = time.perf_counter()
     for pt in sweep.points:  # one writer per log: refuse before any point writes anything
-        lock_log(pt.log)
+        _claim(sweep, pt)
     codes: dict[str, str] = {}  # (one source fingerprint per plugin list, not per point)
     found = {pt.name: _reusable(pt, codes) for pt in sweep.points} if reuse else {}
     kept = [name for name, how in found.items() if how == "same"]
@@ -471,12 +488,21 @@ def run_sweep(sweep: Sweep, executor: Any, *, progress: bool = False,
         note(f"not reusing {len(stale)} of {len(sweep.points)} points' logs, complete and of "
              "the same config but made by other code (code hash differs); running them "
              "again: " + ", ".join(stale))
+    unfinished = [name for name, how in found.items() if how == "unfinished"]
+    if unfinished:
+        note(f"finishing {len(unfinished)} of {len(sweep.points)} points' unfinished logs in "
+             f"{sweep.out} (same config and code; their finished trials are kept): "
+             + ", ".join(unfinished))
     todo = [pt for pt in sweep.points if pt.name not in kept]
     for pt in todo:
+        if pt.name in unfinished:
+            _resume_point(sweep, pt)
         pt.experiment.info.extra["progress"] = progress
         pt.experiment.info.extra["progress_group"] = f"sweep {sweep.name}"
     try:
         drive([(pt.experiment, RunPlan.of(pt.run_kwargs)) for pt in todo], executor)
+    except DiskFullError as exc:
+        raise _disk_full(sweep, exc) from None
     except InputError as exc:  # a setting found wrong only as a point ran: say which point
         pt = next((p for p in todo if p.experiment.res.file == exc.file), None)
         if pt is None:
@@ -486,7 +512,43 @@ def run_sweep(sweep: Sweep, executor: Any, *, progress: bool = False,
     rows = [{"point": pt.name, **pt.values, **summarise_log(pt.log)} for pt in sweep.points]
     return {"name": sweep.name, "out": str(sweep.out), "keys": list(sweep.grid),
             "wall_seconds": round(time.perf_counter() - t0, 3), "points": rows,
-            "reused": kept}
+            "reused": kept, "finished": unfinished}
+
+
+def _claim(sweep: Sweep, pt: Point) -> None:
+    """Become the writer of a point's log (refused, naming where the folder came from)."""
+    from sitframe.logs.writer import lock_log
+
+    try:
+        lock_log(pt.log, key=sweep.out_key)
+    except InputError as exc:
+        if sweep.out_key == "--out":
+            raise
+        raise InputError(f"{pt.log}: {exc.message}", file=sweep.file, key="sweep.out") from None
+
+
+def _resume_point(sweep: Sweep, pt: Point) -> None:
+    """Make the point finish its unfinished log (as ``run --resume``) instead of rerunning it."""
+    from sitframe.runs.prepare import prepare_resume
+
+    exp, kwargs, _missing = prepare_resume(pt.log, plugins_dirs=sweep.plugins_dirs)
+    exp.info.extra["source"] = sweep.base_source
+    pt.experiment, pt.run_kwargs = exp, kwargs
+
+
+def _disk_full(sweep: Sweep, exc: DiskFullError) -> DiskFullError:
+    """The sweep's one line for a full disk: what finishing every point needs, and how."""
+    from sitframe.logs.writer import human_size, space_to_finish
+
+    need = space_to_finish([(pt.log, pt.experiment.info.n_trials) for pt in sweep.points])
+    again = f"sitframe sweep {sweep.file}" + (f" --out {sweep.out}"
+                                              if sweep.out_key == "--out" else "")
+    return DiskFullError(
+        f"the disk is full: {exc.folder} has {human_size(exc.free)} free and finishing the "
+        f"sweep needs about {human_size(need)} more (writing {exc.file} failed); every "
+        f"finished trial is kept: make space there and run `{again} --reuse`, which keeps "
+        "the complete points' logs and finishes the others", file=sweep.file, folder=exc.folder,
+        free=exc.free)
 
 
 def _reusable(pt: Point, codes: dict[str, str]) -> str:
@@ -502,15 +564,17 @@ def _reusable(pt: Point, codes: dict[str, str]) -> str:
         log = open_log(pt.log)
     except InputError:
         return ""  # (not a readable log: the run replaces it or refuses, as without reuse)
-    if not log.complete or str(log.attrs.get("config_hash", "")) != \
-            pt.experiment.info.config_hash:
+    if str(log.attrs.get("config_hash", "")) != pt.experiment.info.config_hash:
         return ""
     info = pt.experiment.info
     key = json.dumps(info.plugins, sort_keys=True)
     if key not in codes:
         codes[key] = code_fingerprint(info.plugins)
     code = info.extra.setdefault("code_hash", codes[key])
-    return "same" if str(log.attrs.get("code_hash", "")) == code else "code"
+    same = str(log.attrs.get("code_hash", "")) == code
+    if not log.complete:
+        return "unfinished" if same else ""
+    return "same" if same else "code"
 
 
 __all__ = ["Sweep", "check_key", "load_sweep", "point_names", "run_sweep"]

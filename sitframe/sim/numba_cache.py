@@ -79,10 +79,11 @@ def configure() -> bool:
         else:
             config.CACHE_DIR = ""  # (numba's own NUMBA_CACHE_DIR, if that was the one)
             _CONFIGURED.append(None)
-            print(f"sitframe: warning: kernel cache folder {folder}: cannot write there "
-                  f"({problem}); the kernels are compiled in every process instead (set "
-                  "SITFRAME_CACHE_DIR to a writable folder to cache them)", file=sys.stderr,
-                  flush=True)
+            from sitframe.errors import warn
+
+            warn(f"kernel cache folder {folder}: cannot write there ({problem}); the kernels "
+                 "are compiled in every process instead (set SITFRAME_CACHE_DIR to a writable "
+                 "folder to cache them)")
     return _CONFIGURED[0] is not None
 
 
