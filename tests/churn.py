@@ -1,6 +1,6 @@
 """A real Dask cluster whose workers are killed and restarted while a sweep runs.
 
-Shared by ``tests/test_faults.py`` (a churn test) and ``benchmarks/bench_churn.py``
+Shared by ``tests/test_faults.py`` (a churn test) and ``benchmarks/scale/bench_churn.py``
 (throughput with and without churn). The scheduler runs in this process (a
 ``distributed.LocalCluster`` without workers); every worker is a ``dask worker``
 process of its own (one thread, no nanny), so killing one with SIGKILL is what a

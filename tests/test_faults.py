@@ -582,7 +582,7 @@ def test_a_sweep_on_a_churning_dask_cluster_finishes_every_point_identically(tmp
                                                                            capsys):
     """40 settings x 2 seeds on a real cluster of 2 worker processes, one killed (SIGKILL)
     and replaced every 1.5 s: every point's log complete and bit-identical to a calm run's.
-    Throughput with and without churn: ``benchmarks/bench_churn.py``."""
+    Throughput with and without churn: ``benchmarks/scale/bench_churn.py``."""
     if not os.environ.get("CI"):
         pytest.importorskip("distributed")
     from churn import Churn, Cluster, write_sweep

@@ -2,7 +2,7 @@
 
 ::
 
-    python benchmarks/scale/bench_churn.py                          # 40 settings x 2 seeds, 2 workers
+    python benchmarks/scale/bench_churn.py                    # 40 settings x 2 seeds, 2 workers
     python benchmarks/scale/bench_churn.py --settings 60 --interval 2 --repeats 3
 
 Starts a real Dask cluster (the scheduler of a ``distributed.LocalCluster`` in this
