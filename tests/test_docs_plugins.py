@@ -171,7 +171,7 @@ def test_same_log_with_two_workers(tutorial: Page, monkeypatch: pytest.MonkeyPat
                 np.testing.assert_array_equal(value, b.plugins[plugin][key])
 
 
-def test_plugin_data_is_everywhere_a_user_looks(tutorial: Tutorial) -> None:
+def test_plugin_data_is_everywhere_a_user_looks(tutorial: Page) -> None:
     """The observer's and the reward's per-trial scalars are columns of the exported summary,
     its per-iteration series a column of the iterations, and the report has a section per
     plugin with its scalars and a plot of the series."""
