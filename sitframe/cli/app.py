@@ -446,7 +446,8 @@ def print_run(result: Any) -> None:
     if result.trials:
         from sitframe.runs.evaluation import rule_base_table
 
-        console.print(rule_base_table(result))
+        for space in ("default", *result.info.config.get("spaces", {})):
+            console.print(rule_base_table(result, space))
     if result.info.out:
         console.print(f"log: {result.info.out}")
 
@@ -473,6 +474,11 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         print(json.dumps(doc, indent=2, default=_json_default))
     else:
         for k, v in doc.items():
+            if k == "spaces":  # one line per situation space: what it is and who reads it
+                for name, sp in v.items():
+                    print(f"{'space ' + name:>22}: {sp['situations']} situations over readings "
+                          f"{sp['view']}, read by {', '.join(sp['read_by']) or 'none'}")
+                continue
             print(f"{k:>22}: {v}")
     return 0
 
