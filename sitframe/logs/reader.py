@@ -321,7 +321,7 @@ class Log:
     def space(self, name: str) -> dict[str, Any]:
         """Space ``name`` as logged: ``view``, ``readers``, ``labels``, ``component``,
         ``source`` and ``state`` (its fitted state, as :meth:`interpreter_state`), plus
-        ``fit/...`` when it was fitted in the run."""
+        ``fit`` when it was fitted in the run and ``samples`` when on data of its own."""
         with self._file() as f:
             if f"spaces/{name}/state" not in f:
                 have = list(f["spaces"]) if "spaces" in f else []
@@ -333,10 +333,9 @@ class Log:
             for k in ("readers", "labels"):
                 if isinstance(out.get(k), str):
                     out[k] = json.loads(out[k])
-            out["view"] = np.asarray(g["view"][()]) if "view" in g else None
-            out["state"] = _read_group(g["state"])
-            if "fit" in g:
-                out["fit"] = _read_group(g["fit"])
+            out["view"] = None
+            for k, item in g.items():  # view, samples (its own data), state, fit
+                out[k] = _read_group(item) if isinstance(item, h5py.Group) else item[()]
             return out
 
     def space_states(self) -> dict[str, dict[str, Any]]:
