@@ -201,7 +201,8 @@ def test_a_third_party_behaviour_gets_its_own_space_from_config_alone(tmp_path, 
 
     seen = tally_plugin.SEEN
     assert ("bind", "wall", 4) in seen and ("reset", 4) in seen
-    assert {(x[0], x[1], tuple(x[2])) for x in seen if x[0] == "u"} == {("u", 4, ("default", "wall"))}
+    got = {(x[0], x[1], tuple(x[2])) for x in seen if x[0] == "u"}
+    assert got == {("u", 4, ("default", "wall"))}
     assert {x for x in seen if x[0] == "learn"} == {("learn", 4)}
     tr = open_log(log).trial(0)
     assert tr.policies["follow"].outputs["turn"].rules.size == 4  # checked against its c

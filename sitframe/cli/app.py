@@ -106,6 +106,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="preset or TOML whose behaviours, arbiter and [goal] table the goal "
                    "episodes use (default: goal-finding)")
     e.add_argument("--json", action="store_true")
+    e.add_argument("--per-episode", action="store_true",
+                   help="with --goal-episodes: also every episode's figures (per_episode)")
 
     w = sub.add_parser("world", help="worlds: draw or list")
     wsub = w.add_subparsers(dest="world_command", required=True, parser_class=_Parser)
@@ -468,7 +470,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
                            iterations=args.iterations, seed=args.seed,
                            plugins_dirs=tuple(args.plugins_dir),
                            goal_episodes=args.goal_episodes or 0, arbiter=args.arbiter,
-                           fusion=args.fusion)
+                           fusion=args.fusion, per_episode=args.per_episode)
     doc = {k: _finite(v) for k, v in summary.items()}
     if args.json:
         print(json.dumps(doc, indent=2, default=_json_default))

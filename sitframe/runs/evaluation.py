@@ -59,6 +59,7 @@ def evaluate_log(
     arbiter: str | None = None,
     fusion: str = "goal-finding",
     checked: Log | None = None,
+    per_episode: bool = False,
 ) -> dict[str, Any]:
     """Run trial ``trial``'s frozen policies from a log in ``world``.
 
@@ -96,6 +97,12 @@ def evaluate_log(
     ``checked``: the log at ``log_path``, already opened and checked (its
     layout and checksums), when several trials of it are evaluated in turn
     (:func:`select_trial`); by default the log is opened and checked here.
+
+    ``per_episode`` (with ``goal_episodes``): also return ``per_episode``, the
+    protocol's figures of every episode (one list per key, in episode order:
+    ``success``, ``collisions``, ``path_length_m``, ``shortest_m``, ... and
+    ``start``, ``goal``), so that two arbiters can be compared pair by pair
+    (the pairs depend only on the world and the seed).
     """
     log = checked
     if log is None:
@@ -164,7 +171,11 @@ def evaluate_log(
                                    "read_by": list(sp.readers)}
                          for sp in res.run.spaces.values()}
     if goal_episodes:
-        return {**out, "arbiter": res.config.arbiter.name, **batch_scores(result)}
+        out = {**out, "arbiter": res.config.arbiter.name, **batch_scores(result)}
+        if per_episode:
+            out["per_episode"] = {k: np.asarray(v).tolist() for k, v in result.episodes.items()
+                                  if isinstance(v, np.ndarray) and k != "first_iteration"}
+        return out
     out.update({key: result.summary[key] for key in EVAL_KEYS})
     return {**out, **_reward_metrics(res, result.arrays)}
 

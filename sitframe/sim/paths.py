@@ -38,6 +38,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from sitframe.sim import geometry as geo
+from sitframe.sim.kernels import kernels
 from sitframe.sim.world import World
 
 #: Points of the polygon that stands in for the disc's arc around each vertex.
@@ -124,6 +125,21 @@ def _clear_chunk(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> n
     corners = geo.point_segment_distance(np.vstack([e[:, :2], e[:, 2:]]), np.hstack([a, b]))
     near |= ((corners[:e.shape[0]] < r) | (corners[e.shape[0]:] < r)).T  # (E, k) -> (k, E)
     return ~(crossed | near).any(axis=1)
+
+
+def _clear_from(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> np.ndarray:
+    """(k,) whether the disc moves straight from ``a`` (2,) to each of ``b`` (k, 2): the
+    compiled kernel when it is loaded (the route planner and the path-distance reward ask
+    this every step), else :func:`_clear_moves`. Only those two use it: a move that grazes
+    an edge within rounding may be judged either way by the two, which no figure of a log
+    of a preset without them depends on."""
+    kern = kernels()
+    if kern is None:
+        return _clear_moves(world, np.broadcast_to(a, b.shape), b, radius)
+    out = np.empty(b.shape[0], dtype=np.bool_)
+    kern.clear_from(float(a[0]), float(a[1]), np.ascontiguousarray(b, dtype=np.float64),
+                    world.segments, radius * (1 - 1e-9), out)
+    return out
 
 
 def _graph(world: World, radius: float) -> _Graph:
@@ -213,8 +229,7 @@ class PathDistance:
 
     def __call__(self, point: np.ndarray) -> float:
         p = np.asarray(point, dtype=np.float64).reshape(2)
-        ok = _clear_moves(self.world, np.broadcast_to(p, self._targets.shape), self._targets,
-                          self.radius)
+        ok = _clear_from(self.world, p, self._targets, self.radius)
         if ok[0]:
             return float(math.hypot(*(self.goal - p)))
         if not ok[1:].any():
@@ -312,8 +327,9 @@ class RouteGraph:
                 ) -> np.ndarray:
         """(k,) whether the disc (``radius``, default the graph's) moves straight from
         ``point`` (2,) to each of ``targets`` (k, 2) without touching an edge."""
-        return segment_clear(self.world, point, targets, self.radius if radius is None
-                             else radius)
+        return _clear_from(self.world, np.asarray(point, dtype=np.float64).reshape(2),
+                           np.asarray(targets, dtype=np.float64).reshape(-1, 2),
+                           self.radius if radius is None else radius)
 
 
 _ROUTES: weakref.WeakKeyDictionary[World, dict[float, RouteGraph]] = weakref.WeakKeyDictionary()
