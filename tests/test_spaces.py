@@ -244,3 +244,25 @@ def test_a_clusters_from_space_that_does_not_fit_its_view(two, tmp_path, capsys)
     assert "\n" not in err
     assert f"{two}: spaces.wall.view: its situations do not fit the 4 readings of space " \
         "'wall'" in err, err
+
+
+def test_resume_takes_the_spaces_from_the_log(two, tmp_path):
+    """A run stopped after its first trial resumes with the spaces its log holds: the
+    resumed trial is bit-identical to the uninterrupted run's."""
+    import h5py
+
+    from sitframe.contract.config import load_config
+    from sitframe.logs.compare import compare_logs
+    from sitframe.runs.prepare import prepare_experiment
+
+    cfg_path = tmp_path / "two.toml"
+    cfg_path.write_text(TWO_SPACES)
+    cfg, source, base = load_config(str(cfg_path))
+    out = tmp_path / "part.h5"
+    exp, kw = prepare_experiment(cfg, source=source, base_dir=base, out=str(out))
+    exp.run(**kw, trials=[0])
+    with h5py.File(out, "a") as f:
+        f.attrs["status"] = "aborted"
+    assert main(["run", "--resume", str(out), "--workers", "1"]) == 0
+    assert open_log(out).trial_indices() == [0, 1]
+    assert compare_logs(str(out), str(two)) == []
