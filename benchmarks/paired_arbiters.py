@@ -78,6 +78,13 @@ def _task(args: tuple[str, str, int, int, int, str | None]) -> dict[str, Any]:
             "episodes": out["per_episode"]}
 
 
+def open_log_trials(log: str) -> list[int]:
+    """The log's trial indices."""
+    from sitframe.logs.reader import open_log
+
+    return open_log(log).trial_indices()
+
+
 def _map(tasks: list[Any], workers: int) -> list[dict[str, Any]]:
     """The batches, in this process (one worker) or a pool of ``workers`` processes."""
     if workers <= 1:
@@ -221,6 +228,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--targets", choices=sorted(TARGETS), default="rooms")
     ap.add_argument("--out", required=True, help="Markdown file of the tables")
     ap.add_argument("--json", default=None, help="every batch's per-episode figures")
+    ap.add_argument("--contexts", default=None,
+                    help="Markdown file of the learning arbiter's per-context visits, "
+                    "updates and convergence over the log's trials")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     k = args.trial
@@ -245,6 +255,13 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(doc)
+    if args.contexts:
+        from sitframe.analysis.results import contexts_table
+
+        Path(args.contexts).write_text(
+            f"<!-- written by benchmarks/paired_arbiters.py; do not edit -->\n\nCommand: "
+            f"`{cmd}`; the log's {len(open_log_trials(args.log))} learning trials.\n\n"
+            + contexts_table(args.log).to_markdown() + "\n")
     print(doc)
     if args.json:
         Path(args.json).write_text(json.dumps({"summary": summary, "rows": rows},

@@ -16,18 +16,21 @@ towards the goal (clipped to ``+-max_turn_deg``, no speed).
 Following the route:
 
 * a waypoint within ``reach`` [m] is reached: the next one becomes current;
-* the farthest later waypoint the planning disc sees straight from the robot
-  becomes current at once (the route is followed by line of sight, so a
-  detour the avoider forced is not walked back);
+* the farthest later waypoint that a disc ``skip_margin`` wider than the
+  planning disc sees straight from the robot becomes current at once (the
+  route is followed by line of sight, so a detour the avoider forced is not
+  walked back, but a corner is not cut closer than the plan keeps off it);
 * **re-planned** from where the robot is when it is *blocked*: the current
   waypoint is out of sight even for the robot's own disc (``sight_margin``
   beyond its radius; the avoider pushed it round a corner), or the robot has
   come no closer to the current waypoint for ``replan_after`` iterations.
 
 The planner first keeps ``clearance`` beyond the robot's radius; where no
-route of that disc exists (a door narrower than the disc, the robot pressed
-against a wall) it plans with half of it, then ``min_clearance``, and with
-no route at all it seeks the goal straight, as ``goal`` does.
+route of that disc exists (a door or a gap narrower than the disc, the robot
+pressed against a wall) it plans with ``clearance_step`` less, and so on down
+to ``min_clearance`` (so a narrow gap is passed by its middle, as far off both
+sides as it allows), and with no route at all it seeks the goal straight, as
+``goal`` does.
 
 The arbiter (CDB, priority, the learned ``fuzzy-q-arbiter``) weights this
 behaviour like any other; given the label ``goal`` in a config
@@ -39,10 +42,12 @@ Config::
     [behaviours.goal]
     component = "route"
     clearance = 0.25      # m kept off walls beyond the robot's radius when planning
+    clearance_step = 0.05 # m less for each next try where no route keeps clearance
     min_clearance = 0.05  # the last clearance tried before seeking the goal straight
     reach = 0.3           # m: a waypoint this close is reached
     replan_after = 15     # iterations without approaching the waypoint: re-plan
     sight_margin = 0.02   # m beyond the robot's radius for "the waypoint is in sight"
+    skip_margin = 0.1     # m beyond the planning disc for "a later waypoint is in sight"
     max_turn_deg = 90
 
 Trial data: ``plans`` (routes planned, the first of each episode included)
@@ -70,16 +75,24 @@ class RouteBehaviour(GoalBehaviour):
 
     def __init__(self, *, max_turn_deg: float = 90.0, clearance: float = 0.25,
                  min_clearance: float = 0.05, reach: float = 0.3, replan_after: int = 15,
-                 sight_margin: float = 0.02) -> None:
+                 sight_margin: float = 0.02, clearance_step: float = 0.05,
+                 skip_margin: float = 0.1) -> None:
         super().__init__(max_turn_deg=max_turn_deg)
         self.clearance = P.number("clearance", clearance, lo=0.0)
         self.min_clearance = P.number("min_clearance", min_clearance, lo=0.0)
         if self.min_clearance > self.clearance:
             raise ValueError(f"min_clearance ({self.min_clearance:g}) must not exceed "
                              f"clearance ({self.clearance:g})")
+        self.clearance_step = P.number("clearance_step", clearance_step, lo=0.0, lo_open=True)
+        n = int(math.floor((self.clearance - self.min_clearance) / self.clearance_step + 1e-9))
+        #: the clearances tried, widest first
+        self.clearances = [round(self.clearance - i * self.clearance_step, 9) for i in range(n + 1)]
+        if self.clearances[-1] > self.min_clearance:
+            self.clearances.append(self.min_clearance)
         self.reach = P.number("reach", reach, lo=0.0, lo_open=True)
         self.replan_after = int(P.number("replan_after", replan_after, lo=1, integer=True))
         self.sight_margin = P.number("sight_margin", sight_margin, lo=0.0)
+        self.skip_margin = P.number("skip_margin", skip_margin, lo=0.0)
         self.radius = 0.15  # (bind gives the run's robot)
         self._key: tuple[Any, ...] | None = None
         self.waypoints = np.zeros((0, 2))
@@ -103,7 +116,7 @@ class RouteBehaviour(GoalBehaviour):
         assert ctx.goal is not None
         self.plans += 1
         here, goal = ctx.pose[:2], np.asarray(ctx.goal.position, dtype=np.float64)
-        for extra in dict.fromkeys((self.clearance, self.clearance / 2, self.min_clearance)):
+        for extra in self.clearances:
             radius = self.radius + extra
             wp, length = route_graph(ctx.world, radius).route(here, goal)
             if math.isfinite(length):
@@ -122,12 +135,12 @@ class RouteBehaviour(GoalBehaviour):
             self.k += 1
             self._best, self._since = math.inf, 0
         graph = route_graph(ctx.world, self.plan_radius)
-        ahead = wp[self.k:]
-        seen = graph.visible(here, ahead)
-        if seen.any():
-            j = self.k + int(np.flatnonzero(seen)[-1])
-            if j != self.k:
-                self.k, self._best, self._since = j, math.inf, 0
+        ahead = wp[self.k + 1:]
+        seen = graph.visible(here, ahead, self.plan_radius + self.skip_margin) if len(ahead) \
+            else ahead[:0, 0].astype(bool)
+        if seen.any():  # a later waypoint in sight with room to spare: cut the route to it
+            self.k, self._best, self._since = self.k + 1 + int(np.flatnonzero(seen)[-1]), \
+                math.inf, 0
         elif not graph.visible(here, wp[self.k][None], self.radius + self.sight_margin)[0]:
             self.replans += 1
             self._plan(ctx)
