@@ -137,16 +137,17 @@ def check_protocol(obj: Any, origin: Origin, *, needs: tuple[str, ...] = ()) -> 
                               "table of its parameters")
 
 
-#: (class, kind) whose methods' signatures passed :func:`_check_signatures` (a run creates
-#: its components once per episode: the signatures of a class are read once per process).
-_SIGNATURES_OK: set[tuple[type, str]] = set()
+#: (class, kind, its methods) whose signatures passed :func:`_check_signatures` (a run creates
+#: its components once per episode: the signatures of a class are read once per process, and
+#: again if one of its methods is replaced).
+_SIGNATURES_OK: set[tuple[Any, ...]] = set()
 
 
 def _check_signatures(obj: Any, origin: Origin) -> None:
     """A :class:`PluginError` for a method sitframe calls that cannot take its arguments."""
     calls = {**CALLS[origin.kind], "bind": ("run",), "trial_start": ("trial",),
              "trial_end": ("trial",)}
-    key = (type(obj), origin.kind)
+    key = (type(obj), origin.kind, *(getattr(type(obj), m, None) for m in calls))
     own = getattr(obj, "__dict__", None)
     if key in _SIGNATURES_OK and (own is None or not own.keys() & calls.keys()):
         return  # (methods set on the instance itself are checked every time)

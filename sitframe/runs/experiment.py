@@ -57,6 +57,7 @@ from sitframe.runs.loop import (
     step_hook_of,
 )
 from sitframe.runs.parallel import InOrder, SerialExecutor, TrialPipeline
+from sitframe.situations.clustering import describe_prototype
 
 
 @dataclass
@@ -247,8 +248,6 @@ class Experiment:
 
     def _labels(self, state: dict[str, Any], view: list[int]) -> list[str]:
         """``S1: wall on left``, ... for a state with range ``centers`` over ``view``."""
-        from sitframe.situations.clustering import describe_prototype
-
         centers = np.asarray(state.get("centers", np.zeros((0, 0))), dtype=float)
         angles = self.res.run.sensor.angles_deg[view]
         if centers.ndim != 2 or centers.shape[1] != len(view):
