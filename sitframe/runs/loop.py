@@ -300,17 +300,14 @@ class _TrialParts:
         c = call(og["interpreter"], "n_situations",
                  lambda: check_n_situations(interp.n_situations), trial=k)
         spaces = [_space_load(res, name, spec) for name in res.config.spaces]
-        where = {lb: 1 + list(res.config.spaces).index(sp) for lb in
-                 [*res.config.behaviours, "arbiter"]
-                 if (sp := res.config.space_of("arbiter" if lb == "arbiter" else
-                                               f"behaviours.{lb}")) in res.config.spaces}
+        where = _space_index(res)
         with _in_trial(k):
             behaviours = res.behaviours()
             arbiter = res.arbiter()
             arb_reward = res.arbiter_reward() if spec.learn else None
         L = spec.iterations
-        own = {lb: (c if i == 0 else spaces[i - 1].c) for lb, i in
-               {lb: where.get(lb, 0) for lb in [*behaviours, "arbiter"]}.items()}
+        own = {lb: spaces[where[lb] - 1].c if lb in where else c
+               for lb in [*behaviours, "arbiter"]}
         for label, (beh, _r) in behaviours.items():
             o = og[f"behaviours.{label}"]
             if label in spec.policies:
@@ -338,6 +335,18 @@ class _TrialParts:
                 call(og[key], "trial_start", comp.trial_start, tinfo, trial=k)
         return cls(sensor, interp, c, behaviours, arbiter, learners, components, tinfo, spaces,
                    where)
+
+
+def _space_index(res: Resolved) -> dict[str, int]:
+    """Behaviour label (or ``"arbiter"``) -> ``1 + i`` for those that read the ``i``-th
+    situation space of its own (the others read the default space)."""
+    names = list(res.config.spaces)
+    out = {}
+    for lb in [*res.config.behaviours, "arbiter"]:
+        space = res.config.space_of("arbiter" if lb == "arbiter" else f"behaviours.{lb}")
+        if space in names:
+            out[lb] = 1 + names.index(space)
+    return out
 
 
 def _space_load(res: Resolved, name: str, spec: TrialSpec) -> _Space:
