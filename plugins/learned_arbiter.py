@@ -43,7 +43,26 @@ follow a wall.
 **Learning.** :class:`sitframe.QLearningParams` (same keys and meaning as
 ``fuzzy-q``; defaults here: ``update = "standard"``, ``terminal_on_collision
 = true``, relative temperature 0.25, ``b = 5``, ``p = 50``). Convergence is the
-learner's: the greedy rule base unchanged for ``p`` rule-base changes.
+learner's: the greedy rule base unchanged for ``p`` rule-base changes
+(``convergence = "rule base"``, the default). With ``convergence = "every
+context"`` learning goes on until *every context* converged: each goal
+context's rules unchanged for ``p`` rule-base changes and, once the context
+was visited at all, updated ``min_context_updates`` times in all (a context
+the training never produced does not hold learning back). A context visited
+rarely (being stalled with the goal behind, say) then keeps the trial
+learning until it has been trained, instead of being frozen untried when the
+common contexts settle (the stall of the one-space arbitration, README).
+
+**Per-context counts** (trial data, every trial): ``arbitration/contexts``
+(names), ``arbitration/context_visits`` (learning iterations spent in each
+context), ``arbitration/context_updates`` (rule updates in each) and
+``arbitration/context_converged_at`` (the iteration each context converged,
+-1 never; judged per context whatever ``convergence`` is), read by the report.
+
+**Situations.** The arbiter reads the situations of its own space when its
+table names one (``space = "NAME"``, a ``[spaces.NAME]`` table: e.g. a
+handful of situations fitted on readings of its own learning room), else the
+run's ``[interpreter]``; ``c`` below is that space's number.
 
 **Policy.** Logged as one output per goal context (``ahead``, ``left``, ...,
 ``ahead_stalled``, ...), each (c,) rules over the action indices with their
@@ -114,6 +133,8 @@ from .arbiters import _label_index
 
 #: What the reward's ``d`` measures (module docstring).
 DISTANCES = ("straight", "path")
+#: When learning stops (module docstring, "Learning").
+CONVERGENCE = ("rule base", "every context")
 #: Names of the goal-bearing sectors for 4 and 8 sectors (others: ``s0``, ``s1``, ...).
 SECTOR_NAMES = {1: ("any",), 2: ("ahead", "behind"), 4: ("ahead", "left", "behind", "right"),
                 8: ("ahead", "ahead_left", "left", "behind_left", "behind", "behind_right",
@@ -282,6 +303,8 @@ class FuzzyQArbiter:
         ``far`` by the nearest range (doubles the rules); ``[]`` off.
     safety, safety_behaviour
         The safety hand-over (module docstring); ``[]`` off.
+    convergence, min_context_updates
+        ``"rule base"`` or ``"every context"`` (module docstring).
     alpha, gamma, b, p, temperature, alpha_visits, ...
         :class:`sitframe.QLearningParams`.
     """
@@ -312,6 +335,8 @@ class FuzzyQArbiter:
         terminal_on_collision: bool = True,
         min_updates: int = 0,
         alpha_visits: float = 0.0,
+        convergence: str = "rule base",
+        min_context_updates: int = 0,
     ) -> None:
         self.sectors = int(P.number("sectors", sectors, lo=1, integer=True))
         if self.sectors not in SECTOR_NAMES:
@@ -326,12 +351,6 @@ class FuzzyQArbiter:
             P.string("safety_behaviour", safety_behaviour)
         self._safe_k = 0
         self._close = 0.0
-        self.qparams = QLearningParams(
-            alpha=alpha, gamma=gamma, b=b, p=p, temperature=temperature,
-            temperature_mode=temperature_mode, temperature_decay=temperature_decay,
-            temperature_min=temperature_min, q_init_value=q_init_value, update=update,
-            activation=activation, terminal_on_collision=terminal_on_collision,
-            min_updates=min_updates, alpha_visits=alpha_visits)
         self._actions_cfg = None if actions is None else self._check_actions(actions)
         names = list(SECTOR_NAMES[self.sectors])
         if self.stall_iterations:
@@ -339,6 +358,22 @@ class FuzzyQArbiter:
         if self.proximity:
             names = [f"{n}_{p}" for n in names for p in ("close", "far")]
         self.contexts = names
+        self.convergence = P.choice("convergence", convergence, CONVERGENCE)
+        every = self.convergence == "every context"
+        self.qparams = QLearningParams(
+            alpha=alpha, gamma=gamma, b=b, p=p, temperature=temperature,
+            temperature_mode=temperature_mode, temperature_decay=temperature_decay,
+            temperature_min=temperature_min, q_init_value=q_init_value, update=update,
+            activation=activation, terminal_on_collision=terminal_on_collision,
+            min_updates=min_updates, alpha_visits=alpha_visits,
+            groups=len(names) if every else 1,
+            min_group_updates=int(P.number("min_context_updates", min_context_updates, lo=0,
+                                           integer=True)))
+        self.visits = np.zeros(len(names), dtype=np.int64)
+        self._stable = np.zeros(len(names), dtype=np.int64)
+        self._converged_at = np.full(len(names), -1, dtype=np.int64)
+        self._greedy: np.ndarray | None = None
+        self._changes = 0
         self.W = np.zeros((0, 0))
         self._labels: tuple[str, ...] = ()
         self.c = 0
@@ -386,6 +421,10 @@ class FuzzyQArbiter:
         self.c = n_situations
         self._iterations = iterations
         self._track = _Progress(self.stall_margin)
+        self.visits = np.zeros(len(self.contexts), dtype=np.int64)
+        self._stable = np.zeros(len(self.contexts), dtype=np.int64)
+        self._converged_at = np.full(len(self.contexts), -1, dtype=np.int64)
+        self._greedy, self._changes = None, 0
         n = n_situations * len(self.contexts)
         if self.fixed is not None:
             if self.fixed.size != n:
@@ -433,6 +472,14 @@ class FuzzyQArbiter:
         u[(2 * j + 1) * self.c:(2 * j + 2) * self.c] = (1.0 - close) * ctx.memberships
         return u
 
+    def _block(self, ctx: Context, stalled: bool) -> int:
+        """Index (in :attr:`contexts`) of the context of ``ctx`` (the nearer of its proximity
+        halves when there is a proximity context)."""
+        j = self._context(ctx, stalled)
+        if not self.proximity:
+            return j
+        return 2 * j + (0 if _closeness(ctx.nearest, self.proximity) >= 0.5 else 1)
+
     def _stalled(self) -> bool:
         return bool(self.stall_iterations) and self._track.since >= self.stall_iterations
 
@@ -444,7 +491,10 @@ class FuzzyQArbiter:
             self.learner.record_rules(context.iteration)
             self.rules = self.learner.rule_base
         self._track.observe(context)
-        self._u = self._state(context, self._stalled())
+        stalled = self._stalled()
+        self._u = self._state(context, stalled)
+        if self.learner is not None:
+            self.visits[self._block(context, stalled)] += 1
         w = self._u @ self.W[self.rules]
         if self.safety:
             self._close = close = _closeness(context.nearest, self.safety)
@@ -462,9 +512,27 @@ class FuzzyQArbiter:
             self.stall_iterations and _goal_distance(after) >= self._track.best - self.stall_margin
         u1 = self._state(after, stalled)
         u0 = self._u * (1.0 - self._close) if self.safety else self._u
-        self.learner.update(u0, reward, u1, transition.outcome.collided,
-                            transition.before.iteration)
+        changed = self.learner.update(u0, reward, u1, transition.outcome.collided,
+                                      transition.before.iteration)
         self.rules = self.learner.rule_base
+        if changed:
+            self._context_convergence(transition.before.iteration)
+
+    def _context_convergence(self, iteration: int) -> None:
+        """After a rule-base change: each context's greedy rules stable for ``p`` changes
+        (with ``min_context_updates`` updates) counts as that context converged."""
+        assert self.learner is not None
+        g = len(self.contexts)
+        greedy = self.learner.greedy.reshape(g, -1)
+        if self._greedy is not None:
+            same = (greedy == self._greedy).all(axis=1)
+            self._stable = np.where(same, self._stable + 1, 0)
+        self._greedy = greedy.copy()
+        upd = self.learner.updates.reshape(g, -1).sum(axis=1)
+        ok = (self._stable >= self.qparams.p) & (upd >= self.qparams.min_group_updates) & \
+            (upd > 0)
+        self._converged_at = np.where(ok, np.where(self._converged_at < 0, iteration + 1,
+                                                   self._converged_at), -1)
 
     # -- results -------------------------------------------------------------
     def trial_data(self) -> dict[str, Any]:
@@ -472,6 +540,11 @@ class FuzzyQArbiter:
         if self.learner is not None:
             d = self.learner.data(self._iterations)
             data.update({f"arbitration/{k}": v for k, v in d.items()})
+            g = len(self.contexts)
+            data["arbitration/contexts"] = list(self.contexts)
+            data["arbitration/context_visits"] = self.visits.copy()
+            data["arbitration/context_updates"] = self.learner.updates.reshape(g, -1).sum(axis=1)
+            data["arbitration/context_converged_at"] = self._converged_at.copy()
             data["converged"] = bool(d["converged"])
             data["convergence_iteration"] = int(d["convergence_iteration"])
         return data

@@ -41,7 +41,7 @@ _PUBLIC: dict[str, str] = {
     # records crossing the plugin boundary
     **dict.fromkeys(("Context", "Proposal", "Transition", "StepRecord", "RunInfo",
                      "TrialResult", "RunContext", "TrialInfo", "SensorSpec", "LearnedPolicy",
-                     "PolicyOutput"), "contract.records"),
+                     "PolicyOutput", "SpaceInfo"), "contract.records"),
     # config tables a plugin declares
     **dict.fromkeys(("ConfigKey", "ConfigTable", "ABSENT", "REQUIRED"), "contract.tables"),
     # errors
@@ -62,7 +62,8 @@ _PUBLIC: dict[str, str] = {
                     "learning.fuzzy_q"),
     # metrics that know no behaviour (for evaluation protocols)
     **dict.fromkeys(("path_length", "heading_change_per_m", "spl"), "sim.metrics"),
-    **dict.fromkeys(("shortest_path_length", "PathDistance"), "sim.paths"),
+    **dict.fromkeys(("shortest_path_length", "PathDistance", "shortest_route", "route_graph",
+                     "RouteGraph"), "sim.paths"),
     # logs
     **dict.fromkeys(("open_log", "LogWriter"), "logs"),
 }

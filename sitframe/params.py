@@ -212,8 +212,37 @@ def known_keys(table: Any, known: Sequence[str], *, prefix: str = "",
                              key=f"{prefix}.{key}" if prefix else str(key))
 
 
+_ACCEPTED: dict[Any, tuple[frozenset[str], bool, frozenset[str]]] = {}
+
+
+def _params_of(factory: Any) -> tuple[frozenset[str], bool, frozenset[str]]:
+    """Keyword names, ``**kwargs``, positional-only names of ``factory`` (read once per
+    factory: a run creates its components once per episode)."""
+    try:
+        return _ACCEPTED[factory]
+    except (KeyError, TypeError):
+        pass
+    names, var_kw = _accepted(factory)
+    try:
+        positional = frozenset(q.name for q in inspect.signature(factory).parameters.values()
+                               if q.kind is q.POSITIONAL_ONLY)
+    except (TypeError, ValueError):
+        positional = frozenset()
+    out = (frozenset(names), var_kw, positional)
+    try:
+        _ACCEPTED[factory] = out
+    except TypeError:  # (an unhashable factory: read every time)
+        pass
+    return out
+
+
 def accepted_params(factory: Any) -> tuple[set[str], bool]:
     """Keyword parameter names ``factory`` accepts, and whether it takes ``**kwargs``."""
+    names, var_kw, _pos = _params_of(factory)
+    return set(names), var_kw
+
+
+def _accepted(factory: Any) -> tuple[set[str], bool]:
     try:
         sig = inspect.signature(factory)
     except (TypeError, ValueError):
@@ -232,14 +261,9 @@ def check_params(
     factory: Any, params: dict[str, Any], *, file: str | None = None, key: str | None = None
 ) -> None:
     """Reject parameters ``factory`` does not accept, suggesting the closest name."""
-    names, var_kw = accepted_params(factory)
+    names, var_kw, positional = _params_of(factory)
     if var_kw:
         return
-    try:
-        positional = {q.name for q in inspect.signature(factory).parameters.values()
-                      if q.kind is q.POSITIONAL_ONLY}
-    except (TypeError, ValueError):
-        positional = set()
     for pname in params:
         if pname not in names:
             where = f"{key}.{pname}" if key else pname

@@ -380,11 +380,14 @@ def test_train_detour_changes_the_training_pairs_only():
 @pytest.fixture(scope="module")
 def learned_log(tmp_path_factory, oa_log) -> str:
     """A short ``goal-finding-learned`` run on oa_log's situations and rule base (the wall
-    follower is oa_log's avoider under another label: only the arbitration matters here)."""
+    follower is oa_log's avoider under another label, over oa_log's situations as a space
+    of its own: only the arbitration matters here)."""
     d = tmp_path_factory.mktemp("gfl")
     text = preset_text("goal-finding-learned").split("\n[prerequisites]")[0]
     text = text.replace("logs/obstacle-avoidance-12.h5", oa_log).replace(
-        "logs/wall-following-12.h5", oa_log).replace(
+        'c = 16\nm = 1.2\ntransform = "inverse"', 'c = 12\nm = 1.2\ntransform = "log"').replace(
+        "wander_samples = 1500", "wander_samples = 100").replace(
+        "logs/wall-following.h5", oa_log).replace(
         'behaviour = "avoid", trial = { world = "goal-training", episodes = 100, seed = 0 }',
         'behaviour = "avoid", trial = 0').replace(
         'trial = "best", behaviour = "follow"', 'trial = 0, behaviour = "avoid"').replace(

@@ -256,6 +256,7 @@ def config_reference(_arg: str | None = None) -> str:
     tables = list(C.TABLES)
     at = tables.index(C.BEHAVIOUR) + 1
     tables[at:at] = [C.POLICY_FROM, C.SELECTION]
+    tables.insert(tables.index(C.ARBITER) + 1, C.SPACE)
     tables.insert(tables.index(C.PLUGINS), C.PREREQUISITES)
     out = []
     for t in tables:

@@ -246,6 +246,8 @@ def analyse(
         radius = R.robot_radius(lg)
 
         _clustering_section(W, lg, rep, CP)
+        if lg.space_names():
+            _spaces_section(W, lg, rep, CP)
 
         # ------------------------------------------------------------- learning
         idx = lg.trial_indices()
@@ -325,6 +327,24 @@ def _clustering_section(W: _Writer, lg: Log, rep: AnalysisReport, CP: Any) -> No
 
 
 
+def _spaces_section(W: _Writer, lg: Log, rep: AnalysisReport, CP: Any) -> None:
+    """Every situation space of its own: what it is, who reads it, its prototypes."""
+    sec = "Situation spaces"
+    W.table(sec, "spaces", "Each behaviour's (and the arbiter's) own situations: interpreter, "
+            "number, the readings seen, where they came from, who reads them",
+            lambda: R.spaces_table(lg))
+    spec = lg.sensor
+    for name in lg.space_names():
+        def prototypes(name: str = name) -> Any:
+            sp = lg.space(name)
+            view = [int(v) for v in np.asarray(sp["view"])]
+            return CP.plot_prototypes(np.asarray(sp["state"]["centers"]),
+                                      spec.angles_deg[view], max_range=spec.max_range,
+                                      labels=R.situation_labels(lg, numbered=False, space=name))
+        W.figure(sec, f"prototypes_{name}.png", f"Prototypes of space '{name}' as polar plots "
+                 f"of the readings it sees", prototypes)
+
+
 def _learning_section(W: _Writer, lg: Log, rep: AnalysisReport, trials: Any, idx: list[int],
                       get: Any, window: int, path_iterations: int, radius: float,
                       LP: Any) -> None:
@@ -336,6 +356,18 @@ def _learning_section(W: _Writer, lg: Log, rep: AnalysisReport, trials: Any, idx
     W.table(sec, "rule_bases", "Learned action per situation in every trial, and the most "
             "frequent one (Tables A.2/A.3)",
             lambda: R.rule_bases_across_trials(lg, read=get))
+    first = get(idx[0])
+    for lb, pol in first.policies.items():  # behaviours over a space of their own
+        space = R.space_of(first, lb)
+        if space == "default" or lb == "arbiter":
+            continue
+        out = "heading" if "heading" in pol.outputs else next(iter(pol.outputs))
+        W.table(sec, f"rule_bases_{lb}", f"Learned {out} of '{lb}' per situation of its own "
+                f"space '{space}' in every trial, and the most frequent one",
+                lambda lb=lb, out=out: R.rule_bases_across_trials(lg, lb, out, read=get))
+    if "arbitration/context_visits" in first.behaviours.get("arbiter", {}):
+        W.table(sec, "contexts", "The learning arbiter's contexts: visits, updates and "
+                "convergence per context over the trials", lambda: R.contexts_table(lg, read=get))
 
     def curves() -> Any:
         rewards, conv = {}, {}

@@ -56,6 +56,7 @@ __all__ = [
     "as_log",
     "clustering_trials",
     "collision_intervals",
+    "contexts_table",
     "convergence_iteration",
     "convergence_table",
     "evaluation_episodes",
@@ -70,6 +71,9 @@ __all__ = [
     "sensor_angles",
     "sensor_max_range",
     "situation_labels",
+    "space_memberships",
+    "space_of",
+    "spaces_table",
     "sweep_result",
 ]
 
@@ -129,14 +133,16 @@ def robot_radius(log: LogLike) -> float:
     return float(_section(as_log(log), "robot").get("radius", 0.15))
 
 
-def situation_labels(log: LogLike, *, numbered: bool = True) -> list[str]:
+def situation_labels(log: LogLike, *, numbered: bool = True,
+                     space: str = "default") -> list[str]:
     """One short label per situation, derived from the fitted prototypes, no two alike.
 
     Uses :func:`sitframe.situations.labels.describe_prototypes` on
     ``/cluster/state/centers`` with the log's sensor angles (each prototype's shape,
     with the open sides, the nearest direction, how close and at last a number where
     two would read alike). Without prototypes (another interpreter) the labels are just
-    ``S1 ... Sc``. Labels are derived here, at analysis time; they are not in the log.
+    ``S1 ... Sc``. A situation space of its own (``space``, a ``[spaces.NAME]``) has the
+    labels the run logged with it (its prototypes over the readings of its view).
 
     Parameters
     ----------
@@ -144,12 +150,17 @@ def situation_labels(log: LogLike, *, numbered: bool = True) -> list[str]:
         The log (or its path).
     numbered
         Prefix each label with ``"S{k}: "``, numbered from 1 (row ``k - 1``).
+    space
+        The situation space (default the ``[interpreter]``'s).
 
     Returns
     -------
     list of str
     """
     lg = as_log(log)
+    if space != "default":
+        logged = [str(x) for x in lg.space(space).get("labels", [])]
+        return logged if numbered else [x.split(": ", 1)[-1] for x in logged]
     try:
         centers = np.asarray(lg.interpreter_state()["centers"], dtype=np.float64)
     except (InputError, KeyError):
@@ -278,6 +289,21 @@ def learned_output(trial: TrialLog, label: str | None = None,
     return pick[0]
 
 
+def space_of(trial: TrialLog, label: str) -> str:
+    """The situation space behaviour ``label`` (or ``"arbiter"``) of the trial read
+    (``"default"`` in a run with one space)."""
+    return str(trial.behaviours.get(label, {}).get("space", "default"))
+
+
+def space_memberships(trial: TrialLog, space: str = "default") -> np.ndarray:
+    """(L, c) memberships of the trial's iterations in situation space ``space``."""
+    key = "memberships" if space == "default" else f"spaces/{space}/memberships"
+    if key not in trial.arrays:
+        raise InputError(f"trial {trial.index} has no memberships of space '{space}'",
+                         key=f"trials/{trial.index:04d}/{key}")
+    return np.asarray(trial.arrays[key])
+
+
 def _policy_output(trial: TrialLog, label: str, output: str) -> Any:
     pol = trial.learned_policy(label)
     if pol is None or output not in pol.outputs:
@@ -307,7 +333,7 @@ def exploration_counts(trial: TrialLog, label: str | None = None, output: str = 
         the number of iterations in the window.
     """
     label, output = learned_output(trial, label, output)
-    u = np.asarray(trial.arrays["memberships"])
+    u = space_memberships(trial, space_of(trial, label))
     if f"{output}/rule_base" not in trial.behaviours[label]:
         raise InputError(f"behaviour '{label}' logged no per-iteration rule base "
                          f"('{output}/rule_base', as fuzzy-q does), so the executed actions "
@@ -597,7 +623,7 @@ def lookup_table(log: LogLike, trial: int | TrialLog, label: str | None = None,
     label, output = learned_output(tr, label, output)
     q = np.asarray(tr.behaviours[label][f"{output}/q"], dtype=np.float64)
     singles = _policy_output(tr, label, output).actions
-    labels = _labels_for(lg, q.shape[0])
+    labels = _labels_for(lg, q.shape[0], space_of(tr, label))
     heading = output == "heading"
     cols = (["Situation", "Description"]
             + [_deg(float(a)) if heading else f"{a:g}" for a in singles]
@@ -611,8 +637,8 @@ def lookup_table(log: LogLike, trial: int | TrialLog, label: str | None = None,
                  cols, rows)
 
 
-def _labels_for(log: Log, c: int) -> list[str]:
-    labels = situation_labels(log, numbered=False)
+def _labels_for(log: Log, c: int, space: str = "default") -> list[str]:
+    labels = situation_labels(log, numbered=False, space=space)
     return labels if len(labels) == c else [""] * c
 
 
@@ -637,8 +663,8 @@ def rule_base_table(log: LogLike, trial: int | TrialLog, label: str | None = Non
     q = None if po.q is None else np.asarray(po.q, dtype=np.float64)
     pol = np.asarray(po.rules, dtype=np.intp)
     c = pol.size
-    labels = _labels_for(lg, c)
-    u = np.asarray(tr.arrays["memberships"])
+    labels = _labels_for(lg, c, space_of(tr, label))
+    u = space_memberships(tr, space_of(tr, label))
     counts = np.bincount(u.argmax(axis=1), minlength=c) if u.size else np.zeros(c)
     share = 100.0 * counts / max(int(counts.sum()), 1)
     head = f"Action [{po.unit}]" if po.unit else f"Action ({output})"
@@ -672,15 +698,17 @@ def rule_bases_across_trials(log: LogLike, label: str | None = None,
     idx = lg.trial_indices()
     acts: list[np.ndarray] = []
     conv: list[bool] = []
+    space = "default"
     for k in idx:
         tr = (read or lg.trial)(k)
         lb, out = learned_output(tr, label, output)
         acts.append(_policy_output(tr, lb, out).values())
         conv.append(convergence_iteration(tr, lb) is not None)
+        space = space_of(tr, lb)
     if not acts:
         raise InputError("the log has no finished learning trial", file=lg.path, key="trials")
     A = np.stack(acts, axis=1)  # (c, T)
-    labels = _labels_for(lg, A.shape[0])
+    labels = _labels_for(lg, A.shape[0], space)
     rows = []
     for i in range(A.shape[0]):
         vals, cnt = np.unique(A[i], return_counts=True)
@@ -753,3 +781,60 @@ def convergence_table(log: LogLike) -> Table:
         notes.append(f"Log status is '{lg.status}': only finished trials are listed.")
     return Table(f"Convergence of {s.size} learning trials ({os.path.basename(lg.path)})",
                  ["Trial", "Converged", *[n for n, _ in series]], rows, notes=notes, digits=2)
+
+
+def spaces_table(log: LogLike) -> Table:
+    """The situation spaces of a run: the ``[interpreter]``'s (``default``) and each
+    ``[spaces.NAME]``, with their interpreter, number of situations, the readings they see,
+    where their situations came from and which behaviours (and arbiter) read them."""
+    lg = as_log(log)
+    cfg = lg.config
+    angles = sensor_angles(lg)
+    spaces = cfg.get("spaces", {})
+    readers: dict[str, list[str]] = {"default": []}
+    for lb, t in cfg.get("behaviours", {}).items():
+        readers.setdefault(str(t.get("space", "default")), []).append(lb)
+    arb = cfg.get("arbiter", {})
+    if "space" in arb or arb.get("reward"):
+        readers.setdefault(str(arb.get("space", "default")), []).append("arbiter")
+    interp = cfg.get("interpreter", {})
+    c0 = len(situation_labels(lg))
+    src0 = cfg.get("experiment", {}).get("clusters_from") or "fitted"
+    rows = [["default", str(interp.get("component", "")), c0,
+             " ".join(f"{a:+g}" for a in angles), src0, ", ".join(readers["default"])]]
+    for name in lg.space_names():
+        sp = lg.space(name)
+        view = [int(v) for v in np.asarray(sp.get("view", []))]
+        rows.append([name, str(sp.get("component", spaces.get(name, {}).get("component", ""))),
+                     len(sp.get("labels", [])), " ".join(f"{angles[v]:+g}" for v in view),
+                     str(sp.get("source", "")), ", ".join(readers.get(name, []))])
+    return Table("Situation spaces: each behaviour's (and the arbiter's) own situations",
+                 ["Space", "Interpreter", "Situations", "Readings [deg]", "Situations from",
+                  "Read by"], rows)
+
+
+def contexts_table(log: LogLike, *, read: Callable[[int], TrialLog] | None = None) -> Table:
+    """Per context of a learning arbiter, over the trials: learning iterations spent in it
+    (visits), rule updates, and in how many trials it converged (``arbitration/context_*``
+    of ``fuzzy-q-arbiter``: a context rarely visited is one learning may leave untrained)."""
+    lg = as_log(log)
+    rows_v, rows_u, rows_c, names = [], [], [], None
+    for k in lg.trial_indices():
+        b = (read or lg.trial)(k).behaviours.get("arbiter", {})
+        if "arbitration/context_visits" not in b:
+            continue
+        names = list(b["arbitration/contexts"]) if isinstance(b["arbitration/contexts"], list) \
+            else json.loads(b["arbitration/contexts"])
+        rows_v.append(np.asarray(b["arbitration/context_visits"], float))
+        rows_u.append(np.asarray(b["arbitration/context_updates"], float))
+        rows_c.append(np.asarray(b["arbitration/context_converged_at"]) >= 0)
+    if names is None:
+        raise InputError("the log's arbiter logged no per-context counts "
+                         "(arbitration/context_visits)", file=lg.path, key="arbiter")
+    V, U, C = np.stack(rows_v), np.stack(rows_u), np.stack(rows_c)
+    rows = [[n, float(np.median(V[:, j])), float(V[:, j].min()), float(np.median(U[:, j])),
+             float(U[:, j].min()), f"{int(C[:, j].sum())}/{len(C)}"]
+            for j, n in enumerate(names)]
+    return Table("Learning arbiter: visits, updates and convergence per context, over trials",
+                 ["Context", "Visits (median)", "Visits (fewest)", "Updates (median)",
+                  "Updates (fewest)", "Converged (trials)"], rows, digits=0)

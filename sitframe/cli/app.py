@@ -176,6 +176,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="preset or TOML whose behaviours, arbiter and [goal] table the goal "
                    "episodes use (default: goal-finding)")
     e.add_argument("--json", action="store_true", help="print the figures as JSON")
+    e.add_argument("--per-episode", action="store_true",
+                   help="with --goal-episodes: also every episode's figures (per_episode)")
 
     w = command("world", "list or draw the shipped worlds (or a world file)")
     wsub = w.add_subparsers(dest="world_command", required=True, parser_class=_Parser,
@@ -549,7 +551,8 @@ def print_run(result: Any) -> None:
     if result.trials:
         from sitframe.runs.evaluation import rule_base_table
 
-        console.print(rule_base_table(result))
+        for space in ("default", *result.info.config.get("spaces", {})):
+            console.print(rule_base_table(result, space))
     if result.info.out:
         console.print(f"log: {result.info.out}")
 
@@ -570,12 +573,17 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
                            iterations=args.iterations, seed=args.seed,
                            plugins_dirs=tuple(args.plugins_dir),
                            goal_episodes=args.goal_episodes or 0, arbiter=args.arbiter,
-                           fusion=args.fusion)
+                           fusion=args.fusion, per_episode=args.per_episode)
     doc = {k: _finite(v) for k, v in summary.items()}
     if args.json:
         print(json.dumps(doc, indent=2, default=_json_default))
     else:
         for k, v in doc.items():
+            if k == "spaces":  # one line per situation space: what it is and who reads it
+                for name, sp in v.items():
+                    print(f"{'space ' + name:>22}: {sp['situations']} situations over readings "
+                          f"{sp['view']}, read by {', '.join(sp['read_by']) or 'none'}")
+                continue
             print(f"{k:>22}: {v}")
     return 0
 

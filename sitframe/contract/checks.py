@@ -138,10 +138,20 @@ def check_protocol(obj: Any, origin: Origin, *, needs: tuple[str, ...] = ()) -> 
                               "with no table, or one declared by config_table)")
 
 
+#: (class, kind, its methods) whose signatures passed :func:`_check_signatures` (a run creates
+#: its components once per episode: the signatures of a class are read once per process, and
+#: again if one of its methods is replaced).
+_SIGNATURES_OK: set[tuple[Any, ...]] = set()
+
+
 def _check_signatures(obj: Any, origin: Origin) -> None:
     """A :class:`PluginError` for a method sitframe calls that cannot take its arguments."""
     calls = {**CALLS[origin.kind], "bind": ("run",), "trial_start": ("trial",),
              "trial_end": ("trial",)}
+    key = (type(obj), origin.kind, *(getattr(type(obj), m, None) for m in calls))
+    own = getattr(obj, "__dict__", None)
+    if key in _SIGNATURES_OK and (own is None or not own.keys() & calls.keys()):
+        return  # (methods set on the instance itself are checked every time)
     for method, args in calls.items():
         fn = getattr(obj, method, None)
         if not callable(fn):
@@ -158,6 +168,7 @@ def _check_signatures(obj: Any, origin: Origin) -> None:
                               return_annotation=sig.empty)
             raise PluginError(f"{origin}: {method}{sig} cannot be called as {method}("
                               f"{', '.join(args)}), as sitframe calls it") from None
+    _SIGNATURES_OK.add(key)
 
 
 def call(origin: Origin, method: str, fn: Callable[..., Any], *args: Any,

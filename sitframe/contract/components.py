@@ -147,6 +147,16 @@ class Behaviour(Protocol):
     bound in the config and the trial learns; ``load_policy`` only when the
     config gives it a policy (``policy_from``) or a frozen evaluation runs.
 
+    **Its situations.** A behaviour reads the situation space its table names
+    (``space = "NAME"``, a ``[spaces.NAME]`` table: situations of its own over
+    the readings of that space's ``view``), else the ``[interpreter]``'s: the
+    core hands it that space's number of situations (``bind``: ``run.space``,
+    ``run.n_situations``; ``reset``) and memberships (``context.memberships``
+    in ``propose``, in ``learn``'s transition and its reward's), so a behaviour
+    needs no code of its own to read situations of its own; ``context.spaces``
+    holds every space's memberships by name in a run with more than one. Its
+    ``policy()`` has one rule per situation of its space.
+
     A *learned* behaviour is one whose ``policy()`` returns a
     :class:`sitframe.contract.records.LearnedPolicy` (actions, output names and units,
     the per-situation rules, optionally Q). The core logs it and every tool
@@ -222,8 +232,9 @@ class Arbiter(Protocol):
     ``reward = "..."`` (and ``reward_params``) in ``[arbiter]`` and a method
     ``learn(transition, reward)``; it may also have ``reset``, ``policy`` and
     ``load_policy`` (a learned policy is logged under the label ``arbiter``).
-    Its policy is a situation rule base like a behaviour's: every output
-    holds one rule per situation, shape (c,); an arbiter whose state adds a
+    It reads a situation space of its own as a behaviour does (``space`` in
+    ``[arbiter]``). Its policy is a situation rule base like a behaviour's: every output
+    holds one rule per situation of its space, shape (c,); an arbiter whose state adds a
     context to the situations logs one output per context (``fuzzy-q-arbiter``:
     ``ahead``, ``left``, ..., ``right_stalled``). A policy over another state
     (e.g. the goal's bearing alone) is refused at the end of the first trial,

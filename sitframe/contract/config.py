@@ -43,6 +43,17 @@ Plugins' tables
     ``timeout``, ``min_distance``, ``worlds``, ``pairs``, ``radius``, ``margin``, optionally
     ``train``, ``train_detour``, ``detour_ratio``) the ``goal-episodes`` protocol's
     (``plugins/goal_episodes.py``).
+``[spaces.NAME]``
+    A *situation space* of its own (optional; :class:`SpaceSection`): an
+    interpreter table like ``[interpreter]`` (``component`` and its
+    parameters) plus the reserved keys ``view`` (which readings it sees:
+    indices into the sensor's reading, default all), ``clusters_from`` (a
+    log whose fitted ``[interpreter]`` situations it reuses) and ``collect``
+    (overrides of ``[collect]`` for data of its own). A behaviour (or the
+    arbiter) reads it with ``space = "NAME"`` in its table; the
+    ``[interpreter]`` is the space named ``"default"``, which every
+    component without ``space`` reads. Spaces are absent from a config that
+    does not use them, so a run with one space is what it always was.
 ``[prerequisites]``
     ``"LOG PATH" = "EXPERIMENT"``: a log this config reads (``clusters_from``,
     ``policy_from.log``) and the experiment (preset name or .toml path) that
@@ -123,6 +134,8 @@ _REWARD = Key("reward", "string", ABSENT, "a reward component: the behaviour (or
               "learns from it")
 _REWARD_PARAMS = Key("reward_params", "table", ABSENT, "the reward's parameters (needs "
                      "reward)")
+_SPACE = Key("space", "string", ABSENT, "the situation space it reads: a [spaces.NAME] "
+             "table's NAME (default: the [interpreter]'s space, \"default\")")
 
 #: The tables of a run config, declared once: :func:`validate_config` checks a config with
 #: them, :data:`DEFAULTS` comes from them, and the documentation's config reference is made
@@ -173,6 +186,7 @@ BEHAVIOUR = Table("behaviours.LABEL", doc="One table per behaviour, LABEL naming
     _REWARD_PARAMS,
     Key("policy_from", "table", ABSENT, "start from a learned policy: {log = \"path.h5\", "
         "trial = K, behaviour = \"LABEL\"} (the table below)"),
+    _SPACE,
 ), free=True)
 POLICY_FROM = Table("behaviours.LABEL.policy_from", doc="A learned policy to start from (or be "
                     "frozen at).", keys=(
@@ -195,7 +209,19 @@ SELECTION = Table("behaviours.LABEL.policy_from.trial", doc="The trial whose pol
 ))
 ARBITER = Table("arbiter", doc="The arbiter that fuses the behaviours' proposals: a component, "
                 "what it learns from, and its parameters.",
-                keys=(_component("single", "arbiter"), _REWARD, _REWARD_PARAMS), free=True)
+                keys=(_component("single", "arbiter"), _REWARD, _REWARD_PARAMS, _SPACE),
+                free=True)
+SPACE = Table("spaces.NAME", doc="A situation space of its own (optional, absent unless "
+              "given): an interpreter like [interpreter] (a component and its parameters) "
+              "over a view of the readings; a behaviour or the arbiter reads it with "
+              "space = \"NAME\". NAME is not \"default\" (the [interpreter]'s space).", keys=(
+    _component(REQUIRED, "space's situation interpreter"),
+    Key("view", "numbers", ABSENT, "the readings it sees: indices into the sensor's reading "
+        "(0 = the first beam); default all, in order", lo=0),
+    Key("clusters_from", "path", ABSENT, "a log whose fitted [interpreter] situations it "
+        "reuses (no collect or cluster of its own)"),
+    Key("collect", "table", ABSENT, "[collect] keys overridden for the data it clusters"),
+), free=True)
 PREREQUISITES = Table("prerequisites", doc="Logs this config reads and the experiments that "
                       "make them: \"LOG PATH\" = \"EXPERIMENT\" (a preset name or a .toml "
                       "path); sitframe run makes a missing one first, or reuses a complete "
@@ -217,7 +243,7 @@ DEFAULTS: dict[str, dict[str, Any]] = {
 DEFAULT_PROTOCOL = "frozen"  # the evaluation protocol of a run whose components name none
 #: Optional sections without defaults (absent from a config that does not use them, so the
 #: config's text, and so its hash, stays what it was before they existed).
-OPTIONAL_SECTIONS = ("prerequisites",)
+OPTIONAL_SECTIONS = ("prerequisites", "spaces")
 #: The core's tables, in the order a config lists them; plugins' tables go between
 #: ``arbiter`` and ``plugins``, by name.
 _BEFORE_PLUGIN_TABLES = ("experiment", "robot", "sensor", "collect", "interpreter",
@@ -228,13 +254,18 @@ _COMPONENT_SECTIONS = ("sensor", "interpreter", "arbiter")
 #: Keys of a ``[behaviours.LABEL]`` (or ``[arbiter]``) table that the core reads and that
 #: are not the component's parameters (the one definition; resolve and sweep use it).
 META_KEYS = tuple(k.name for k in BEHAVIOUR.keys)
+#: The name of the situation space of ``[interpreter]`` (every component's unless its table
+#: names another ``space``).
+DEFAULT_SPACE = "default"
+#: Keys of a ``[spaces.NAME]`` table that are not the interpreter's parameters.
+SPACE_KEYS = tuple(k.name for k in SPACE.keys)
 
 
 @dataclass(frozen=True)
 class Component:
     """A component table: the registered ``name`` and the component's own ``params``.
 
-    ``reward``, ``reward_params`` and ``policy_from`` are the reserved keys
+    ``reward``, ``reward_params``, ``policy_from`` and ``space`` are the reserved keys
     (:data:`META_KEYS`) the core reads from behaviour and arbiter tables.
     """
 
@@ -243,12 +274,43 @@ class Component:
     reward: str | None = None
     reward_params: dict[str, Any] = dataclasses.field(default_factory=dict)
     policy_from: dict[str, Any] | None = None
+    space: str = DEFAULT_SPACE
 
     @classmethod
     def of(cls, table: dict[str, Any]) -> Component:
         return cls(table["component"], {k: v for k, v in table.items() if k not in META_KEYS},
                    table.get("reward"), dict(table.get("reward_params", {})),
-                   table.get("policy_from"))
+                   table.get("policy_from"), str(table.get("space", DEFAULT_SPACE)))
+
+
+@dataclass(frozen=True)
+class SpaceSection:
+    """``[spaces.NAME]``: a situation space of its own (module docstring).
+
+    Attributes
+    ----------
+    interpreter
+        The interpreter (component and parameters), as ``[interpreter]``.
+    view
+        Indices of the readings it sees (into the sensor's reading), or ``None``: all.
+    clusters_from
+        A log whose fitted ``[interpreter]`` situations it reuses (``""``: fitted here).
+    collect
+        Overrides of the ``[collect]`` table for the data it is fitted on.
+    """
+
+    interpreter: Component
+    view: tuple[int, ...] | None
+    clusters_from: str
+    collect: dict[str, Any]
+
+    @classmethod
+    def of(cls, table: dict[str, Any]) -> SpaceSection:
+        view = table.get("view")
+        return cls(Component(table["component"],
+                             {k: v for k, v in table.items() if k not in SPACE_KEYS}),
+                   None if view is None else tuple(int(i) for i in view),
+                   str(table.get("clusters_from", "")), dict(table.get("collect", {})))
 
 
 @dataclass(frozen=True)
@@ -297,6 +359,7 @@ class Config:
     plugin_dirs: tuple[str, ...]
     prerequisites: dict[str, str]
     tables: dict[str, dict[str, Any]]
+    spaces: dict[str, SpaceSection] = dataclasses.field(default_factory=dict)
 
     @classmethod
     def of(cls, cfg: dict[str, Any]) -> Config:
@@ -313,7 +376,22 @@ class Config:
             {label: Component.of(t) for label, t in cfg["behaviours"].items()},
             Component.of(cfg["arbiter"]),
             tuple(cfg["plugins"]["dirs"]), dict(cfg.get("prerequisites", {})),
-            {k: t for k, t in cfg.items() if isinstance(t, dict)})
+            {k: t for k, t in cfg.items() if isinstance(t, dict)},
+            {n: SpaceSection.of(t) for n, t in cfg.get("spaces", {}).items()})
+
+    def space_of(self, key: str) -> str:
+        """The situation space a component reads: ``key`` is ``"behaviours.LABEL"`` or
+        ``"arbiter"`` (anything else: the default space)."""
+        if key == "arbiter":
+            return self.arbiter.space
+        if key.startswith("behaviours.") and key.count(".") == 1:
+            return self.behaviours[key.split(".", 1)[1]].space
+        return DEFAULT_SPACE
+
+    def readers(self, space: str) -> list[str]:
+        """The labels of the behaviours (and ``"arbiter"``) that read ``space``, in order."""
+        out = [lb for lb, b in self.behaviours.items() if b.space == space]
+        return out + (["arbiter"] if self.arbiter.space == space else [])
 
     def worlds(self) -> list[str]:
         """The worlds the core's tables name, once each: the learning world, then the
@@ -386,6 +464,11 @@ def parse_config(text: str, *, file: str | None = None, pending: bool = False
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
+        twice = re.match(r"Cannot declare \('spaces', '([^']*)'\) twice \((.*)\)", str(exc))
+        if twice:  # (two situation spaces with one name: say which, and what a space needs)
+            raise InputError(f"two [spaces.{twice.group(1)}] tables ({twice.group(2)}); "
+                             "expected one table per space, each space with a name of its own",
+                             file=file, key=f"spaces.{twice.group(1)}") from None
         raise InputError(f"not valid TOML: {exc}", file=file) from None
     return validate_config(raw, file=file, pending=pending)
 
@@ -435,7 +518,7 @@ def validate_config(raw: dict[str, Any], *, file: str | None = None,
                 table["component"] = _at(P.string, "component", table["component"], file, section)
             else:
                 table["component"] = DEFAULTS[section]["component"]
-            _check_meta(table, file, section, ("reward", "reward_params")
+            _check_meta(table, file, section, ("reward", "reward_params", "space")
                         if section == "arbiter" else ())
             cfg[section] = table
         elif section == "robot":
@@ -443,6 +526,8 @@ def validate_config(raw: dict[str, Any], *, file: str | None = None,
         elif section == "prerequisites":
             cfg[section] = {log: _at(P.string, log, run, file, section)
                             for log, run in value.items()}
+        elif section == "spaces":
+            cfg[section] = _validate_spaces(value, file)
         else:
             P.known_keys(value, sorted(_CORE_KEYS[section]), prefix=section, file=file)
             cfg[section].update(value)
@@ -451,6 +536,7 @@ def validate_config(raw: dict[str, Any], *, file: str | None = None,
         raise InputError("no behaviours configured (expected at least one [behaviours.LABEL] "
                          "table with a 'component')", file=file, key="behaviours")
     cfg = _with_plugin_tables(cfg, plugin_tables_given, index, file)
+    _check_space_names(cfg, file)
     _check_utf8(cfg, file, "")
     return cfg
 
@@ -499,6 +585,64 @@ def complete_tables(cfg: dict[str, Any], index: PluginTables, *,
                                index, file)
     cfg.clear()
     cfg.update(done)
+
+
+def _validate_spaces(value: dict[str, Any], file: str | None) -> dict[str, Any]:
+    """The ``[spaces.NAME]`` tables: names, reserved keys (the interpreter's own parameters
+    are checked when the run resolves it, the ``view`` against the sensor's readings)."""
+    out = {}
+    for name, table in value.items():
+        key = f"spaces.{name}"
+        if name in ("", ".") or "/" in name:
+            raise InputError(f"expected a space name that can name an HDF5 group (not empty, "
+                             f"not '.', no '/'), got {name!r}", file=file, key=key)
+        if name == DEFAULT_SPACE:
+            raise InputError(f"'{DEFAULT_SPACE}' is the name of the [interpreter]'s space; "
+                             "expected another name for a space of its own", file=file, key=key)
+        if not isinstance(table, dict):
+            raise InputError(f"expected a table, got {type(table).__name__}", file=file, key=key)
+        t = dict(table)
+        if "component" not in t:
+            raise InputError("missing 'component' (the space's interpreter, e.g. \"fcm\")",
+                             file=file, key=key)
+        _at(P.string, "component", t["component"], file, key)
+        if "view" in t:
+            view = t["view"]
+            if not isinstance(view, list) or not view:
+                raise InputError(f"expected a non-empty list of reading indices (0 = the "
+                                 f"sensor's first beam), got {view!r}", file=file,
+                                 key=f"{key}.view")
+            for i, v in enumerate(view):
+                _at(P.number, f"view[{i}]", v, file, key, lo=0, integer=True)
+            if len(set(view)) != len(view):
+                raise InputError(f"names a reading twice in {view}; expected distinct indices",
+                                 file=file, key=f"{key}.view")
+            t["view"] = [int(v) for v in view]
+        if "clusters_from" in t:
+            _at(P.string, "clusters_from", t["clusters_from"], file, key)
+        if "collect" in t:
+            if not isinstance(t["collect"], dict):
+                raise InputError("expected a table of [collect] keys", file=file,
+                                 key=f"{key}.collect")
+            P.known_keys(t["collect"], sorted(_CORE_KEYS["collect"]), prefix=f"{key}.collect",
+                         file=file)
+        out[name] = t
+    return out
+
+
+def _check_space_names(cfg: dict[str, Any], file: str | None) -> None:
+    """Every ``space`` a behaviour or the arbiter names is a space of the config."""
+    spaces = [DEFAULT_SPACE, *cfg.get("spaces", {})]
+    tables = [(f"behaviours.{lb}", t) for lb, t in cfg["behaviours"].items()]
+    for key, table in [*tables, ("arbiter", cfg["arbiter"])]:
+        if "space" not in table:
+            continue
+        name = _at(P.string, "space", table["space"], file, key)
+        if name not in spaces:
+            raise InputError(f"no situation space '{name}'{did_you_mean(name, spaces)}; the "
+                             f"config's spaces are: {', '.join(spaces)} (the [interpreter] is "
+                             f"'{DEFAULT_SPACE}', others are [spaces.NAME] tables)", file=file,
+                             key=f"{key}.space")
 
 
 def _check_utf8(value: Any, file: str | None, key: str) -> None:

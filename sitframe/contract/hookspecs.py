@@ -82,8 +82,22 @@ def sitframe_interpreters() -> list[Any]:
     :class:`sitframe.situations.events.SituationEvent` that behaviours follow in
     ``situations_changed(event)`` (the contract: :mod:`sitframe.situations`).
 
+    **Situation spaces.** The same factories make the interpreter of every
+    *situation space of its own*: a ``[spaces.NAME]`` table (its ``component``
+    and parameters, plus the reserved keys ``view``, ``clusters_from`` and
+    ``collect``) is a second interpreter that sees only the readings of its
+    ``view``, is fitted on data of its own (or takes the situations of a log),
+    and serves the behaviours (and the arbiter) whose tables say ``space =
+    "NAME"``; the ``[interpreter]`` is the space ``"default"``. A behaviour or
+    arbiter *reads* its space with no code of its own: ``bind(run)`` gets
+    ``run.space`` and that space's ``run.n_situations``, ``reset`` its number
+    of situations, and each :class:`sitframe.contract.records.Context` it is
+    handed carries that space's ``memberships`` (and every space's in
+    ``Context.spaces``). An evolving interpreter can only be the default space.
+
     :return: A list of factories with unique ``name`` attributes, called with
-        the keys of the config's ``[interpreter]`` table.
+        the keys of the config's ``[interpreter]`` table (or of a
+        ``[spaces.NAME]`` table, but its reserved keys).
 
     All implementations are called; their lists are merged.
     """
@@ -183,12 +197,15 @@ def sitframe_run_start(run: RunInfo) -> None:
 
 @hookspec
 def sitframe_stage_end(run: RunInfo, stage: str, data: dict[str, Any]) -> None:
-    """A non-learning stage finished (``"collect"`` or ``"cluster"``).
+    """A non-learning stage finished (``"collect"``, ``"cluster"`` or ``"spaces"``).
 
     Called once per stage, in the main process.
 
     :param run: The run, as given to :func:`sitframe_run_start`.
-    :param stage: ``"collect"`` or ``"cluster"``.
+    :param stage: ``"collect"``, ``"cluster"`` or ``"spaces"`` (the situation spaces of
+        their own, ``[spaces.NAME]``: one entry per space with its ``state``, ``view``,
+        ``readers``, ``labels``, ``source`` and, when fitted in the run, ``fit`` and its
+        own ``samples``; written to ``/spaces/NAME``).
     :param data: The stage's results as numpy arrays and scalars (e.g.
         ``samples``, ``poses`` for collect; ``centers``, ``measures``,
         ``chosen`` for cluster), ready to be written.

@@ -78,6 +78,12 @@ class Context:
     goal
         The current episode's goal (an evaluation protocol's, e.g. goal
         episodes), else the world's ``[goal]``, else ``None``.
+    spaces
+        In a run with situation spaces of their own (``[spaces.NAME]``): space
+        name -> (c,) memberships of each space (``"default"``: the
+        ``[interpreter]``'s), the same for every component; ``memberships`` is
+        then those of the space the component reads (its table's ``space``).
+        ``None`` in a run with one space (``memberships`` is its only one).
     """
 
     iteration: int
@@ -87,6 +93,7 @@ class Context:
     nearest: float
     world: World
     goal: Goal | None = None
+    spaces: dict[str, np.ndarray] | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -286,6 +293,12 @@ class RunContext:
         The run's plugin-declared config tables, as validated with their defaults
         (table name -> key -> value; :mod:`sitframe.contract.tables`): where a component
         that declares a ``config_table`` reads it.
+    space
+        The situation space the component reads (its table's ``space``,
+        default ``"default"``: the ``[interpreter]``); ``n_situations`` is that
+        space's. A reward is bound with its behaviour's space.
+    spaces
+        Every situation space of the run: name -> its :class:`SpaceInfo`.
     """
 
     robot: Any
@@ -298,6 +311,30 @@ class RunContext:
     default_speed: float
     component: str = ""
     tables: dict[str, dict[str, Any]] = field(default_factory=dict)
+    space: str = "default"
+    spaces: dict[str, SpaceInfo] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SpaceInfo:
+    """One situation space of a run (``[interpreter]`` or a ``[spaces.NAME]`` table).
+
+    Attributes
+    ----------
+    name
+        ``"default"`` (the ``[interpreter]``) or the table's name.
+    n_situations
+        Its number of situations (``None`` until fitted, e.g. ``c = "auto"``).
+    view
+        (d',) indices of the sensor's readings it sees (all, in order, for the default).
+    readers
+        The behaviour labels (and ``"arbiter"``) that read it.
+    """
+
+    name: str
+    n_situations: int | None
+    view: tuple[int, ...]
+    readers: tuple[str, ...]
 
 
 @dataclass(frozen=True)

@@ -26,9 +26,15 @@ from sitframe.contract.checks import (
     sensor_geometry,
     sensor_spec_mismatch,
 )
-from sitframe.contract.config import DEFAULT_PROTOCOL, Component, Config, complete_tables
+from sitframe.contract.config import (
+    DEFAULT_PROTOCOL,
+    DEFAULT_SPACE,
+    Component,
+    Config,
+    complete_tables,
+)
 from sitframe.contract.pluginmanager import Registry
-from sitframe.contract.records import RunContext, SensorSpec
+from sitframe.contract.records import RunContext, SensorSpec, SpaceInfo
 from sitframe.contract.tables import PluginTables, plugin_tables, protocol_key
 from sitframe.errors import PLUGIN_ERRORS, InputError, PluginError, PluginFault
 from sitframe.sim.robot import RobotParams
@@ -112,13 +118,20 @@ class Resolved:
         e = res.config.experiment
         loaded = {n: res.world(n, "experiment.world" if n == e.world else "worlds")
                   for n in dict.fromkeys([*res.stage_worlds(), *worlds])}
+        spaces = {DEFAULT_SPACE: SpaceInfo(DEFAULT_SPACE, None if c is None else int(c),
+                                           tuple(range(spec.dim)),
+                                           tuple(res.config.readers(DEFAULT_SPACE)))}
+        space_interps = {name: res._space(name, spec) for name in res.config.spaces}
+        spaces |= {name: info for name, (_i, info) in space_interps.items()}
         res.run = RunContext(robot, spec, tuple(res.config.behaviours),
                              None if c is None else int(c), loaded, e.seed, e.iterations,
-                             e.default_speed,
+                             e.default_speed, spaces=spaces,
                              tables={t: dict(res.cfg[t]) for t in tables.tables if t in res.cfg})
         res._bind(sensor, "sensor")
         res._check_sensor(sensor, spec, loaded[e.world])
         res._bind(interp, "interpreter")
+        for name, (sp_interp, _info) in space_interps.items():
+            res._bind(sp_interp, f"spaces.{name}")
         res.behaviours()
         res.arbiter()
         for name in registry.names("protocol"):  # a protocol's own table is checked now
@@ -139,6 +152,49 @@ class Resolved:
             if isinstance(worlds, list):
                 names += [w for w in worlds if isinstance(w, str)]
         return list(dict.fromkeys(names))
+
+    def _space(self, name: str, spec: SensorSpec) -> tuple[Any, SpaceInfo]:
+        """Create space ``name``'s interpreter (unbound) and describe the space; its ``view``
+        must name readings the sensor has, and its interpreter must not evolve."""
+        section = self.config.spaces[name]
+        key = f"spaces.{name}"
+        view = tuple(range(spec.dim)) if section.view is None else section.view
+        for i, v in enumerate(view):
+            if v >= spec.dim:
+                raise InputError(f"reading {v} is outside the sensor's {spec.dim} readings "
+                                 f"(indices 0-{spec.dim - 1}, at "
+                                 f"{', '.join(f'{a:+g}' for a in spec.angles_deg)} deg)",
+                                 file=self.file, key=f"{key}.view[{i}]")
+        interp = self._create("interpreter", key, section.interpreter, bind=False)
+        if getattr(interp, "evolving", False):
+            raise InputError(f"interpreter '{section.interpreter.name}' evolves its situations, "
+                             "which only the [interpreter] (the default space) may; expected "
+                             "a fixed interpreter (e.g. fcm) for a space of its own",
+                             file=self.file, key=f"{key}.component")
+        c = call(self.origins[key], "n_situations", lambda: interp.n_situations)
+        try:
+            c = check_n_situations(c, unknown_ok=True)
+        except BoundaryError as exc:
+            raise PluginFault(str(exc), where=str(self.origins[key]),
+                              method="n_situations") from None
+        return interp, SpaceInfo(name, None if c is None else int(c), view,
+                                 tuple(self.config.readers(name)))
+
+    def space_view(self, name: str) -> np.ndarray | None:
+        """The reading indices space ``name`` sees (``None``: all, in order)."""
+        view = self.run.spaces[name].view
+        return None if view == tuple(range(self.run.sensor.dim)) else np.asarray(view, np.intp)
+
+    def space_interpreter(self, name: str) -> Any:
+        """A fresh, bound interpreter of space ``name`` (``"default"``: :meth:`interpreter`)."""
+        if name == DEFAULT_SPACE:
+            return self.interpreter()
+        return self._create("interpreter", f"spaces.{name}",
+                            self.config.spaces[name].interpreter)
+
+    def space_key(self, name: str) -> str:
+        """The config key of space ``name``'s interpreter (for :attr:`origins`)."""
+        return "interpreter" if name == DEFAULT_SPACE else f"spaces.{name}"
 
     def _check_sensor(self, sensor: Any, spec: SensorSpec, world: World) -> None:
         """Read once at the learning world's start: the reading must match the declared spec."""
@@ -166,8 +222,18 @@ class Resolved:
         if fn is None:
             return
         o = self.origins[key]
+        run = dataclasses.replace(self.run, component=key)
+        space = key.split(".", 1)[1] if key.startswith("spaces.") else \
+            self.config.space_of(key.removesuffix(".reward"))
+        if space != DEFAULT_SPACE and space in run.spaces:  # (the component's own space)
+            info = run.spaces[space]
+            run = dataclasses.replace(run, space=space, n_situations=info.n_situations,
+                                      sensor=dataclasses.replace(
+                                          run.sensor, angles_deg=run.sensor.angles_deg[
+                                              list(info.view)]) if key.startswith("spaces.")
+                                      else run.sensor)
         try:
-            fn(dataclasses.replace(self.run, component=key))
+            fn(run)
         except InputError as exc:
             raise exc.at(file=self.file, key_prefix=key) from None
         except (ValueError, TypeError) as exc:  # the component's parameters do not fit the run

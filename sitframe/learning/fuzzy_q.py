@@ -132,6 +132,8 @@ class QLearningParams:
     min_updates: int = 0
     tie_break: str = "first"
     alpha_visits: float = 0.0
+    groups: int = 1
+    min_group_updates: int = 0
 
     def __post_init__(self) -> None:
         P.number("alpha", self.alpha, lo=0.0, hi=1.0, lo_open=True)
@@ -151,6 +153,8 @@ class QLearningParams:
         P.number("min_updates", self.min_updates, lo=0, integer=True)
         P.choice("tie_break", self.tie_break, TIE_BREAKS)
         P.number("alpha_visits", self.alpha_visits, lo=0.0)
+        P.number("groups", self.groups, lo=1, integer=True)
+        P.number("min_group_updates", self.min_group_updates, lo=0, integer=True)
 
 
 TIE_BREAKS = ("first", "centre")
@@ -257,6 +261,13 @@ class FuzzyQLearner:
         self._snap_greedy: list[np.ndarray] = [self.greedy.copy()]
         self._snap_q: list[np.ndarray] = [self.q.copy()]
         self.rules_per_iteration = np.zeros((max_iterations, c), dtype=np.int8)
+        g = int(params.groups)
+        if g > 1 and c % g:
+            raise ValueError(f"{c} rules do not fall into {g} equal groups")
+        #: per group: consecutive stable rule-base changes, and the iteration it converged
+        #: (-1: not yet); only with ``groups > 1``
+        self.group_stable = np.zeros(g, dtype=np.int64)
+        self.group_converged_at = np.full(g, -1, dtype=np.int64)
 
     @property
     def temperature(self) -> float:
@@ -362,16 +373,36 @@ class FuzzyQLearner:
             w = u_before.item(i) if thesis else 1.0
             td[i] = abs(w * reward + gamma * w * v_next - q.item(i, rules.item(i)))
 
+    def _groups_converged(self, greedy: np.ndarray, iteration: int) -> bool:
+        """Per-group convergence (``groups > 1``): update each group's stability and its
+        convergence iteration; whether every group that counts has converged."""
+        prm = self.params
+        g = prm.groups
+        same = (greedy == self.greedy).reshape(g, -1).all(axis=1)
+        self.group_stable = np.where(same, self.group_stable + 1, 0)
+        upd = self.updates.reshape(g, -1).sum(axis=1)
+        ok = (self.group_stable >= prm.p) & (upd >= prm.min_group_updates)
+        self.group_converged_at = np.where(ok & (self.group_converged_at < 0), iteration + 1,
+                                           np.where(ok, self.group_converged_at, -1))
+        return bool((ok | (upd == 0)).all())
+
+    def group_data(self) -> dict[str, np.ndarray]:
+        """Per group: its updates and the iteration it converged (-1: not), for the log."""
+        g = self.params.groups
+        return {"group_updates": self.updates.reshape(g, -1).sum(axis=1),
+                "group_converged_at": self.group_converged_at.copy()}
+
     def _change(self, iteration: int) -> None:
         self.since_change = 0
         greedy = greedy_actions(self.q, self.params.tie_break)
+        grouped = self.params.groups > 1 and self._groups_converged(greedy, iteration)
         if np.array_equal(greedy, self.greedy):
             self.stable_changes += 1
         else:
             self.stable_changes = 0
             self.greedy = greedy
         self.n_changes += 1
-        if self.stable_changes >= self.params.p and (
+        if (grouped if self.params.groups > 1 else self.stable_changes >= self.params.p) and (
                 self.params.min_updates == 0 or self._min_updates() >= self.params.min_updates):
             self.converged_at = iteration + 1
             self.rule_base = greedy.copy()

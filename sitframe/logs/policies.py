@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sitframe.contract.checks import Origin, fault
+from sitframe.contract.checks import Origin, fault, memberships_mismatch
 from sitframe.contract.records import LearnedPolicy, SensorSpec, summary_key
 from sitframe.errors import PLUGIN_ERRORS, InputError, PluginError
 from sitframe.logs.reader import Log
@@ -29,11 +29,13 @@ if TYPE_CHECKING:
 
 
 def check_state(res: Resolved, state: dict[str, Any], path: str,
-                sensor: SensorSpec | None = None) -> None:
+                sensor: SensorSpec | None = None, space: str = "default") -> None:
     """Load a logged interpreter state into a fresh interpreter (InputError if it does not fit).
 
     ``sensor``: the geometry of the sensor whose readings the state was fitted on (a
-    log's :attr:`Log.sensor`), which the run's sensor must still have.
+    log's :attr:`Log.sensor`), which the run's sensor must still have. ``space``: the
+    situation space whose interpreter takes it (a state fitted on all the readings must
+    fit a space's ``view``: its memberships of a reading seen through the view are checked).
     """
     now = res.run.sensor
     if sensor is not None and ((now.name, now.dim, now.max_range) != (
@@ -44,8 +46,25 @@ def check_state(res: Resolved, state: dict[str, Any], path: str,
                          f"{sensor.max_range:g}), but the sensor '{now.name}' now has {now.dim} "
                          f"at {now.angles_deg.tolist()} deg, max range {now.max_range:g} (did "
                          "its plugin change?)", file=path, key="sensor")
-    _fits(res.interpreter(), res.origins["interpreter"], "load_state", state,
-          "its situations do not fit this config's interpreter", path, "cluster/state")
+    if space == "default":
+        _fits(res.interpreter(), res.origins["interpreter"], "load_state", state,
+              "its situations do not fit this config's interpreter", path, "cluster/state")
+        return
+    interp, key = res.space_interpreter(space), f"spaces.{space}"
+    _fits(interp, res.origins[key], "load_state", state,
+          f"its situations do not fit the interpreter of space '{space}'", path,
+          f"{key}.clusters_from")
+    view = res.run.spaces[space].view
+    probe = np.full(len(view), res.run.sensor.max_range / 2)
+    try:
+        u = interp.memberships(probe)
+        why = memberships_mismatch(u, int(interp.n_situations))
+    except (ValueError, IndexError, TypeError) as exc:
+        why = str(exc)
+    if why is not None:
+        raise InputError(f"its situations do not fit the {len(view)} readings of space "
+                         f"'{space}' (view {list(view)}): {why}", file=path,
+                         key=f"{key}.view")
 
 
 def check_logged_policy(res: Resolved, label: str, policy: LearnedPolicy, path: str,

@@ -308,6 +308,40 @@ class Log:
                                  "was the cluster stage run?", file=self.path, key="cluster")
             return _read_group(f["cluster/state"])
 
+    def space_names(self) -> list[str]:
+        """The situation spaces of their own the run had (``/spaces/NAME``), in config order;
+        empty for a run with one space."""
+        with self._file() as f:
+            if "spaces" not in f:
+                return []
+            names = list(f["spaces"])
+        order = list(self.config.get("spaces", {}))
+        return sorted(names, key=lambda n: (order.index(n) if n in order else len(order), n))
+
+    def space(self, name: str) -> dict[str, Any]:
+        """Space ``name`` as logged: ``view``, ``readers``, ``labels``, ``component``,
+        ``source`` and ``state`` (its fitted state, as :meth:`interpreter_state`), plus
+        ``fit`` when it was fitted in the run and ``samples`` when on data of its own."""
+        with self._file() as f:
+            if f"spaces/{name}/state" not in f:
+                have = list(f["spaces"]) if "spaces" in f else []
+                raise InputError(f"the log has no situation space '{name}' (it has "
+                                 f"{', '.join(['default', *have])})", file=self.path,
+                                 key=f"spaces/{name}")
+            g = f[f"spaces/{name}"]
+            out: dict[str, Any] = {k: _attr(v) for k, v in g.attrs.items()}
+            for k in ("readers", "labels"):
+                if isinstance(out.get(k), str):
+                    out[k] = json.loads(out[k])
+            out["view"] = None
+            for k, item in g.items():  # view, samples (its own data), state, fit
+                out[k] = _read_group(item) if isinstance(item, h5py.Group) else item[()]
+            return out
+
+    def space_states(self) -> dict[str, dict[str, Any]]:
+        """Name -> fitted state of every situation space of its own (empty: one space)."""
+        return {name: self.space(name)["state"] for name in self.space_names()}
+
     def trial(self, index: int) -> TrialLog:
         """Read trial ``index`` (an InputError lists the trials present if it is missing)."""
         with self._file() as f:

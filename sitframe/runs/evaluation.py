@@ -59,6 +59,7 @@ def evaluate_log(
     arbiter: str | None = None,
     fusion: str = "goal-finding",
     checked: Log | None = None,
+    per_episode: bool = False,
 ) -> dict[str, Any]:
     """Run trial ``trial``'s frozen policies from a log in ``world``.
 
@@ -96,6 +97,12 @@ def evaluate_log(
     ``checked``: the log at ``log_path``, already opened and checked (its
     layout and checksums), when several trials of it are evaluated in turn
     (:func:`select_trial`); by default the log is opened and checked here.
+
+    ``per_episode`` (with ``goal_episodes``): also return ``per_episode``, the
+    protocol's figures of every episode (one list per key, in episode order:
+    ``success``, ``collisions``, ``path_length_m``, ``shortest_m``, ... and
+    ``start``, ``goal``), so that two arbiters can be compared pair by pair
+    (the pairs depend only on the world and the seed).
     """
     log = checked
     if log is None:
@@ -118,6 +125,7 @@ def evaluate_log(
         state = log.interpreter_state()
     else:  # a run that reused situations from another log (e.g. a goal run)
         state = open_log(clusters_from).interpreter_state()
+    space_states = log.space_states()  # (situation spaces of their own, as the run fitted them)
     pm = get_plugin_manager(plugins_dirs=plugins_dirs)
     registry = Registry.collect(pm)
     if arbiter is not None:
@@ -137,6 +145,7 @@ def evaluate_log(
     _check_arbitration(res, policies, trial, log_path, arbiter)
     res.world(world, key="--world")
     check_state(res, state, log_path, log.sensor)
+    _check_spaces(res, space_states, log_path)
     for label in set(policies) & set(res.config.behaviours):
         check_logged_policy(res, label, policies[label], log_path,
                      f"trials/{trial:04d}/behaviours/{label}")
@@ -158,12 +167,31 @@ def evaluate_log(
         result = simulate(res, TrialSpec(index=trial, seed=stage_seed(seed, *stage), world=world,
                                          iterations=int(res.protocol(name).iterations),
                                          learn=False, interpreter_state=state,
-                                         policies=policies, protocol=name))
-    out = {"log": log_path, "world": world, "trial": trial}
+                                         policies=policies, protocol=name,
+                                         space_states=space_states))
+    out: dict[str, Any] = {"log": log_path, "world": world, "trial": trial}
+    if res.config.spaces:  # which situations each component read
+        out["spaces"] = {sp.name: {"situations": sp.n_situations, "view": list(sp.view),
+                                   "read_by": list(sp.readers)}
+                         for sp in res.run.spaces.values()}
     if goal_episodes:
-        return {**out, "arbiter": res.config.arbiter.name, **batch_scores(result)}
+        out = {**out, "arbiter": res.config.arbiter.name, **batch_scores(result)}
+        if per_episode:
+            out["per_episode"] = {k: np.asarray(v).tolist() for k, v in result.episodes.items()
+                                  if isinstance(v, np.ndarray) and k != "first_iteration"}
+        return out
     out.update({key: result.summary[key] for key in EVAL_KEYS})
     return {**out, **_reward_metrics(res, result.arrays)}
+
+
+def _check_spaces(res: Resolved, space_states: dict[str, Any], log_path: str) -> None:
+    """Every situation space of the config is in the log and fits its interpreter."""
+    for name in res.config.spaces:
+        if name not in space_states:
+            raise InputError(f"the log has no fitted situations of space '{name}' (its "
+                             f"/spaces holds {', '.join(space_states) or 'none'})",
+                             file=log_path, key=f"spaces/{name}")
+        check_state(res, space_states[name], log_path, space=name)
 
 
 def _check_arbitration(res: Resolved, policies: dict[str, Any], trial: int, log_path: str,
@@ -291,6 +319,8 @@ def _fusion_config(log_cfg: dict[str, Any], policies: dict[str, LearnedPolicy],
                           for lb, t in fcfg["behaviours"].items()}
     for section in ("sensor", "interpreter", "robot"):
         fcfg[section] = log_cfg[section]
+    if "spaces" in log_cfg and "space" in table:  # the behaviour reads a space of its own
+        fcfg["spaces"] = {table["space"]: log_cfg["spaces"][table["space"]]}
     fcfg["experiment"]["clusters_from"] = ""
     return (validate_config(fcfg, file=fsource, pending=True),
             {slot: policies[src]} if src in policies else {}, fsource)
@@ -305,21 +335,24 @@ def format_action(value: float, unit: str) -> str:
     return f"{value:.3g} {unit}".rstrip()
 
 
-def rule_base_table(result: Any) -> Any:
-    """A rich Table of the learned rule bases of a run, one row per situation.
+def rule_base_table(result: Any, space: str = "default") -> Any:
+    """A rich Table of the learned rule bases of a run, one row per situation of ``space``.
 
-    For each learned output: the action most trials chose for the situation
-    and in how many trials (thesis Tables A.2/A.3), and the action of the trial
-    that ``policy_from.trial = "best"`` would pick (:func:`best_trial`:
-    collisions and coverage when evaluated in the learning world; trial 0
-    when there is no such evaluation). Situations are described from their prototypes.
+    For each learned output of the behaviours (and arbiter) that read ``space``
+    (the ``[interpreter]``'s ``"default"``, or a ``[spaces.NAME]``): the action
+    most trials chose for the situation and in how many trials (thesis Tables
+    A.2/A.3), and the action of the trial that ``policy_from.trial = "best"``
+    would pick (:func:`best_trial`: collisions and coverage when evaluated in
+    the learning world; trial 0 when there is no such evaluation). Situations
+    are described from their prototypes.
     """
     from collections import Counter
 
     from rich.table import Table
 
     trials = result.trials
-    world = Config.of(result.info.config).experiment.world
+    config = Config.of(result.info.config)
+    world = config.experiment.world
     key = summary_key("eval", world, "collisions_per_1000")
     ranked = [t for t in trials if key in t.summary]
     best = trials[0]
@@ -330,24 +363,33 @@ def rule_base_table(result: Any) -> Any:
         best = next(t for t in ranked if t.index == k)
     why = (f"best trial {best.index}: {BEST_TRIAL_RULE} when evaluated in '{world}'"
            if ranked else f"trial {best.index}: no evaluation in the learning world")
-    table = Table(title=f"learned rule bases of {len(trials)} trials",
+    readers = config.readers(space)
+    of_space = f" over space '{space}'" if config.spaces else ""
+    table = Table(title=f"learned rule bases of {len(trials)} trials{of_space}",
                   caption=f"most trials = the most frequent action (how many trials); {why}")
     table.add_column("situation", justify="right")
     table.add_column("description")
-    outs = [(label, out, o) for label, pol in best.policies.items()
+    outs = [(label, out, o) for label, pol in best.policies.items() if label in readers
             for out, o in pol.outputs.items()]
     for label, out, _o in outs:
         table.add_column(f"{label}.{out}\nmost trials", justify="right")
         table.add_column(f"{label}.{out}\ntrial {best.index}", justify="right")
     if not outs:
         return table
-    centers = result.interpreter_state.get("centers")
-    rows: Any = range(outs[0][2].rules.size)
-    if own := getattr(best, "situations", {}).get("state"):  # evolving: the best trial's ids
-        rows, centers = [int(i) for i in own["ids"]], own["centers"]
     angles = result.sensor_angles_deg
+    if space == "default":
+        centers = result.interpreter_state.get("centers")
+    else:
+        centers = getattr(result, "space_states", {}).get(space, {}).get("centers")
+        view = config.spaces[space].view
+        if angles is not None and view is not None:
+            angles = np.asarray(angles)[list(view)]
+    rows: Any = range(outs[0][2].rules.size)
+    if space == "default" and (own := getattr(best, "situations", {}).get("state")):
+        rows, centers = [int(i) for i in own["ids"]], own["centers"]  # evolving: the best's ids
     descs = describe_prototypes(centers, angles) if centers is not None and \
-        np.ndim(centers) == 2 and len(angles) == np.shape(centers)[1] else []
+        angles is not None and np.ndim(centers) == 2 and len(angles) == np.shape(centers)[1] \
+        else []
     for n, i in enumerate(rows):
         row = [f"S{i + 1}", descs[n] if n < len(descs) else ""]
         for label, out, o in outs:

@@ -24,7 +24,7 @@ import pluggy
 
 from sitframe import __version__
 from sitframe.contract.checks import BoundaryError, call, check_data, fault, sensor_spec_mismatch
-from sitframe.contract.config import config_hash, to_toml
+from sitframe.contract.config import DEFAULT_SPACE, config_hash, to_toml
 from sitframe.contract.pluginmanager import Registry, get_plugin_manager
 from sitframe.contract.records import RunInfo, TrialResult
 from sitframe.contract.resolve import Resolved
@@ -49,6 +49,7 @@ from sitframe.runs.loop import (
     STAGE_BATCH,
     STAGE_CLUSTER,
     STAGE_COLLECT,
+    STAGE_SPACES,
     STAGE_TRIALS,
     TRIAL_WORK,
     TrialSpec,
@@ -57,6 +58,7 @@ from sitframe.runs.loop import (
     step_hook_of,
 )
 from sitframe.runs.parallel import InOrder, SerialExecutor, TrialPipeline
+from sitframe.situations.labels import describe_prototypes
 
 
 @dataclass
@@ -69,6 +71,7 @@ class RunResult:
     status: str
     interpreter_state: dict[str, Any] = field(default_factory=dict)
     sensor_angles_deg: np.ndarray | None = None
+    space_states: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
 class Experiment:
@@ -109,6 +112,8 @@ class Experiment:
         #: The typed config (what the run reads); :attr:`cfg` is its serial form.
         self.config = self.res.config
         self.out = out
+        #: Fitted state of each situation space of its own, by name (:meth:`prepare_spaces`).
+        self.space_states: dict[str, dict[str, Any]] = {}
         text = to_toml(cfg)
         e = self.config.experiment
         names = self.res.stage_worlds()
@@ -130,10 +135,13 @@ class Experiment:
         )
 
     # -- stages ------------------------------------------------------------
-    def collect(self) -> Collected:
-        c = self.config.collect
-        rng = np.random.default_rng(stage_seed(self.info.seed, STAGE_COLLECT))
-        worlds = [self.res.world(n, "collect.worlds") for n in c.worlds]
+    def collect(self, c: Any = None, rng: np.random.Generator | None = None,
+                key: str = "collect") -> Collected:
+        """The collect stage: ``c`` (default ``[collect]``) with ``rng`` (default the stage's)."""
+        c = self.config.collect if c is None else c
+        rng = np.random.default_rng(stage_seed(self.info.seed, STAGE_COLLECT)) \
+            if rng is None else rng
+        worlds = [self.res.world(n, f"{key}.worlds") for n in c.worlds]
         sensor = self.res.sensor()
         o = self.res.origins["sensor"]
         parts = []
@@ -154,18 +162,22 @@ class Experiment:
             raise PluginFault(f"{why} (collect stage)", where=str(o), method="read")
         return collected
 
-    def cluster(self, samples: np.ndarray,
-                pmap: Any = None) -> tuple[dict[str, Any], dict[str, Any]]:
-        """Fit the interpreter on ``samples``; ``pmap`` is passed on if its ``fit`` takes one."""
-        rng = np.random.default_rng(stage_seed(self.info.seed, STAGE_CLUSTER))
-        interp = self.res.interpreter()
+    def cluster(self, samples: np.ndarray, pmap: Any = None, *,
+                rng: np.random.Generator | None = None,
+                space: str = DEFAULT_SPACE) -> tuple[dict[str, Any], dict[str, Any]]:
+        """Fit the interpreter of ``space`` (default the ``[interpreter]``) on ``samples``;
+        ``pmap`` is passed on if its ``fit`` takes one."""
+        if rng is None:
+            rng = np.random.default_rng(stage_seed(self.info.seed, STAGE_CLUSTER))
+        interp = self.res.space_interpreter(space)
+        key = self.res.space_key(space)
         c = getattr(interp, "n_situations", None)
         if isinstance(c, int) and len(samples) < c:
             raise InputError(f"the collect stage recorded {len(samples)} samples, fewer than the "
                              f"{c} situations to fit; expected at least {c}: collect more "
                              "(collect.worlds, collect.rate_hz, collect.mode) or lower c",
-                             file=self.source, key="interpreter.c")
-        o = self.res.origins["interpreter"]
+                             file=self.source, key=f"{key}.c")
+        o = self.res.origins[key]
         if pmap is not None and "pmap" in inspect.signature(interp.fit).parameters:
             fit = call(o, "fit", interp.fit, samples, rng, pmap=pmap)
         else:
@@ -185,7 +197,64 @@ class Experiment:
         return TrialSpec(
             index=k, seed=stage_seed(self.info.seed, STAGE_TRIALS, k), world=e.world,
             iterations=e.iterations, learn=True, interpreter_state=interpreter_state,
-            policies=policies or {}, evaluate=evaluate, protocol=self.protocol)
+            policies=policies or {}, evaluate=evaluate, protocol=self.protocol,
+            space_states=dict(self.space_states))
+
+    def prepare_spaces(self, given: dict[str, dict[str, Any]] | None = None,
+                       collected: Collected | None = None) -> dict[str, dict[str, Any]]:
+        """The fitted state of every situation space of its own (``[spaces.NAME]``).
+
+        A state in ``given`` (its ``clusters_from`` log's, or the log being
+        resumed) is taken as it is; any other space is fitted on the run's
+        collected readings (``collected``) seen through its ``view``, or, when
+        the run collects nothing or the space has ``collect`` settings of its
+        own, on readings collected for it (seeds of stage :data:`STAGE_SPACES`,
+        one per space, so the default space's data and every preset's log stay
+        what they were). All spaces are recorded as the stage ``spaces``
+        (not again when resuming: the log has them).
+        """
+        given = dict(given or {})
+        record: dict[str, Any] = {}
+        for i, (name, section) in enumerate(self.config.spaces.items()):
+            view = list(self.res.run.spaces[name].view)
+            entry: dict[str, Any] = {"view": np.asarray(view, dtype=np.int64),
+                                     "readers": list(self.config.readers(name)),
+                                     "component": section.interpreter.name}
+            if name in given:
+                state = given[name]
+                entry["source"] = f"clusters_from: {section.clusters_from}" \
+                    if section.clusters_from else "given"
+            else:
+                if collected is None or section.collect:
+                    table = dataclasses.replace(self.config.collect, **{
+                        k: (tuple(v) if k == "worlds" else v) for k, v in section.collect.items()})
+                    rng = np.random.default_rng(stage_seed(self.info.seed, STAGE_SPACES, 2 * i))
+                    data = self.collect(table, rng, key=f"spaces.{name}.collect")
+                    entry["samples"] = data.samples[:, view]
+                    samples = data.samples
+                else:
+                    samples = collected.samples
+                rng = np.random.default_rng(stage_seed(self.info.seed, STAGE_SPACES, 2 * i + 1))
+                fit, state = self.cluster(samples[:, view], rng=rng, space=name)
+                entry["fit"] = fit
+                entry["source"] = "fitted"
+            entry["state"] = state
+            entry["labels"] = self._labels(state, view)
+            given[name] = state
+            record[name] = entry
+        if record and not self.info.extra.get("resume"):
+            self._notify("sitframe_stage_end", run=self.info, stage="spaces", data=record)
+        self.space_states = {name: given[name] for name in self.config.spaces}
+        return self.space_states
+
+    def _labels(self, state: dict[str, Any], view: list[int]) -> list[str]:
+        """``S1: wall on left``, ... for a state with range ``centers`` over ``view`` (no two
+        alike: :func:`~sitframe.situations.labels.describe_prototypes`)."""
+        centers = np.asarray(state.get("centers", np.zeros((0, 0))), dtype=float)
+        angles = self.res.run.sensor.angles_deg[view]
+        if centers.ndim != 2 or centers.shape[1] != len(view):
+            return [f"S{i + 1}" for i in range(len(centers))]
+        return [f"S{i}: {w}" for i, w in enumerate(describe_prototypes(centers, angles), 1)]
 
     # -- phases (``run`` composes them; a sweep interleaves them across runs) --
     def begin(self) -> None:
@@ -233,13 +302,26 @@ class Experiment:
                                         data={**fit, "state": state})
 
     def prepare(self, interpreter_state: dict[str, Any] | None = None,
-                collected: Collected | None = None) -> dict[str, Any]:
+                collected: Collected | None = None,
+                space_states: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
         """Collect and cluster (unless ``interpreter_state`` is given); return the state.
 
         Situations given from elsewhere (``clusters_from``) are still recorded as
         the cluster stage, so the run's own log is self-contained for
         ``evaluate`` and ``analyse`` (not again when resuming: the log has them).
+        The situation spaces of their own are fitted (or taken from
+        ``space_states``) after it (:meth:`prepare_spaces`).
         """
+        collected_here: list[Collected] = []
+        state = self._prepare_default(interpreter_state, collected, collected_here)
+        if self.config.spaces:
+            self.prepare_spaces(space_states, collected or next(iter(collected_here), None))
+        return state
+
+    def _prepare_default(self, interpreter_state: dict[str, Any] | None,
+                         collected: Collected | None,
+                         collected_here: list[Collected]) -> dict[str, Any]:
+        """:meth:`prepare` for the default space (``collected_here`` gets what it collected)."""
         if interpreter_state is None and collected is None and self.starts_online():
             interp = self.res.interpreter()
             interpreter_state = call(self.res.origins["interpreter"], "state", interp.state)
@@ -254,6 +336,7 @@ class Experiment:
         if collected is None:
             collected = self.collect()
             self.record_collected(collected)
+            collected_here.append(collected)
         fit, state = self.cluster(collected.samples, getattr(self.executor, "task_map", None))
         self.record_clusters(fit, state)
         return state
@@ -328,7 +411,8 @@ class Experiment:
             collected: Collected | None = None,
             policies: dict[str, dict[str, np.ndarray]] | None = None,
             trials: list[int] | None = None,
-            skip: set[int] | frozenset[int] = frozenset()) -> RunResult:
+            skip: set[int] | frozenset[int] = frozenset(),
+            space_states: dict[str, dict[str, Any]] | None = None) -> RunResult:
         """Run the configured stages; observers see every stage and trial.
 
         ``interpreter_state`` (e.g. read from an earlier log) skips collect
@@ -337,7 +421,7 @@ class Experiment:
         is in it (resume: the ones already in the log). See :func:`drive`.
         """
         return drive([(self, RunPlan(interpreter_state, collected, policies, trials,
-                                     frozenset(skip)))], self.executor)[0]
+                                     frozenset(skip), space_states))], self.executor)[0]
 
 
 @dataclass(frozen=True)
@@ -356,6 +440,9 @@ class RunPlan:
         Learning-trial indices to run (default all).
     skip
         Indices of specs not to run (resume: those already in the log).
+    space_states
+        Fitted states of situation spaces of their own, by name (``clusters_from``
+        of a ``[spaces.NAME]``, or resume); the others are fitted.
     """
 
     interpreter_state: dict[str, Any] | None = None
@@ -363,6 +450,7 @@ class RunPlan:
     policies: dict[str, Any] | None = None
     trials: list[int] | None = None
     skip: frozenset[int] = frozenset()
+    space_states: dict[str, dict[str, Any]] | None = None
 
     @classmethod
     def of(cls, kwargs: dict[str, Any]) -> RunPlan:
@@ -475,12 +563,15 @@ def drive(runs: list[tuple[Experiment, RunPlan]], executor: Any) -> list[RunResu
                         if isinstance(handles[i], Setup):  # forked workers inherit it
                             _cache.setdefault(handles[i].key, exp)
                         executor.warm(warm_up, handles[i])  # workers start while we cluster
-                    book.add_trials(i, exp.prepare(plan.interpreter_state, plan.collected))
+                    book.add_trials(i, exp.prepare(plan.interpreter_state, plan.collected,
+                                                   plan.space_states))
             for kind, tag, value in pipe:
                 if kind == "call":
                     collected, fit, state = value
                     runs[tag][0].record_collected(collected)
                     runs[tag][0].record_clusters(fit, state)
+                    if runs[tag][0].config.spaces:
+                        runs[tag][0].prepare_spaces(runs[tag][1].space_states, collected)
                     book.add_trials(tag, state)
                 else:
                     book.trial(*tag, value)
@@ -493,7 +584,8 @@ def drive(runs: list[tuple[Experiment, RunPlan]], executor: Any) -> list[RunResu
         raise
     wall = time.perf_counter() - t0
     return [RunResult(exp.info, book.results[i], wall, book.status[i], book.states[i],
-                      exp.res.run.sensor.angles_deg) for i, (exp, _plan) in enumerate(runs)]
+                      exp.res.run.sensor.angles_deg, dict(exp.space_states))
+            for i, (exp, _plan) in enumerate(runs)]
 
 
 # ---------------------------------------------------------------------------

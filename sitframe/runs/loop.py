@@ -58,6 +58,7 @@ from sitframe.contract.checks import (
     memberships_mismatch,
     sensor_spec_mismatch,
 )
+from sitframe.contract.config import DEFAULT_SPACE
 from sitframe.contract.records import (
     Context,
     LearnedPolicy,
@@ -79,8 +80,9 @@ if TYPE_CHECKING:  # (the run's components, bound: built by the run driver)
     from sitframe.contract.resolve import Resolved
 
 #: Seed stages (:func:`stage_seed`); ``STAGE_BATCH``: the episode batches of a run that
-#: does not learn (one per world of its evaluation protocol).
-STAGE_COLLECT, STAGE_CLUSTER, STAGE_TRIALS, STAGE_EVAL, STAGE_BATCH = 0, 1, 2, 3, 4
+#: does not learn (one per world of its evaluation protocol); ``STAGE_SPACES``: the data and
+#: clustering of the situation spaces of their own (index ``2 i``, ``2 i + 1`` for space ``i``).
+STAGE_COLLECT, STAGE_CLUSTER, STAGE_TRIALS, STAGE_EVAL, STAGE_BATCH, STAGE_SPACES = range(6)
 #: Figures the core measures of every evaluation (``eval/<world>/...``, ``evaluate --json``).
 EVAL_KEYS = ("iterations", "collisions", "collisions_per_1000", "distance_m", "mean_speed_m_s",
              "coverage")
@@ -127,6 +129,9 @@ class TrialSpec:
     observed
         Whether ``sitframe_step`` observers see the trial's iterations (not in
         the evaluations of a learning trial).
+    space_states
+        Fitted state of each situation space of its own (``[spaces.NAME]``), by
+        name; empty in a run with one space.
     """
 
     index: int
@@ -141,6 +146,7 @@ class TrialSpec:
     goal: tuple[float, float, float] | None = None
     protocol: str | None = None
     observed: bool = True
+    space_states: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
 class _Step:
@@ -225,7 +231,8 @@ def simulate(
                                                      float(spec.goal[2]))
     parts = _TrialParts.create(res, spec, rng, world)
     rec = Recorder(spec.iterations, res.run.sensor.dim, parts.c, list(parts.behaviours),
-                   [lb for lb, *_ in parts.learners])
+                   [lb for lb, *_ in parts.learners],
+                   {sp.name: sp.c for sp in parts.spaces})
     start = np.array(world.start if spec.start is None else spec.start, dtype=float)
     env = _Env(world, goal, rng, start)
     env.chain = _training_episodes(res, spec, world)  # None unless the protocol trains so
@@ -241,13 +248,28 @@ def simulate(
     return result
 
 
+@dataclass(frozen=True)
+class _Space:
+    """A situation space of its own in a trial: its interpreter (loaded), the readings it
+    sees (``view``, ``None``: all) and its number of situations ``c``."""
+
+    name: str
+    interp: Any
+    view: np.ndarray | None
+    c: int
+    at_u: _Step
+
+
 @dataclass
 class _TrialParts:
     """One trial's components, created, loaded and reset (:meth:`create`).
 
     ``learners`` are ``(label, component, reward, its origin, the reward's origin)``
     of every behaviour (and the arbiter) that learns in this trial; ``components``
-    ``(config key, component)`` of all of them, for the lifecycle calls.
+    ``(config key, component)`` of all of them, for the lifecycle calls. ``spaces``
+    are the situation spaces of their own (none in a run with one space) and
+    ``where`` gives each behaviour label (and ``"arbiter"``) the index of the
+    space it reads: 0 the default, ``i`` ``spaces[i - 1]``.
     """
 
     sensor: Any
@@ -258,6 +280,14 @@ class _TrialParts:
     learners: list[tuple[str, Any, Any, Origin, Origin]]
     components: list[tuple[str, Any]]
     tinfo: TrialInfo
+    spaces: list[_Space] = field(default_factory=list)
+    where: dict[str, int] = field(default_factory=dict)
+
+    def c_of(self, label: str) -> int:
+        """The number of situations of the space ``label`` (a behaviour or ``"arbiter"``)
+        reads."""
+        i = self.where.get(label, 0)
+        return self.c if i == 0 else self.spaces[i - 1].c
 
     @classmethod
     def create(cls, res: Resolved, spec: TrialSpec, rng: np.random.Generator,
@@ -270,26 +300,31 @@ class _TrialParts:
         call(og["interpreter"], "load_state", interp.load_state, spec.interpreter_state, trial=k)
         c = call(og["interpreter"], "n_situations",
                  lambda: check_n_situations(interp.n_situations), trial=k)
+        spaces = [_space_load(res, name, spec) for name in res.config.spaces]
+        where = _space_index(res)
         with _in_trial(k):
             behaviours = res.behaviours()
             arbiter = res.arbiter()
             arb_reward = res.arbiter_reward() if spec.learn else None
         L = spec.iterations
+        own = {lb: spaces[where[lb] - 1].c if lb in where else c
+               for lb in [*behaviours, "arbiter"]}
         for label, (beh, _r) in behaviours.items():
             o = og[f"behaviours.{label}"]
             if label in spec.policies:
                 call(o, "load_policy", beh.load_policy, spec.policies[label], trial=k)
-            call(o, "reset", beh.reset, rng, c, L, trial=k)
+            call(o, "reset", beh.reset, rng, own[label], L, trial=k)
         if "arbiter" in spec.policies:  # (an arbiter with policy() has load_policy)
             call(og["arbiter"], "load_policy", arbiter.load_policy, spec.policies["arbiter"],
                  trial=k)
         if hasattr(arbiter, "reset"):
-            call(og["arbiter"], "reset", arbiter.reset, rng, c, L, trial=k)
+            call(og["arbiter"], "reset", arbiter.reset, rng, own["arbiter"], L, trial=k)
         learners = [(lb, beh, rew, og[f"behaviours.{lb}"], og[f"behaviours.{lb}.reward"])
                     for lb, (beh, rew) in behaviours.items() if rew is not None and spec.learn]
         if arb_reward is not None:
             learners.append(("arbiter", arbiter, arb_reward, og["arbiter"], og["arbiter.reward"]))
         components = [("sensor", sensor), ("interpreter", interp),
+                      *[(f"spaces.{sp.name}", sp.interp) for sp in spaces],
                       *[(f"behaviours.{lb}", b) for lb, (b, _r) in behaviours.items()],
                       *[(f"behaviours.{lb}.reward", r) for lb, (_b, r) in behaviours.items()
                         if r is not None and spec.learn],  # (a frozen run uses no reward)
@@ -299,7 +334,36 @@ class _TrialParts:
         for key, comp in components:
             if hasattr(comp, "trial_start"):
                 call(og[key], "trial_start", comp.trial_start, tinfo, trial=k)
-        return cls(sensor, interp, c, behaviours, arbiter, learners, components, tinfo)
+        return cls(sensor, interp, c, behaviours, arbiter, learners, components, tinfo, spaces,
+                   where)
+
+
+def _space_index(res: Resolved) -> dict[str, int]:
+    """Behaviour label (or ``"arbiter"``) -> ``1 + i`` for those that read the ``i``-th
+    situation space of its own (the others read the default space)."""
+    names = list(res.config.spaces)
+    out = {}
+    for lb in [*res.config.behaviours, "arbiter"]:
+        space = res.config.space_of("arbiter" if lb == "arbiter" else f"behaviours.{lb}")
+        if space in names:
+            out[lb] = 1 + names.index(space)
+    return out
+
+
+def _space_load(res: Resolved, name: str, spec: TrialSpec) -> _Space:
+    """Create space ``name``'s interpreter for a trial and load its fitted state."""
+    key, k = f"spaces.{name}", spec.index
+    if name not in spec.space_states:
+        raise InputError(f"no fitted situations for space '{name}' (expected them from its "
+                         "clusters_from log, the collect and cluster stages, or the log)",
+                         key=key)
+    with _in_trial(k):
+        interp = res.space_interpreter(name)
+    o = res.origins[key]
+    call(o, "load_state", interp.load_state, spec.space_states[name], trial=k)
+    c = call(o, "n_situations", lambda: check_n_situations(interp.n_situations), trial=k)
+    return _Space(name, interp, res.space_view(name), int(c), _Step(o, "memberships"))
+
 
 
 class Recorder:
@@ -317,15 +381,19 @@ class Recorder:
         The behaviours' labels, in config order.
     rewarded
         The labels whose rewards are recorded (the learners').
+    spaces
+        Name -> number of situations of each situation space of its own (its
+        memberships are recorded as ``spaces/<name>/memberships``).
     """
 
     def __init__(self, iterations: int, dim: int, c: int, labels: list[str],
-                 rewarded: list[str]) -> None:
+                 rewarded: list[str], spaces: dict[str, int] | None = None) -> None:
         L = iterations
         self.labels = labels
         self.pose = np.empty((L + 1, 3))
         self.reading = np.empty((L, dim))
         self.memberships = np.empty((L, c))
+        self.spaces = {name: np.empty((L, cs)) for name, cs in (spaces or {}).items()}
         self.weights = np.empty((L, len(labels)))
         # Scalars go to lists (an append is cheaper than writing into an array).
         self._command: list[tuple[float, float]] = []
@@ -355,6 +423,11 @@ class Recorder:
         if rewards:
             self._rewards.append(tuple(rewards.values()))
 
+    def record_spaces(self, t: int, ctxs: list[Context]) -> None:
+        """Record iteration ``t``'s memberships of each space of its own (``ctxs[1:]``)."""
+        for u, ctx in zip(self.spaces.values(), ctxs[1:], strict=True):
+            u[t] = ctx.memberships
+
     def arrays(self, n: int, origins: dict[str, Origin], trial: int,
                max_range: float = np.inf) -> dict[str, np.ndarray]:
         """The first ``n`` iterations' arrays (the final pose is the last of ``pose``).
@@ -364,6 +437,8 @@ class Recorder:
         """
         _check_trial_values(self.reading[:n], self.memberships[:n], self.weights[:n], origins,
                             trial, max_range)
+        for name, u in self.spaces.items():
+            _check_memberships_rows(u[:n], origins[f"spaces.{name}"], trial)
         coll = np.zeros(n, dtype=bool)
         contact = np.full((n, 2), np.nan)
         for t, xy in self._contacts:
@@ -377,6 +452,8 @@ class Recorder:
         props = np.array(self._proposals, dtype=float).reshape(n, 2 * len(self.labels))
         for i, lb in enumerate(self.labels):
             out[f"proposals/{lb}"] = props[:, 2 * i: 2 * i + 2].copy()
+        for name, u in self.spaces.items():
+            out[f"spaces/{name}/memberships"] = u[:n]
         rewards = np.array(self._rewards, dtype=float).reshape(n, len(self.rewarded))
         for i, lb in enumerate(self.rewarded):
             out[f"reward/{lb}"] = rewards[:, i].copy()
@@ -402,6 +479,9 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
 
     Every plugin call is preceded by setting ``step_at`` to where it is, so a
     raise is reported at the right plugin and method (:func:`_loop_fault`).
+    With situation spaces of their own, each component gets the context of the
+    space it reads (``ctxs[i]``, :func:`_in_spaces`); with one space
+    ``ctxs == [ctx]``.
     """
     og, k = res.origins, spec.index
     sensor, interp, arbiter = parts.sensor, parts.interp, parts.arbiter
@@ -409,14 +489,15 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
     d, c, n_labels = res.run.sensor.dim, parts.c, len(parts.behaviours)
     default_speed = res.config.experiment.default_speed
     robot = res.robot
-    track, chain = env.track, env.chain
+    track, chain, spaces, where = env.track, env.chain, parts.spaces, parts.where
     at_read, at_u = _Step(og["sensor"], "read"), _Step(og["interpreter"], "memberships")
     at_combine, at_core = _Step(og["arbiter"], "combine"), _Step(None, "step")
     at_step = _Step(None, "sitframe_step")
-    at_propose = [(lb, beh, _Step(og[f"behaviours.{lb}"], "propose"))
+    at_propose = [(lb, beh, where.get(lb, 0), _Step(og[f"behaviours.{lb}"], "propose"))
                   for lb, (beh, _r) in parts.behaviours.items()]
-    at_learn = [(lb, beh, rew, _Step(ob, "learn"), _Step(orw, "__call__"))
+    at_learn = [(lb, beh, rew, where.get(lb, 0), _Step(ob, "learn"), _Step(orw, "__call__"))
                 for lb, beh, rew, ob, orw in parts.learners]
+    at_arb = where.get("arbiter", 0)
     at_end = None if protocol is None else _Step(
         og.get(protocol_key(protocol)) or f"protocol '{protocol.name}'", "terminated")
     step_at = at_read
@@ -424,6 +505,7 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
     pose = env.start
     n_done = spec.iterations
     ctx = None
+    ctxs: list[Context] = []
     try:
         for t in range(spec.iterations):
             if ctx is None:  # the trial's (or a training episode's) first reading
@@ -435,11 +517,14 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
                 u = interp.memberships(reading)
                 check_memberships(u, c)
                 ctx = Context(t, pose, reading, u, _nearest(reading), world, goal)
+                ctxs = _in_spaces(ctx, spaces, k) if spaces else [ctx]
+                ctx = ctxs[0]
             proposals = {}
-            for lb, beh, step_at in at_propose:  # noqa: B007 - step_at names the caller on a fault
-                proposals[lb] = check_proposal(beh.propose(ctx))
+            for lb, beh, i, step_at in at_propose:  # noqa: B007 - step_at names the caller
+                proposals[lb] = check_proposal(beh.propose(ctxs[i]))
             step_at = at_combine
-            prop, weights = check_combined(arbiter.combine(ctx, proposals), n_labels, proposals)
+            prop, weights = check_combined(arbiter.combine(ctxs[at_arb], proposals), n_labels,
+                                           proposals)
             step_at = at_core
             cmd = Command(prop.heading_deg,
                           default_speed if prop.speed_m_s is None else prop.speed_m_s)
@@ -453,19 +538,22 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
             u2 = interp.memberships(reading2)
             check_memberships(u2, c)
             ctx2 = Context(t + 1, pose, reading2, u2, _nearest(reading2), world, goal)
-            tr = Transition(ctx, cmd, out, ctx2)
+            ctxs2 = _in_spaces(ctx2, spaces, k) if spaces else [ctx2]
+            trs = [Transition(a, cmd, out, b) for a, b in zip(ctxs, ctxs2, strict=True)]
             rewards = {}
-            for lb, beh, rew, at_l, step_at in at_learn:
-                rewards[lb] = r = check_reward(rew(tr))
+            for lb, beh, rew, i, at_l, step_at in at_learn:
+                rewards[lb] = r = check_reward(rew(trs[i]))
                 step_at = at_l
-                beh.learn(tr, r)
+                beh.learn(trs[i], r)
             if track is not None:
                 track.step(t)
             rec.record(t, ctx, cmd, out, weights, proposals, rewards)
+            if spaces:
+                rec.record_spaces(t, ctxs)
             if step_hook is not None:
                 step_at = at_step
-                step_hook(StepRecord(k, tr, proposals, weights, rewards))
-            ctx = ctx2
+                step_hook(StepRecord(k, trs[0], proposals, weights, rewards))
+            ctx, ctxs = ctxs2[0], ctxs2
             if at_end is not None and (step_at := at_end) and \
                     check_flag(protocol.terminated(ctx)):
                 n_done = t + 1
@@ -483,10 +571,33 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
     return n_done
 
 
+def _in_spaces(ctx: Context, spaces: list[_Space], trial: int) -> list[Context]:
+    """The context of each situation space: ``[default, *spaces]``, each with its own
+    memberships and all of them in ``Context.spaces`` (a fault in a space's interpreter
+    names it)."""
+    us = {DEFAULT_SPACE: ctx.memberships}
+    reading = ctx.reading
+    for sp in spaces:
+        try:
+            u = sp.interp.memberships(reading if sp.view is None else reading[sp.view])
+            check_memberships(u, sp.c)
+        except (KeyboardInterrupt, TaskCancelled, PluginFault, InputError):
+            raise
+        except BoundaryError as exc:
+            raise PluginFault(str(exc), where=str(sp.at_u.origin), method="memberships",
+                              trial=trial, iteration=ctx.iteration) from None
+        except PLUGIN_ERRORS as exc:
+            raise fault(exc, sp.at_u.origin, "memberships", trial, ctx.iteration) from exc
+        us[sp.name] = u
+    it, pose, nearest, world, goal = ctx.iteration, ctx.pose, ctx.nearest, ctx.world, ctx.goal
+    return [Context(it, pose, reading, us[name], nearest, world, goal, us)
+            for name in (DEFAULT_SPACE, *(sp.name for sp in spaces))]
+
+
 def _trial_result(res: Resolved, spec: TrialSpec, world: World, parts: _TrialParts,
                   arrays: dict[str, np.ndarray], env: _Env) -> TrialResult:
     """The finished trial: behaviours' data and policies, summary, plugins' data."""
-    k, og, c = spec.index, res.origins, parts.c
+    k, og = spec.index, res.origins
     bdata, policies = {}, {}
     learned = [(lb, b, og[f"behaviours.{lb}"]) for lb, (b, _r) in parts.behaviours.items()]
     if hasattr(parts.arbiter, "policy"):
@@ -496,9 +607,14 @@ def _trial_result(res: Resolved, spec: TrialSpec, world: World, parts: _TrialPar
             bdata[lb] = _checked(o, "trial_data", check_trial_data, b.trial_data, k,
                                  spec.iterations)
         if hasattr(b, "policy"):
-            pol = _checked(o, "policy", lambda p: check_policy(p, c), b.policy, k)
+            pol = _checked(o, "policy", lambda p, lb=lb: check_policy(p, parts.c_of(lb)),
+                           b.policy, k)
             if pol is not None:
                 policies[lb] = pol
+    if parts.spaces:  # (which situation space each behaviour read, logged with its data)
+        for lb, _b, _o in learned:
+            bdata.setdefault(lb, {})["space"] = res.config.space_of(
+                "arbiter" if lb == "arbiter" else f"behaviours.{lb}")
     summary = trial_summary(world, arrays, bdata, res.robot)
     episodes = {} if env.chain is None else env.chain.record(arrays["pose"], summary)
     result = TrialResult(spec.index, spec.seed, world.name, arrays, bdata, summary, episodes,
@@ -706,6 +822,16 @@ def _loop_fault(exc: Exception, step_at: _Step, trial: int, t: int, res: Resolve
     return fault(exc, step_at.origin or "an observer (sitframe_step)", step_at.method, trial, t)
 
 
+def _check_memberships_rows(u: np.ndarray, origin: Origin, trial: int) -> None:
+    """Vectorised check of a space's memberships over a finished trial."""
+    bad = ~np.isfinite(u).all(axis=1) | (u < 0).any(axis=1) | \
+        (np.abs(u.sum(axis=1) - 1.0) > MEMBERSHIP_SUM_TOL)
+    if bad.any():
+        t = int(np.argmax(bad))
+        raise PluginFault(memberships_mismatch(u[t], u.shape[1]) or "invalid", where=str(origin),
+                          method="memberships", trial=trial, iteration=t)
+
+
 def _check_trial_values(readings: np.ndarray, u: np.ndarray, weights: np.ndarray,
                         origins: dict[str, Origin], trial: int, max_range: float) -> None:
     """Vectorised checks of every reading, membership vector and weight of a finished trial."""
@@ -805,7 +931,7 @@ def attach_evaluation(result: TrialResult, wname: str, ev: TrialResult) -> None:
     Its arrays (:data:`EVAL_ARRAYS`), per-episode records (``episodes/eval/<wname>/...``),
     the figures of :data:`EVAL_KEYS`, its protocol's aggregates and its plugin data.
     """
-    for key in EVAL_ARRAYS:
+    for key in (*EVAL_ARRAYS, *(k for k in ev.arrays if k.startswith("spaces/"))):
         if key in ev.arrays:
             result.episodes[f"eval/{wname}/{key}"] = ev.arrays[key]
     for key, v in ev.episodes.items():

@@ -122,10 +122,10 @@ def prepare_experiment(
             checked[path].check()
         return checked[path]
 
-    clusters_from = config.experiment.clusters_from
-    if clusters_from:
+    def reused(clusters_from: str, key: str, space: str) -> dict[str, Any]:
+        """The situations a space reuses from another log (fingerprinted as an input)."""
         path = _resolve_path(clusters_from, base_dir)
-        log = source_log(path, "experiment.clusters_from")
+        log = source_log(path, key)
         state = log.interpreter_state()
         logged_sensor = validate_config(log.config, file=path, pending=True)["sensor"]
         if logged_sensor != cfg["sensor"]:
@@ -133,9 +133,18 @@ def prepare_experiment(
                 f"its situations were fitted on readings of sensor {logged_sensor}, but this "
                 f"config reads {cfg['sensor']}; use the same [sensor] table",
                 file=path, key="sensor")
-        check_state(exp.res, state, path, log.sensor)
-        kwargs["interpreter_state"] = state
-        inputs["clusters_from"] = fingerprint(state)
+        check_state(exp.res, state, path, log.sensor, space=space)
+        inputs["clusters_from" if space == "default" else f"spaces/{space}"] = \
+            fingerprint(state)
+        return state
+
+    if config.experiment.clusters_from:
+        kwargs["interpreter_state"] = reused(config.experiment.clusters_from,
+                                             "experiment.clusters_from", "default")
+    space_states = {name: reused(section.clusters_from, f"spaces.{name}.clusters_from", name)
+                    for name, section in config.spaces.items() if section.clusters_from}
+    if space_states:
+        kwargs["space_states"] = space_states
     policies: dict[str, LearnedPolicy] = {}
     for label, table in config.behaviours.items():
         pf = table.policy_from
@@ -421,6 +430,10 @@ def prepare_resume(
     if log.has("cluster/state"):
         kwargs["interpreter_state"] = log.interpreter_state()
         check_state(exp.res, kwargs["interpreter_state"], p, log.sensor)
+    if log.has("spaces"):
+        kwargs["space_states"] = log.space_states()
+        for name, state in kwargs["space_states"].items():
+            check_state(exp.res, state, p, space=name)
     have = set(log.trial_indices())
     kwargs["skip"] = frozenset(have)
     missing = [k for k in range(exp.info.n_trials) if k not in have] \

@@ -70,6 +70,7 @@ from typing import Any
 from sitframe.contract.config import (
     DEFAULTS,
     META_KEYS,
+    SPACE_KEYS,
     Component,
     load_config,
     validate_config,
@@ -295,6 +296,9 @@ def check_key(key: str, cfg: dict[str, Any], registry: Any, *, file: str | None 
 
     declared = plugin_tables(registry, strict=False).tables
     sections = [*DEFAULTS, *declared]
+    if parts[0] == "spaces" and "spaces" in cfg:  # a situation space of its own
+        _check_space_key(parts, cfg["spaces"], fail, params_of)
+        return
     if parts[0] not in sections:
         fail(sections, "", parts[0])
     sec = parts[0]
@@ -328,6 +332,18 @@ def check_key(key: str, cfg: dict[str, Any], registry: Any, *, file: str | None 
         valid = set(DEFAULTS[sec])
     if len(parts) != 2 or parts[1] not in valid:
         fail(valid, f"{sec}.", ".".join(parts[1:]))
+
+
+def _check_space_key(parts: list[str], spaces: dict[str, Any], fail: Any,
+                     params_of: Any) -> None:
+    """:func:`check_key` for ``spaces.NAME.KEY``: the space's interpreter's parameters and
+    the reserved keys of a space table."""
+    if len(parts) < 3 or parts[1] not in spaces:
+        fail([f"{n}.component" for n in spaces], "spaces.", ".".join(parts[1:]))
+    names, var_kw = params_of("interpreter", spaces[parts[1]]["component"])
+    valid = names | set(SPACE_KEYS)
+    if len(parts) != 3 or (parts[2] not in valid and not var_kw):
+        fail(valid, f"spaces.{parts[1]}.", ".".join(parts[2:]))
 
 
 def _set(cfg: dict[str, Any], key: str, value: Any) -> None:

@@ -34,7 +34,7 @@ import numpy as np
 from numba import njit
 from numba.core import config as numba_config
 
-__all__ = ["arc_angles", "arc_poses", "backoff", "backoffs", "cast", "cast_each",
+__all__ = ["arc_angles", "arc_poses", "backoff", "backoffs", "cast", "cast_each", "clear_from",
            "contact_points", "fcm_ratios", "first_contact", "label_strengths", "linspace",
            "near_segments", "nearest_point", "normalize", "ranges", "ranges_many", "refine",
            "sweep_begin", "sweep_end"]
@@ -617,3 +617,46 @@ def _warm() -> None:
 
 
 _warm()
+
+
+@njit(**_JIT)
+def _seg_d2(px: float, py: float, ax: float, ay: float, ex: float, ey: float,
+            inv: float) -> float:  # pragma: no cover - compiled
+    wx, wy = px - ax, py - ay
+    t = min(max((wx * ex + wy * ey) * inv, 0.0), 1.0)
+    dx, dy = wx - t * ex, wy - t * ey
+    return dx * dx + dy * dy
+
+
+@njit(**_JIT)
+def clear_from(px: float, py: float, targets: np.ndarray, seg: np.ndarray, r: float,
+               out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """Whether a disc of radius ``r`` moved straight from (px, py) to each target (k, 2)
+    touches no edge of ``seg`` (S, 4): the test of :func:`sitframe.sim.paths._clear_chunk`
+    for one start (no crossing; no endpoint of either within ``r`` of the other), on
+    squared distances. Not bit-twinned: only the route planner and the path-distance
+    reward use it (never a figure of a preset's log)."""
+    r2 = r * r
+    for i in range(targets.shape[0]):
+        qx, qy = targets[i, 0], targets[i, 1]
+        mx, my = qx - px, qy - py
+        ml2 = mx * mx + my * my
+        minv = 1.0 / ml2 if ml2 > 0.0 else 0.0
+        ok = True
+        for j in range(seg.shape[0]):
+            ax, ay, bx, by = seg[j, 0], seg[j, 1], seg[j, 2], seg[j, 3]
+            ex, ey = bx - ax, by - ay
+            el2 = ex * ex + ey * ey
+            einv = 1.0 / el2 if el2 > 0.0 else 0.0
+            o1 = ex * (py - ay) - ey * (px - ax)
+            o2 = ex * (qy - ay) - ey * (qx - ax)
+            o3 = mx * (ay - py) - my * (ax - px)
+            o4 = mx * (by - py) - my * (bx - px)
+            if (o1 * o2 < 0.0 and o3 * o4 < 0.0) or \
+                    _seg_d2(px, py, ax, ay, ex, ey, einv) < r2 or \
+                    _seg_d2(qx, qy, ax, ay, ex, ey, einv) < r2 or \
+                    _seg_d2(ax, ay, px, py, mx, my, minv) < r2 or \
+                    _seg_d2(bx, by, px, py, mx, my, minv) < r2:
+                ok = False
+                break
+        out[i] = ok

@@ -38,6 +38,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from sitframe.sim import geometry as geo
+from sitframe.sim.kernels import kernels
 from sitframe.sim.world import World
 
 #: Points of the polygon that stands in for the disc's arc around each vertex.
@@ -124,6 +125,21 @@ def _clear_chunk(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> n
     corners = geo.point_segment_distance(np.vstack([e[:, :2], e[:, 2:]]), np.hstack([a, b]))
     near |= ((corners[:e.shape[0]] < r) | (corners[e.shape[0]:] < r)).T  # (E, k) -> (k, E)
     return ~(crossed | near).any(axis=1)
+
+
+def _clear_from(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> np.ndarray:
+    """(k,) whether the disc moves straight from ``a`` (2,) to each of ``b`` (k, 2): the
+    compiled kernel when it is loaded (the route planner and the path-distance reward ask
+    this every step), else :func:`_clear_moves`. Only those two use it: a move that grazes
+    an edge within rounding may be judged either way by the two, which no figure of a log
+    of a preset without them depends on."""
+    kern = kernels()
+    if kern is None:
+        return _clear_moves(world, np.broadcast_to(a, b.shape), b, radius)
+    out = np.empty(b.shape[0], dtype=np.bool_)
+    kern.clear_from(float(a[0]), float(a[1]), np.ascontiguousarray(b, dtype=np.float64),
+                    world.segments, radius * (1 - 1e-9), out)
+    return out
 
 
 def _graph(world: World, radius: float) -> _Graph:
@@ -215,8 +231,7 @@ class PathDistance:
 
     def __call__(self, point: np.ndarray) -> float:
         p = np.asarray(point, dtype=np.float64).reshape(2)
-        ok = _clear_moves(self.world, np.broadcast_to(p, self._targets.shape), self._targets,
-                          self.radius)
+        ok = _clear_from(self.world, p, self._targets, self.radius)
         if ok[0]:
             return float(math.hypot(*(self.goal - p)))
         if not ok[1:].any():
@@ -233,3 +248,105 @@ def _shortest(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> floa
         return math.inf
     da, db = (_in_sight(world, p, g.nodes, radius) for p in (a, b))
     return float((da[:, None] + g.between + db[None, :]).min())
+
+
+class RouteGraph:
+    """A world's visibility graph for a disc, with the routes between its arc points.
+
+    The same arc points as :func:`shortest_path_length` uses (``ARC_POINTS`` around
+    every vertex of the world's edges, at the disc's radius), and the shortest path
+    between every two of them with its predecessors, so that a route (the list of
+    waypoints, not only its length) costs one visibility check of the start and of
+    the goal. Built once per world and radius (:func:`route_graph`).
+
+    Parameters
+    ----------
+    world
+        The world.
+    radius
+        Disc radius [m], > 0: the robot's radius plus the clearance a planner keeps.
+    """
+
+    def __init__(self, world: World, radius: float) -> None:
+        if not radius > 0:
+            raise ValueError(f"radius must be > 0 metres (the disc's), got {radius!r}")
+        self.world, self.radius = world, float(radius)
+        verts = np.unique(np.vstack([world.segments[:, :2], world.segments[:, 2:]]), axis=0)
+        ang = 2 * math.pi * np.arange(ARC_POINTS) / ARC_POINTS
+        ring = (radius / math.cos(math.pi / ARC_POINTS) * (1 + 1e-9)
+                * np.stack([np.cos(ang), np.sin(ang)], axis=1))
+        pts = (verts[:, None, :] + ring[None]).reshape(-1, 2)
+        #: (n, 2) the arc points free for the disc
+        self.nodes = pts[world.is_free(pts, radius)] if pts.size else pts
+        n = self.nodes.shape[0]
+        iu, ju = np.triu_indices(n, k=1)
+        ok = _clear_moves(world, self.nodes[iu], self.nodes[ju], radius)
+        lengths = np.zeros((n, n))
+        d = np.hypot(*(self.nodes[iu[ok]] - self.nodes[ju[ok]]).T)
+        lengths[iu[ok], ju[ok]] = d
+        lengths[ju[ok], iu[ok]] = d
+        if n:
+            between, pred = dijkstra(csr_matrix(lengths), directed=True,
+                                     return_predecessors=True)
+        else:
+            between, pred = np.zeros((0, 0)), np.zeros((0, 0), dtype=np.int32)
+        #: (n, n) shortest path between every two arc points [m] (inf: not connected)
+        self.between = between
+        #: (n, n) the node before ``j`` on the shortest path from ``i`` (-9999: none)
+        self.pred = pred
+
+    def route(self, start: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, float]:
+        """The shortest route of the disc from ``start`` to ``goal`` (both (2,) [m]).
+
+        Returns
+        -------
+        (waypoints, length)
+            ``waypoints`` (k, 2): the arc points the route turns at, then ``goal``
+            (just ``goal`` when the straight line is clear); ``length`` [m] of the
+            route from ``start``. ``(empty (0, 2), inf)`` when no route of this disc
+            joins them (e.g. ``start`` touches a wall for this radius).
+        """
+        a = np.asarray(start, dtype=np.float64).reshape(2)
+        b = np.asarray(goal, dtype=np.float64).reshape(2)
+        if segment_clear(self.world, a, b[None], self.radius)[0]:
+            return b[None].copy(), float(math.hypot(*(b - a)))
+        if self.nodes.shape[0] == 0:
+            return np.zeros((0, 2)), math.inf
+        da = _in_sight(self.world, a, self.nodes, self.radius)
+        db = _in_sight(self.world, b, self.nodes, self.radius)
+        total = da[:, None] + self.between + db[None, :]
+        flat = int(np.argmin(total))
+        best = float(total.flat[flat])
+        if not math.isfinite(best):
+            return np.zeros((0, 2)), math.inf
+        i, j = divmod(flat, self.nodes.shape[0])
+        chain = [j]
+        while chain[-1] != i:
+            chain.append(int(self.pred[i, chain[-1]]))
+        return np.vstack([self.nodes[chain[::-1]], b[None]]), best
+
+    def visible(self, point: np.ndarray, targets: np.ndarray, radius: float | None = None
+                ) -> np.ndarray:
+        """(k,) whether the disc (``radius``, default the graph's) moves straight from
+        ``point`` (2,) to each of ``targets`` (k, 2) without touching an edge."""
+        return _clear_from(self.world, np.asarray(point, dtype=np.float64).reshape(2),
+                           np.asarray(targets, dtype=np.float64).reshape(-1, 2),
+                           self.radius if radius is None else radius)
+
+
+_ROUTES: weakref.WeakKeyDictionary[World, dict[float, RouteGraph]] = weakref.WeakKeyDictionary()
+
+
+def route_graph(world: World, radius: float) -> RouteGraph:
+    """The :class:`RouteGraph` of ``world`` for a disc of ``radius``, built once per process."""
+    memo = _ROUTES.setdefault(world, {})
+    if float(radius) not in memo:
+        memo[float(radius)] = RouteGraph(world, float(radius))
+    return memo[float(radius)]
+
+
+def shortest_route(world: World, start: np.ndarray, goal: np.ndarray, *,
+                   radius: float) -> tuple[np.ndarray, float]:
+    """The waypoints (k, 2) and length [m] of the shortest route of a disc of ``radius``
+    from ``start`` to ``goal`` (:meth:`RouteGraph.route`; ``(empty, inf)`` when none)."""
+    return route_graph(world, radius).route(start, goal)
