@@ -118,13 +118,7 @@ def evaluate_log(
                          key="trials")
     for label, params in pinned.items():  # e.g. the model file's hash of a frozen policy
         cfg["behaviours"][label] = {**cfg["behaviours"][label], **params}
-    clusters_from = Config.of(cfg).experiment.clusters_from
-    if tl.situations:  # situations that evolved in the trial: its own final ones
-        state = tl.situations_part("state")
-    elif log.has("cluster/state") or not clusters_from:
-        state = log.interpreter_state()
-    else:  # a run that reused situations from another log (e.g. a goal run)
-        state = open_log(clusters_from).interpreter_state()
+    state = _trial_state(log, tl, cfg)
     space_states = log.space_states()  # (situation spaces of their own, as the run fitted them)
     pm = get_plugin_manager(plugins_dirs=plugins_dirs)
     registry = Registry.collect(pm)
@@ -296,6 +290,17 @@ def _pinned(behaviours: dict[str, dict[str, Any]], cfg: dict[str, Any]
         if params and label in cfg["behaviours"]:
             out[label] = params
     return out
+
+
+def _trial_state(log: Log, tl: Any, cfg: dict[str, Any]) -> dict[str, Any]:
+    """The situations trial ``tl`` of ``log`` ran with: those that evolved in the trial (its
+    own final ones), the run's fitted ones, or those of the log it reused (a goal run's)."""
+    clusters_from = Config.of(cfg).experiment.clusters_from
+    if tl.situations:
+        return tl.situations_part("state")
+    if log.has("cluster/state") or not clusters_from:
+        return log.interpreter_state()
+    return open_log(clusters_from).interpreter_state()
 
 
 def _fusion_config(log_cfg: dict[str, Any], policies: dict[str, LearnedPolicy],

@@ -306,23 +306,7 @@ def check_key(key: str, cfg: dict[str, Any], registry: Any, *, file: str | None 
             sec == "behaviours" and len(parts) == 2 and parts[1] in cfg["behaviours"]):
         return  # a whole component table per value; each point's config is validated
     if sec in ("sensor", "interpreter", "arbiter", "behaviours"):
-        if sec == "behaviours":
-            labels = list(cfg["behaviours"])
-            if len(parts) < 3 or parts[1] not in labels:
-                fail([f"{lb}.component" for lb in labels], "behaviours.", ".".join(parts[1:]))
-            kind, table, prefix, rest = ("behaviour", cfg["behaviours"][parts[1]],
-                                         f"behaviours.{parts[1]}.", parts[2:])
-        else:
-            kind, table, prefix, rest = sec, cfg[sec], f"{sec}.", parts[1:]
-        names, var_kw = params_of(kind, table["component"])
-        meta = set(META_KEYS) if kind in ("behaviour", "arbiter") else {"component"}
-        if rest[0] == "reward_params" and "reward_params" in meta and len(rest) > 1:
-            rnames, rvar = params_of("reward", table.get("reward") or "")
-            if len(rest) != 2 or (rest[1] not in rnames and not rvar):
-                fail(rnames, f"{prefix}reward_params.", ".".join(rest[1:]))
-            return
-        if len(rest) != 1 or (rest[0] not in meta | names and not var_kw):
-            fail(meta | names, prefix, ".".join(rest))
+        _check_component_key(parts, cfg, fail, params_of)
         return
     if sec == "robot":
         valid, _ = accepted_params(RobotParams)
@@ -332,6 +316,31 @@ def check_key(key: str, cfg: dict[str, Any], registry: Any, *, file: str | None 
         valid = set(DEFAULTS[sec])
     if len(parts) != 2 or parts[1] not in valid:
         fail(valid, f"{sec}.", ".".join(parts[1:]))
+
+
+def _check_component_key(parts: list[str], cfg: dict[str, Any], fail: Any,
+                         params_of: Any) -> None:
+    """:func:`check_key` for a key of a component table (sensor, interpreter, arbiter,
+    behaviours.LABEL): ``component``, the component's parameters, the core's keys of a
+    behaviour or the arbiter, and the parameters of its reward."""
+    sec = parts[0]
+    if sec == "behaviours":
+        labels = list(cfg["behaviours"])
+        if len(parts) < 3 or parts[1] not in labels:
+            fail([f"{lb}.component" for lb in labels], "behaviours.", ".".join(parts[1:]))
+        kind, table, prefix, rest = ("behaviour", cfg["behaviours"][parts[1]],
+                                     f"behaviours.{parts[1]}.", parts[2:])
+    else:
+        kind, table, prefix, rest = sec, cfg[sec], f"{sec}.", parts[1:]
+    names, var_kw = params_of(kind, table["component"])
+    meta = set(META_KEYS) if kind in ("behaviour", "arbiter") else {"component"}
+    if rest[0] == "reward_params" and "reward_params" in meta and len(rest) > 1:
+        rnames, rvar = params_of("reward", table.get("reward") or "")
+        if len(rest) != 2 or (rest[1] not in rnames and not rvar):
+            fail(rnames, f"{prefix}reward_params.", ".".join(rest[1:]))
+        return
+    if len(rest) != 1 or (rest[0] not in meta | names and not var_kw):
+        fail(meta | names, prefix, ".".join(rest))
 
 
 def _check_space_key(parts: list[str], spaces: dict[str, Any], fail: Any,
