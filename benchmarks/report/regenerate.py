@@ -161,8 +161,7 @@ def headline() -> str:
             ("The thesis's method as printed", "obstacle-avoidance-thesis",
              "obstacle-avoidance"),
             ("Wall following (15–35 cm)", "wall-following", "wall-following"),
-            ("Goal finding, CDB", "goal-finding", "goal-finding"),
-            ("Learned arbitration", "goal-finding-learned", "learned-arbitration")):
+            ("Goal finding, CDB", "goal-finding", "goal-finding")):
         p = logs(folder)
         if p is None:
             result = f"not yet regenerated: `sitframe sweep sweeps/{folder}.toml`"
@@ -183,9 +182,28 @@ def headline() -> str:
             if band:
                 result += f"; wall in the band {np.median(band[0]):.0%} of the time (median)"
         rows.append(f"| {label} | {result} | [{page}]({page}.md) |")
+    rows.append(f"| Learned arbitration (own situations per behaviour, route planner) | "
+                f"{_paired_arbiters()} | [learned-arbitration](learned-arbitration.md) |")
     rows.append("| The duel: fuzzy Q vs DQN and PPO | its own tables, made by "
                 "`python benchmarks/duel.py report` | [duel](duel.md) |")
     return "\n".join(rows)
+
+
+def _paired_arbiters() -> str:
+    """The learned arbitration's row, read from the tables benchmarks/learning/
+    paired_arbiters.py published (rooms.md, office.md)."""
+    import re
+
+    rooms, office = tables_dir() / "rooms.md", tables_dir() / "office.md"
+    pooled = re.search(r"Collision-free pooled over the rooms: learned (\d+\.\d+), CDB (\d+\.\d+)",
+                       rooms.read_text("utf-8")) if rooms.is_file() else None
+    rows = [line.split("|") for line in office.read_text("utf-8").splitlines()
+            if line.startswith("| office | learned |")] if office.is_file() else []
+    if pooled is None or not rows:
+        return "not yet regenerated: `python benchmarks/learning/paired_arbiters.py` (the page)"
+    return (f"7 rooms × 10 seeds × 50 goal pairs: collision-free {pooled[1]} pooled (CDB "
+            f"{pooled[2]}); office with doors: success {float(rows[0][4]):.2f}, SPL "
+            f"{float(rows[0][10]):.2f}")
 
 
 def publish_headline() -> None:
