@@ -103,16 +103,17 @@ def test_the_config_reference_has_every_key(generate) -> None:
             assert f"| `{k.name}` |" in text
 
 
-def test_the_goal_tables_defaults_are_the_protocols() -> None:
-    """The [goal] defaults the core writes into every config are the goal-episodes
-    protocol's own (its parameters and checks are declared there)."""
-    from sitframe.plugins.goal_episodes import GoalEpisodes
+def test_the_config_reference_lists_the_plugins_tables(generate) -> None:
+    """The built-in protocols' tables ([evaluate], [goal]) are declared by their plugins and
+    listed, key by key, under the plugins' tables of the config reference."""
+    from sitframe.plugins.frozen_evaluation import EVALUATE
+    from sitframe.plugins.goal_episodes import GOAL
 
-    sig = inspect.signature(GoalEpisodes).parameters
-    for key, value in C.DEFAULTS["goal"].items():
-        if key in sig:
-            default = sig[key].default
-            assert (list(default) if isinstance(default, tuple) else default) == value, key
+    text = generate.config_reference().split("## Tables the plugins declare", 1)[1]
+    for table in (EVALUATE, GOAL):
+        section = text.split(f"### `[{table.name}]`", 1)[1].split("\n### ", 1)[0]
+        for key in table.keys:
+            assert f"| `{key.name}` |" in section, (table.name, key.name)
 
 
 def test_the_components_reference_has_every_builtin_and_parameter(generate) -> None:

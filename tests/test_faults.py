@@ -599,7 +599,7 @@ def test_a_sweep_on_a_churning_dask_cluster_finishes_every_point_identically(tmp
     assert res.stderr.strip().splitlines() == [  # the one warning a plain tcp:// address gets
         f"sitframe: warning: --scheduler {cluster.address}: plain tcp; Dask unpickles what it "
         "receives, so whoever can reach the scheduler can run code here and on the workers: "
-        "use tls:// on a shared network (see README)"]
+        "use tls:// on a shared network (see docs/how-to/dask.md)"]
     assert churn.kills >= 2, churn.kills
     calm = sorted(p.name for p in (tmp_path / "calm").glob("*.h5"))
     assert len(calm) == 80

@@ -1,4 +1,4 @@
-"""The learned arbitration against CDB on the same pairs (benchmarks/paired_arbiters.py), at a
+"""The learned arbitration against CDB on the same pairs (benchmarks/learning/paired_arbiters.py), at a
 reduced scale, and the arbiter's per-context learning it reports on."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from helpers import run_config
 from sitframe.learning.fuzzy_q import FuzzyQLearner, QLearningParams
 from sitframe.logs.reader import open_log
 
-SCRIPT = Path(__file__).parents[1] / "benchmarks" / "paired_arbiters.py"
+SCRIPT = Path(__file__).parents[1] / "benchmarks" / "learning" / "paired_arbiters.py"
 
 #: A learned arbitration of route-guided and straight goal seeking over 2 situations of the
 #: arbiter's own (fitted on wander readings of its learning room), every context converged.
@@ -116,7 +116,7 @@ def test_paired_comparison_at_a_reduced_scale(learned, tmp_path):
     room = doc["summary"]["rooms"]["u-trap"]
     assert set(room["paired"]) == {"success", "collision_free", "cf_success", "spl"}
     text = out.read_text()
-    assert "written by benchmarks/paired_arbiters.py" in text and "| u-trap | learned |" in text
+    assert "written by benchmarks/learning/paired_arbiters.py" in text and "| u-trap | learned |" in text
 
 
 def test_holm_and_the_paired_tests():

@@ -1,5 +1,12 @@
 """Learned arbitration against CDB over the same behaviours, spaces and start/goal pairs.
 
+Question: Does the learned arbitration do at least as well as hand-set CDB, pair by pair,
+in every room (success, collision-free, SPL), and does it meet issue 40's targets?
+
+Output: Markdown tables (per room and arbiter: pooled rates, median (IQR) [worst] over
+seeds; the paired tests with Holm; the targets met or missed) written to ``--out`` (and the
+per-context counts to ``--contexts``), published in docs/results/learned-arbitration.md.
+
 For each room and seed, the log's learned arbitration and CDB (``--arbiter cdb``: the same
 behaviours, situation spaces and policies, CDB's own context sets) run the same random
 start/goal pairs, exactly as::

@@ -1,5 +1,11 @@
 """A sweep on a Dask cluster whose workers are killed and restarted: throughput, identical logs.
 
+Question: How much throughput does a sweep keep when its Dask workers are killed and
+replaced every few seconds, and are its logs still bit-identical to a calm run's?
+
+Output: per repeat and as medians: wall time, trials per minute calm and under churn,
+their ratio, workers killed, complete and identical logs (printed).
+
 ::
 
     python benchmarks/scale/bench_churn.py                    # 40 settings x 2 seeds, 2 workers

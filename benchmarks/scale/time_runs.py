@@ -1,5 +1,11 @@
 """Wall and CPU time of one preset run, for several sitframe installs, alternated.
 
+Question: How much longer (or shorter) does a preset's run take with one version of
+sitframe than with another, on the same machine at the same time?
+
+Output: a Markdown table (per install: median wall and CPU time, ratio to the first) at
+``--out`` (docs/results/tables/timing.md for the learned arbitration's page).
+
 Runs ``SITFRAME run PRESET --workers 1 --out <scratch>`` in ``--folder`` (where the
 preset's prerequisite logs are, so only the run itself is timed, its avoidance rule base
 selection included) for every ``--sitframe`` executable in turn, ``--repeats`` rounds,

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import argparse
 
+from sitframe.errors import one_line
+
 HELP = "pack an unfinished log's trial files into one file"
 
 
@@ -25,7 +27,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from sitframe.errors import one_line
     from sitframe.logs.layout import shard_folder  # h5py: start-up time
     from sitframe.logs.reader import open_log  # h5py: start-up time
     from sitframe.logs.writer import LogWriter, lock_log  # h5py: start-up time

@@ -78,6 +78,9 @@ else is checked here: the core tables, and the plugins' tables that the installe
 ``[plugins] dirs``) declares is checked when the run resolves its components
 (:func:`complete_tables`), as its plugins are loaded only then. Every error is an
 :class:`~sitframe.errors.InputError` naming the file and the key path.
+
+Why one module of this size: every core table is declared, checked and typed here, so
+that the config reference, the validation and the typed view read one declaration.
 """
 
 from __future__ import annotations

@@ -3,6 +3,10 @@
 Every write is one short crash-safe transaction that publishes a complete, closed file by an
 atomic rename; a finished trial goes to its own file until the run ends and packs them. The
 layout and the reasons are in :mod:`sitframe.logs.layout`.
+
+Why one module of this size: the transaction, the lock and the full-disk handling share
+one boundary with the disk (:func:`write_bytes`); split, each half would need the other's
+private state.
 """
 
 from __future__ import annotations

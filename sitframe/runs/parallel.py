@@ -11,6 +11,10 @@ compute: each rebuilds the components from the config and the plugin folders
 the calling process hands them to the observers, so exactly one process writes
 the HDF5 log, in trial order.
 
+Why one module of this size: the three executors share one protocol and one retry and
+release logic (a Dask task lost with its worker is the pool's lost process); apart, each
+would repeat it.
+
 Results are bit-identical to a serial run: a trial depends only on its
 :class:`~sitframe.runs.loop.TrialSpec` (its seed is spawned from the run seed
 and its index) and on the config, never on which worker runs it or when; across

@@ -28,6 +28,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from sitframe.errors import warn
+
 __all__ = ["announce_compilation", "cache_dir", "compile_pending", "configure"]
 
 #: Set once by :func:`configure`: the folder numba caches in, or ``None`` (no cache).
@@ -79,8 +81,6 @@ def configure() -> bool:
         else:
             config.CACHE_DIR = ""  # (numba's own NUMBA_CACHE_DIR, if that was the one)
             _CONFIGURED.append(None)
-            from sitframe.errors import warn
-
             warn(f"kernel cache folder {folder}: cannot write there ({problem}); the kernels "
                  "are compiled in every process instead (set SITFRAME_CACHE_DIR to a writable "
                  "folder to cache them)")
