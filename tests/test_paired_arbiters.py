@@ -1,5 +1,5 @@
-"""The learned arbitration against CDB on the same pairs (benchmarks/learning/paired_arbiters.py), at a
-reduced scale, and the arbiter's per-context learning it reports on."""
+"""The learned arbitration against CDB on the same pairs
+(benchmarks/learning/paired_arbiters.py), at a reduced scale, and the arbiter's per-context learning it reports on."""
 
 from __future__ import annotations
 
@@ -116,7 +116,8 @@ def test_paired_comparison_at_a_reduced_scale(learned, tmp_path):
     room = doc["summary"]["rooms"]["u-trap"]
     assert set(room["paired"]) == {"success", "collision_free", "cf_success", "spl"}
     text = out.read_text()
-    assert "written by benchmarks/learning/paired_arbiters.py" in text and "| u-trap | learned |" in text
+    assert "written by benchmarks/learning/paired_arbiters.py" in text
+    assert "| u-trap | learned |" in text
 
 
 def test_holm_and_the_paired_tests():
