@@ -1,5 +1,6 @@
 """The learned arbitration against CDB on the same pairs
-(benchmarks/learning/paired_arbiters.py), at a reduced scale, and the arbiter's per-context learning it reports on."""
+(benchmarks/learning/paired_arbiters.py), at a reduced scale, and the arbiter's per-context
+learning it reports on."""
 
 from __future__ import annotations
 
