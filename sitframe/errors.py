@@ -159,6 +159,25 @@ def show_warning(message: Warning | str, category: type[Warning], filename: str,
     warn(f"{category.__name__} in {where}:{lineno}: {message}")
 
 
+def quiet_teardown() -> None:
+    """Install ``sys.unraisablehook`` so that an exception raised in a destructor while the
+    interpreter shuts down is dropped instead of printed as a traceback (llvmlite's
+    compiled-code handles, closed twice at exit, print ``Exception ignored in ...
+    AttributeError``); while the program runs, such exceptions still reach the previous
+    hook. A command's stderr then ends with its own lines (its one error line on failure)."""
+    previous = sys.unraisablehook
+
+    def hook(unraisable: Any) -> None:
+        where = str(getattr(unraisable.object, "__module__", ""))
+        if sys.is_finalizing() or where.startswith("llvmlite"):
+            return
+        previous(unraisable)
+
+    if getattr(previous, "__name__", "") != "quiet_hook":
+        hook.__name__ = "quiet_hook"
+        sys.unraisablehook = hook
+
+
 def one_line(text: str) -> str:
     """``text`` with every character that is not printable escaped (a newline as ``\\n``, an
     escape sequence as ``\\x1b``): text from files (a log's status, a TOML string) reaches

@@ -58,6 +58,7 @@ from sitframe.errors import (
     PluginFault,
     forget_notes,
     note,
+    quiet_teardown,
     show_warning,
     warn,
 )
@@ -280,6 +281,7 @@ def console_main(argv: list[str] | None = None) -> int:
     -2 or -15, as if nothing had been written), so both are ignored from
     here on.
     """
+    quiet_teardown()
     status = main(argv)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)

@@ -56,7 +56,14 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import suppress
 from typing import TYPE_CHECKING, Any
 
-from sitframe.errors import InputError, PluginFault, TaskCancelled, show_warning, warn
+from sitframe.errors import (
+    InputError,
+    PluginFault,
+    TaskCancelled,
+    quiet_teardown,
+    show_warning,
+    warn,
+)
 from sitframe.logs.interrupts import deferred_interrupt
 from sitframe.runs.arithmetic import arithmetic, check_same_arithmetic
 from sitframe.sim import kernels
@@ -109,6 +116,7 @@ def _worker_init(lifeline: Any = None, inherited_writer: Any = None) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _on_sigterm)
     warnings.showwarning = show_warning  # (a worker writes to the command's stderr)
+    quiet_teardown()
     if inherited_writer is not None:
         inherited_writer.close()
     if lifeline is None:
@@ -542,7 +550,10 @@ class DaskExecutor(PoolExecutor):
                              f"{timeout:g} s ({msg})", key="--scheduler") from None
         self.arithmetic = arithmetic()
         try:
-            check_same_arithmetic(self.arithmetic, self.client.run(arithmetic))
+            # (a worker that leaves while asked, e.g. killed under churn, is skipped: every
+            # task checks its worker's arithmetic again before it returns a trial)
+            check_same_arithmetic(self.arithmetic,
+                                  self.client.run(arithmetic, on_error="ignore"))
         except InputError:
             self.shutdown()
             raise
