@@ -279,6 +279,13 @@ def config_reference(_arg: str | None = None) -> str:
     return "\n".join(out)
 
 
+def generator_reference(_arg: str | None = None) -> str:
+    """The room generator's parameters (a world file's ``[generator]`` table)."""
+    from sitframe.sim.roomgen import GENERATOR
+
+    return "\n".join(key_rows(GENERATOR.keys))
+
+
 def components_reference(_arg: str | None = None) -> str:
     """Every built-in component by kind, with its parameters."""
     import inspect
@@ -441,6 +448,7 @@ GENERATORS: dict[str, Callable[[str | None], str]] = {
     "cli": cli_reference,
     "config": config_reference,
     "components": components_reference,
+    "generator": generator_reference,
     "layers": layers_diagram,
     "subpackages": subpackages_table,
     "face": face_page,
