@@ -40,6 +40,14 @@ with the largest area) and outside every other closed wall polygon (an inner
 closed wall is a solid block). A world with no closed wall uses the bounding
 box of its walls instead.
 
+Generated rooms (``"gen:SEED"``, a file with a ``[generator]`` table) are drawn by
+:mod:`sitframe.sim.roomgen` as world-file text and loaded here like any other.
+
+Why one module of this size: the :class:`World`, its file format and the format's checks
+are one thing; the checks use the world's own queries (inside, clearance) and a world is
+only ever made by the loader, so split, each part would reach into the other's private
+state.
+
 Example
 -------
 >>> from sitframe.sim.world import load_world, list_worlds
