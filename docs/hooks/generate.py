@@ -416,10 +416,12 @@ def face_page(_arg: str | None = None) -> str:
         home = getattr(getattr(sitframe, name), "__module__", None) or \
             f"sitframe.{sitframe._PUBLIC[name]}"
         page = home.split(".")[1] if home.count(".") > 1 else "ground"
+        obj = getattr(sitframe, name)  # an alias (ConfigKey) links to its own name; a constant
+        anchor = f"{home}.{obj.__name__}" if isinstance(obj, type) or callable(obj) else home
         summary = (getattr(getattr(sitframe, name), "__doc__", None) or "").strip()
         summary = summary.split("\n\n")[0] if summary and callable(getattr(sitframe, name)) \
             else ""
-        rows.append(f"| [`{name}`]({page}.md#{home}.{name}) | `{home}` | "
+        rows.append(f"| [`{name}`]({page}.md#{anchor}) | `{home}` | "
                     f"{cell(rst_to_md(summary))} |")
     out = ["| name | defined in | what it is |", "|---|---|---|", *rows, "",
            "Modules used as namespaces: "
