@@ -86,10 +86,11 @@ def cast(x: float, y: float, dx: np.ndarray, dy: np.ndarray, seg: np.ndarray,
     """Rays from one origin ``(x, y)`` (twin of :func:`sitframe.sim.geometry._raycast`).
 
     ``dx, dy`` are the (n,) unit directions, ``seg`` a packed ``(5, S)``
-    segment set; the (n,) distances go to ``out``.
+    segment set; the (n,) distances go to ``out`` (all rays together, :func:`_nearest_hits`).
     """
-    for i in range(dx.size):
-        out[i] = _ray(x, y, dx[i], dy[i], seg, max_range)
+    out[:] = max_range
+    if _nearest_hits(x, y, dx, dy, seg, out):
+        _parallel_hits(x, y, dx, dy, seg, out)
 
 
 @njit(**_JIT)
