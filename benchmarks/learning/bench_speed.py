@@ -38,8 +38,12 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
 from common import BENCHMARKS, against  # noqa: E402
 
-#: Parts of a learning step, and the source files (or compiled kernels) whose own time
-#: (cProfile's ``tottime``) counts as that part; anything else is "loop and other".
+#: Parts of a learning step, and the source files (or compiled kernels, ``k:``, or functions,
+#: ``f:``) whose own time (cProfile's ``tottime``; a C function's counts for its caller) is
+#: that part; anything else is "loop and other": the loop's own code in
+#: ``sitframe/runs/loop.py``, which builds the step's records (``Context``, ``Transition``,
+#: ``StepRecord``: their ``__init__`` is not seen by cProfile on Python 3.11), and the trial's
+#: set-up and summary.
 PARTS: dict[str, tuple[str, ...]] = {
     "sensing": ("plugins/sonar.py", "sim/geometry.py", "k:ranges", "k:cast"),
     "memberships": ("plugins/fcm_interpreter.py", "situations/fcm.py", "k:fcm_ratios",
@@ -52,7 +56,6 @@ PARTS: dict[str, tuple[str, ...]] = {
                               "k:first_contact", "k:linspace", "k:nearest_point", "k:backoff"),
     "recorder and log": ("f:record", "logs/", "h5py/"),
     "boundary checks": ("contract/checks.py",),
-    "step records (dataclasses)": ("contract/records.py", "<string>"),
     "observers (pluggy)": ("pluggy/", "plugins/progress.py", "f:step_hook"),
 }
 
@@ -119,8 +122,12 @@ def trial_profile(config: str, iterations: int = 5000) -> dict[str, float]:
         exp.run(interpreter_state=state)
         prof.disable()
     stats = pstats.Stats(prof).stats  # type: ignore[attr-defined]
-    for (filename, _line, func), (_cc, _nc, tottime, _ct, _callers) in stats.items():
-        parts[_part(filename.replace(os.sep, "/"), func)] += tottime
+    for (filename, _line, func), (_cc, _nc, tottime, _ct, callers) in stats.items():
+        if filename != "~":
+            parts[_part(filename.replace(os.sep, "/"), func)] += tottime
+            continue
+        for (cfile, _cline, cfunc), (*_, c_tottime, _c_cumtime) in callers.items():
+            parts[_part(cfile.replace(os.sep, "/"), cfunc)] += c_tottime  # (a C call: its caller's)
     parts["total"] = sum(parts.values())
     return parts
 

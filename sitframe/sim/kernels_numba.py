@@ -22,6 +22,10 @@ Kernels are compiled on first use and cached on disk in the user's cache folder
 (:mod:`sitframe.sim.numba_cache`; never inside the installed package), so only the first run
 after an install pays the compilation.
 
+Why one module of this size: the kernels call each other (the sonar's, the robot's and the
+fleet's share their ray and distance helpers) and are loaded, and cached by numba, together
+(:func:`sitframe.sim.kernels.load`); split, every part would import the others.
+
 Segment sets are passed as one ``(5, S)`` array :attr:`SegmentSet.packed
 <sitframe.sim.geometry.SegmentSet>`: rows ``ax, ay, ex, ey, inv_len2``.
 """

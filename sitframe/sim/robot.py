@@ -58,6 +58,7 @@ import numpy as np
 
 from sitframe.params import choice, number
 from sitframe.sim import geometry as geo
+from sitframe.sim.fastinit import slot_init
 from sitframe.sim.kernels import kernels
 
 if TYPE_CHECKING:  # (a world is read through its segments and start pose only)
@@ -135,6 +136,7 @@ class RobotParams:
             )
 
 
+@slot_init
 @dataclass(frozen=True, slots=True)
 class Command:
     """One control command, held for ``control_period_s``.
@@ -163,6 +165,7 @@ class Command:
                 raise ValueError(f"Command.{name} must be finite, got {v!r}")
 
 
+@slot_init
 @dataclass(frozen=True, slots=True)
 class StepOutcome:
     """What happened during one control period.
