@@ -44,7 +44,10 @@ from common import BENCHMARKS, against  # noqa: E402
 #: ``sitframe/runs/loop.py``, which builds the step's records (``Context``, ``Transition``,
 #: ``StepRecord``: their ``__init__`` is not seen by cProfile on Python 3.11), and the trial's
 #: set-up and summary.
-PARTS: dict[str, tuple[str, ...]] = {
+PARTS: dict[str, tuple[str, ...]] = {  # (the first that matches: motion's subset before sensing)
+    "motion and collisions": ("sim/robot.py", "f:subset", "k:arc_angles", "k:arc_poses",
+                              "k:near_segments", "k:first_contact", "k:linspace",
+                              "k:nearest_point", "k:backoff"),
     "sensing": ("plugins/sonar.py", "sim/geometry.py", "k:ranges", "k:cast"),
     "memberships": ("plugins/fcm_interpreter.py", "situations/fcm.py", "k:fcm_ratios",
                     "k:normalize"),
@@ -52,8 +55,6 @@ PARTS: dict[str, tuple[str, ...]] = {
                       "f:propose", "f:record_rules"),
     "fuzzy-Q update": ("learning/fuzzy_q.py", "f:learn"),
     "reward": ("plugins/rewards.py",),
-    "motion and collisions": ("sim/robot.py", "k:arc_angles", "k:arc_poses", "k:near_segments",
-                              "k:first_contact", "k:linspace", "k:nearest_point", "k:backoff"),
     "recorder and log": ("f:record", "logs/", "h5py/"),
     "boundary checks": ("contract/checks.py",),
     "observers (pluggy)": ("pluggy/", "plugins/progress.py", "f:step_hook"),
