@@ -442,8 +442,7 @@ def _near(segs: geo.SegmentSet, x: float, y: float, reach: float) -> geo.Segment
         idx = np.empty(segs.n, dtype=np.intp)
         m = kern.near_segments(x, y, segs.packed, reach * reach, idx)
         return segs.subset(idx[:m]) if m else None  # (open space: no subset, no slice)
-    else:
-        idx = np.flatnonzero(_dist2_cols(np.array([x]), np.array([y]), segs)[0] < reach * reach)
+    idx = np.flatnonzero(_dist2_cols(np.array([x]), np.array([y]), segs)[0] < reach * reach)
     return segs.subset(idx) if idx.size else None
 
 
