@@ -163,7 +163,14 @@ EXPERIMENT = Table("experiment", doc="What runs, how long and where.", keys=(
         unit="m/s", lo=0.0, lo_open=True),
     Key("clusters_from", "path", "", "a log whose fitted situations are reused (the collect "
         "and cluster stages are skipped); empty: none"),
+    Key("rooms", "names", ABSENT, "learn over a family of rooms: each learning trial is a "
+        "chain of episodes, each in a room and from a free start pose drawn by the trial's "
+        "Generator (the rooms in shuffled rounds); absent: the trial runs in world only"),
+    Key("episode_iterations", "integer", ABSENT, "iterations of one episode of a learning "
+        "trial over rooms (needs rooms; default 250)", lo=1, hi=MAX_ITERATIONS),
 ))
+#: Iterations of one episode of a learning trial over ``rooms`` when the config does not say.
+ROOM_EPISODE_ITERATIONS = 250
 ROBOT = Table("robot", doc="The simulated robot: the fields of RobotParams, which checks them.",
               keys=(), free=True)
 SENSOR = Table("sensor", doc="The sensor: a component and its parameters.",
@@ -252,7 +259,8 @@ OPTIONAL_SECTIONS = ("prerequisites", "spaces")
 _BEFORE_PLUGIN_TABLES = ("experiment", "robot", "sensor", "collect", "interpreter",
                          "behaviours", "arbiter")
 _CORE_TABLES = {t.name: t for t in (EXPERIMENT, COLLECT, PLUGINS)}
-_CORE_KEYS = {s: set(v) for s, v in DEFAULTS.items() if s not in ("behaviours",)}
+_CORE_KEYS = {s: set(v) | {k.name for k in _CORE_TABLES[s].keys} if s in _CORE_TABLES
+              else set(v) for s, v in DEFAULTS.items() if s not in ("behaviours",)}
 _COMPONENT_SECTIONS = ("sensor", "interpreter", "arbiter")
 #: Keys of a ``[behaviours.LABEL]`` (or ``[arbiter]``) table that the core reads and that
 #: are not the component's parameters (the one definition; resolve and sweep use it).
@@ -329,6 +337,8 @@ class ExperimentSection:
     world: str
     default_speed: float
     clusters_from: str
+    rooms: tuple[str, ...] = ()
+    episode_iterations: int = ROOM_EPISODE_ITERATIONS
 
 
 @dataclass(frozen=True)
@@ -371,7 +381,9 @@ class Config:
         return cls(
             ExperimentSection(e["name"], e["description"], int(e["seed"]), int(e["trials"]),
                               int(e["iterations"]), tuple(e["stages"]), e["world"],
-                              float(e["default_speed"]), e["clusters_from"]),
+                              float(e["default_speed"]), e["clusters_from"],
+                              tuple(e.get("rooms", ())),
+                              int(e.get("episode_iterations", ROOM_EPISODE_ITERATIONS))),
             dict(cfg["robot"]), Component.of(cfg["sensor"]),
             CollectSection(c["mode"], tuple(c["worlds"]), float(c["speed"]),
                            float(c["rate_hz"]), int(c["wander_samples"])),
@@ -401,7 +413,7 @@ class Config:
         collection rooms (if it collects); the evaluation protocols' worlds are their tables'
         (:meth:`sitframe.contract.resolve.Resolved.stage_worlds`)."""
         e = self.experiment
-        names = [e.world]
+        names = [e.world, *e.rooms]
         if "collect" in e.stages:
             names += self.collect.worlds
         return list(dict.fromkeys(names))
@@ -752,7 +764,8 @@ def _check_selection(sel: dict[str, Any], file: str | None, key: str) -> None:
 #: The order in which :func:`_check_core` checks the core tables' keys (the first wrong key
 #: is the one reported).
 _CHECK_ORDER = {"experiment": ("name", "description", "seed", "trials", "iterations",
-                               "default_speed", "world", "clusters_from", "stages"),
+                               "default_speed", "world", "clusters_from", "stages", "rooms",
+                               "episode_iterations"),
                 "collect": ("mode", "worlds", "speed", "rate_hz", "wander_samples"),
                 "plugins": ("dirs",)}
 
@@ -762,11 +775,17 @@ def _check_core(cfg: dict[str, Any], file: str | None) -> None:
     for section, names in _CHECK_ORDER.items():
         table, values = _CORE_TABLES[section], cfg[section]
         for name in names:
+            if name not in values:  # (a key without default the config leaves out)
+                continue
             key = table.key(name)
             checked = _at(lambda _n, v, k=key: k.validate(v), name, values[name], file,
                           section)
             if key.kind == "integer":
                 values[name] = checked
+    e = cfg["experiment"]
+    if "episode_iterations" in e and "rooms" not in e:
+        raise InputError("expected experiment.rooms with it (the rooms whose episodes last "
+                         "this long)", file=file, key="experiment.episode_iterations")
 
 
 def to_toml(cfg: dict[str, Any]) -> str:

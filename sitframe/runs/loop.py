@@ -235,9 +235,10 @@ def simulate(
                    {sp.name: sp.c for sp in parts.spaces})
     start = np.array(world.start if spec.start is None else spec.start, dtype=float)
     env = _Env(world, goal, rng, start)
-    env.chain = _training_episodes(res, spec, world)  # None unless the protocol trains so
+    # None unless the trial learns over rooms or its protocol trains in episodes
+    env.chain = _room_episodes(res, spec) or _training_episodes(res, spec, world)
     if env.chain is not None:
-        env.start, env.goal = next(env.chain.pairs)
+        env.start, env.goal, env.world = next(env.chain.pairs)
     env.track = SituationTracker.start(parts.interp, spec.learn, parts.components, res.origins,
                                        spec.index)  # None unless the situations evolve
     n = _run_loop(res, spec, parts, rec, env, step_hook, protocol)
@@ -469,7 +470,7 @@ class _Env:
     def __init__(self, world: World, goal: Goal | None, rng: np.random.Generator,
                  start: np.ndarray) -> None:
         self.world, self.goal, self.rng, self.start = world, goal, rng, start
-        self.chain: _TrainingEpisodes | None = None
+        self.chain: _TrainingEpisodes | RoomEpisodes | None = None
         self.track: SituationTracker | None = None
 
 
@@ -559,7 +560,7 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
                 n_done = t + 1
                 break
             if chain is not None and chain.over(ctx, t + 1, spec.iterations):
-                pose, goal = next(chain.pairs)  # the next training episode starts here
+                pose, goal, world = next(chain.pairs)  # the next training episode starts here
                 ctx = None
     except (KeyboardInterrupt, TaskCancelled, PluginFault, InputError):
         raise  # (a plugin's InputError names the input it found wrong)
@@ -616,7 +617,7 @@ def _trial_result(res: Resolved, spec: TrialSpec, world: World, parts: _TrialPar
             bdata.setdefault(lb, {})["space"] = res.config.space_of(
                 "arbiter" if lb == "arbiter" else f"behaviours.{lb}")
     summary = trial_summary(world, arrays, bdata, res.robot)
-    episodes = {} if env.chain is None else env.chain.record(arrays["pose"], summary)
+    episodes = {} if env.chain is None else env.chain.record(arrays, summary, res.robot)
     result = TrialResult(spec.index, spec.seed, world.name, arrays, bdata, summary, episodes,
                          policies=policies)
     if env.track is not None:
@@ -652,7 +653,7 @@ class _TrainingEpisodes:
         self.reached: list[bool] = []
         self.pairs = self._pairs()
 
-    def _pairs(self) -> Iterator[tuple[np.ndarray, Goal | None]]:
+    def _pairs(self) -> Iterator[tuple[np.ndarray, Goal | None, World]]:
         method = "training_starts" if callable(getattr(self.proto, "training_starts", None)) \
             else "episode_starts"
         draw = getattr(self.proto, method)
@@ -663,7 +664,7 @@ class _TrainingEpisodes:
             for e, start in enumerate(starts):
                 g = None if goals is None else goals[e]
                 self.goals.append((np.nan, np.nan, np.nan) if g is None else tuple(g))
-                yield start.copy(), None if g is None else Goal(g[:2], float(g[2]))
+                yield start.copy(), None if g is None else Goal(g[:2], float(g[2])), self.world
 
     def over(self, ctx: Context, t: int, limit: int) -> bool:
         """Whether the episode ends at ``ctx`` (iteration ``t`` of a trial of ``limit``):
@@ -678,14 +679,104 @@ class _TrainingEpisodes:
             return True
         return False
 
-    def record(self, pose: np.ndarray, summary: dict[str, Any]) -> dict[str, Any]:
+    def record(self, arrays: dict[str, np.ndarray], summary: dict[str, Any],
+               robot: RobotParams) -> dict[str, Any]:
         """The episodes' first rows and goals (``learn/...``); the distance without the jumps."""
+        pose = arrays["pose"]
         first = np.asarray(self.first, dtype=np.int64)
         summary["distance_m"] = float(sum(path_length(seg[:, :2])
                                           for seg in np.split(pose, first[1:])))
         n = len(first)
         return {"learn/first_iteration": first, "learn/goal": np.asarray(self.goals[:n]),
                 "learn/success": np.asarray(self.reached + [False] * (n - len(self.reached)))[:n]}
+
+
+class RoomEpisodes:
+    """A learning trial over a family of rooms (``experiment.rooms``), episode by episode.
+
+    The trial is a chain of episodes of ``episode_iterations`` iterations (the
+    last one ends with the trial). Each episode runs in one of the rooms, from a
+    start pose drawn uniformly among the room's free poses (the robot disc and a
+    margin of :attr:`MARGIN` clear of every wall), heading uniform; the rooms
+    come in rounds, each round every room once in an order shuffled anew. Rooms,
+    orders and poses come from a Generator of their own seeded by the trial's
+    seed (``spawn_key = (3,)``), so the trial's other draws are those of a trial
+    in one world and a seed gives the same chain whatever the rooms' count of
+    workers. Learning carries on across episodes (nothing is reset between them).
+
+    The log records, besides the trial's usual arrays, ``room`` (per iteration,
+    the index into ``learn/rooms`` of the room it ran in) and per episode
+    ``learn/first_iteration`` and ``learn/room``; the summary's ``coverage`` is
+    the mean over the rooms the trial visited of the share of each room's free
+    cells visited in its episodes there (:func:`sitframe.sim.metrics.coverage`),
+    ``rooms_visited`` their number, ``distance_m`` the path without the jumps
+    between episodes.
+
+    Parameters
+    ----------
+    worlds
+        The rooms, in config order.
+    episode
+        Iterations of one episode.
+    seed
+        The trial's seed.
+    robot
+        The robot (its radius decides which poses are free).
+    """
+
+    #: Clearance [m] beyond the robot's radius of an episode's start position.
+    MARGIN = 0.1
+
+    def __init__(self, worlds: list[World], episode: int, seed: int,
+                 robot: RobotParams) -> None:
+        self.worlds, self.episode, self.robot = worlds, int(episode), robot
+        self.rng = np.random.default_rng(np.random.SeedSequence(seed % 2**64, spawn_key=(3,)))
+        self.first: list[int] = [0]
+        self.rooms: list[int] = []
+        self.pairs = self._pairs()
+
+    def _pairs(self) -> Iterator[tuple[np.ndarray, Goal | None, World]]:
+        while True:
+            for i in self.rng.permutation(len(self.worlds)):
+                world = self.worlds[int(i)]
+                self.rooms.append(int(i))
+                yield (world.random_free_pose(self.rng, self.robot.radius, margin=self.MARGIN),
+                       world.goal, world)
+
+    def over(self, ctx: Context, t: int, limit: int) -> bool:
+        """Whether the episode ends after iteration ``t`` of a trial of ``limit`` (never at
+        the trial's own end)."""
+        if t < limit and t - self.first[-1] >= self.episode:
+            self.first.append(t)
+            return True
+        return False
+
+    def record(self, arrays: dict[str, np.ndarray], summary: dict[str, Any],
+               robot: RobotParams) -> dict[str, Any]:
+        """Add ``room`` to the trial's ``arrays``, the coverage over rooms and the distance
+        without the jumps to its ``summary``; return the episodes' records (``learn/...``)."""
+        pose, n = arrays["pose"], int(arrays["collision"].size)
+        first = np.asarray(self.first, dtype=np.int64)
+        rooms = np.asarray(self.rooms[: first.size], dtype=np.int16)
+        arrays["room"] = np.repeat(rooms, np.diff(np.append(first, n)))
+        summary["distance_m"] = float(sum(path_length(seg[:, :2])
+                                          for seg in np.split(pose, first[1:])))
+        visited = np.unique(rooms)
+        summary["coverage"] = float(np.mean([coverage(
+            self.worlds[i], pose[:-1][arrays["room"] == i, :2], radius=robot.radius)
+            for i in visited]))
+        summary["rooms_visited"] = int(visited.size)
+        return {"learn/first_iteration": first, "learn/room": rooms,
+                "learn/rooms": [w.name for w in self.worlds]}
+
+
+def _room_episodes(res: Resolved, spec: TrialSpec) -> RoomEpisodes | None:
+    """The episode chain of a learning trial over ``experiment.rooms``, else None."""
+    e = res.config.experiment
+    if not spec.learn or not e.rooms:
+        return None
+    worlds = [res.world(name, key=f"experiment.rooms[{j}]") for j, name in enumerate(e.rooms)]
+    return RoomEpisodes(worlds, e.episode_iterations, spec.seed, res.robot)
 
 
 def _training_episodes(res: Resolved, spec: TrialSpec, world: World) -> _TrainingEpisodes | None:
