@@ -408,6 +408,14 @@ class Config:
         out = [lb for lb, b in self.behaviours.items() if b.space == space]
         return out + (["arbiter"] if self.arbiter.space == space else [])
 
+    def world_key(self, name: str) -> str:
+        """The config key that names world ``name`` (for messages): ``experiment.world``,
+        ``experiment.rooms[j]``, else ``worlds``."""
+        e = self.experiment
+        if name == e.world:
+            return "experiment.world"
+        return f"experiment.rooms[{e.rooms.index(name)}]" if name in e.rooms else "worlds"
+
     def worlds(self) -> list[str]:
         """The worlds the core's tables name, once each: the learning world, then the
         collection rooms (if it collects); the evaluation protocols' worlds are their tables'

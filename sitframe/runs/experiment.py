@@ -122,9 +122,8 @@ class Experiment:
         self.eval_worlds = self.res.protocol_worlds(self.protocol) \
             if "evaluate" in e.stages else []
         names += self.eval_worlds
-        keys = {n: f"experiment.rooms[{j}]" for j, n in reversed(list(enumerate(e.rooms)))}
-        keys[e.world] = "experiment.world"
-        worlds = {n: self.res.world(n, keys.get(n, "worlds")).text for n in dict.fromkeys(names)}
+        worlds = {n: self.res.world(n, self.config.world_key(n)).text
+                  for n in dict.fromkeys(names)}
         plugins = [dataclasses.asdict(info) for info, _c in self.registry.plugins_table()]
         self.info = RunInfo(
             name=e.name, config=cfg, config_text=text, config_hash=config_hash(text),
