@@ -132,12 +132,14 @@ def test_progress_reward_pays_for_distance_not_for_circling():
     assert plain(tr((0, 0), (1, 0), 30.0)) == pytest.approx(27.0)
     r = ObstacleAvoidanceReward(progress=5.0, progress_window=2)
     line = [r(tr((x, 0), (x + 0.2, 0))) for x in (0.0, 0.2, 0.4, 0.6)]
-    assert line == pytest.approx([31.0, 32.0, 32.0, 32.0])  # 0.2, 0.4, then 0.4 m in 2 steps
+    assert line == pytest.approx([31.0] * 4)  # each step 0.2 m farther from 2 steps back
+    assert r(tr((0.8, 0), (0.6, 0))) == pytest.approx(29.0)  # turning back costs
     # a jump (a new episode) starts the window again
     assert r(tr((5, 5), (5.2, 5))) == pytest.approx(31.0)
     c = ObstacleAvoidanceReward(progress=5.0, progress_window=2)
-    ring = [(0.2 * np.cos(a), 0.2 * np.sin(a)) for a in np.linspace(0, 2 * np.pi, 7)]
-    paid = [c(tr(ring[i], ring[i + 1])) - 30.0 for i in range(6)]
-    assert max(paid[1:]) < line[-1] - 30.0  # circling earns less progress than a line
+    ring = [(0.2 * np.cos(a), 0.2 * np.sin(a)) for a in np.linspace(0, 4 * np.pi, 13)]
+    paid = [c(tr(ring[i], ring[i + 1])) - 30.0 for i in range(12)]
+    # circling (a step of the same length, turning 60 deg) earns under a third of a line
+    assert max(paid[2:]) < (line[-1] - 30.0) / 3
     with pytest.raises(InputError, match="progress_window"):
         ObstacleAvoidanceReward(progress_window=0)

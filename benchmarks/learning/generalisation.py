@@ -48,8 +48,11 @@ COLLECT_ROOMS = ["collect-1", "collect-2", "collect-3", "collect-4", "collect-5"
 #: "every shipped preset safe" target of issue 39).
 BAD = 10.0
 
-_ROOMS = {"experiment": {"rooms": TRAIN_ROOMS, "episode_iterations": 250},
-          "collect": {"worlds": COLLECT_ROOMS + TRAIN_ROOMS}}
+#: In a recipe's keys, stands for the training rooms (``--train-rooms``, default
+#: :data:`TRAIN_ROOMS`) in a list of rooms.
+TRAIN = "@train"
+_ROOMS = {"experiment": {"rooms": [TRAIN], "episode_iterations": 250},
+          "collect": {"worlds": [*COLLECT_ROOMS, TRAIN]}}
 _MU50 = {"behaviours": {"avoid": {"min_updates": 50}}}
 
 #: Recipe -> (what it changes, the keys it sets on the shipped preset, merged table by table).
@@ -61,10 +64,14 @@ RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
     "rooms-mu50": ("rooms + convergence needs 50 updates of every situation's rules "
                    "(`min_updates = 50`)", _ROOMS | _MU50),
     "rooms-mu50-progress": (
-        "rooms-mu50 + reward for distance from the position 8 iterations ago "
-        "(`progress = 5` per metre)",
+        "rooms-mu50 + reward for moving away from the position 8 iterations back "
+        "(`progress = 20` per metre: +4.5 per straight step)",
         _ROOMS | {"behaviours": {"avoid": {"min_updates": 50, "reward_params": {
-            "progress": 5.0, "progress_window": 8}}}}),
+            "progress": 20.0, "progress_window": 8}}}}),
+    "rooms-progress": (
+        "rooms + the progress reward (`progress = 20`, window 8)",
+        _ROOMS | {"behaviours": {"avoid": {"reward_params": {
+            "progress": 20.0, "progress_window": 8}}}}),
     "rooms-mu50-heading": (
         "rooms-mu50 + turning costs 3x (`heading_cost = 0.3`)",
         _ROOMS | {"behaviours": {"avoid": {"min_updates": 50, "reward_params": {
@@ -77,45 +84,49 @@ RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
 }
 
 
-def recipe_config(name: str) -> dict[str, Any]:
-    """The shipped ``obstacle-avoidance`` preset's config with recipe ``name``'s keys set
-    (and no evaluate stage: the script judges)."""
+def recipe_config(name: str, train: list[str] | None = None) -> dict[str, Any]:
+    """The shipped ``obstacle-avoidance`` preset's config with recipe ``name``'s keys set,
+    ``train`` (default :data:`TRAIN_ROOMS`) as its training rooms, and no evaluate stage
+    (the script judges)."""
     import tomllib
 
     from sitframe.contract.config import preset_text
 
     cfg = tomllib.loads(preset_text("obstacle-avoidance"))
-    _merge(cfg, copy.deepcopy(RECIPES[name][1]))
+    _merge(cfg, copy.deepcopy(RECIPES[name][1]), TRAIN_ROOMS if train is None else train)
     cfg["experiment"]["name"] = f"generalisation-{name}"
     cfg["experiment"]["stages"] = ["collect", "cluster", "learn"]
     return cfg
 
 
-def _merge(into: dict[str, Any], keys: dict[str, Any]) -> None:
+def _merge(into: dict[str, Any], keys: dict[str, Any], train: list[str]) -> None:
     for k, v in keys.items():
         if isinstance(v, dict) and isinstance(into.get(k), dict):
-            _merge(into[k], v)
+            _merge(into[k], v, train)
+        elif isinstance(v, list) and TRAIN in v:
+            into[k] = [r for x in v for r in (train if x == TRAIN else [x])]
         else:
             into[k] = v
 
 
-def write_config(name: str, folder: Path) -> Path:
+def write_config(name: str, folder: Path, train: list[str] | None = None) -> Path:
     """Write recipe ``name``'s config as ``folder/NAME.toml``."""
     from sitframe.contract.config import to_toml
 
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"{name}.toml"
-    path.write_text(f"# {RECIPES[name][0]}\n{to_toml(recipe_config(name))}", "utf-8")
+    path.write_text(f"# {RECIPES[name][0]}\n{to_toml(recipe_config(name, train))}", "utf-8")
     return path
 
 
-def run_seed(name: str, seed: int, out: Path, rooms: list[str]) -> dict[str, Any]:
+def run_seed(name: str, seed: int, out: Path, rooms: list[str],
+             train: list[str] | None = None) -> dict[str, Any]:
     """Learn recipe ``name`` with run seed ``seed`` and judge trial 0 in ``rooms``."""
     from sitframe.cli import main as cli_main
     from sitframe.logs.reader import open_log
     from sitframe.runs.evaluation import evaluate_log
 
-    cfg_path = write_config(name, out / "configs")
+    cfg_path = write_config(name, out / "configs", train)
     log = out / name / f"seed-{seed}.h5"
     log.parent.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -173,6 +184,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=10, help="run seeds 0..N-1 (default 10)")
     ap.add_argument("--rooms", nargs="+", default=DEV_ROOMS,
                     help="the rooms judged in (default the 20 development rooms)")
+    ap.add_argument("--train-rooms", nargs="+", default=TRAIN_ROOMS,
+                    help="the generated training rooms of the recipes that learn over rooms "
+                         "(default gen:1000000 ... gen:1000009)")
     ap.add_argument("--out", type=Path, default=Path("logs/generalisation"),
                     help="logs, configs and cached per-seed figures (default %(default)s)")
     ap.add_argument("--publish", action="store_true",
@@ -187,7 +201,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if a.write_configs:
         for name in a.recipes:
-            print(write_config(name, a.write_configs))
+            print(write_config(name, a.write_configs, a.train_rooms))
         return 0
     rows = []
     for name in a.recipes:
@@ -197,7 +211,7 @@ def main(argv: list[str] | None = None) -> int:
             if cache.is_file() and json.loads(cache.read_text())["rooms"].keys() == set(a.rooms):
                 results.append(json.loads(cache.read_text()))
                 continue
-            r = run_seed(name, seed, a.out, a.rooms)
+            r = run_seed(name, seed, a.out, a.rooms, a.train_rooms)
             cache.write_text(json.dumps(r, indent=1))
             c, v, _p = seed_figures(r)
             print(f"{name} seed {seed}: {c:.2f} coll/1000, coverage {v:.3f} "
