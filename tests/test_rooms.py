@@ -143,3 +143,47 @@ def test_progress_reward_pays_for_distance_not_for_circling():
     assert max(paid[2:]) < (line[-1] - 30.0) / 3
     with pytest.raises(InputError, match="progress_window"):
         ObstacleAvoidanceReward(progress_window=0)
+
+
+def candidates_config(name: str = "cands") -> str:
+    return rooms_config(trials=1, name=name).replace(
+        "episode_iterations = 60", "episode_iterations = 60\ncandidates = 3\n"
+        'validation_rooms = ["novel-1", "collect-2"]\nvalidation_iterations = 80')
+
+
+def test_candidates_keep_the_rule_base_best_in_the_validation_rooms(tmp_path):
+    _c, out = run_config(tmp_path, candidates_config(), "cands.h5", "--workers", "1")
+    tl = open_log(out).trial(0)
+    sel = {k[len("select/"):]: v for k, v in tl.episodes.items() if k.startswith("select/")}
+    assert sel["first_iteration"].tolist() == [0, 100, 200]
+    score = sel["collisions_per_1000"] - 20.0 * sel["coverage"]
+    assert np.allclose(sel["score"], score)
+    best = int(tl.summary["candidate"])
+    assert best == int(np.argmin(score))
+    assert int(tl.summary["validation_iterations"]) == 3 * 2 * 80
+    # the logged (and evaluated) policy is the kept candidate's: it scores as recorded
+    from sitframe.runs.evaluation import evaluate_log
+
+    runs = [evaluate_log(str(out), world=w, trial=0, iterations=80) for w in
+            ("novel-1", "collect-2")]
+    assert all(r["iterations"] == 80 for r in runs)
+    again = tmp_path / "again.h5"
+    assert main(["run", str(tmp_path / "cands.toml"), "--out", str(again), "--workers",
+                 "1"]) == 0
+    assert compare_logs(out, again) == []
+
+
+@pytest.mark.parametrize(("edit", "key"), [
+    (lambda t: t.replace('validation_rooms = ["novel-1", "collect-2"]\n', ""),
+     "experiment.candidates"),
+    (lambda t: t.replace("candidates = 3\n", ""), "experiment.validation_iterations"),
+    (lambda t: t.replace('"novel-1", "collect-2"]', '"novel-1", "nowhere"]'),
+     "experiment.validation_rooms[1]"),
+    (lambda t: t.replace("candidates = 3", "candidates = 301"), "experiment.candidates"),
+], ids=["no-rooms", "no-candidates", "unknown-room", "too-many"])
+def test_a_bad_candidates_key_is_one_line_naming_it(tmp_path, capsys, edit, key):
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(edit(candidates_config()))
+    assert main(["run", str(cfg), "--out", str(tmp_path / "bad.h5")]) != 0
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"{cfg}: {key}:" in err, err

@@ -16,7 +16,8 @@ policy is run 1000 iterations from the start of each development room (``gen:200
 ... ``gen:2000019``, rooms no recipe learns or collects in), which is ``sitframe evaluate
 LOG --world W --trial 0`` (evaluation seed 0). A seed's collisions per 1000 are pooled
 over its rooms, its coverage is the mean over them. Steps are everything the learner
-spends in the simulator: the collected samples plus the learning iterations.
+spends in the simulator: the collected samples, the learning iterations and the
+iterations its candidates run in validation rooms.
 
 Training rooms are ``gen:1000000`` ... ``gen:1000009`` and the shipped training and
 collection rooms; test rooms (``gen:3000000`` ...) are never touched.
@@ -49,8 +50,9 @@ COLLECT_ROOMS = ["collect-1", "collect-2", "collect-3", "collect-4", "collect-5"
 BAD = 10.0
 
 #: In a recipe's keys, stands for the training rooms (``--train-rooms``, default
-#: :data:`TRAIN_ROOMS`) in a list of rooms.
-TRAIN = "@train"
+#: :data:`TRAIN_ROOMS`) in a list of rooms; ``LEARN`` and ``VALIDATE`` for all but the last
+#: two of them and those two (a recipe that chooses among candidates holds them out).
+TRAIN, LEARN, VALIDATE = "@train", "@learn", "@validate"
 _ROOMS = {"experiment": {"rooms": [TRAIN], "episode_iterations": 250},
           "collect": {"worlds": [*COLLECT_ROOMS, TRAIN]}}
 _MU50 = {"behaviours": {"avoid": {"min_updates": 50}}}
@@ -76,6 +78,17 @@ RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
         "rooms-mu50 + turning costs 3x (`heading_cost = 0.3`)",
         _ROOMS | {"behaviours": {"avoid": {"min_updates": 50, "reward_params": {
             "heading_cost": 0.3}}}}),
+    "rooms-mu50-cand3": (
+        "rooms-mu50, learning in 8 of the rooms, 3 candidates of 1667 iterations, the best "
+        "in the other 2 (500 iterations each) kept",
+        {"experiment": {"rooms": [LEARN], "episode_iterations": 250, "candidates": 3,
+                        "validation_rooms": [VALIDATE], "validation_iterations": 500},
+         "collect": _ROOMS["collect"], **_MU50}),
+    "rooms-cand3": (
+        "rooms-mu50-cand3 without min_updates",
+        {"experiment": {"rooms": [LEARN], "episode_iterations": 250, "candidates": 3,
+                        "validation_rooms": [VALIDATE], "validation_iterations": 500},
+         "collect": _ROOMS["collect"]}),
     "rooms-mu50-c12": ("rooms-mu50 with 12 situations", _ROOMS | _MU50 | {
         "interpreter": {"c": 12}}),
     "rooms-mu50-ep100": ("rooms-mu50 with 100-iteration episodes", {
@@ -103,8 +116,9 @@ def _merge(into: dict[str, Any], keys: dict[str, Any], train: list[str]) -> None
     for k, v in keys.items():
         if isinstance(v, dict) and isinstance(into.get(k), dict):
             _merge(into[k], v, train)
-        elif isinstance(v, list) and TRAIN in v:
-            into[k] = [r for x in v for r in (train if x == TRAIN else [x])]
+        elif isinstance(v, list) and {TRAIN, LEARN, VALIDATE} & set(v):
+            rooms = {TRAIN: train, LEARN: train[:-2], VALIDATE: train[-2:]}
+            into[k] = [r for x in v for r in rooms.get(x, [x])]
         else:
             into[k] = v
 
@@ -143,7 +157,9 @@ def run_seed(name: str, seed: int, out: Path, rooms: list[str],
     per_room = {w: evaluate_log(str(log), world=w, trial=0, iterations=1000, checked=lg)
                 for w in rooms}
     return {"recipe": name, "seed": seed, "samples": samples,
-            "iterations": int(s["iterations"]), "steps": samples + int(s["iterations"]),
+            "iterations": int(s["iterations"]),
+            "validation": int(s.get("validation_iterations", 0)),
+            "steps": samples + int(s["iterations"]) + int(s.get("validation_iterations", 0)),
             "learn_collisions": int(s["collisions"]), "converged": bool(s["converged"]),
             "learn_seconds": learn_s, "judge_seconds": time.perf_counter() - t0 - learn_s,
             "rooms": {w: {"collisions": int(r["collisions"]), "iterations": int(r["iterations"]),

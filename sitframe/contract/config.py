@@ -168,9 +168,18 @@ EXPERIMENT = Table("experiment", doc="What runs, how long and where.", keys=(
         "Generator (the rooms in shuffled rounds); absent: the trial runs in world only"),
     Key("episode_iterations", "integer", ABSENT, "iterations of one episode of a learning "
         "trial over rooms (needs rooms; default 250)", lo=1, hi=MAX_ITERATIONS),
+    Key("candidates", "integer", ABSENT, "rule bases a learning trial learns one after "
+        "another (iterations / candidates each, the learners reset in between), keeping the "
+        "one that scores best in validation_rooms (needs them; default 1)", lo=1, hi=1000),
+    Key("validation_rooms", "names", ABSENT, "the rooms the candidates are judged in, each "
+        "from its start pose, frozen (needs candidates)"),
+    Key("validation_iterations", "integer", ABSENT, "iterations of a candidate's run in each "
+        "validation room (needs candidates; default 500)", lo=1, hi=MAX_ITERATIONS),
 ))
 #: Iterations of one episode of a learning trial over ``rooms`` when the config does not say.
 ROOM_EPISODE_ITERATIONS = 250
+#: Iterations of a candidate's run in a validation room when the config does not say.
+VALIDATION_ITERATIONS = 500
 ROBOT = Table("robot", doc="The simulated robot: the fields of RobotParams, which checks them.",
               keys=(), free=True)
 SENSOR = Table("sensor", doc="The sensor: a component and its parameters.",
@@ -339,6 +348,9 @@ class ExperimentSection:
     clusters_from: str
     rooms: tuple[str, ...] = ()
     episode_iterations: int = ROOM_EPISODE_ITERATIONS
+    candidates: int = 1
+    validation_rooms: tuple[str, ...] = ()
+    validation_iterations: int = VALIDATION_ITERATIONS
 
 
 @dataclass(frozen=True)
@@ -383,7 +395,9 @@ class Config:
                               int(e["iterations"]), tuple(e["stages"]), e["world"],
                               float(e["default_speed"]), e["clusters_from"],
                               tuple(e.get("rooms", ())),
-                              int(e.get("episode_iterations", ROOM_EPISODE_ITERATIONS))),
+                              int(e.get("episode_iterations", ROOM_EPISODE_ITERATIONS)),
+                              int(e.get("candidates", 1)), tuple(e.get("validation_rooms", ())),
+                              int(e.get("validation_iterations", VALIDATION_ITERATIONS))),
             dict(cfg["robot"]), Component.of(cfg["sensor"]),
             CollectSection(c["mode"], tuple(c["worlds"]), float(c["speed"]),
                            float(c["rate_hz"]), int(c["wander_samples"])),
@@ -414,14 +428,17 @@ class Config:
         e = self.experiment
         if name == e.world:
             return "experiment.world"
-        return f"experiment.rooms[{e.rooms.index(name)}]" if name in e.rooms else "worlds"
+        for key, names in (("rooms", e.rooms), ("validation_rooms", e.validation_rooms)):
+            if name in names:
+                return f"experiment.{key}[{names.index(name)}]"
+        return "worlds"
 
     def worlds(self) -> list[str]:
         """The worlds the core's tables name, once each: the learning world, then the
         collection rooms (if it collects); the evaluation protocols' worlds are their tables'
         (:meth:`sitframe.contract.resolve.Resolved.stage_worlds`)."""
         e = self.experiment
-        names = [e.world, *e.rooms]
+        names = [e.world, *e.rooms, *e.validation_rooms]
         if "collect" in e.stages:
             names += self.collect.worlds
         return list(dict.fromkeys(names))
@@ -773,7 +790,8 @@ def _check_selection(sel: dict[str, Any], file: str | None, key: str) -> None:
 #: is the one reported).
 _CHECK_ORDER = {"experiment": ("name", "description", "seed", "trials", "iterations",
                                "default_speed", "world", "clusters_from", "stages", "rooms",
-                               "episode_iterations"),
+                               "episode_iterations", "candidates", "validation_rooms",
+                               "validation_iterations"),
                 "collect": ("mode", "worlds", "speed", "rate_hz", "wander_samples"),
                 "plugins": ("dirs",)}
 
@@ -790,10 +808,23 @@ def _check_core(cfg: dict[str, Any], file: str | None) -> None:
                           section)
             if key.kind == "integer":
                 values[name] = checked
-    e = cfg["experiment"]
-    if "episode_iterations" in e and "rooms" not in e:
-        raise InputError("expected experiment.rooms with it (the rooms whose episodes last "
-                         "this long)", file=file, key="experiment.episode_iterations")
+    _check_together(cfg["experiment"], file)
+
+
+def _check_together(e: dict[str, Any], file: str | None) -> None:
+    """The ``[experiment]`` keys that need one another (rooms, candidates, validation)."""
+    for key, needs, what in (
+            ("episode_iterations", "rooms", "the rooms whose episodes last this long"),
+            ("validation_iterations", "candidates", "the candidates judged this long"),
+            ("validation_rooms", "candidates", "the candidates judged there"),
+            ("candidates", "validation_rooms", "the rooms the candidates are judged in")):
+        if key in e and needs not in e:
+            raise InputError(f"expected experiment.{needs} with it ({what})", file=file,
+                             key=f"experiment.{key}")
+    if "candidates" in e and e["candidates"] > e["iterations"]:
+        raise InputError(f"expected at most experiment.iterations ({e['iterations']}) "
+                         f"candidates, got {e['candidates']}", file=file,
+                         key="experiment.candidates")
 
 
 def to_toml(cfg: dict[str, Any]) -> str:

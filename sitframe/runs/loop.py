@@ -239,6 +239,7 @@ def simulate(
     env.chain = _room_episodes(res, spec) or _training_episodes(res, spec, world)
     if env.chain is not None:
         env.start, env.goal, env.world = next(env.chain.pairs)
+    env.cands = _candidates(res, spec)  # None unless the trial learns several rule bases
     env.track = SituationTracker.start(parts.interp, spec.learn, parts.components, res.origins,
                                        spec.index)  # None unless the situations evolve
     n = _run_loop(res, spec, parts, rec, env, step_hook, protocol)
@@ -465,13 +466,14 @@ class _Env:
     """Where a trial runs: world, goal, Generator and start pose; the chain of training
     episodes (:class:`_TrainingEpisodes`) and the tracker of evolving situations, if any."""
 
-    __slots__ = ("world", "goal", "rng", "start", "chain", "track")
+    __slots__ = ("world", "goal", "rng", "start", "chain", "track", "cands")
 
     def __init__(self, world: World, goal: Goal | None, rng: np.random.Generator,
                  start: np.ndarray) -> None:
         self.world, self.goal, self.rng, self.start = world, goal, rng, start
         self.chain: _TrainingEpisodes | RoomEpisodes | None = None
         self.track: SituationTracker | None = None
+        self.cands: Candidates | None = None
 
 
 def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder, env: _Env,
@@ -491,6 +493,7 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
     default_speed = res.config.experiment.default_speed
     robot = res.robot
     track, chain, spaces, where = env.track, env.chain, parts.spaces, parts.where
+    cands = env.cands
     at_read, at_u = _Step(og["sensor"], "read"), _Step(og["interpreter"], "memberships")
     at_combine, at_core = _Step(og["arbiter"], "combine"), _Step(None, "step")
     at_step = _Step(None, "sitframe_step")
@@ -559,6 +562,9 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
                     check_flag(protocol.terminated(ctx)):
                 n_done = t + 1
                 break
+            if cands is not None and cands.over(t + 1):
+                step_at = at_core
+                cands.next_round(res, spec, parts, rng)
             if chain is not None and chain.over(ctx, t + 1, spec.iterations):
                 pose, goal, world = next(chain.pairs)  # the next training episode starts here
                 ctx = None
@@ -599,6 +605,28 @@ def _trial_result(res: Resolved, spec: TrialSpec, world: World, parts: _TrialPar
                   arrays: dict[str, np.ndarray], env: _Env) -> TrialResult:
     """The finished trial: behaviours' data and policies, summary, plugins' data."""
     k, og = spec.index, res.origins
+    bdata, policies = _learned_state(res, spec, parts)
+    chosen: dict[str, Any] = {}
+    if env.cands is not None:  # the candidate that scored best in the validation rooms
+        bdata, policies, chosen = env.cands.choose(res, spec, bdata, policies)
+    summary = trial_summary(world, arrays, bdata, res.robot)
+    episodes = {} if env.chain is None else env.chain.record(arrays, summary, res.robot)
+    if env.cands is not None:
+        episodes.update(env.cands.record(chosen, summary))
+    result = TrialResult(spec.index, spec.seed, world.name, arrays, bdata, summary, episodes,
+                         policies=policies)
+    if env.track is not None:
+        result.situations = call(og["interpreter"], "state", env.track.finish, arrays["pose"],
+                                 res.run.sensor.dim, trial=k)
+        summary["situations"] = result.situations["count"]
+    _collect_plugin_data(result, parts.components, parts.tinfo, og, res)
+    return result
+
+
+def _learned_state(res: Resolved, spec: TrialSpec, parts: _TrialParts
+                   ) -> tuple[dict[str, dict[str, Any]], dict[str, LearnedPolicy]]:
+    """The behaviours' (and a learning arbiter's) trial data and policies, now."""
+    k, og = spec.index, res.origins
     bdata, policies = {}, {}
     learned = [(lb, b, og[f"behaviours.{lb}"]) for lb, (b, _r) in parts.behaviours.items()]
     if hasattr(parts.arbiter, "policy"):
@@ -616,16 +644,95 @@ def _trial_result(res: Resolved, spec: TrialSpec, world: World, parts: _TrialPar
         for lb, _b, _o in learned:
             bdata.setdefault(lb, {})["space"] = res.config.space_of(
                 "arbiter" if lb == "arbiter" else f"behaviours.{lb}")
-    summary = trial_summary(world, arrays, bdata, res.robot)
-    episodes = {} if env.chain is None else env.chain.record(arrays, summary, res.robot)
-    result = TrialResult(spec.index, spec.seed, world.name, arrays, bdata, summary, episodes,
-                         policies=policies)
-    if env.track is not None:
-        result.situations = call(og["interpreter"], "state", env.track.finish, arrays["pose"],
-                                 res.run.sensor.dim, trial=k)
-        summary["situations"] = result.situations["count"]
-    _collect_plugin_data(result, parts.components, parts.tinfo, og, res)
-    return result
+    return bdata, policies
+
+
+class Candidates:
+    """Several rule bases learnt one after another in a trial; the best in validation kept.
+
+    ``experiment.candidates = K`` splits a learning trial into ``K`` rounds of
+    ``iterations / K`` iterations (the last takes the remainder). At the end of a
+    round every learner's data and policy are kept and the learners are reset
+    (``reset`` again, with the trial's Generator: a fresh rule base, Q from its
+    initial values); the robot drives on where it is (or in the next room of a
+    trial over rooms). After the last round each candidate's frozen policies run
+    ``validation_iterations`` iterations from the start of every validation
+    room (the same seeds for every candidate, so they meet the same noise), and
+    the candidate with the lowest score
+
+        collisions per 1000 (pooled over the rooms) - :attr:`COVERAGE_WEIGHT` x
+        mean coverage
+
+    (the earliest of equal ones) is the trial's: its policies are evaluated and
+    logged, its data is the behaviours' trial data (its convergence iteration
+    counts from the trial's start). The validation runs are steps the learner
+    spends: the summary's ``validation_iterations`` counts them; ``candidate`` is
+    the one kept, ``select/...`` in the episodes records every candidate's first
+    iteration, figures and score.
+    """
+
+    #: Coverage's weight in the score: 0.1 more coverage is worth 2 collisions per 1000.
+    COVERAGE_WEIGHT = 20.0
+
+    def __init__(self, k: int, iterations: int, rooms: list[str], run_iterations: int) -> None:
+        self.ends = [iterations * (j + 1) // k for j in range(k)]
+        self.rooms, self.run_iterations = rooms, run_iterations
+        self.saved: list[tuple[dict[str, dict[str, Any]], dict[str, LearnedPolicy]]] = []
+
+    def over(self, t: int) -> bool:
+        """Whether a round (not the last) ends after iteration ``t``."""
+        return len(self.saved) < len(self.ends) - 1 and t == self.ends[len(self.saved)]
+
+    def next_round(self, res: Resolved, spec: TrialSpec, parts: _TrialParts,
+                   rng: np.random.Generator) -> None:
+        """Keep the round's data and policies; reset every learner for the next round."""
+        self.saved.append(_learned_state(res, spec, parts))
+        for lb, beh, _rew, o, _orw in parts.learners:
+            call(o, "reset", beh.reset, rng, parts.c_of(lb), spec.iterations, trial=spec.index)
+
+    def choose(self, res: Resolved, spec: TrialSpec, bdata: dict[str, dict[str, Any]],
+               policies: dict[str, LearnedPolicy]
+               ) -> tuple[dict[str, dict[str, Any]], dict[str, LearnedPolicy], dict[str, Any]]:
+        """Judge every candidate (the last one's ``bdata``, ``policies`` given) in the
+        validation rooms; the chosen one's data and policies, and every candidate's figures."""
+        self.saved.append((bdata, policies))
+        seeds = np.random.SeedSequence(spec.seed % 2**64, spawn_key=(4,)).generate_state(
+            len(self.rooms), np.uint64)
+        coll = np.zeros(len(self.saved))
+        cov = np.zeros(len(self.saved))
+        for j, (_b, pol) in enumerate(self.saved):
+            runs = [simulate(res, dataclasses.replace(
+                spec, seed=int(seeds[r]), world=room, iterations=self.run_iterations,
+                learn=False, policies=dict(pol), evaluate=(), start=None, goal=None,
+                protocol=None, observed=False)).summary for r, room in enumerate(self.rooms)]
+            coll[j] = 1000.0 * sum(s["collisions"] for s in runs) / \
+                (self.run_iterations * len(runs))
+            cov[j] = float(np.mean([s["coverage"] for s in runs]))
+        score = coll - self.COVERAGE_WEIGHT * cov
+        best = int(np.argmin(score))
+        return (*self.saved[best], {"candidate": best, "collisions_per_1000": coll,
+                                    "coverage": cov, "score": score})
+
+    def record(self, chosen: dict[str, Any], summary: dict[str, Any]) -> dict[str, Any]:
+        """Add the chosen candidate and the validation steps to ``summary``; return the
+        candidates' records (``select/...``)."""
+        summary["candidate"] = int(chosen["candidate"])
+        summary["validation_iterations"] = len(self.saved) * len(self.rooms) * \
+            self.run_iterations
+        return {"select/first_iteration": np.asarray([0, *self.ends[:-1]], dtype=np.int64),
+                "select/collisions_per_1000": chosen["collisions_per_1000"],
+                "select/coverage": chosen["coverage"], "select/score": chosen["score"]}
+
+
+def _candidates(res: Resolved, spec: TrialSpec) -> Candidates | None:
+    """The rounds of a learning trial that learns several candidates, else None."""
+    e = res.config.experiment
+    if not spec.learn or e.candidates <= 1:
+        return None
+    for j, room in enumerate(e.validation_rooms):
+        res.world(room, key=f"experiment.validation_rooms[{j}]")
+    return Candidates(e.candidates, spec.iterations, list(e.validation_rooms),
+                      e.validation_iterations)
 
 
 class _TrainingEpisodes:
