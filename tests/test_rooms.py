@@ -187,3 +187,15 @@ def test_a_bad_candidates_key_is_one_line_naming_it(tmp_path, capsys, edit, key)
     assert main(["run", str(cfg), "--out", str(tmp_path / "bad.h5")]) != 0
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and f"{cfg}: {key}:" in err, err
+
+
+def test_the_learning_path_figure_is_drawn_in_the_room_the_robot_was_in():
+    from types import SimpleNamespace as NS
+
+    from sitframe.analysis.report import _room_at
+
+    tr = NS(world="training", arrays={"room": np.repeat([2, 0, 0, 1], 50)},
+            episodes={"learn/rooms": '["training", "novel-1", "novel-2"]'})
+    assert _room_at(tr, 10, 110) == ("novel-2", 50)  # up to where it left novel-2
+    assert _room_at(tr, 60, 160) == ("training", 150)
+    assert _room_at(NS(world="training", arrays={}, episodes={}), 0, 100) == ("training", 100)
