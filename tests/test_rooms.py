@@ -180,7 +180,9 @@ def test_candidates_keep_the_rule_base_best_in_the_validation_rooms(tmp_path):
     (lambda t: t.replace('"novel-1", "collect-2"]', '"novel-1", "nowhere"]'),
      "experiment.validation_rooms[1]"),
     (lambda t: t.replace("candidates = 3", "candidates = 301"), "experiment.candidates"),
-], ids=["no-rooms", "no-candidates", "unknown-room", "too-many"])
+    (lambda t: t.replace('component = "fcm"', 'component = "evolving"'),
+     "experiment.candidates"),
+], ids=["no-rooms", "no-candidates", "unknown-room", "too-many", "evolving"])
 def test_a_bad_candidates_key_is_one_line_naming_it(tmp_path, capsys, edit, key):
     cfg = tmp_path / "bad.toml"
     cfg.write_text(edit(candidates_config()))

@@ -89,6 +89,14 @@ RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
         {"experiment": {"rooms": [LEARN], "episode_iterations": 250, "candidates": 3,
                         "validation_rooms": [VALIDATE], "validation_iterations": 500},
          "collect": _ROOMS["collect"]}),
+    "rooms-mu50-evolving": (
+        "rooms-mu50 with situations evolving on-line from the 8 fitted ones (the "
+        "obstacle-avoidance-evolving preset's interpreter)",
+        _ROOMS | _MU50 | {"interpreter": {
+            "component": "evolving", "capacity": 48, "create_distance": 1.8,
+            "create_after": 3, "prior_weight": 100.0, "adapt": True, "merge_distance": 0.4,
+            "split_ratio": 4.0, "split_min_updates": 100, "split_min_distance": 0.4,
+            "error_decay": 0.9, "prune_after": 0, "check_every": 50}}),
     "rooms-mu50-c12": ("rooms-mu50 with 12 situations", _ROOMS | _MU50 | {
         "interpreter": {"c": 12}}),
     "rooms-mu50-ep100": ("rooms-mu50 with 100-iteration episodes", {

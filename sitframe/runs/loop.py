@@ -242,6 +242,10 @@ def simulate(
     env.cands = _candidates(res, spec)  # None unless the trial learns several rule bases
     env.track = SituationTracker.start(parts.interp, spec.learn, parts.components, res.origins,
                                        spec.index)  # None unless the situations evolve
+    if env.cands is not None and env.track is not None:
+        raise InputError("expected an interpreter whose situations do not evolve: the "
+                         "candidates are judged with the situations the trial started from",
+                         key="experiment.candidates")
     n = _run_loop(res, spec, parts, rec, env, step_hook, protocol)
     arrays = rec.arrays(n, res.origins, spec.index, res.run.sensor.max_range)
     result = _trial_result(res, spec, world, parts, arrays, env)
