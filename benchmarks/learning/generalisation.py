@@ -57,6 +57,13 @@ _ROOMS = {"experiment": {"rooms": [TRAIN], "episode_iterations": 250},
           "collect": {"worlds": [*COLLECT_ROOMS, TRAIN]}}
 _MU50 = {"behaviours": {"avoid": {"min_updates": 50}}}
 
+#: The obstacle-avoidance-evolving preset's interpreter (situations created, split and
+#: merged on-line), here from the preset's 8 fitted situations.
+_EVOLVING = {"component": "evolving", "capacity": 48, "create_distance": 1.8,
+             "create_after": 3, "prior_weight": 100.0, "adapt": True, "merge_distance": 0.4,
+             "split_ratio": 4.0, "split_min_updates": 100, "split_min_distance": 0.4,
+             "error_decay": 0.9, "prune_after": 0, "check_every": 50}
+
 #: Recipe -> (what it changes, the keys it sets on the shipped preset, merged table by table).
 RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
     "base": ("the shipped preset as on main: learn in `training` only", {}),
@@ -92,11 +99,33 @@ RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
     "rooms-mu50-evolving": (
         "rooms-mu50 with situations evolving on-line from the 8 fitted ones (the "
         "obstacle-avoidance-evolving preset's interpreter)",
-        _ROOMS | _MU50 | {"interpreter": {
-            "component": "evolving", "capacity": 48, "create_distance": 1.8,
-            "create_after": 3, "prior_weight": 100.0, "adapt": True, "merge_distance": 0.4,
-            "split_ratio": 4.0, "split_min_updates": 100, "split_min_distance": 0.4,
-            "error_decay": 0.9, "prune_after": 0, "check_every": 50}}),
+        _ROOMS | _MU50 | {"interpreter": _EVOLVING}),
+    "rooms-evolving": ("rooms-mu50-evolving without min_updates", _ROOMS | {
+        "interpreter": _EVOLVING}),
+    "rooms-mu50-evolving-heading": (
+        "rooms-mu50-evolving + turning costs 3x (`heading_cost = 0.3`)",
+        _ROOMS | {"interpreter": _EVOLVING, "behaviours": {"avoid": {
+            "min_updates": 50, "reward_params": {"heading_cost": 0.3}}}}),
+    "rooms-evolving-heading": (
+        "rooms-mu50-evolving-heading without min_updates",
+        _ROOMS | {"interpreter": _EVOLVING, "behaviours": {"avoid": {
+            "reward_params": {"heading_cost": 0.3}}}}),
+    "rooms-mu50-evolving-heading5": (
+        "rooms-mu50-evolving with turning costing 5x (`heading_cost = 0.5`)",
+        _ROOMS | {"interpreter": _EVOLVING, "behaviours": {"avoid": {
+            "min_updates": 50, "reward_params": {"heading_cost": 0.5}}}}),
+    "rooms-mu50-evolving-heading-t": (
+        "rooms-mu50-evolving-heading, the shipped training room among the rooms",
+        {"experiment": {"rooms": ["training", TRAIN], "episode_iterations": 250},
+         "collect": _ROOMS["collect"], "interpreter": _EVOLVING, "behaviours": {"avoid": {
+             "min_updates": 50, "reward_params": {"heading_cost": 0.3}}}}),
+    "rooms-mu50-evolving-progress": (
+        "rooms-mu50-evolving + the progress reward (`progress = 20`, window 8)",
+        _ROOMS | {"interpreter": _EVOLVING, "behaviours": {"avoid": {
+            "min_updates": 50, "reward_params": {"progress": 20.0, "progress_window": 8}}}}),
+    "rooms-mu50-evolving-c12": (
+        "rooms-mu50-evolving starting from 12 fitted situations",
+        _ROOMS | _MU50 | {"interpreter": {**_EVOLVING, "c": 12}}),
     "rooms-mu50-c12": ("rooms-mu50 with 12 situations", _ROOMS | _MU50 | {
         "interpreter": {"c": 12}}),
     "rooms-mu50-ep100": ("rooms-mu50 with 100-iteration episodes", {
