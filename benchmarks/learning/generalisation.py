@@ -126,6 +126,16 @@ RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
     "rooms-mu50-evolving-c12": (
         "rooms-mu50-evolving starting from 12 fitted situations",
         _ROOMS | _MU50 | {"interpreter": {**_EVOLVING, "c": 12}}),
+    "rooms-heading": (
+        "rooms + turning costs 3x (`heading_cost = 0.3`)",
+        _ROOMS | {"behaviours": {"avoid": {"reward_params": {"heading_cost": 0.3}}}}),
+    "rooms-mu50-heading-cand3": (
+        "rooms-mu50-heading, learning in 8 of the rooms, 3 candidates, the best in the other "
+        "2 kept (as rooms-mu50-cand3)",
+        {"experiment": {"rooms": [LEARN], "episode_iterations": 250, "candidates": 3,
+                        "validation_rooms": [VALIDATE], "validation_iterations": 500},
+         "collect": _ROOMS["collect"], "behaviours": {"avoid": {
+             "min_updates": 50, "reward_params": {"heading_cost": 0.3}}}}),
     "rooms-mu50-c12": ("rooms-mu50 with 12 situations", _ROOMS | _MU50 | {
         "interpreter": {"c": 12}}),
     "rooms-mu50-ep100": ("rooms-mu50 with 100-iteration episodes", {
