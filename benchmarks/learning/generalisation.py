@@ -8,13 +8,15 @@ Output: the ablation table (one row per recipe: collisions per 1000 iterations m
 share of evaluations above 10 per 1000), printed and with ``--publish`` written to
 ``docs/results/tables/generalisation.md``; per-seed figures cached as JSON in ``--out``.
 
-Every recipe is the shipped ``obstacle-avoidance`` preset with some keys changed
+Every recipe is the ``obstacle-avoidance`` preset as it was before issue 39
+(``benchmarks/learning/generalisation/before.toml``) with some keys changed
 (:data:`RECIPES`; ``--list`` prints them, ``--write-configs DIR`` writes them as TOML
-files). For each recipe and seed ``S``: ``sitframe run CONFIG --trials 1 --seed S
---workers 1`` (without its evaluate stage: judging is done here), then the frozen trial-0
-policy is run 1000 iterations from the start of each development room (``gen:2000000``
-... ``gen:2000019``, rooms no recipe learns or collects in), which is ``sitframe evaluate
-LOG --world W --trial 0`` (evaluation seed 0). A seed's collisions per 1000 are pooled
+files); ``shipped`` is the preset as it is now. For each recipe and seed ``S``:
+``sitframe run CONFIG --trials 1 --seed S --workers 1`` (without its evaluate stage:
+judging is done here), then the frozen trial-0 policy is run 1000 iterations from the
+start of each development room (``gen:2000000`` ... ``gen:2000019``, rooms no recipe
+learns or collects in), which is ``sitframe evaluate LOG --world W --trial 0``
+(evaluation seed 0). A seed's collisions per 1000 are pooled
 over its rooms, its coverage is the mean over them. Steps are everything the learner
 spends in the simulator: the collected samples, the learning iterations and the
 iterations its candidates run in validation rooms.
@@ -43,6 +45,9 @@ from typing import Any
 import numpy as np
 
 TRAIN_ROOMS = [f"gen:{1_000_000 + i}" for i in range(10)]
+#: The ``obstacle-avoidance`` preset before issue 39, which every recipe but ``shipped``
+#: changes.
+BEFORE = Path(__file__).resolve().parent / "generalisation" / "before.toml"
 DEV_ROOMS = [f"gen:{2_000_000 + i}" for i in range(20)]
 COLLECT_ROOMS = ["collect-1", "collect-2", "collect-3", "collect-4", "collect-5"]
 #: An evaluation above this many collisions per 1000 iterations is a bad one (the
@@ -66,7 +71,9 @@ _EVOLVING = {"component": "evolving", "capacity": 48, "create_distance": 1.8,
 
 #: Recipe -> (what it changes, the keys it sets on the shipped preset, merged table by table).
 RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
-    "base": ("the shipped preset as on main: learn in `training` only", {}),
+    "base": ("the preset before issue 39: learn in `training` only", {}),
+    "shipped": ("the `obstacle-avoidance` preset as shipped now (rooms-mu50-heading, its "
+                "evaluation rooms aside)", {}),
     "rooms": ("collect also in the 10 generated training rooms (wander); learn in "
               "250-iteration episodes over them, room and free start pose drawn per episode",
               _ROOMS),
@@ -145,14 +152,16 @@ RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
 
 
 def recipe_config(name: str, train: list[str] | None = None) -> dict[str, Any]:
-    """The shipped ``obstacle-avoidance`` preset's config with recipe ``name``'s keys set,
-    ``train`` (default :data:`TRAIN_ROOMS`) as its training rooms, and no evaluate stage
-    (the script judges)."""
+    """Recipe ``name``'s config: the ``obstacle-avoidance`` preset as it was before issue 39
+    (:data:`BEFORE`; ``shipped``: as it is now) with the recipe's keys set, ``train``
+    (default :data:`TRAIN_ROOMS`) as its training rooms, and no evaluate stage (the script
+    judges)."""
     import tomllib
 
     from sitframe.contract.config import preset_text
 
-    cfg = tomllib.loads(preset_text("obstacle-avoidance"))
+    cfg = tomllib.loads(preset_text("obstacle-avoidance") if name == "shipped"
+                        else BEFORE.read_text("utf-8"))
     _merge(cfg, copy.deepcopy(RECIPES[name][1]), TRAIN_ROOMS if train is None else train)
     cfg["experiment"]["name"] = f"generalisation-{name}"
     cfg["experiment"]["stages"] = ["collect", "cluster", "learn"]
