@@ -60,7 +60,9 @@ def run_seed(preset: str, seed: int, out: Path, rooms: list[str],
         argv += ["--trials", str(trials)]
     t0 = time.perf_counter()
     here = Path.cwd()
-    os.chdir(out)  # (a preset's prerequisites are made in logs/ of the working folder)
+    work = out / "work"  # (a preset's prerequisites are made in logs/ of the working folder,
+    work.mkdir(exist_ok=True)  # which must not hold a folder named like a preset)
+    os.chdir(work)
     try:
         with contextlib.redirect_stdout(io.StringIO()):
             rc = cli_main(argv)
