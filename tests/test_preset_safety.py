@@ -4,7 +4,8 @@
 this runs the main job's first three trials (seed 0) and judges each frozen rule base in
 three development rooms, as ``sitframe evaluate LOG --world W --trial K`` does. A change
 that made the shipped rule bases collide more than 10 times per 1000 iterations there fails
-it (they collide at most 4 times, measured when the preset learnt over rooms).
+it (they collide at most twice, measured when the preset learnt over rooms with evolving
+situations).
 """
 
 from __future__ import annotations
