@@ -72,8 +72,8 @@ _EVOLVING = {"component": "evolving", "capacity": 48, "create_distance": 1.8,
 #: Recipe -> (what it changes, the keys it sets on the shipped preset, merged table by table).
 RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
     "base": ("the preset before issue 39: learn in `training` only", {}),
-    "shipped": ("the `obstacle-avoidance` preset as shipped now (rooms-mu50-heading, its "
-                "evaluation rooms aside)", {}),
+    "shipped": ("the `obstacle-avoidance` preset as shipped now (rooms-evolving-heading, "
+                "its evaluation rooms aside)", {}),
     "rooms": ("collect also in the 10 generated training rooms (wander); learn in "
               "250-iteration episodes over them, room and free start pose drawn per episode",
               _ROOMS),
