@@ -141,6 +141,10 @@ RECIPES: dict[str, Recipe] = {
     "arbiters-own-rooms": Recipe((), (
         f"{ARBITERS} --worlds {OWN_ROOMS} --publish arbiters-own-rooms",), 20,
         runs=("goal-finding-learned", "goal-finding")),
+    "generalisation": Recipe((), (
+        f"{PY} benchmarks/learning/generalisation.py --seeds 10 --publish",), 50),
+    "preset-safety": Recipe((), (
+        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --publish",), 120),
     "select-avoidance": Recipe((), (
         f"capture {PY} benchmarks/learning/select_avoidance.py logs/obstacle-avoidance-12.h5 "
         "--short 100 --short-world goal-training --test 100 --worlds goal novel-1 novel-2 "
