@@ -243,8 +243,14 @@ def run_in_process(argv: list[str]) -> Outcome:
     from sitframe.cli import main
 
     out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        code = main(list(argv))
+    # as when piped: no COLUMNS (a test process may carry one), so tables print whole
+    columns = os.environ.pop("COLUMNS", None)
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            code = main(list(argv))
+    finally:
+        if columns is not None:
+            os.environ["COLUMNS"] = columns
     return Outcome(list(argv), code, out.getvalue(), err.getvalue())
 
 
