@@ -143,6 +143,13 @@ RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
                         "validation_rooms": [VALIDATE], "validation_iterations": 500},
          "collect": _ROOMS["collect"], "behaviours": {"avoid": {
              "min_updates": 50, "reward_params": {"heading_cost": 0.3}}}}),
+    "heading": ("base + turning costs 3x (`heading_cost = 0.3`), learning in `training` "
+                "only", {"behaviours": {"avoid": {"reward_params": {"heading_cost": 0.3}}}}),
+    "evolving-heading": (
+        "base + evolving situations + `heading_cost = 0.3`, learning in `training` only "
+        "(rooms-evolving-heading without the rooms)",
+        {"interpreter": _EVOLVING, "behaviours": {"avoid": {
+            "reward_params": {"heading_cost": 0.3}}}}),
     "rooms-mu50-c12": ("rooms-mu50 with 12 situations", _ROOMS | _MU50 | {
         "interpreter": {"c": 12}}),
     "rooms-mu50-ep100": ("rooms-mu50 with 100-iteration episodes", {
