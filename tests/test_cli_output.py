@@ -60,7 +60,9 @@ def test_piped_run_prints_its_tables_whole(tmp_path, capsys, monkeypatch):
     # (description + two columns per output) is wider and reached the file as ellipses.
     monkeypatch.delenv("COLUMNS", raising=False)
     cfg = tmp_path / "piped.toml"
-    cfg.write_text(small_config(name="piped", trials=2, iterations=200, eval_iterations=50))
+    wide = "avoid_obstacles_in_every_room_of_the_laboratory"  # its columns pass 80
+    cfg.write_text(small_config(name="piped", trials=2, iterations=200, eval_iterations=50)
+                   .replace("[behaviours.avoid]", f"[behaviours.{wide}]"))
     capsys.readouterr()
     assert main(["run", str(cfg), "--out", str(tmp_path / "piped.h5"), "--workers", "1"]) == 0
     text = capsys.readouterr().out
