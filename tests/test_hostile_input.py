@@ -395,7 +395,7 @@ def test_9_scheduler_address_checks_and_plain_tcp_warning(tmp_path, capsys, monk
         def __init__(self, *a, **k):
             pass
 
-        def run(self, fn):  # what each connected worker's fn() returns
+        def run(self, fn, **_kw):  # what each connected worker's fn() returns
             return dict(self.workers)
 
         def close(self):

@@ -279,6 +279,13 @@ def config_reference(_arg: str | None = None) -> str:
     return "\n".join(out)
 
 
+def generator_reference(_arg: str | None = None) -> str:
+    """The room generator's parameters (a world file's ``[generator]`` table)."""
+    from sitframe.sim.roomgen import GENERATOR
+
+    return "\n".join(key_rows(GENERATOR.keys))
+
+
 def components_reference(_arg: str | None = None) -> str:
     """Every built-in component by kind, with its parameters."""
     import inspect
@@ -409,10 +416,12 @@ def face_page(_arg: str | None = None) -> str:
         home = getattr(getattr(sitframe, name), "__module__", None) or \
             f"sitframe.{sitframe._PUBLIC[name]}"
         page = home.split(".")[1] if home.count(".") > 1 else "ground"
+        obj = getattr(sitframe, name)  # an alias (ConfigKey) links to its own name; a constant
+        anchor = f"{home}.{obj.__name__}" if isinstance(obj, type) or callable(obj) else home
         summary = (getattr(getattr(sitframe, name), "__doc__", None) or "").strip()
         summary = summary.split("\n\n")[0] if summary and callable(getattr(sitframe, name)) \
             else ""
-        rows.append(f"| [`{name}`]({page}.md#{home}.{name}) | `{home}` | "
+        rows.append(f"| [`{name}`]({page}.md#{anchor}) | `{home}` | "
                     f"{cell(rst_to_md(summary))} |")
     out = ["| name | defined in | what it is |", "|---|---|---|", *rows, "",
            "Modules used as namespaces: "
@@ -441,6 +450,7 @@ GENERATORS: dict[str, Callable[[str | None], str]] = {
     "cli": cli_reference,
     "config": config_reference,
     "components": components_reference,
+    "generator": generator_reference,
     "layers": layers_diagram,
     "subpackages": subpackages_table,
     "face": face_page,

@@ -40,6 +40,14 @@ with the largest area) and outside every other closed wall polygon (an inner
 closed wall is a solid block). A world with no closed wall uses the bounding
 box of its walls instead.
 
+Generated rooms (``"gen:SEED"``, a file with a ``[generator]`` table) are drawn by
+:mod:`sitframe.sim.roomgen` as world-file text and loaded here like any other.
+
+Why one module of this size: the :class:`World`, its file format and the format's checks
+are one thing; the checks use the world's own queries (inside, clearance) and a world is
+only ever made by the loader, so split, each part would reach into the other's private
+state.
+
 Example
 -------
 >>> from sitframe.sim.world import load_world, list_worlds
@@ -64,8 +72,10 @@ import numpy as np
 from sitframe import params as P
 from sitframe.errors import InputError, did_you_mean
 from sitframe.sim import geometry as geo
+from sitframe.sim import roomgen
 
-__all__ = ["DEFAULT_ROBOT_RADIUS", "Goal", "World", "list_worlds", "load_world", "parse_world"]
+__all__ = ["DEFAULT_ROBOT_RADIUS", "Goal", "World", "generate_room", "list_worlds", "load_world",
+           "parse_world"]
 
 #: Robot disc radius [m] used to validate start poses when the file gives none.
 DEFAULT_ROBOT_RADIUS = 0.15
@@ -406,6 +416,8 @@ def load_world(name_or_path: str | Path | World) -> World:
             raise InputError(f"cannot read world file: {exc}", file=str(path)) from exc
         return parse_world(text, file=str(path))
     name = str(name_or_path)
+    if name.startswith(roomgen.PREFIX):
+        return _generated_world(name)
     names = list_worlds()
     if name not in names:
         raise InputError(
@@ -413,6 +425,45 @@ def load_world(name_or_path: str | Path | World) -> World:
             f"file or one of: {', '.join(names)}"
         )
     return _shipped_world(name)
+
+
+def generate_room(seed: int, **params: Any) -> World:
+    """The generated room of ``seed`` (:mod:`sitframe.sim.roomgen`), a validated world.
+
+    Parameters
+    ----------
+    seed
+        Any integer in [0, 2**63): the same seed and parameters give the same room, bit for
+        bit.
+    **params
+        ``name``, ``description``, and any generator parameter
+        (:data:`sitframe.sim.roomgen.GENERATOR`: ``width``, ``height``, ``dividers``,
+        ``door``, ``obstacles``, ``obstacle_size``, ``gap``, ``robot_radius``; metres,
+        ranges as ``[lo, hi]``).
+
+    Raises
+    ------
+    InputError
+        A parameter out of range or impossible, naming the key and the limit.
+
+    Examples
+    --------
+    >>> room = generate_room(3)
+    >>> room.name, room == generate_room(3), room.text == generate_room(3).text
+    ('gen:3', False, True)
+    """
+    return parse_world(roomgen.room_text(seed, **params), file=params.get("file"))
+
+
+@cache
+def _generated_world(name: str) -> World:
+    """The room ``"gen:SEED"`` names (:mod:`sitframe.sim.roomgen`), generated once per
+    process."""
+    seed = name[len(roomgen.PREFIX):]
+    if not (seed.isascii() and seed.isdigit()) or int(seed) >= 2**63:
+        raise InputError(f"unknown world {name!r}; expected {roomgen.PREFIX}SEED with SEED a "
+                         "whole number in [0, 2**63), e.g. \"gen:1000000\"")
+    return generate_room(int(seed))
 
 
 @cache
@@ -443,20 +494,9 @@ def parse_world(text: str, *, file: str | None = None) -> World:
         outside the walls or inside an obstacle. The message names the key
         path (e.g. ``obstacles[1].points``) and what was expected.
     """
-    if not isinstance(text, str):
-        raise TypeError(f"text must be a str of TOML, got {type(text).__name__}")
-    if not text.strip():
-        raise InputError(
-            "world file is empty; expected TOML with name, [robot] start and [[walls]]", file=file
-        )
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        msg = str(exc)
-        if "line" not in msg:  # tomllib says "at end of document": give the line anyway
-            msg = f"{msg}, line {text.count(chr(10)) + (not text.endswith(chr(10)))}"
-        raise InputError(f"not valid TOML: {msg}", file=file) from exc
-
+    data = _toml_table(text, file)
+    if "generator" in data:
+        return _generated_file(data, file)
     P.known_keys(data, _TOP_KEYS, file=file)
     for req in ("name", "robot", "walls"):
         if req not in data:
@@ -530,6 +570,41 @@ def parse_world(text: str, *, file: str | None = None) -> World:
                 file=file, key="goal.position",
             )
     return world
+
+
+def _toml_table(text: str, file: str | None) -> dict[str, Any]:
+    """The TOML table of a world file's ``text`` (an :class:`InputError` with the line)."""
+    if not isinstance(text, str):
+        raise TypeError(f"text must be a str of TOML, got {type(text).__name__}")
+    if not text.strip():
+        raise InputError(
+            "world file is empty; expected TOML with name, [robot] start and [[walls]]", file=file
+        )
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        msg = str(exc)
+        if "line" not in msg:  # tomllib says "at end of document": give the line anyway
+            msg = f"{msg}, line {text.count(chr(10)) + (not text.endswith(chr(10)))}"
+        raise InputError(f"not valid TOML: {msg}", file=file) from exc
+
+
+def _generated_file(data: dict[str, Any], file: str | None) -> World:
+    """A world file holding a ``[generator]`` table (and at most a name and description):
+    the room it describes (:func:`sitframe.sim.roomgen.generate_room`)."""
+    P.known_keys(data, ("name", "description", "generator"), file=file)
+    gen = data["generator"]
+    if not isinstance(gen, dict):
+        raise InputError(f"expected a table [generator] with seed = N, got {gen!r}",
+                         file=file, key="generator")
+    table = roomgen.room_parameters(gen, file=file)
+    for key in ("name", "description"):
+        if not isinstance(data.get(key, ""), str):
+            raise InputError(f"expected a string, got {data[key]!r}", file=file, key=key)
+    name = data.get("name", "").strip() or f"{roomgen.PREFIX}{table['seed']}"
+    text = roomgen.generated_text(table, name=name, description=data.get("description", ""),
+                                  file=file)
+    return parse_world(text, file=file)
 
 
 # ----------------------------------------------------------------------------- validation helpers
