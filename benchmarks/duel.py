@@ -64,13 +64,12 @@ the test rooms about 3 s.
 from __future__ import annotations
 
 import argparse
+import io
 import json
-import resource
-import subprocess
-import sys
 import time
 import zlib
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager, redirect_stdout
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -396,19 +395,79 @@ def fuzzy_steps(log_path: Path, test_rooms: Sequence[str]) -> dict[str, int]:
             "learning_collisions": collisions}
 
 
-def run_fuzzy(seed: int, d: Path, rooms: dict[str, tuple[str, ...]]) -> dict[str, Any]:
-    """``sitframe run PRESET --trials 1 --seed S`` into ``d/run.h5``; its steps and CPU time."""
+@contextmanager
+def simulator_tally() -> Iterator[dict[str, Tally]]:
+    """Count what a ``sitframe run`` in this process executes: the collect stage's sensor
+    readings (``collect_readings``) and robot moves (``collect_moves``, the wander's, with
+    their collisions, which the log does not keep), and the loop's robot moves
+    (``loop_moves``: learning iterations and evaluation runs, with collisions)."""
+    import sitframe.runs.collect as collect
+    import sitframe.runs.experiment as experiment
+    import sitframe.runs.loop as loop
+
+    t = {"collect_readings": Tally(), "collect_moves": Tally(), "loop_moves": Tally()}
+
+    def moves(tally: Tally, fn: Callable[..., Any]) -> Callable[..., Any]:
+        def step(*args: Any, **kw: Any) -> Any:
+            out = fn(*args, **kw)
+            tally.steps += 1
+            tally.collisions += bool(out.collided)
+            return out
+        return step
+
+    class Reads:
+        """The sensor, its ``read`` calls counted."""
+
+        def __init__(self, sensor: Any) -> None:
+            self._sensor = sensor
+
+        def __getattr__(self, name: str) -> Any:
+            return getattr(self._sensor, name)
+
+        def read(self, *args: Any, **kw: Any) -> Any:
+            t["collect_readings"].steps += 1
+            return self._sensor.read(*args, **kw)
+
+    def reads(fn: Callable[..., Any]) -> Callable[..., Any]:
+        return lambda worlds, sensor, *args, **kw: fn(worlds, Reads(sensor), *args, **kw)
+
+    patches = [(collect, "step_robot", moves(t["collect_moves"], collect.step_robot)),
+               (loop, "step_robot", moves(t["loop_moves"], loop.step_robot)),
+               (experiment, "collect_trajectories", reads(experiment.collect_trajectories)),
+               (experiment, "collect_wander", reads(experiment.collect_wander))]
+    saved = [(m, name, getattr(m, name)) for m, name, _f in patches]
+    try:
+        for m, name, f in patches:
+            setattr(m, name, f)
+        yield t
+    finally:
+        for m, name, f in saved:
+            setattr(m, name, f)
+
+
+def run_fuzzy(seed: int, d: Path, rooms: dict[str, tuple[str, ...]], config: str = PRESET
+              ) -> dict[str, Any]:
+    """``sitframe run CONFIG --trials 1 --seed S --out d/run.h5`` (in this process, one
+    trial runs serially), its steps read from the log (:func:`fuzzy_steps`) and the
+    simulator's own count (:func:`simulator_tally`), its CPU time."""
+    from sitframe.cli.app import main as sitframe_main
+
     d.mkdir(parents=True, exist_ok=True)
     log = d / "run.h5"
     log.unlink(missing_ok=True)
-    c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    subprocess.run([str(Path(sys.executable).parent / "sitframe"), "run", PRESET, "--trials",
-                    "1", "--seed", str(seed), "--out", str(log)], check=True,
-                   stdout=subprocess.DEVNULL)
-    c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    res = {"config": "fuzzy-q", "method": "fuzzy-q", "seed": seed, "preset": PRESET,
-           "cpu_s": c1.ru_utime + c1.ru_stime - c0.ru_utime - c0.ru_stime,
-           **fuzzy_steps(log, rooms["test"])}
+    c0 = time.process_time()
+    with simulator_tally() as sim, redirect_stdout(io.StringIO()):
+        rc = sitframe_main(["run", config, "--trials", "1", "--seed", str(seed),
+                            "--out", str(log)])
+    if rc != 0:
+        raise SystemExit(f"sitframe run {config} --seed {seed} failed (exit {rc})")
+    steps = fuzzy_steps(log, rooms["test"])
+    res = {"config": "fuzzy-q", "method": "fuzzy-q", "seed": seed, "preset": config,
+           "cpu_s": time.process_time() - c0, **steps,
+           "simulator": {k: vars(v) for k, v in sim.items()},
+           # collisions while learning: the trial's (logged) and the wander's (counted here)
+           "learning_collisions": steps["learning_collisions"]
+           + sim["collect_moves"].collisions}
     (d / "train.json").write_text(json.dumps(res, indent=1))
     return res
 
