@@ -721,7 +721,7 @@ def curves_figure(final: dict[str, list[dict[str, Any]]], path: Path) -> None:
     panels = [("collisions_per_1000", "collisions / 1000 iterations, 22 unseen rooms", SAFE),
               ("coverage", "coverage, 22 unseen rooms", 0.5),
               ("learning_collisions", "collisions while learning (cumulative)", None)]
-    fig = Figure(figsize=(15, 4.8))
+    fig = Figure(figsize=(15, 5.8))
     for ax, (key, label, bar) in zip(fig.subplots(1, 3), panels, strict=True):
         for name, jobs in final.items():
             x, v = _curve(jobs, key)
@@ -732,6 +732,11 @@ def curves_figure(final: dict[str, list[dict[str, Any]]], path: Path) -> None:
                 continue
             line, = ax.plot(x, med, "o-", ms=3, label=f"{name} ({len(jobs)} seeds)")
             ax.fill_between(x, q1, q3, color=line.get_color(), alpha=0.18)
+            if key != "learning_collisions":  # the duel's score: each seed's chosen checkpoint
+                fin = [j["rows"][j["best"]]["test"][key] for j in jobs]
+                ax.plot(x[-1], np.median(fin), "D", mfc="none", mew=2, ms=10,
+                        color=line.get_color(), label=f"{name}: at the checkpoints chosen on "
+                        "validation rooms (median)")
         if bar is not None:
             ax.axhline(bar, color="grey", ls=":", lw=1, label="the issue's bar")
         ax.set_xscale("log")
@@ -741,10 +746,11 @@ def curves_figure(final: dict[str, list[dict[str, Any]]], path: Path) -> None:
         if key != "coverage":
             ax.set_yscale("symlog", linthresh=1.0 if key != "learning_collisions" else 10.0)
             ax.set_ylim(bottom=0)
-    fig.axes[0].legend(fontsize=8)
+    fig.legend(*fig.axes[0].get_legend_handles_labels(), loc="lower center", ncol=3,
+               fontsize=9, frameon=False)
     fig.suptitle("Duel v2: frozen policies at each checkpoint in the 22 test rooms (median and "
                  "IQR over seeds; fuzzy-q: its final policy)")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.11, 1, 1))
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100)
 
