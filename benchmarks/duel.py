@@ -57,8 +57,9 @@ Run (extra ``baselines``; one core, one process, torch on one thread)::
     python benchmarks/duel.py report --out duel2
 
 A rerun skips finished jobs (training and scoring apart). CPU per job on one core: DQN
-100k steps about 75 s, PPO 200k about 90 s, fuzzy-q about 4 s; scoring a checkpoint in
-the test rooms about 3 s.
+100k steps about 70 s, PPO 200k about 95 s, fuzzy-q 2-4 s (its whole ``sitframe run``);
+scoring a deep-RL job (11 checkpoints, validation and test rooms) about 50 s, a fuzzy-q
+job about 3 s; the screening about 13 minutes (20 jobs at half budget) and 1 of scoring.
 """
 
 from __future__ import annotations
@@ -762,6 +763,9 @@ def cmd_report(a: argparse.Namespace) -> None:
     if screen:
         publish("duel-tuning", tuning_table(screen) + "\n\nSelected (validation rooms only): "
                 + ", ".join(selected(screen).values()) + ".")
+        jobs = [j for js in screen.values() for j in js]
+        print(f"screening CPU s: training {sum(j['checkpoints'][-1]['cpu_s'] for j in jobs):.0f}"
+              f", scoring {sum(j['score_cpu_s'] for j in jobs):.0f}")
     final = load(a.out, "final")
     if "fuzzy-q" not in final or len(final) < 2:
         raise SystemExit("report: expected fuzzy-q and at least one deep-RL set in --phase final")
