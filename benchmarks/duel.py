@@ -760,7 +760,7 @@ def cmd_report(a: argparse.Namespace) -> None:
     from common.publish import publish
 
     screen = load(a.out, "screen")
-    if screen:
+    if screen and a.table == "duel":
         publish("duel-tuning", tuning_table(screen) + "\n\nSelected (validation rooms only): "
                 + ", ".join(selected(screen).values()) + ".")
         jobs = [j for js in screen.values() for j in js]
@@ -772,7 +772,7 @@ def cmd_report(a: argparse.Namespace) -> None:
     sums = [Summary.of(n, jobs) for n, jobs in final.items()]
     fq = next(s for s in sums if s.name == "fuzzy-q")
     deep = [s for s in sums if s.name != "fuzzy-q"]
-    publish("duel", duel_table([fq, *deep]) + "\n\n" + targets_table(fq, deep))
+    publish(a.table, duel_table([fq, *deep]) + "\n\n" + targets_table(fq, deep))
     curves_figure(final, a.figure)
     print(f"figure: {a.figure}")
     print("CPU s per method (training + scoring, summed over seeds): " + ", ".join(
@@ -791,6 +791,8 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=SCREEN_SEEDS, help="seeds 0 .. N-1")
     ap.add_argument("--from-seed", type=int, default=0)
     ap.add_argument("--figure", type=Path, default=FIGURE, help="report: the figure's path")
+    ap.add_argument("--table", default="duel",
+                    help="report: the published table's name (a second duel beside the first)")
     a = ap.parse_args()
     a.out.mkdir(parents=True, exist_ok=True)
     {"run": cmd_run, "score": cmd_score, "report": cmd_report}[a.command](a)
