@@ -25,7 +25,10 @@ a behaviour's table: ``reward = "cautious"``.
 
 from __future__ import annotations
 
+from collections import deque
 from typing import Any
+
+import numpy as np
 
 from sitframe import Transition, hookimpl
 from sitframe import params as P
@@ -37,20 +40,49 @@ class ObstacleAvoidanceReward:
     The printed algorithm subtracts the *signed* crisp heading, which would
     reward right turns over left turns; the text's intent (prefer actions that
     need less energy) is the magnitude, which is what we use.
+
+    ``progress`` (default 0: the thesis's reward) adds, to a step without
+    collision, ``progress`` times how much farther [m] the step took the robot
+    from where it was ``progress_window`` iterations before the step (fewer at
+    the start of a trial or a training episode, recognised by a jump between one
+    transition's end pose and the next one's start). Driving on in a line earns
+    the whole step length, circling little (nothing once the window spans the
+    circle), turning back loses:
+    against a rule base that turns in open space, which the heading cost alone
+    barely punishes (27 per step against 30). The term depends on the last
+    ``progress_window`` poses, which the situations do not show; keep the window
+    short.
     """
 
     name = "obstacle-avoidance"
 
     def __init__(self, *, collision: float = -30.0, base: float = 30.0,
-                 heading_cost: float = 0.1) -> None:
+                 heading_cost: float = 0.1, progress: float = 0.0,
+                 progress_window: int = 8) -> None:
         self.collision = P.number("collision", collision)
         self.base = P.number("base", base)
         self.heading_cost = P.number("heading_cost", heading_cost, lo=0.0)
+        self.progress = P.number("progress", progress, lo=0.0)
+        self.progress_window = int(P.number("progress_window", progress_window, lo=1,
+                                            integer=True))
+        self._xy: deque[np.ndarray] = deque(maxlen=self.progress_window + 1)
 
     def __call__(self, tr: Transition) -> float:
+        bonus = self._away(tr) * self.progress if self.progress else 0.0
         if tr.outcome.collided:
             return self.collision
-        return self.base - self.heading_cost * abs(tr.command.heading_change_deg)
+        return self.base - self.heading_cost * abs(tr.command.heading_change_deg) + bonus
+
+    def _away(self, tr: Transition) -> float:
+        """How much farther [m] the transition's end is than its start from the position
+        ``progress_window`` iterations before its start (or the episode's first)."""
+        xy, before = self._xy, np.asarray(tr.before.pose[:2], dtype=float)
+        if not xy or float(np.hypot(*(xy[-1] - before))) > 1e-6:  # a trial or episode starts
+            xy.clear()
+            xy.append(before)
+        anchor = xy[0]
+        xy.append(np.asarray(tr.after.pose[:2], dtype=float))
+        return float(np.hypot(*(xy[-1] - anchor)) - np.hypot(*(before - anchor)))
 
 
 class SpeedReward:

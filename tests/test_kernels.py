@@ -366,3 +366,27 @@ def test_frozen_rule_td_errors_are_bit_identical(seed: int, activation: float, u
         slow = td()
     assert np.array_equal(fast, slow)
     assert (fast > 0).sum() == (u0 >= activation).sum() if activation else (fast > 0).all()
+
+
+def test_the_pioneer_cone_reads_the_same_on_both_paths(room: World,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The sonar kernel casts all rays of a read together (segment by segment, the parallel
+    case apart): 8 cones of 5 rays from poses all over the room, some on a wall's line with
+    one ray exactly along it), read as the numpy path reads."""
+    rng = np.random.default_rng(41)
+    rel = np.radians((np.array([90.0, 50, 30, 10, -10, -30, -50, -90])[:, None]
+                      + np.linspace(-12.5, 12.5, 5)[None, :]).reshape(-1))
+    poses = [(x, y, th) for x, y, th in zip(rng.uniform(-0.5, 5.5, 300),
+                                            rng.uniform(-0.5, 4.5, 300),
+                                            rng.uniform(-math.pi, math.pi, 300), strict=True)]
+    # on a horizontal wall's line with one ray exactly along it (its angle rel + th is 0)
+    poses += [(x, y, -rel[k]) for x in (-1.0, 0.0, 1.0, 2.5, 6.0) for y in (0.0, 1.0, 4.0)
+              for k in (0, 3, 17, 39)]
+    s = room.segment_set
+    for x, y, th in poses:
+        fast, slow = both(monkeypatch, lambda x=x, y=y, th=th: geo.rim_ranges(
+            s, x, y, rel + th, 3.0, 0.15, 5, clip=True))
+        assert np.array_equal(fast, slow), (x, y, th)
+        fast, slow = both(monkeypatch, lambda x=x, y=y, th=th: geo.cast_rays(s, x, y, rel + th,
+                                                                             3.15))
+        assert np.array_equal(fast, slow), (x, y, th)

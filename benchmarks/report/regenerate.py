@@ -128,6 +128,9 @@ RECIPES: dict[str, Recipe] = {
         f"{POOLED} --publish wall-following {S}/wall-following",), 3),
     "goal-finding": Recipe(("goal-finding",), (
         f"{POOLED} --publish goal-finding {S}/goal-finding",), 4),
+    "speed-41": Recipe((), (
+        f"{PY} benchmarks/learning/bench_speed.py --against b2a2035 --repeats 5 "
+        "--publish speed-41",), 6),
     "gym-speed": Recipe((), (
         f"{PY} benchmarks/sim/bench_gym.py --steps 3200 --repeats 5 --publish gym-speed",), 2),
     "goal-finding-learned": Recipe(("goal-finding-learned",), (
@@ -138,6 +141,10 @@ RECIPES: dict[str, Recipe] = {
     "arbiters-own-rooms": Recipe((), (
         f"{ARBITERS} --worlds {OWN_ROOMS} --publish arbiters-own-rooms",), 20,
         runs=("goal-finding-learned", "goal-finding")),
+    "generalisation": Recipe((), (
+        f"{PY} benchmarks/learning/generalisation.py --seeds 10 --publish",), 50),
+    "preset-safety": Recipe((), (
+        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --publish",), 120),
     "select-avoidance": Recipe((), (
         f"capture {PY} benchmarks/learning/select_avoidance.py logs/obstacle-avoidance-12.h5 "
         "--short 100 --short-world goal-training --test 100 --worlds goal novel-1 novel-2 "

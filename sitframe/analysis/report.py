@@ -439,6 +439,20 @@ def _reward_label(tr: TrialLog) -> str:
     return lab if lab in labels else labels[0]
 
 
+def _room_at(tr: TrialLog, s: int, e: int) -> tuple[str, int]:
+    """The room iteration ``s`` of a trial ran in and the end (at most ``e``) of its stay
+    there: a trial over rooms (``room``, ``learn/rooms``) moves between rooms, any other
+    runs in its world."""
+    room = tr.arrays.get("room")
+    names = tr.episodes.get("learn/rooms")
+    if room is None or names is None or s >= len(room):
+        return tr.world, e
+    names = json.loads(names) if isinstance(names, str) else [str(n) for n in names]
+    there = np.asarray(room[s:e]) == room[s]
+    stop = s + (int(np.argmin(there)) if not there.all() else len(there))
+    return names[int(room[s])], stop
+
+
 def _trial_figures(W: _Writer, lg: Log, tr: TrialLog, worlds: dict[str, Any], window: int,
                    path_iterations: int, radius: float, LP: Any) -> None:
     k = tr.index
@@ -476,13 +490,14 @@ def _trial_figures(W: _Writer, lg: Log, tr: TrialLog, worlds: dict[str, Any], wi
     W.figure(sec, f"reward_trial{k}.png",
              f"Mean reward per {window} iterations in trial {k}, {state} (Fig. 5.7)", reward)
 
-    world = worlds.get(tr.world)
+    s = conv if conv is not None else max(0, L - path_iterations)
+    e = min(L, s + path_iterations)
+    room, e = _room_at(tr, s, e)
+    world = worlds.get(room)
     if world is not None and "pose" in tr.arrays:
-        s = conv if conv is not None else max(0, L - path_iterations)
-        e = min(L, s + path_iterations)
         what = "after convergence" if conv is not None else "at the end (not converged)"
         W.figure(sec, f"trajectory_trial{k}.png",
-                 f"Learning path of trial {k} in '{tr.world}', iterations {s}-{e} {what}; "
+                 f"Learning path of trial {k} in '{room}', iterations {s}-{e} {what}; "
                  "crosses = collisions (Fig. 5.10)",
                  lambda: LP.plot_trajectory(
                      world, tr.arrays["pose"], collision=tr.arrays.get("collision"),
@@ -490,9 +505,9 @@ def _trial_figures(W: _Writer, lg: Log, tr: TrialLog, worlds: dict[str, Any], wi
                      first=tr.episodes.get("learn/first_iteration",
                                            tr.episodes.get("first_iteration")),
                      goals=tr.episodes.get("learn/goal", tr.episodes.get("goal")),
-                     title=f"Trial {k}, {tr.world}, it. {s}–{e}: {_count(tr, s, e)} coll."))
+                     title=f"Trial {k}, {room}, it. {s}–{e}: {_count(tr, s, e)} coll."))
     else:
-        W.r.skipped.append(f"trajectory_trial{k}.png: world '{tr.world}' not in the log")
+        W.r.skipped.append(f"trajectory_trial{k}.png: world '{room}' not in the log")
     eps = R.evaluation_episodes(tr)
     if eps:
         cov = {w: float(tr.summary.get(summary_key("eval", w, "coverage"), np.nan)) for w in eps}

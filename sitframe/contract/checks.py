@@ -305,16 +305,17 @@ def check_proposal(p: Any) -> Proposal:
     if p.__class__ is not Proposal:
         raise BoundaryError(f"returned {type(p).__name__} {p!r:.60}, expected a "
                             "sitframe.Proposal(heading_deg, speed_m_s=None, activation=None)")
-    h = p.heading_deg
+    h, s, a = p.heading_deg, p.speed_m_s, p.activation
+    if h.__class__ is float and h - h == 0.0 and a is None and (s is None or (
+            s.__class__ is float and s - s == 0.0 and s >= 0.0)):
+        return p  # (the common case, every iteration: finite floats, no activation)
     if not isinstance(h, _REAL) or isinstance(h, bool) or not math.isfinite(h):
         raise BoundaryError(f"returned a Proposal with heading_deg {h!r}, expected a finite "
                             "number of degrees")
-    s = p.speed_m_s
     if s is not None and (not isinstance(s, _REAL) or isinstance(s, bool)
                           or not math.isfinite(s) or s < 0):
         raise BoundaryError(f"returned a Proposal with speed_m_s {s!r}, expected None or a "
                             "finite number >= 0 [m/s]")
-    a = p.activation
     if a is not None and (not isinstance(a, _REAL) or isinstance(a, bool)
                           or not 0.0 <= a <= 1.0):
         raise BoundaryError(f"returned a Proposal with activation {a!r}, expected None or a "

@@ -163,7 +163,23 @@ EXPERIMENT = Table("experiment", doc="What runs, how long and where.", keys=(
         unit="m/s", lo=0.0, lo_open=True),
     Key("clusters_from", "path", "", "a log whose fitted situations are reused (the collect "
         "and cluster stages are skipped); empty: none"),
+    Key("rooms", "names", ABSENT, "learn over a family of rooms: each learning trial is a "
+        "chain of episodes, each in a room and from a free start pose drawn by the trial's "
+        "Generator (the rooms in shuffled rounds); absent: the trial runs in world only"),
+    Key("episode_iterations", "integer", ABSENT, "iterations of one episode of a learning "
+        "trial over rooms (needs rooms; default 250)", lo=1, hi=MAX_ITERATIONS),
+    Key("candidates", "integer", ABSENT, "rule bases a learning trial learns one after "
+        "another (iterations / candidates each, the learners reset in between), keeping the "
+        "one that scores best in validation_rooms (needs them; default 1)", lo=1, hi=1000),
+    Key("validation_rooms", "names", ABSENT, "the rooms the candidates are judged in, each "
+        "from its start pose, frozen (needs candidates)"),
+    Key("validation_iterations", "integer", ABSENT, "iterations of a candidate's run in each "
+        "validation room (needs candidates; default 500)", lo=1, hi=MAX_ITERATIONS),
 ))
+#: Iterations of one episode of a learning trial over ``rooms`` when the config does not say.
+ROOM_EPISODE_ITERATIONS = 250
+#: Iterations of a candidate's run in a validation room when the config does not say.
+VALIDATION_ITERATIONS = 500
 ROBOT = Table("robot", doc="The simulated robot: the fields of RobotParams, which checks them.",
               keys=(), free=True)
 SENSOR = Table("sensor", doc="The sensor: a component and its parameters.",
@@ -252,7 +268,8 @@ OPTIONAL_SECTIONS = ("prerequisites", "spaces")
 _BEFORE_PLUGIN_TABLES = ("experiment", "robot", "sensor", "collect", "interpreter",
                          "behaviours", "arbiter")
 _CORE_TABLES = {t.name: t for t in (EXPERIMENT, COLLECT, PLUGINS)}
-_CORE_KEYS = {s: set(v) for s, v in DEFAULTS.items() if s not in ("behaviours",)}
+_CORE_KEYS = {s: set(v) | {k.name for k in _CORE_TABLES[s].keys} if s in _CORE_TABLES
+              else set(v) for s, v in DEFAULTS.items() if s not in ("behaviours",)}
 _COMPONENT_SECTIONS = ("sensor", "interpreter", "arbiter")
 #: Keys of a ``[behaviours.LABEL]`` (or ``[arbiter]``) table that the core reads and that
 #: are not the component's parameters (the one definition; resolve and sweep use it).
@@ -329,6 +346,11 @@ class ExperimentSection:
     world: str
     default_speed: float
     clusters_from: str
+    rooms: tuple[str, ...] = ()
+    episode_iterations: int = ROOM_EPISODE_ITERATIONS
+    candidates: int = 1
+    validation_rooms: tuple[str, ...] = ()
+    validation_iterations: int = VALIDATION_ITERATIONS
 
 
 @dataclass(frozen=True)
@@ -371,7 +393,11 @@ class Config:
         return cls(
             ExperimentSection(e["name"], e["description"], int(e["seed"]), int(e["trials"]),
                               int(e["iterations"]), tuple(e["stages"]), e["world"],
-                              float(e["default_speed"]), e["clusters_from"]),
+                              float(e["default_speed"]), e["clusters_from"],
+                              tuple(e.get("rooms", ())),
+                              int(e.get("episode_iterations", ROOM_EPISODE_ITERATIONS)),
+                              int(e.get("candidates", 1)), tuple(e.get("validation_rooms", ())),
+                              int(e.get("validation_iterations", VALIDATION_ITERATIONS))),
             dict(cfg["robot"]), Component.of(cfg["sensor"]),
             CollectSection(c["mode"], tuple(c["worlds"]), float(c["speed"]),
                            float(c["rate_hz"]), int(c["wander_samples"])),
@@ -396,12 +422,23 @@ class Config:
         out = [lb for lb, b in self.behaviours.items() if b.space == space]
         return out + (["arbiter"] if self.arbiter.space == space else [])
 
+    def world_key(self, name: str) -> str:
+        """The config key that names world ``name`` (for messages): ``experiment.world``,
+        ``experiment.rooms[j]``, else ``worlds``."""
+        e = self.experiment
+        if name == e.world:
+            return "experiment.world"
+        for key, names in (("rooms", e.rooms), ("validation_rooms", e.validation_rooms)):
+            if name in names:
+                return f"experiment.{key}[{names.index(name)}]"
+        return "worlds"
+
     def worlds(self) -> list[str]:
         """The worlds the core's tables name, once each: the learning world, then the
         collection rooms (if it collects); the evaluation protocols' worlds are their tables'
         (:meth:`sitframe.contract.resolve.Resolved.stage_worlds`)."""
         e = self.experiment
-        names = [e.world]
+        names = [e.world, *e.rooms, *e.validation_rooms]
         if "collect" in e.stages:
             names += self.collect.worlds
         return list(dict.fromkeys(names))
@@ -752,7 +789,9 @@ def _check_selection(sel: dict[str, Any], file: str | None, key: str) -> None:
 #: The order in which :func:`_check_core` checks the core tables' keys (the first wrong key
 #: is the one reported).
 _CHECK_ORDER = {"experiment": ("name", "description", "seed", "trials", "iterations",
-                               "default_speed", "world", "clusters_from", "stages"),
+                               "default_speed", "world", "clusters_from", "stages", "rooms",
+                               "episode_iterations", "candidates", "validation_rooms",
+                               "validation_iterations"),
                 "collect": ("mode", "worlds", "speed", "rate_hz", "wander_samples"),
                 "plugins": ("dirs",)}
 
@@ -762,11 +801,30 @@ def _check_core(cfg: dict[str, Any], file: str | None) -> None:
     for section, names in _CHECK_ORDER.items():
         table, values = _CORE_TABLES[section], cfg[section]
         for name in names:
+            if name not in values:  # (a key without default the config leaves out)
+                continue
             key = table.key(name)
             checked = _at(lambda _n, v, k=key: k.validate(v), name, values[name], file,
                           section)
             if key.kind == "integer":
                 values[name] = checked
+    _check_together(cfg["experiment"], file)
+
+
+def _check_together(e: dict[str, Any], file: str | None) -> None:
+    """The ``[experiment]`` keys that need one another (rooms, candidates, validation)."""
+    for key, needs, what in (
+            ("episode_iterations", "rooms", "the rooms whose episodes last this long"),
+            ("validation_iterations", "candidates", "the candidates judged this long"),
+            ("validation_rooms", "candidates", "the candidates judged there"),
+            ("candidates", "validation_rooms", "the rooms the candidates are judged in")):
+        if key in e and needs not in e:
+            raise InputError(f"expected experiment.{needs} with it ({what})", file=file,
+                             key=f"experiment.{key}")
+    if "candidates" in e and e["candidates"] > e["iterations"]:
+        raise InputError(f"expected at most experiment.iterations ({e['iterations']}) "
+                         f"candidates, got {e['candidates']}", file=file,
+                         key="experiment.candidates")
 
 
 def to_toml(cfg: dict[str, Any]) -> str:

@@ -11,11 +11,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from sitframe.sim.fastinit import slot_init
+
 if TYPE_CHECKING:
     from sitframe.sim.robot import Command, StepOutcome
     from sitframe.sim.world import Goal, World
 
 
+@slot_init
 @dataclass(frozen=True, slots=True)
 class Proposal:
     """What one behaviour wants: a relative heading change and optionally a speed.
@@ -56,6 +59,7 @@ class Proposal:
         return Proposal(heading, speed)
 
 
+@slot_init
 @dataclass(frozen=True, slots=True)
 class Context:
     """What every behaviour and arbiter sees at one iteration.
@@ -96,6 +100,7 @@ class Context:
     spaces: dict[str, np.ndarray] | None = None
 
 
+@slot_init
 @dataclass(frozen=True, slots=True)
 class Transition:
     """One iteration's cause and effect, given to rewards and learning behaviours.
@@ -121,6 +126,7 @@ class Transition:
         return bool(self.outcome.collided)
 
 
+@slot_init
 @dataclass(frozen=True, slots=True)
 class StepRecord:
     """Everything about one iteration, for ``sitframe_step`` observers."""

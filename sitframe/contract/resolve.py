@@ -116,7 +116,7 @@ class Resolved:
             raise PluginFault(str(exc), where=str(res.origins["interpreter"]),
                               method="n_situations") from None
         e = res.config.experiment
-        loaded = {n: res.world(n, "experiment.world" if n == e.world else "worlds")
+        loaded = {n: res.world(n, res.config.world_key(n))
                   for n in dict.fromkeys([*res.stage_worlds(), *worlds])}
         spaces = {DEFAULT_SPACE: SpaceInfo(DEFAULT_SPACE, None if c is None else int(c),
                                            tuple(range(spec.dim)),

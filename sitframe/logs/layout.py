@@ -26,7 +26,9 @@ Layout (schema ``sitframe-log``, version :data:`SCHEMA_VERSION`)::
                           sensor; called sonar before contract v2), memberships (L, c),
                           command (L, 2) [deg, m/s], collision (L,),
                           contact (L, 2), nearest (L,), weights (L, k),
-                          proposals/<label> (L, 2), reward/<label> (L,)
+                          proposals/<label> (L, 2), reward/<label> (L,);
+                          a trial over rooms (experiment.rooms) also room (L,),
+                          each iteration's index into episodes/learn attr rooms
     /trials/NNNN/behaviours/<label>/   what the behaviour's trial_data() returned
                           (e.g. heading/q_snapshots (K, c, A),
                           heading/snapshot_iteration (K,)), and its learned
@@ -35,7 +37,11 @@ Layout (schema ``sitframe-log``, version :data:`SCHEMA_VERSION`)::
                           actions/<out> (A,) action values, units/<out> attr,
                           q/<out> (c, A) if the learner keeps Q; a learning
                           arbiter's under the label "arbiter"
-    /trials/NNNN/episodes/...          evaluation / goal-episode arrays
+    /trials/NNNN/episodes/...          evaluation / goal-episode arrays; a trial in
+                          episodes: learn/first_iteration (E,) and, over rooms,
+                          learn/room (E,) and attr learn/rooms (JSON names); a
+                          trial of candidates: select/first_iteration, select/
+                          collisions_per_1000, select/coverage, select/score (K,)
     /trials/NNNN/plugins/<plugin>/...  per-trial data handed by a plugin's
                           components (trial_end) or observers
                           (sitframe_trial_data); an evaluation's under eval/<world>/

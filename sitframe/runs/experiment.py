@@ -122,7 +122,7 @@ class Experiment:
         self.eval_worlds = self.res.protocol_worlds(self.protocol) \
             if "evaluate" in e.stages else []
         names += self.eval_worlds
-        worlds = {n: self.res.world(n, "experiment.world" if n == e.world else "worlds").text
+        worlds = {n: self.res.world(n, self.config.world_key(n)).text
                   for n in dict.fromkeys(names)}
         plugins = [dataclasses.asdict(info) for info, _c in self.registry.plugins_table()]
         self.info = RunInfo(
@@ -145,9 +145,20 @@ class Experiment:
         sensor = self.res.sensor()
         o = self.res.origins["sensor"]
         parts = []
-        if c.mode in ("trajectory", "both"):
-            parts.append(call(o, "read", collect_trajectories, worlds, sensor, rng,
-                              speed=c.speed, rate_hz=c.rate_hz, params=self.res.robot))
+        # "both" follows the trajectories of the rooms that have them (a generated room has
+        # none: it is only wandered in); "trajectory" needs them in every room
+        paths = [w for w in worlds if w.trajectories]
+        if c.mode == "trajectory" and len(paths) < len(worlds):
+            j = next(j for j, w in enumerate(worlds) if not w.trajectories)
+            raise InputError(f"world '{c.worlds[j]}' has no [[trajectories]] to collect along; "
+                             "expected a room with trajectories, or collect.mode = \"wander\" "
+                             "or \"both\"", file=self.source, key=f"{key}.worlds[{j}]")
+        if c.mode in ("trajectory", "both") and paths:
+            along = call(o, "read", collect_trajectories, paths, sensor, rng,
+                         speed=c.speed, rate_hz=c.rate_hz, params=self.res.robot)
+            at = np.asarray([j for j, w in enumerate(worlds) if w.trajectories], dtype=np.int16)
+            parts.append(dataclasses.replace(along, source=at[along.source],
+                                             worlds=tuple(w.name for w in worlds)))
         if c.mode in ("wander", "both"):
             parts.append(call(o, "read", collect_wander, worlds, sensor, rng,
                               n_samples=c.wander_samples, speed=c.speed,

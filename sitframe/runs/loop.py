@@ -235,11 +235,17 @@ def simulate(
                    {sp.name: sp.c for sp in parts.spaces})
     start = np.array(world.start if spec.start is None else spec.start, dtype=float)
     env = _Env(world, goal, rng, start)
-    env.chain = _training_episodes(res, spec, world)  # None unless the protocol trains so
+    # None unless the trial learns over rooms or its protocol trains in episodes
+    env.chain = _room_episodes(res, spec) or _training_episodes(res, spec, world)
     if env.chain is not None:
-        env.start, env.goal = next(env.chain.pairs)
+        env.start, env.goal, env.world = next(env.chain.pairs)
+    env.cands = _candidates(res, spec)  # None unless the trial learns several rule bases
     env.track = SituationTracker.start(parts.interp, spec.learn, parts.components, res.origins,
                                        spec.index)  # None unless the situations evolve
+    if env.cands is not None and env.track is not None:
+        raise InputError("expected an interpreter whose situations do not evolve: the "
+                         "candidates are judged with the situations the trial started from",
+                         key="experiment.candidates")
     n = _run_loop(res, spec, parts, rec, env, step_hook, protocol)
     arrays = rec.arrays(n, res.origins, spec.index, res.run.sensor.max_range)
     result = _trial_result(res, spec, world, parts, arrays, env)
@@ -464,13 +470,14 @@ class _Env:
     """Where a trial runs: world, goal, Generator and start pose; the chain of training
     episodes (:class:`_TrainingEpisodes`) and the tracker of evolving situations, if any."""
 
-    __slots__ = ("world", "goal", "rng", "start", "chain", "track")
+    __slots__ = ("world", "goal", "rng", "start", "chain", "track", "cands")
 
     def __init__(self, world: World, goal: Goal | None, rng: np.random.Generator,
                  start: np.ndarray) -> None:
         self.world, self.goal, self.rng, self.start = world, goal, rng, start
-        self.chain: _TrainingEpisodes | None = None
+        self.chain: _TrainingEpisodes | RoomEpisodes | None = None
         self.track: SituationTracker | None = None
+        self.cands: Candidates | None = None
 
 
 def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder, env: _Env,
@@ -490,6 +497,7 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
     default_speed = res.config.experiment.default_speed
     robot = res.robot
     track, chain, spaces, where = env.track, env.chain, parts.spaces, parts.where
+    cands = env.cands
     at_read, at_u = _Step(og["sensor"], "read"), _Step(og["interpreter"], "memberships")
     at_combine, at_core = _Step(og["arbiter"], "combine"), _Step(None, "step")
     at_step = _Step(None, "sitframe_step")
@@ -558,8 +566,11 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
                     check_flag(protocol.terminated(ctx)):
                 n_done = t + 1
                 break
+            if cands is not None and cands.over(t + 1):
+                step_at = at_core
+                cands.next_round(res, spec, parts, rng)
             if chain is not None and chain.over(ctx, t + 1, spec.iterations):
-                pose, goal = next(chain.pairs)  # the next training episode starts here
+                pose, goal, world = next(chain.pairs)  # the next training episode starts here
                 ctx = None
     except (KeyboardInterrupt, TaskCancelled, PluginFault, InputError):
         raise  # (a plugin's InputError names the input it found wrong)
@@ -598,6 +609,28 @@ def _trial_result(res: Resolved, spec: TrialSpec, world: World, parts: _TrialPar
                   arrays: dict[str, np.ndarray], env: _Env) -> TrialResult:
     """The finished trial: behaviours' data and policies, summary, plugins' data."""
     k, og = spec.index, res.origins
+    bdata, policies = _learned_state(res, spec, parts)
+    chosen: dict[str, Any] = {}
+    if env.cands is not None:  # the candidate that scored best in the validation rooms
+        bdata, policies, chosen = env.cands.choose(res, spec, bdata, policies)
+    summary = trial_summary(world, arrays, bdata, res.robot)
+    episodes = {} if env.chain is None else env.chain.record(arrays, summary, res.robot)
+    if env.cands is not None:
+        episodes.update(env.cands.record(chosen, summary))
+    result = TrialResult(spec.index, spec.seed, world.name, arrays, bdata, summary, episodes,
+                         policies=policies)
+    if env.track is not None:
+        result.situations = call(og["interpreter"], "state", env.track.finish, arrays["pose"],
+                                 res.run.sensor.dim, trial=k)
+        summary["situations"] = result.situations["count"]
+    _collect_plugin_data(result, parts.components, parts.tinfo, og, res)
+    return result
+
+
+def _learned_state(res: Resolved, spec: TrialSpec, parts: _TrialParts
+                   ) -> tuple[dict[str, dict[str, Any]], dict[str, LearnedPolicy]]:
+    """The behaviours' (and a learning arbiter's) trial data and policies, now."""
+    k, og = spec.index, res.origins
     bdata, policies = {}, {}
     learned = [(lb, b, og[f"behaviours.{lb}"]) for lb, (b, _r) in parts.behaviours.items()]
     if hasattr(parts.arbiter, "policy"):
@@ -615,16 +648,95 @@ def _trial_result(res: Resolved, spec: TrialSpec, world: World, parts: _TrialPar
         for lb, _b, _o in learned:
             bdata.setdefault(lb, {})["space"] = res.config.space_of(
                 "arbiter" if lb == "arbiter" else f"behaviours.{lb}")
-    summary = trial_summary(world, arrays, bdata, res.robot)
-    episodes = {} if env.chain is None else env.chain.record(arrays["pose"], summary)
-    result = TrialResult(spec.index, spec.seed, world.name, arrays, bdata, summary, episodes,
-                         policies=policies)
-    if env.track is not None:
-        result.situations = call(og["interpreter"], "state", env.track.finish, arrays["pose"],
-                                 res.run.sensor.dim, trial=k)
-        summary["situations"] = result.situations["count"]
-    _collect_plugin_data(result, parts.components, parts.tinfo, og, res)
-    return result
+    return bdata, policies
+
+
+class Candidates:
+    """Several rule bases learnt one after another in a trial; the best in validation kept.
+
+    ``experiment.candidates = K`` splits a learning trial into ``K`` rounds of
+    ``iterations / K`` iterations (the last takes the remainder). At the end of a
+    round every learner's data and policy are kept and the learners are reset
+    (``reset`` again, with the trial's Generator: a fresh rule base, Q from its
+    initial values); the robot drives on where it is (or in the next room of a
+    trial over rooms). After the last round each candidate's frozen policies run
+    ``validation_iterations`` iterations from the start of every validation
+    room (the same seeds for every candidate, so they meet the same noise), and
+    the candidate with the lowest score
+
+        collisions per 1000 (pooled over the rooms) - :attr:`COVERAGE_WEIGHT` x
+        mean coverage
+
+    (the earliest of equal ones) is the trial's: its policies are evaluated and
+    logged, its data is the behaviours' trial data (its convergence iteration
+    counts from the trial's start). The validation runs are steps the learner
+    spends: the summary's ``validation_iterations`` counts them; ``candidate`` is
+    the one kept, ``select/...`` in the episodes records every candidate's first
+    iteration, figures and score.
+    """
+
+    #: Coverage's weight in the score: 0.1 more coverage is worth 2 collisions per 1000.
+    COVERAGE_WEIGHT = 20.0
+
+    def __init__(self, k: int, iterations: int, rooms: list[str], run_iterations: int) -> None:
+        self.ends = [iterations * (j + 1) // k for j in range(k)]
+        self.rooms, self.run_iterations = rooms, run_iterations
+        self.saved: list[tuple[dict[str, dict[str, Any]], dict[str, LearnedPolicy]]] = []
+
+    def over(self, t: int) -> bool:
+        """Whether a round (not the last) ends after iteration ``t``."""
+        return len(self.saved) < len(self.ends) - 1 and t == self.ends[len(self.saved)]
+
+    def next_round(self, res: Resolved, spec: TrialSpec, parts: _TrialParts,
+                   rng: np.random.Generator) -> None:
+        """Keep the round's data and policies; reset every learner for the next round."""
+        self.saved.append(_learned_state(res, spec, parts))
+        for lb, beh, _rew, o, _orw in parts.learners:
+            call(o, "reset", beh.reset, rng, parts.c_of(lb), spec.iterations, trial=spec.index)
+
+    def choose(self, res: Resolved, spec: TrialSpec, bdata: dict[str, dict[str, Any]],
+               policies: dict[str, LearnedPolicy]
+               ) -> tuple[dict[str, dict[str, Any]], dict[str, LearnedPolicy], dict[str, Any]]:
+        """Judge every candidate (the last one's ``bdata``, ``policies`` given) in the
+        validation rooms; the chosen one's data and policies, and every candidate's figures."""
+        self.saved.append((bdata, policies))
+        seeds = np.random.SeedSequence(spec.seed % 2**64, spawn_key=(4,)).generate_state(
+            len(self.rooms), np.uint64)
+        coll = np.zeros(len(self.saved))
+        cov = np.zeros(len(self.saved))
+        for j, (_b, pol) in enumerate(self.saved):
+            runs = [simulate(res, dataclasses.replace(
+                spec, seed=int(seeds[r]), world=room, iterations=self.run_iterations,
+                learn=False, policies=dict(pol), evaluate=(), start=None, goal=None,
+                protocol=None, observed=False)).summary for r, room in enumerate(self.rooms)]
+            coll[j] = 1000.0 * sum(s["collisions"] for s in runs) / \
+                (self.run_iterations * len(runs))
+            cov[j] = float(np.mean([s["coverage"] for s in runs]))
+        score = coll - self.COVERAGE_WEIGHT * cov
+        best = int(np.argmin(score))
+        return (*self.saved[best], {"candidate": best, "collisions_per_1000": coll,
+                                    "coverage": cov, "score": score})
+
+    def record(self, chosen: dict[str, Any], summary: dict[str, Any]) -> dict[str, Any]:
+        """Add the chosen candidate and the validation steps to ``summary``; return the
+        candidates' records (``select/...``)."""
+        summary["candidate"] = int(chosen["candidate"])
+        summary["validation_iterations"] = len(self.saved) * len(self.rooms) * \
+            self.run_iterations
+        return {"select/first_iteration": np.asarray([0, *self.ends[:-1]], dtype=np.int64),
+                "select/collisions_per_1000": chosen["collisions_per_1000"],
+                "select/coverage": chosen["coverage"], "select/score": chosen["score"]}
+
+
+def _candidates(res: Resolved, spec: TrialSpec) -> Candidates | None:
+    """The rounds of a learning trial that learns several candidates, else None."""
+    e = res.config.experiment
+    if not spec.learn or e.candidates <= 1:
+        return None
+    for j, room in enumerate(e.validation_rooms):
+        res.world(room, key=f"experiment.validation_rooms[{j}]")
+    return Candidates(e.candidates, spec.iterations, list(e.validation_rooms),
+                      e.validation_iterations)
 
 
 class _TrainingEpisodes:
@@ -652,7 +764,7 @@ class _TrainingEpisodes:
         self.reached: list[bool] = []
         self.pairs = self._pairs()
 
-    def _pairs(self) -> Iterator[tuple[np.ndarray, Goal | None]]:
+    def _pairs(self) -> Iterator[tuple[np.ndarray, Goal | None, World]]:
         method = "training_starts" if callable(getattr(self.proto, "training_starts", None)) \
             else "episode_starts"
         draw = getattr(self.proto, method)
@@ -663,7 +775,7 @@ class _TrainingEpisodes:
             for e, start in enumerate(starts):
                 g = None if goals is None else goals[e]
                 self.goals.append((np.nan, np.nan, np.nan) if g is None else tuple(g))
-                yield start.copy(), None if g is None else Goal(g[:2], float(g[2]))
+                yield start.copy(), None if g is None else Goal(g[:2], float(g[2])), self.world
 
     def over(self, ctx: Context, t: int, limit: int) -> bool:
         """Whether the episode ends at ``ctx`` (iteration ``t`` of a trial of ``limit``):
@@ -678,14 +790,104 @@ class _TrainingEpisodes:
             return True
         return False
 
-    def record(self, pose: np.ndarray, summary: dict[str, Any]) -> dict[str, Any]:
+    def record(self, arrays: dict[str, np.ndarray], summary: dict[str, Any],
+               robot: RobotParams) -> dict[str, Any]:
         """The episodes' first rows and goals (``learn/...``); the distance without the jumps."""
+        pose = arrays["pose"]
         first = np.asarray(self.first, dtype=np.int64)
         summary["distance_m"] = float(sum(path_length(seg[:, :2])
                                           for seg in np.split(pose, first[1:])))
         n = len(first)
         return {"learn/first_iteration": first, "learn/goal": np.asarray(self.goals[:n]),
                 "learn/success": np.asarray(self.reached + [False] * (n - len(self.reached)))[:n]}
+
+
+class RoomEpisodes:
+    """A learning trial over a family of rooms (``experiment.rooms``), episode by episode.
+
+    The trial is a chain of episodes of ``episode_iterations`` iterations (the
+    last one ends with the trial). Each episode runs in one of the rooms, from a
+    start pose drawn uniformly among the room's free poses (the robot disc and a
+    margin of :attr:`MARGIN` clear of every wall), heading uniform; the rooms
+    come in rounds, each round every room once in an order shuffled anew. Rooms,
+    orders and poses come from a Generator of their own seeded by the trial's
+    seed (``spawn_key = (3,)``), so the trial's other draws are those of a trial
+    in one world and a seed gives the same chain whatever the rooms' count of
+    workers. Learning carries on across episodes (nothing is reset between them).
+
+    The log records, besides the trial's usual arrays, ``room`` (per iteration,
+    the index into ``learn/rooms`` of the room it ran in) and per episode
+    ``learn/first_iteration`` and ``learn/room``; the summary's ``coverage`` is
+    the mean over the rooms the trial visited of the share of each room's free
+    cells visited in its episodes there (:func:`sitframe.sim.metrics.coverage`),
+    ``rooms_visited`` their number, ``distance_m`` the path without the jumps
+    between episodes.
+
+    Parameters
+    ----------
+    worlds
+        The rooms, in config order.
+    episode
+        Iterations of one episode.
+    seed
+        The trial's seed.
+    robot
+        The robot (its radius decides which poses are free).
+    """
+
+    #: Clearance [m] beyond the robot's radius of an episode's start position.
+    MARGIN = 0.1
+
+    def __init__(self, worlds: list[World], episode: int, seed: int,
+                 robot: RobotParams) -> None:
+        self.worlds, self.episode, self.robot = worlds, int(episode), robot
+        self.rng = np.random.default_rng(np.random.SeedSequence(seed % 2**64, spawn_key=(3,)))
+        self.first: list[int] = [0]
+        self.rooms: list[int] = []
+        self.pairs = self._pairs()
+
+    def _pairs(self) -> Iterator[tuple[np.ndarray, Goal | None, World]]:
+        while True:
+            for i in self.rng.permutation(len(self.worlds)):
+                world = self.worlds[int(i)]
+                self.rooms.append(int(i))
+                yield (world.random_free_pose(self.rng, self.robot.radius, margin=self.MARGIN),
+                       world.goal, world)
+
+    def over(self, ctx: Context, t: int, limit: int) -> bool:
+        """Whether the episode ends after iteration ``t`` of a trial of ``limit`` (never at
+        the trial's own end)."""
+        if t < limit and t - self.first[-1] >= self.episode:
+            self.first.append(t)
+            return True
+        return False
+
+    def record(self, arrays: dict[str, np.ndarray], summary: dict[str, Any],
+               robot: RobotParams) -> dict[str, Any]:
+        """Add ``room`` to the trial's ``arrays``, the coverage over rooms and the distance
+        without the jumps to its ``summary``; return the episodes' records (``learn/...``)."""
+        pose, n = arrays["pose"], int(arrays["collision"].size)
+        first = np.asarray(self.first, dtype=np.int64)
+        rooms = np.asarray(self.rooms[: first.size], dtype=np.int16)
+        arrays["room"] = np.repeat(rooms, np.diff(np.append(first, n)))
+        summary["distance_m"] = float(sum(path_length(seg[:, :2])
+                                          for seg in np.split(pose, first[1:])))
+        visited = np.unique(rooms)
+        summary["coverage"] = float(np.mean([coverage(
+            self.worlds[i], pose[:-1][arrays["room"] == i, :2], radius=robot.radius)
+            for i in visited]))
+        summary["rooms_visited"] = int(visited.size)
+        return {"learn/first_iteration": first, "learn/room": rooms,
+                "learn/rooms": [w.name for w in self.worlds]}
+
+
+def _room_episodes(res: Resolved, spec: TrialSpec) -> RoomEpisodes | None:
+    """The episode chain of a learning trial over ``experiment.rooms``, else None."""
+    e = res.config.experiment
+    if not spec.learn or not e.rooms:
+        return None
+    worlds = [res.world(name, key=f"experiment.rooms[{j}]") for j, name in enumerate(e.rooms)]
+    return RoomEpisodes(worlds, e.episode_iterations, spec.seed, res.robot)
 
 
 def _training_episodes(res: Resolved, spec: TrialSpec, world: World) -> _TrainingEpisodes | None:

@@ -338,10 +338,13 @@ def _check_collect(exp: Experiment, source: str | None) -> None:
         estimate = 0.0  # upper bound: samples along the paths + turning on the spot
         for i, name in enumerate(c.worlds):
             world = exp.res.world(name, "collect.worlds")
+            if not world.trajectories and c.mode == "both":
+                continue  # (only wandered in: a generated room has no trajectories)
             if not world.trajectories:
                 raise InputError(f"world '{name}' has no [[trajectories]] to collect along; "
                                  "expected a data-collection room (e.g. collect-1) or "
-                                 "collect.mode = \"wander\"", file=source,
+                                 "collect.mode = \"wander\" or \"both\" (which only wanders "
+                                 "in a room without trajectories)", file=source,
                                  key=f"collect.worlds[{i}]")
             for t in world.trajectories:
                 estimate += float(np.hypot(*np.diff(t, axis=0).T).sum()) * rate / speed

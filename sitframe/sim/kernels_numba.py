@@ -22,6 +22,10 @@ Kernels are compiled on first use and cached on disk in the user's cache folder
 (:mod:`sitframe.sim.numba_cache`; never inside the installed package), so only the first run
 after an install pays the compilation.
 
+Why one module of this size: the kernels call each other (the sonar's, the robot's and the
+fleet's share their ray and distance helpers) and are loaded, and cached by numba, together
+(:func:`sitframe.sim.kernels.load`); split, every part would import the others.
+
 Segment sets are passed as one ``(5, S)`` array :attr:`SegmentSet.packed
 <sitframe.sim.geometry.SegmentSet>`: rows ``ax, ay, ex, ey, inv_len2``.
 """
@@ -86,10 +90,11 @@ def cast(x: float, y: float, dx: np.ndarray, dy: np.ndarray, seg: np.ndarray,
     """Rays from one origin ``(x, y)`` (twin of :func:`sitframe.sim.geometry._raycast`).
 
     ``dx, dy`` are the (n,) unit directions, ``seg`` a packed ``(5, S)``
-    segment set; the (n,) distances go to ``out``.
+    segment set; the (n,) distances go to ``out`` (all rays together, :func:`_nearest_hits`).
     """
-    for i in range(dx.size):
-        out[i] = _ray(x, y, dx[i], dy[i], seg, max_range)
+    out[:] = max_range
+    if _nearest_hits(x, y, dx, dy, seg, out):
+        _parallel_hits(x, y, dx, dy, seg, out)
 
 
 @njit(**_JIT)
@@ -101,6 +106,58 @@ def cast_each(px: np.ndarray, py: np.ndarray, dx: np.ndarray, dy: np.ndarray, se
 
 
 @njit(**_JIT)
+def _parallel_hits(x: float, y: float, dx: np.ndarray, dy: np.ndarray, seg: np.ndarray,
+                   best: np.ndarray) -> None:  # pragma: no cover - compiled
+    """The hits of the rays parallel to a segment (:func:`_ray`'s ``denom == 0`` branch)
+    folded into ``best`` (the rare case :func:`_nearest_hits` leaves out)."""
+    for j in range(seg.shape[1]):
+        wx = seg[0, j] - x
+        wy = seg[1, j] - y
+        ex, ey = seg[2, j], seg[3, j]
+        for i in range(dx.size):
+            if dx[i] * ey - dy[i] * ex != 0.0:
+                continue
+            u_num = wx * dy[i] - wy * dx[i]
+            if -_EPS <= u_num <= _EPS:  # collinear: the nearest end ahead, 0 when on it
+                ta = wx * dx[i] + wy * dy[i]
+                tb = ta + ex * dx[i] + ey * dy[i]
+                if (ta >= 0.0 or tb >= 0.0) and ta == ta and tb == tb:
+                    near = ta if ta < tb else tb
+                    d = near if near > 0.0 else 0.0
+                    if d < best[i]:
+                        best[i] = d
+
+
+@njit(**_JIT)
+def _nearest_hits(x: float, y: float, dx: np.ndarray, dy: np.ndarray, seg: np.ndarray,
+                  best: np.ndarray) -> bool:  # pragma: no cover - compiled
+    """:func:`_ray` for all rays from ``(x, y)`` at once, into ``best`` (each ray's limit on
+    entry, its nearest hit on return); returns whether some ray is parallel to a segment.
+
+    Segment by segment over all rays, without branches (so the compiler can use vector
+    instructions): each quantity is :func:`_ray`'s, from the same operations on the same
+    values, and a ray keeps the smallest of its hits, which does not depend on the order
+    the hits come in. The parallel case is left to :func:`_parallel_hits`.
+    """
+    flat = False
+    for j in range(seg.shape[1]):
+        wx = seg[0, j] - x
+        wy = seg[1, j] - y
+        ex, ey = seg[2, j], seg[3, j]
+        t_num = wx * ey - wy * ex
+        for i in range(dx.size):
+            denom = dx[i] * ey - dy[i] * ex
+            t = t_num / denom
+            u = (wx * dy[i] - wy * dx[i]) / denom
+            d = t if t > 0.0 else 0.0
+            hit = (denom != 0.0) & (t >= -_EPS) & (u >= -_EPS) & (u <= 1.0 + _EPS) \
+                & (d < best[i])
+            best[i] = d if hit else best[i]
+            flat |= denom == 0.0
+    return flat
+
+
+@njit(**_JIT)
 def ranges(x: float, y: float, dx: np.ndarray, dy: np.ndarray, seg: np.ndarray, max_range: float,
            radius: float, group: int, clip: bool,
            out: np.ndarray) -> None:  # pragma: no cover - compiled
@@ -108,15 +165,18 @@ def ranges(x: float, y: float, dx: np.ndarray, dy: np.ndarray, seg: np.ndarray, 
 
     Rays of ``max_range + radius`` from ``(x, y)``; ``out[g]`` is the nearest hit of
     rays ``g * group ... (g + 1) * group - 1`` less ``radius``, or ``max_range``;
-    with ``clip`` then clipped to ``[0, max_range]``.
+    with ``clip`` then clipped to ``[0, max_range]``. All rays are cast together
+    (:func:`_nearest_hits`; each ray's distance is :func:`_ray`'s).
     """
     reach = max_range + radius
+    hits = np.full(dx.size, reach)
+    if _nearest_hits(x, y, dx, dy, seg, hits):
+        _parallel_hits(x, y, dx, dy, seg, hits)
     for g in range(out.size):
         best = reach
         for i in range(g * group, (g + 1) * group):
-            d = _ray(x, y, dx[i], dy[i], seg, reach)
-            if d < best:
-                best = d
+            if hits[i] < best:
+                best = hits[i]
         v = max_range if best >= reach else best - radius
         if clip:  # numpy.clip's _NPY_MIN(_NPY_MAX(v, 0), max_range), NaN propagating
             v = v if (v > 0.0 or v != v) else 0.0

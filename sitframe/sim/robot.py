@@ -58,6 +58,7 @@ import numpy as np
 
 from sitframe.params import choice, number
 from sitframe.sim import geometry as geo
+from sitframe.sim.fastinit import slot_init
 from sitframe.sim.kernels import kernels
 
 if TYPE_CHECKING:  # (a world is read through its segments and start pose only)
@@ -135,6 +136,7 @@ class RobotParams:
             )
 
 
+@slot_init
 @dataclass(frozen=True, slots=True)
 class Command:
     """One control command, held for ``control_period_s``.
@@ -163,6 +165,7 @@ class Command:
                 raise ValueError(f"Command.{name} must be finite, got {v!r}")
 
 
+@slot_init
 @dataclass(frozen=True, slots=True)
 class StepOutcome:
     """What happened during one control period.
@@ -221,13 +224,20 @@ def _plan(pose: np.ndarray, command: Command, params: RobotParams
           ) -> tuple[float, float, float, float, float, float]:
     """Return x0, y0, th0, v, omega [rad/s] and turn duration t_turn [s]."""
     x0, y0, th0 = float(pose[0]), float(pose[1]), float(pose[2])
-    if not (math.isfinite(x0) and math.isfinite(y0) and math.isfinite(th0)):
+    if x0 - x0 != 0.0 or y0 - y0 != 0.0 or th0 - th0 != 0.0:  # (not finite: inf - inf is NaN)
         raise ValueError(f"pose must be 3 finite numbers (x, y, theta_rad), got {pose!r}")
-    lim = params.max_heading_change_deg
-    dh = math.radians(min(max(float(command.heading_change_deg), -lim), lim))
-    v = min(max(float(command.speed_m_s), params.min_speed), params.max_speed)
+    # min(max(value, lo), hi) as Python's min and max choose (b if b > a else a, b if b < a
+    # else a), written out: this runs every iteration
+    lo, hi, h = -params.max_heading_change_deg, params.max_heading_change_deg, \
+        float(command.heading_change_deg)
+    h = lo if lo > h else h
+    dh = math.radians(hi if hi < h else h)
+    lo, hi, v = params.min_speed, params.max_speed, float(command.speed_m_s)
+    v = lo if lo > v else v
+    v = hi if hi < v else v
     w = math.radians(params.max_turn_rate_deg_s)
-    t_turn = min(abs(dh) / w, params.control_period_s)
+    t_turn, period = abs(dh) / w, params.control_period_s
+    t_turn = period if period < t_turn else t_turn
     omega = math.copysign(w, dh) if dh != 0.0 else 0.0
     return x0, y0, th0, v, omega, t_turn
 
@@ -258,7 +268,7 @@ def _poses_at(t: np.ndarray, x0: float, y0: float, th0: float, v: float, omega: 
 def _pose_at(t: float, x0: float, y0: float, th0: float, v: float, omega: float,
              t_turn: float) -> tuple[float, float, float]:
     """Scalar version of :func:`_poses_at` (pure Python, for the fast path)."""
-    tt = min(t, t_turn)
+    tt = t_turn if t_turn < t else t  # (min(t, t_turn), as Python's min chooses)
     half = 0.5 * omega * tt
     chord = v * tt * (math.sin(half) / half if half != 0.0 else 1.0)
     th_end = th0 + omega * t_turn
@@ -430,9 +440,9 @@ def _near(segs: geo.SegmentSet, x: float, y: float, reach: float) -> geo.Segment
     kern = kernels()
     if kern is not None:
         idx = np.empty(segs.n, dtype=np.intp)
-        idx = idx[: kern.near_segments(x, y, segs.packed, reach * reach, idx)]
-    else:
-        idx = np.flatnonzero(_dist2_cols(np.array([x]), np.array([y]), segs)[0] < reach * reach)
+        m = kern.near_segments(x, y, segs.packed, reach * reach, idx)
+        return segs.subset(idx[:m]) if m else None  # (open space: no subset, no slice)
+    idx = np.flatnonzero(_dist2_cols(np.array([x]), np.array([y]), segs)[0] < reach * reach)
     return segs.subset(idx) if idx.size else None
 
 

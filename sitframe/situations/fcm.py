@@ -484,7 +484,7 @@ class MembershipFunction:
     def __call__(self, x: np.ndarray) -> np.ndarray:
         """Return the (c,) memberships of one (d,) reading; they sum to 1."""
         diff = self.centers - x
-        return self.from_d2(row_sq_norms(diff))
+        return self.from_d2(_c_einsum("ij,ij->i", diff, diff))  # (row_sq_norms, inlined)
 
     def from_d2(self, d2: np.ndarray) -> np.ndarray:
         """Memberships from the (c,) squared distances of one reading to the centres.

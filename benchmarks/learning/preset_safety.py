@@ -1,0 +1,141 @@
+"""Is every shipped preset safe in rooms it never saw (issue 39)?
+
+Question: For each shipped preset whose frozen policies drive alone (obstacle avoidance,
+wall following, speed), in what share of evaluations in unseen rooms does a frozen policy
+exceed 10 collisions per 1000 iterations, over 10 run seeds x the preset's trials?
+Output: a Markdown table (one row per preset: evaluations, share above 10 per 1000, median
+and worst collisions per 1000, median coverage), printed and with ``--publish`` written to
+``docs/results/tables/preset-safety.md``; per-seed figures cached as JSON in ``--out``.
+
+For each preset and seed ``S``: ``sitframe run PRESET --seed S --workers 1`` (the
+preset as shipped, its own prerequisites made first in ``--out``), then every trial's
+frozen policy runs 1000 iterations from the start of each judging room (default the 20
+development rooms ``gen:2000000`` ... ``gen:2000019``; evaluation seed 0), which is
+``sitframe evaluate LOG --world W --trial K``. The goal presets are judged in goal
+episodes (their own results pages) and are not listed.
+
+Usage (one core, one process)::
+
+    taskset -c 0 nice -n 5 python benchmarks/learning/preset_safety.py --seeds 10 --publish
+    python benchmarks/learning/preset_safety.py --presets obstacle-avoidance --seeds 2 \\
+        --rooms gen:2000000 gen:2000001
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+DEV_ROOMS = [f"gen:{2_000_000 + i}" for i in range(20)]
+#: The presets whose frozen policies drive alone (the goal presets fuse behaviours and are
+#: judged in goal episodes).
+PRESETS = ("obstacle-avoidance", "obstacle-avoidance-12", "obstacle-avoidance-16",
+           "obstacle-avoidance-evolving", "obstacle-avoidance-online",
+           "obstacle-avoidance-thesis", "speed", "wall-following", "wall-following-12",
+           "wall-following-evolving")
+#: An evaluation above this many collisions per 1000 iterations is unsafe.
+BAD = 10.0
+
+
+def run_seed(preset: str, seed: int, out: Path, rooms: list[str],
+             trials: int | None = None) -> dict[str, Any]:
+    """Run ``preset`` with seed ``seed`` in ``out`` and judge every trial in ``rooms``."""
+    from sitframe.cli import main as cli_main
+    from sitframe.logs.reader import open_log
+    from sitframe.runs.evaluation import evaluate_log
+
+    log = out / preset / f"seed-{seed}.h5"
+    log.parent.mkdir(parents=True, exist_ok=True)
+    argv = ["run", preset, "--seed", str(seed), "--workers", "1", "--out", str(log.resolve())]
+    if trials is not None:
+        argv += ["--trials", str(trials)]
+    t0 = time.perf_counter()
+    here = Path.cwd()
+    work = out / "work"  # (a preset's prerequisites are made in logs/ of the working folder,
+    work.mkdir(exist_ok=True)  # which must not hold a folder named like a preset)
+    os.chdir(work)
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):
+            rc = cli_main(argv)
+    finally:
+        os.chdir(here)
+    if rc:
+        raise SystemExit(f"sitframe {' '.join(argv)} failed ({rc})")
+    lg = open_log(str(log))
+    lg.check()
+    evals = {f"{k}@{w}": evaluate_log(str(log), world=w, trial=k, iterations=1000, checked=lg)
+             for k in lg.trial_indices() for w in rooms}
+    return {"preset": preset, "seed": seed, "seconds": time.perf_counter() - t0,
+            "rooms": rooms, "trials": trials,
+            "converged": [bool(lg.trial(k).summary["converged"]) for k in lg.trial_indices()],
+            "evaluations": {key: {"collisions_per_1000": float(r["collisions_per_1000"]),
+                                  "coverage": float(r["coverage"])}
+                            for key, r in evals.items()}}
+
+
+def row(preset: str, results: list[dict[str, Any]]) -> str:
+    """One Markdown row: the preset's evaluations pooled over seeds, trials and rooms."""
+    ev = [e for r in results for e in r["evaluations"].values()]
+    coll = np.array([e["collisions_per_1000"] for e in ev])
+    cov = np.array([e["coverage"] for e in ev])
+    conv = [c for r in results for c in r["converged"]]
+    return (f"| `{preset}` | {len(results)} × {len(results[0]['converged'])} | {len(ev)} | "
+            f"{np.mean(coll > BAD):.1%} | {np.median(coll):.2f} | {coll.max():.1f} | "
+            f"{np.median(cov):.3f} | {np.mean(conv):.0%} |")
+
+
+HEADER = ("| preset | seeds × trials | evaluations | > 10 coll./1000 | coll./1000 median | "
+          "worst | coverage median | trials converged |\n|---|---|---|---|---|---|---|---|")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--presets", nargs="+", default=list(PRESETS), choices=list(PRESETS))
+    ap.add_argument("--seeds", type=int, default=10, help="run seeds 0..N-1 (default 10)")
+    ap.add_argument("--trials", type=int, default=None,
+                    help="trials per run (default: the preset's own)")
+    ap.add_argument("--rooms", nargs="+", default=DEV_ROOMS,
+                    help="the rooms judged in (default the 20 development rooms)")
+    ap.add_argument("--out", type=Path, default=Path("logs/preset-safety"),
+                    help="logs and cached per-seed figures (default %(default)s)")
+    ap.add_argument("--publish", action="store_true",
+                    help="write docs/results/tables/preset-safety.md")
+    a = ap.parse_args(argv)
+    a.out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for preset in a.presets:
+        results = []
+        for seed in range(a.seeds):
+            cache = a.out / preset / f"seed-{seed}.json"
+            old = json.loads(cache.read_text()) if cache.is_file() else {}
+            if old.get("rooms") == a.rooms and old.get("trials") == a.trials:
+                results.append(old)
+                continue
+            r = run_seed(preset, seed, a.out, a.rooms, a.trials)
+            cache.write_text(json.dumps(r, indent=1))
+            bad = np.mean([e["collisions_per_1000"] > BAD for e in r["evaluations"].values()])
+            print(f"{preset} seed {seed}: {bad:.1%} above {BAD:g} ({r['seconds']:.0f} s)",
+                  file=sys.stderr)
+            results.append(r)
+        rows.append(row(preset, results))
+    table = "\n".join([HEADER, *rows])
+    print(table)
+    if a.publish:
+        sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
+        from common.publish import publish
+
+        publish("preset-safety", table)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
