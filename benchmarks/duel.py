@@ -679,9 +679,14 @@ def targets_table(fq: Summary, deep: list[Summary]) -> str:
     ]
     lines = [f"Best deep-RL method: {best.name} (lower median test collision rate).\n",
              "| target (fuzzy-q) | fuzzy-q | bound | met |", "|---|---|---|---|"]
-    lines += [f"| {t} | {v:,.3g} | {b:,.3g} | {'yes' if ok else '**no**'} |"
+    lines += [f"| {t} | {_num(v)} | {_num(b)} | {'yes' if ok else '**no**'} |"
               for t, v, b, ok in rows]
     return "\n".join(lines)
+
+
+def _num(v: float) -> str:
+    """A figure of the targets' table: steps and counts whole, rates to 3 digits."""
+    return f"{v:,.0f}" if abs(v) >= 100 else f"{v:.3g}"
 
 
 def tuning_table(screen: dict[str, list[dict[str, Any]]]) -> str:
