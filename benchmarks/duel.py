@@ -1,481 +1,806 @@
-"""The duel: fuzzy Q-learning over situations vs Stable-Baselines3 DQN and PPO.
+"""Duel v2: fuzzy Q-learning over situations against Stable-Baselines3 DQN and PPO, in rooms
+no method, tuning or selection ever touched.
 
-Same robot, sensor (the obstacle-avoidance preset's 8 sonar cones), reward
-(the preset's ``obstacle-avoidance`` reward) and training room for every
-method. Each method learns for a budget of environment steps; at checkpoints
-its *frozen* policy is scored in the two rooms it never saw (``novel-1``,
-``novel-2``), from ``--starts`` random start poses per room (the same poses
-for every method and checkpoint), ``--eval-iterations`` iterations each:
+Question: trained in the same ten generated rooms, with the same robot, sonar and reward,
+how do fuzzy Q-learning over situations (the shipped ``obstacle-avoidance`` preset) and
+deep RL (SB3 DQN and PPO, tuned by one rule on training and validation rooms only) compare
+in unseen rooms -- collisions per 1000 iterations and coverage -- per environment step
+counted (collection, every trial, every validation episode) and per collision while
+learning?
 
-- collisions per 1000 iterations (pooled over starts and rooms),
-- coverage (fraction of free 0.5 m cells visited, mean over starts and rooms),
+Output: ``OUT/`` holds every job (SB3 checkpoints every few thousand steps, the fuzzy-q
+logs, each job's step accounting and scores as JSON); ``report`` publishes
+``docs/results/tables/duel.md`` (the duel and its targets) and ``duel-tuning.md`` (the
+grid ranked by the selection rule) through ``benchmarks/common/publish.py`` and draws
+``docs/results/figures/duel-curves.png`` (unseen-room collisions/1000, coverage and
+collisions while learning against counted steps, median and IQR over seeds).
 
-against environment steps and against training time (CPU seconds of the
-learning process, evaluation excluded: the wall time on an idle core; the
-machine the duel ran on was shared, so its wall clock measured the others).
-Collisions while learning are the second score.
+Rooms (generator seeds, ``gen:SEED``; fixed with the preset's author)
+---------------------------------------------------------------------
+- training: ``gen:1000000`` ... ``gen:1000009`` (every method learns in exactly these),
+- validation: ``gen:2000000`` ... ``gen:2000004`` (checkpoint selection and tuning only),
+- test: ``novel-1``, ``novel-2`` and ``gen:3000000`` ... ``gen:3000019``, touched by
+  nothing but the final scoring (:func:`check_rooms` refuses any overlap).
 
-Methods
--------
-``fuzzy-q``
-    ``sitframe run obstacle-avoidance --trials 1 --seed S``: collect, cluster
-    (8 FCM situations), learn 5000 iterations. Its budget counts the collected
-    sonar samples (2992 in the preset) plus the learning iterations; the policy
-    at iteration t is the greedy rule base of the last rule-base change before t
-    (the converged one after convergence), read from the log.
-``dqn-*`` / ``ppo-*``
-    SB3 on ``sitframe/ObstacleAvoidance-v0`` (normalised readings, 7 discrete
-    headings at 0.15 m/s, random start poses, 1000-step episodes); frozen =
-    ``predict(deterministic=True)``; one torch thread. Hyper-parameter sets:
-    :data:`CONFIGS` (DQN 30k steps, PPO 80k).
+Protocol
+--------
+Every environment step a method takes is counted by :class:`Counted` (a Gymnasium
+wrapper around every env it steps): SB3's training steps and the validation runs of
+every checkpoint; fuzzy-q's steps are read from its log (collected sonar samples, every
+learning iteration, its evaluate stage outside the test rooms). A frozen policy is scored
+by :func:`drive`: ``starts`` robots per room from fixed start poses (the room's own start
+pose, then poses drawn from a seed fixed per room: the same for every method), pooled
+collisions per 1000 iterations and mean coverage. Validation: 5 rooms x 2 starts x 500
+iterations per checkpoint (counted); test: 22 rooms x 3 starts x 1000 iterations
+(the judge's, not counted).
 
-Tuning and duel in one run
---------------------------
-Every checkpoint is scored twice: in the training room (keys ``train_*``) and
-in the unseen rooms. The tuning (:func:`tune_table`) ranks the sets of
-:data:`CONFIGS` by their *training-room* scores only, over the first seeds
-every set has; the selected set per algorithm then runs more seeds, and the
-duel (:func:`table`, ``duel.png``) reports the unseen-room scores of fuzzy-q
-and every set with ``--min-seeds`` seeds. The selection never reads an
-unseen-room score, so the rooms the duel is judged in stay unseen by the
-tuning; the selected sets' first seeds serve both. fuzzy-q gets no tuning:
-it runs its preset as published.
+**Selection rule** (:func:`merit`, the same for checkpoints, DQN and PPO): a policy is
+*safe* on the validation rooms when it collides at most 3 times per 1000 iterations (the
+issue's bar); the best checkpoint is the safe one with the highest coverage, else the
+one with the fewest collisions. The grid (:data:`GRID`, one change at a time from v1's
+selected sets, adding two knobs per algorithm) is screened on 2 seeds over the first half
+of the budget (the same schedules, stopped at half); a set ranks by the share of seeds
+whose best checkpoint is safe, then its median coverage, then its median collisions. The
+selected set of each algorithm then runs 10 seeds at the full budget (DQN 100k, PPO 200k
+steps) and is scored at each seed's best checkpoint. fuzzy-q is ``sitframe run
+obstacle-avoidance --trials 1 --seed S`` (the preset as shipped, no tuning here), scored
+as ``sitframe evaluate`` scores trial 0's frozen policy (its rule base over its logged
+situations), from the same start poses.
 
-Run (extra ``baselines``)::
+Run (extra ``baselines``; one core, one process, torch on one thread)::
 
-    nice -n 10 python benchmarks/duel.py run --out duel --configs fuzzy-q --seeds 5
-    nice -n 10 python benchmarks/duel.py run --out duel --seeds 2     # the grid
-    python benchmarks/duel.py report --out duel                       # -> "selected: ..."
-    nice -n 10 python benchmarks/duel.py run --out duel --seeds 5 --configs DQN_SET PPO_SET
-    python benchmarks/duel.py report --out duel     # tune.png, duel.png, both tables
+    taskset -c 1 nice -n 5 python benchmarks/duel.py run --out duel2 --phase screen
+    taskset -c 1 nice -n 5 python benchmarks/duel.py score --out duel2 --phase screen
+    taskset -c 1 nice -n 5 python benchmarks/duel.py run --out duel2 --phase final \\
+        --configs fuzzy-q selected --seeds 10
+    taskset -c 1 nice -n 5 python benchmarks/duel.py score --out duel2 --phase final
+    python benchmarks/duel.py report --out duel2
 
-Each (set, seed) job writes ``OUT/<set>-<seed>.json``; a rerun skips finished
-jobs. Learning CPU per job: fuzzy-q ~10 s, DQN ~55 s (30k steps), PPO ~85 s
-(60k steps); scoring every checkpoint in three rooms adds about as much again.
+A rerun skips finished jobs (training and scoring apart). CPU per job on one core: DQN
+100k steps about 70 s, PPO 200k about 95 s, fuzzy-q 2-4 s (its whole ``sitframe run``);
+scoring a deep-RL job (11 checkpoints, validation and test rooms) about 50 s, a fuzzy-q
+job about 3 s; the screening about 13 minutes (20 jobs at half budget) and 1 of scoring.
 """
 
 from __future__ import annotations
 
 import argparse
-import copy
+import io
 import json
-import resource
-import subprocess
-import sys
 import time
-from multiprocessing import Pool
+import zlib
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager, redirect_stdout
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
-from sitframe.sim.metrics import coverage
-
 PRESET = "obstacle-avoidance"
-NOVEL = ("novel-1", "novel-2")
+ROOT = Path(__file__).resolve().parents[1]
+FIGURE = ROOT / "docs" / "results" / "figures" / "duel-curves.png"
 
-#: One hyper-parameter set: (algorithm, SB3 kwargs (plus ``n_envs``), total steps, checkpoints).
-Config = tuple[str, dict[str, Any], int, tuple[int, ...]]
+
+def _gen(first: int, n: int) -> tuple[str, ...]:
+    return tuple(f"gen:{s}" for s in range(first, first + n))
+
+
+#: Room sets: training, validation, test. ``shipped`` (shipped worlds only) is for the
+#: tests and for trying the harness; the duel is ``gen``.
+ROOMS: dict[str, dict[str, tuple[str, ...]]] = {
+    "gen": {"train": _gen(1_000_000, 10), "valid": _gen(2_000_000, 5),
+            "test": ("novel-1", "novel-2", *_gen(3_000_000, 20))},
+    "shipped": {"train": ("training",), "valid": ("u-trap",), "test": ("novel-1", "novel-2")},
+}
+
+
+@dataclass(frozen=True)
+class EvalSpec:
+    """Where and how long a frozen policy is driven: ``starts`` robots per room, fixed start
+    poses from ``seed``, ``iterations`` each."""
+
+    starts: int
+    iterations: int
+    seed: int
+
+
+VALID = EvalSpec(starts=2, iterations=500, seed=2024)
+TEST = EvalSpec(starts=3, iterations=1000, seed=12345)
+SAFE = 3.0  # collisions per 1000 iterations: the issue's bar for a safe policy
 
 _DQN = {"learning_rate": 1e-3, "gamma": 0.9, "learning_starts": 1000,
-        "target_update_interval": 1000, "exploration_fraction": 0.2, "exploration_final_eps": 0.05}
-_PPO = {"n_envs": 8, "n_steps": 256, "gamma": 0.9}  # 8 x 256 = SB3's 2048-step rollout
-_DQN_T = (2_500, 5_000, 10_000, 15_000, 20_000, 30_000)
-_PPO_T = (10_000, 20_000, 30_000, 40_000, 60_000)
+        "target_update_interval": 1000, "exploration_fraction": 0.2,
+        "exploration_final_eps": 0.05}
+_PPO = {"n_envs": 8, "n_steps": 256, "gamma": 0.9, "learning_rate": 1e-3}
+DQN_CHECKPOINTS = (5_000, *range(10_000, 100_001, 10_000))
+PPO_CHECKPOINTS = (10_000, *range(20_000, 200_001, 20_000))
 
-#: The tuning grid and the duel in one: every set changes one thing from its
-#: starting point (``*-base``: the issue's calibration for DQN, lr 1e-3 and gamma
-#: 0.9 (the fuzzy learner's gamma); gamma 0.9 and 8 envs x 256 steps (SB3's
-#: 2048-step rollout, batched forward passes) for PPO). Every checkpoint is scored
-#: in the training room (``train_*``: the only scores the selection sees, see
-#: :func:`tune_table`) and in the unseen rooms (the duel's scores).
-CONFIGS: dict[str, Config] = {
-    "dqn-base": ("dqn", _DQN, 30_000, _DQN_T),
-    "dqn-lr3e-3": ("dqn", {**_DQN, "learning_rate": 3e-3}, 30_000, _DQN_T),
-    "dqn-g0.99": ("dqn", {**_DQN, "gamma": 0.99}, 30_000, _DQN_T),
-    "ppo-base": ("ppo", _PPO, 60_000, _PPO_T),
-    "ppo-lr1e-3": ("ppo", {**_PPO, "learning_rate": 1e-3}, 60_000, _PPO_T),
-    "ppo-g0.99": ("ppo", {**_PPO, "gamma": 0.99}, 60_000, _PPO_T),
+#: One set of the grid: algorithm, SB3 keyword arguments (plus ``n_envs``), checkpoints (the
+#: last is the full budget), and what it changes from its algorithm's base.
+Config = tuple[str, dict[str, Any], tuple[int, ...], str]
+
+#: The grid: v1's selected sets (``dqn-base``, ``ppo-base`` = v1's ``ppo-lr1e-3``), v1's two
+#: knobs (learning rate, gamma) and two new knobs per algorithm (DQN: the exploration
+#: schedule and the replay buffer; PPO: the entropy bonus and the rollout length), one
+#: change at a time.
+GRID: dict[str, Config] = {
+    "dqn-base": ("dqn", _DQN, DQN_CHECKPOINTS, "v1's selected set"),
+    "dqn-lr3e-3": ("dqn", {**_DQN, "learning_rate": 3e-3}, DQN_CHECKPOINTS, "learning rate 3e-3"),
+    "dqn-g0.99": ("dqn", {**_DQN, "gamma": 0.99}, DQN_CHECKPOINTS, "gamma 0.99"),
+    "dqn-eps0.05": ("dqn", {**_DQN, "exploration_fraction": 0.05}, DQN_CHECKPOINTS,
+                    "exploration decays over 5 % of the budget (new)"),
+    "dqn-buf20k": ("dqn", {**_DQN, "buffer_size": 20_000}, DQN_CHECKPOINTS,
+                   "replay buffer 20k instead of 1M (new)"),
+    "ppo-base": ("ppo", _PPO, PPO_CHECKPOINTS, "v1's selected set (ppo-lr1e-3)"),
+    "ppo-lr3e-4": ("ppo", {**_PPO, "learning_rate": 3e-4}, PPO_CHECKPOINTS,
+                   "learning rate 3e-4"),
+    "ppo-g0.99": ("ppo", {**_PPO, "gamma": 0.99}, PPO_CHECKPOINTS, "gamma 0.99"),
+    "ppo-ent0.01": ("ppo", {**_PPO, "ent_coef": 0.01}, PPO_CHECKPOINTS,
+                    "entropy bonus 0.01 (new)"),
+    "ppo-n128": ("ppo", {**_PPO, "n_steps": 128}, PPO_CHECKPOINTS,
+                 "rollout 8 x 128 steps (new)"),
 }
-FUZZY_CHECKPOINTS = (500, 1000, 2000, 5000)  # learning iterations
+SCREEN_SEEDS = 2
+SCREEN_FRACTION = 0.5  # screening stops each schedule at half its budget
 
 
-# ----------------------------------------------------------------------------- evaluation
-
-def evaluate(policy: Any, *, starts: int, iterations: int, seed: int,
-             worlds: tuple[str, ...] = NOVEL) -> dict[str, float]:
-    """Score ``policy`` (raw readings (N, d) -> heading changes (N,) [deg]) frozen in ``worlds``.
-
-    Every world runs ``starts`` robots at once (the vector env) from start poses
-    drawn by seed ``seed`` (the same for every policy).
-    """
-    from sitframe.gym import SitframeVectorEnv
-
-    coll, cov, n = 0, [], 0
-    for w in worlds:
-        env = SitframeVectorEnv(PRESET, num_envs=starts, world=w, max_steps=iterations,
-                                normalize=False, continuous=True)
-        obs, info = env.reset(seed=seed)
-        xy = [info["pose"][:, :2]]
-        for _ in range(iterations):
-            obs, _r, _te, _tr, info = env.step((policy(obs) / 90.0)[:, None])
-            coll += int(info["collided"].sum())
-            xy.append(info["pose"][:, :2])
-        path = np.stack(xy, axis=1)  # (starts, iterations + 1, 2)
-        cov += [coverage(env.task.world, path[i]) for i in range(starts)]
-        n += starts * iterations
-    return {"collisions_per_1000": 1000.0 * coll / n, "coverage": float(np.mean(cov))}
+def check_rooms(rooms: dict[str, tuple[str, ...]]) -> None:
+    """Refuse room sets where training or validation rooms are test rooms."""
+    touched = (set(rooms["train"]) | set(rooms["valid"])) & set(rooms["test"])
+    if touched:
+        raise SystemExit(f"test rooms used for training or validation: {sorted(touched)}")
 
 
-def score(policy: Any, a: argparse.Namespace) -> dict[str, float]:
-    """The unseen rooms' scores and the training room's (keys prefixed ``train_``)."""
-    train = evaluate(policy, starts=a.starts, iterations=a.eval_iterations, seed=a.eval_seed,
-                     worlds=("training",))
-    return {**evaluate(policy, starts=a.starts, iterations=a.eval_iterations, seed=a.eval_seed),
-            **{f"train_{k}": v for k, v in train.items()}}
+# ----------------------------------------------------------------------------- step accounting
+
+@dataclass
+class Tally:
+    """Environment steps and collisions counted by :class:`Counted` wrappers."""
+
+    steps: int = 0
+    collisions: int = 0
 
 
-# ----------------------------------------------------------------------------- fuzzy Q
+class Counted(gym.Wrapper):
+    """Counts every ``step`` of the env it wraps (and the collisions) into a shared
+    :class:`Tally`: the duel's step accounting."""
 
-def run_fuzzy(seed: int, out: Path, a: argparse.Namespace) -> dict[str, Any]:
-    """Learn with sitframe itself (one trial), then score the logged rule bases."""
-    from sitframe.gym import Task
-    from sitframe.learning.fcs import SituationFCS
+    def __init__(self, env: gym.Env, tally: Tally) -> None:
+        super().__init__(env)
+        self.tally = tally
+
+    def step(self, action: Any) -> tuple[Any, Any, bool, bool, dict[str, Any]]:
+        out = self.env.step(action)
+        self.tally.steps += 1
+        self.tally.collisions += bool(out[4].get("collided"))
+        return out
+
+
+# ----------------------------------------------------------------------------- frozen policies
+
+@dataclass
+class Frozen:
+    """A frozen policy for :func:`drive`: ``act`` maps (N, d) observations to N actions of an
+    env made with ``continuous`` and ``normalize``."""
+
+    act: Callable[[np.ndarray], Any]
+    continuous: bool
+    normalize: bool
+
+
+def start_poses(world: Any, n: int, seed: int, radius: float) -> list[np.ndarray]:
+    """``n`` fixed start poses in ``world``: its own start, then free poses drawn from
+    ``seed`` and the world's name (the same for every method)."""
+    rng = np.random.default_rng([seed, zlib.crc32(world.name.encode())])
+    return [np.asarray(world.start, float).copy(),
+            *(world.random_free_pose(rng, radius, margin=0.1) for _ in range(n - 1))]
+
+
+@dataclass
+class _Robot:
+    env: Any
+    room: str
+    path: list[np.ndarray] = field(default_factory=list)
+    collisions: int = 0
+
+
+def _robots(frozen: Frozen, rooms: Sequence[str], spec: EvalSpec, tally: Tally | None
+            ) -> tuple[list[_Robot], list[np.ndarray]]:
+    """One env per (room, start), reset at its fixed start pose; their first observations."""
+    from sitframe.gym import SitframeEnv, Task
+
+    robots, obs = [], []
+    for room in rooms:
+        task = Task.from_config(PRESET, world=room, max_steps=spec.iterations,
+                                normalize=frozen.normalize)
+        for k, pose in enumerate(start_poses(task.world, spec.starts, spec.seed,
+                                             task.res.robot.radius)):
+            env: Any = SitframeEnv(task=task, continuous=frozen.continuous)
+            if tally is not None:
+                env = Counted(env, tally)
+            o, info = env.reset(seed=spec.seed + 1000 * k + zlib.crc32(room.encode()) % 1000,
+                                options={"pose": pose})
+            robots.append(_Robot(env, room, [info["pose"][:2]]))
+            obs.append(o)
+    return robots, obs
+
+
+def drive(frozen: Frozen, rooms: Sequence[str], spec: EvalSpec, tally: Tally | None = None
+          ) -> dict[str, Any]:
+    """Drive ``frozen`` in ``rooms`` (``spec``): pooled collisions per 1000 iterations, mean
+    coverage, and both per room. ``tally`` (if given) counts the steps."""
+    from sitframe.sim.metrics import coverage
+
+    robots, obs = _robots(frozen, rooms, spec, tally)
+    for _ in range(spec.iterations):
+        acts = frozen.act(np.stack(obs))
+        for j, (r, a) in enumerate(zip(robots, acts, strict=True)):
+            obs[j], _r, _te, _tr, info = r.env.step(a)
+            r.collisions += info["collided"]
+            r.path.append(info["pose"][:2])
+    per_room: dict[str, dict[str, float]] = {}
+    for r in robots:
+        u = r.env.unwrapped
+        cov = coverage(u.world, np.array(r.path), radius=u.task.res.robot.radius)
+        d = per_room.setdefault(r.room, {"collisions": 0, "coverage": 0.0})
+        d["collisions"] += r.collisions
+        d["coverage"] += cov / spec.starts
+    n = len(robots) * spec.iterations
+    return {"collisions_per_1000": 1000.0 * sum(r.collisions for r in robots) / n,
+            "coverage": float(np.mean([d["coverage"] for d in per_room.values()])),
+            "rooms": per_room}
+
+
+def sb3_frozen(path: Path) -> Frozen:
+    """The SB3 model saved at ``path`` (``predict(deterministic=True)``) as a frozen policy."""
+    model = _sb3_class(path.name.split("-")[0]).load(path, device="cpu")
+
+    def act(obs: np.ndarray) -> np.ndarray:
+        a, _ = model.predict(obs.astype(np.float32), deterministic=True)
+        return np.asarray(a, dtype=int).tolist()
+
+    return Frozen(act, continuous=False, normalize=True)
+
+
+def fuzzy_scores(log_path: Path, rooms: Sequence[str], spec: EvalSpec, trial: int = 0
+                 ) -> dict[str, Any]:
+    """Trial ``trial``'s frozen policies from a fuzzy-q log, scored as :func:`drive` scores a
+    deep-RL policy (same rooms, start poses, iterations) by the loop ``sitframe evaluate``
+    runs (:func:`sitframe.runs.loop.simulate`, frozen, the log's situations and rule base).
+    Start 0 of each room (its own start pose) gets ``sitframe evaluate``'s default seed, so
+    that run *is* ``sitframe evaluate LOG --world ROOM --iterations N``."""
+    from sitframe.contract.config import DEFAULT_PROTOCOL, validate_config
+    from sitframe.contract.pluginmanager import Registry, get_plugin_manager
+    from sitframe.contract.resolve import Resolved
+    from sitframe.logs.policies import logged_policy, plugins_of
     from sitframe.logs.reader import open_log
+    from sitframe.runs.loop import STAGE_EVAL, TrialSpec, simulate, stage_seed
 
-    log_path = out / f"fuzzy-q-{seed}.h5"
-    cpu_path = log_path.with_suffix(".cpu")
-    if not cpu_path.exists():  # (a rerun reuses a finished learning run)
-        c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-        subprocess.run([str(Path(sys.executable).parent / "sitframe"), "run", PRESET,
-                        "--trials", "1", "--seed", str(seed), "--out", str(log_path)],
-                       check=True, stdout=subprocess.DEVNULL)
-        c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-        cpu_path.write_text(json.dumps(c1.ru_utime + c1.ru_stime - c0.ru_utime - c0.ru_stime))
-    cpu = float(json.loads(cpu_path.read_text()))
-    log = open_log(log_path)
-    n_collect = int(log.stage("collect")["samples"].shape[0])
-    trial = log.trial(0)
-    data = trial.behaviours["avoid"]
-    snap_it = np.asarray(data["heading/snapshot_iteration"])
-    snap = np.asarray(data["heading/snapshot_greedy"])
-    singles = trial.learned_policy("avoid").outputs["heading"].actions
-    collided = np.asarray(trial.arrays["collision"], dtype=bool)
-    L = collided.size
-    interp = Task.from_config(PRESET).res.interpreter()  # the preset's fcm, fitted state below
-    interp.load_state(log.interpreter_state())
-    rows = []
-    for t in FUZZY_CHECKPOINTS:
-        rules = snap[int(np.searchsorted(snap_it, t, side="right")) - 1]
-        fcs = SituationFCS(singles, rules.astype(np.intp))
-
-        def policy(obs: np.ndarray, fcs: SituationFCS = fcs) -> np.ndarray:
-            return np.array([fcs.output(interp.memberships(r.astype(np.float64))) for r in obs])
-
-        rows.append({"steps": n_collect + t, "learning_collisions": int(collided[:t].sum()),
-                     # the run's CPU time up to t (collect + cluster + learning, pro rata;
-                     # its own evaluation stage of 3 x 1000 iterations is counted too)
-                     "cpu_s": cpu * (n_collect + t) / (n_collect + L), **score(policy, a)})
-    return {"config": "fuzzy-q", "method": "fuzzy-q", "seed": seed, "collected": n_collect,
-            "rows": rows}
+    path = str(log_path)
+    log = open_log(path)
+    log.check()
+    tl = log.trial(trial)
+    policies = {lb: p for lb in tl.behaviours if (p := logged_policy(tl, lb, path)) is not None}
+    state = tl.situations_part("state") if tl.situations else log.interpreter_state()
+    cfg = validate_config(log.config, file=path, pending=True)
+    with plugins_of(log, path, ()):
+        res = Resolved.build(cfg, Registry.collect(get_plugin_manager()), path)
+        table = res.protocol_table(DEFAULT_PROTOCOL)
+        cfg[table] = {**cfg[table], "iterations": spec.iterations}
+        res = Resolved.build(cfg, Registry.collect(get_plugin_manager()), path,
+                             worlds=tuple(rooms))
+    per_room: dict[str, dict[str, float]] = {}
+    for room in rooms:
+        d = per_room[room] = {"collisions": 0, "coverage": 0.0}
+        for k, pose in enumerate(start_poses(res.world(room), spec.starts, spec.seed,
+                                             res.robot.radius)):
+            seed = stage_seed(0 if k == 0 else spec.seed + k, STAGE_EVAL, trial)
+            out = simulate(res, TrialSpec(index=trial, seed=seed, world=room,
+                                          iterations=spec.iterations, learn=False,
+                                          interpreter_state=state, policies=policies,
+                                          protocol=None,
+                                          space_states=log.space_states(),
+                                          start=tuple(pose)))
+            d["collisions"] += int(out.summary["collisions"])
+            d["coverage"] += float(out.summary["coverage"]) / spec.starts
+    n = len(rooms) * spec.starts * spec.iterations
+    return {"collisions_per_1000": 1000.0 * sum(d["collisions"] for d in per_room.values()) / n,
+            "coverage": float(np.mean([d["coverage"] for d in per_room.values()])),
+            "rooms": per_room}
 
 
-# ----------------------------------------------------------------------------- SB3
-
-def run_sb3(name: str, seed: int, a: argparse.Namespace) -> dict[str, Any]:
-    """Train SB3 ``name`` (:data:`CONFIGS`), snapshot the policy at checkpoints, score them."""
-    import torch
+def _sb3_class(algo: str) -> Any:
     from stable_baselines3 import DQN, PPO
+
+    return {"dqn": DQN, "ppo": PPO}[algo]
+
+
+# ----------------------------------------------------------------------------- jobs
+
+def job_dir(out: Path, phase: str, name: str, seed: int) -> Path:
+    return out / phase / name / f"seed-{seed}"
+
+
+def train_sb3(name: str, seed: int, d: Path, rooms: tuple[str, ...], stop: int | None = None,
+              config: Config | None = None) -> dict[str, Any]:
+    """Train grid set ``name`` with ``seed`` in ``rooms``, saving ``d/<algo>-<steps>.zip`` at its
+    checkpoints (up to ``stop`` steps); ``d/train.json``: steps, collisions and CPU per
+    checkpoint, counted by :class:`Counted`."""
+    import torch
     from stable_baselines3.common.callbacks import BaseCallback
-    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import DummyVecEnv
 
     from sitframe.gym import make_env
 
     torch.set_num_threads(1)
-    algo, kw, total, checkpoints = CONFIGS[name]
+    algo, kw, checkpoints, _what = config or GRID[name]
     kw = dict(kw)
     n_envs = kw.pop("n_envs", 1)
-    env = make_env(PRESET)
-    venv = make_vec_env(make_env, n_envs, seed=seed, env_kwargs={"config": PRESET}) \
-        if n_envs > 1 else env
-    cls = {"dqn": DQN, "ppo": PPO}[algo]
-    model = cls("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **kw)
-    snaps: list[dict[str, Any]] = []
+    stop = stop or checkpoints[-1]
+    tally = Tally()
+    venv = DummyVecEnv([lambda: Counted(make_env(PRESET, worlds=list(rooms)), tally)
+                        for _ in range(n_envs)])
+    venv.seed(seed)  # sub-env i: seed + i, at the first reset
+    model = _sb3_class(algo)("MlpPolicy", venv, seed=seed, device="cpu", verbose=0, **kw)
+    rows: list[dict[str, Any]] = []
+    d.mkdir(parents=True, exist_ok=True)
+    todo = [c for c in checkpoints if c <= stop]
 
-    class Checkpoints(BaseCallback):
+    class Saver(BaseCallback):
         def _on_training_start(self) -> None:
-            self.collisions, self.t0, self.paused = 0, time.process_time(), 0.0
+            self.t0, self.paused = time.process_time(), 0.0
 
         def _on_step(self) -> bool:
-            self.collisions += sum(bool(i.get("collided")) for i in self.locals["infos"])
-            if len(snaps) < len(checkpoints) and self.num_timesteps >= checkpoints[len(snaps)]:
+            if rows and rows[-1]["steps"] >= stop:
+                return False
+            if len(rows) < len(todo) and self.num_timesteps >= todo[len(rows)]:
                 p0 = time.process_time()
-                snaps.append({"steps": self.num_timesteps, "learning_collisions": self.collisions,
-                              "cpu_s": p0 - self.t0 - self.paused,
-                              "state": copy.deepcopy(self.model.policy.state_dict())})
+                self.model.save(d / f"{algo}-{self.num_timesteps}.zip")
+                rows.append({"steps": tally.steps, "sb3_steps": self.num_timesteps,
+                             "learning_collisions": tally.collisions,
+                             "cpu_s": p0 - self.t0 - self.paused,
+                             "model": f"{algo}-{self.num_timesteps}.zip"})
                 self.paused += time.process_time() - p0
-            return True
+            return len(rows) < len(todo)
 
-    model.learn(total_timesteps=total, callback=Checkpoints())
-    max_range = env.task.max_range
-    headings = env.task.headings
-    rows = []
-    for s in snaps:
-        model.policy.load_state_dict(s.pop("state"))
+    model.learn(total_timesteps=checkpoints[-1], callback=Saver())
+    res = {"config": name, "method": algo, "seed": seed, "rooms": list(rooms),
+           "checkpoints": rows, "budget": checkpoints[-1], "stopped_at": stop,
+           "steps": tally.steps, "learning_collisions": tally.collisions}
+    (d / "train.json").write_text(json.dumps(res, indent=1))
+    return res
 
-        def policy(obs: np.ndarray) -> np.ndarray:
-            act, _ = model.predict((obs / max_range).astype(np.float32), deterministic=True)
-            return headings[np.asarray(act, dtype=int)]
 
-        rows.append({**s, **score(policy, a)})
-    if a.save_models:
-        model.save(a.out / f"{name}-{seed}.zip")
-    return {"config": name, "method": algo, "seed": seed, "rows": rows}
+def fuzzy_steps(log_path: Path, test_rooms: Sequence[str]) -> dict[str, int]:
+    """fuzzy-q's environment steps from its log: collected samples, the learning iterations
+    of every trial, and its evaluate stage inside and outside the test rooms."""
+    from sitframe.logs.reader import open_log
+
+    log = open_log(str(log_path))
+    collect = int(log.stage("collect")["samples"].shape[0]) if log.has("collect") else 0
+    learn = evaluate = judged = 0
+    collisions = 0
+    for k in log.trial_indices():
+        tl = log.trial(k)
+        learn += int(np.asarray(tl.arrays["collision"]).size)
+        collisions += int(np.asarray(tl.arrays["collision"]).sum())
+        for key, v in tl.summary.items():
+            if key.startswith("eval/") and key.endswith("/iterations"):
+                world = key.split("/")[1]
+                judged += int(v) if world in test_rooms else 0
+                evaluate += 0 if world in test_rooms else int(v)
+    return {"collect": collect, "learn": learn, "evaluate_outside_test": evaluate,
+            "evaluate_in_test_not_counted": judged, "counted": collect + learn + evaluate,
+            "learning_collisions": collisions}
+
+
+@contextmanager
+def simulator_tally() -> Iterator[dict[str, Tally]]:
+    """Count what a ``sitframe run`` in this process executes: the collect stage's sensor
+    readings (``collect_readings``) and robot moves (``collect_moves``, the wander's, with
+    their collisions, which the log does not keep), and the loop's robot moves
+    (``loop_moves``: learning iterations and evaluation runs, with collisions)."""
+    import sitframe.runs.collect as collect
+    import sitframe.runs.experiment as experiment
+    import sitframe.runs.loop as loop
+
+    t = {"collect_readings": Tally(), "collect_moves": Tally(), "loop_moves": Tally()}
+
+    def moves(tally: Tally, fn: Callable[..., Any]) -> Callable[..., Any]:
+        def step(*args: Any, **kw: Any) -> Any:
+            out = fn(*args, **kw)
+            tally.steps += 1
+            tally.collisions += bool(out.collided)
+            return out
+        return step
+
+    class Reads:
+        """The sensor, its ``read`` calls counted."""
+
+        def __init__(self, sensor: Any) -> None:
+            self._sensor = sensor
+
+        def __getattr__(self, name: str) -> Any:
+            return getattr(self._sensor, name)
+
+        def read(self, *args: Any, **kw: Any) -> Any:
+            t["collect_readings"].steps += 1
+            return self._sensor.read(*args, **kw)
+
+    def reads(fn: Callable[..., Any]) -> Callable[..., Any]:
+        return lambda worlds, sensor, *args, **kw: fn(worlds, Reads(sensor), *args, **kw)
+
+    patches = [(collect, "step_robot", moves(t["collect_moves"], collect.step_robot)),
+               (loop, "step_robot", moves(t["loop_moves"], loop.step_robot)),
+               (experiment, "collect_trajectories", reads(experiment.collect_trajectories)),
+               (experiment, "collect_wander", reads(experiment.collect_wander))]
+    saved = [(m, name, getattr(m, name)) for m, name, _f in patches]
+    try:
+        for m, name, f in patches:
+            setattr(m, name, f)
+        yield t
+    finally:
+        for m, name, f in saved:
+            setattr(m, name, f)
+
+
+def run_fuzzy(seed: int, d: Path, rooms: dict[str, tuple[str, ...]], config: str = PRESET
+              ) -> dict[str, Any]:
+    """``sitframe run CONFIG --trials 1 --seed S --out d/run.h5`` (in this process, one
+    trial runs serially), its steps read from the log (:func:`fuzzy_steps`) and the
+    simulator's own count (:func:`simulator_tally`), its CPU time."""
+    from sitframe.cli.app import main as sitframe_main
+
+    d.mkdir(parents=True, exist_ok=True)
+    log = d / "run.h5"
+    log.unlink(missing_ok=True)
+    c0 = time.process_time()
+    with simulator_tally() as sim, redirect_stdout(io.StringIO()):
+        rc = sitframe_main(["run", config, "--trials", "1", "--seed", str(seed),
+                            "--out", str(log)])
+    if rc != 0:
+        raise SystemExit(f"sitframe run {config} --seed {seed} failed (exit {rc})")
+    steps = fuzzy_steps(log, rooms["test"])
+    res = {"config": "fuzzy-q", "method": "fuzzy-q", "seed": seed, "preset": config,
+           "cpu_s": time.process_time() - c0, **steps,
+           "simulator": {k: vars(v) for k, v in sim.items()},
+           # collisions while learning: the trial's (logged) and the wander's (counted here)
+           "learning_collisions": steps["learning_collisions"]
+           + sim["collect_moves"].collisions}
+    (d / "train.json").write_text(json.dumps(res, indent=1))
+    return res
+
+
+def score_sb3(d: Path, rooms: dict[str, tuple[str, ...]], test: bool,
+              specs: tuple[EvalSpec, EvalSpec] = (VALID, TEST)) -> dict[str, Any]:
+    """Validate every checkpoint of job ``d`` (counted), pick the best (:func:`merit`), and
+    with ``test`` score every checkpoint in the test rooms (the learning curves); ``specs``:
+    the validation's and the test's :class:`EvalSpec`."""
+    train = json.loads((d / "train.json").read_text())
+    rows, valid_steps = [], 0
+    for ck in train["checkpoints"]:
+        frozen = sb3_frozen(d / ck["model"])
+        tally = Tally()
+        v = drive(frozen, rooms["valid"], specs[0], tally)
+        valid_steps += tally.steps
+        row = {**ck, "valid": v, "valid_steps": tally.steps, "valid_collisions": tally.collisions,
+               "counted_steps": ck["steps"] + valid_steps}
+        if test:
+            row["test"] = drive(frozen, rooms["test"], specs[1])
+        rows.append(row)
+    best = max(range(len(rows)), key=lambda i: merit(rows[i]["valid"]))
+    return {**train, "rows": rows, "best": best, "valid_steps": valid_steps,
+            "counted_steps": train["steps"] + valid_steps,
+            "counted_collisions": train["learning_collisions"]
+            + sum(r["valid_collisions"] for r in rows)}
+
+
+def score_fuzzy(d: Path, rooms: dict[str, tuple[str, ...]], test: bool,
+                specs: tuple[EvalSpec, EvalSpec] = (VALID, TEST)) -> dict[str, Any]:
+    """Trial 0's frozen policy in the validation rooms (not counted: nothing is selected by
+    it) and the test rooms."""
+    train = json.loads((d / "train.json").read_text())
+    log = d / "run.h5"
+    row = {"steps": train["counted"], "counted_steps": train["counted"],
+           "learning_collisions": train["learning_collisions"], "cpu_s": train["cpu_s"],
+           "valid": fuzzy_scores(log, rooms["valid"], specs[0])}
+    if test:
+        row["test"] = fuzzy_scores(log, rooms["test"], specs[1])
+    return {**train, "rows": [row], "best": 0, "counted_steps": train["counted"],
+            "counted_collisions": train["learning_collisions"]}
+
+
+def merit(v: dict[str, Any]) -> tuple[bool, float, float]:
+    """The selection rule's key (higher is better): safe (at most :data:`SAFE` collisions per
+    1000 iterations), then coverage if safe, else fewer collisions, then coverage."""
+    safe = v["collisions_per_1000"] <= SAFE
+    return (safe, v["coverage"] if safe else -v["collisions_per_1000"], v["coverage"])
 
 
 # ----------------------------------------------------------------------------- driver
 
-def job(args: tuple[str, int, argparse.Namespace]) -> str:
-    name, seed, a = args
-    path = a.out / f"{name}-{seed}.json"
-    if path.exists():
-        return f"{path} (done before)"
-    t0 = time.perf_counter()
-    res = run_fuzzy(seed, a.out, a) if name == "fuzzy-q" else run_sb3(name, seed, a)
-    res["job_wall_s"] = time.perf_counter() - t0
-    res["eval"] = {"starts": a.starts, "iterations": a.eval_iterations, "seed": a.eval_seed,
-                   "worlds": list(NOVEL), "tuning_world": "training"}
-    path.write_text(json.dumps(res, indent=1))
-    return f"{path} in {res['job_wall_s']:.0f} s"
+def _configs(names: list[str], out: Path) -> list[str]:
+    """``selected`` expands to the sets the screening selected (:func:`selected`)."""
+    expanded: list[str] = []
+    for n in names:
+        expanded += list(selected(load(out, "screen")).values()) if n == "selected" else [n]
+    for n in expanded:
+        if n != "fuzzy-q" and n not in GRID:
+            raise SystemExit(f"--configs: unknown '{n}'; expected fuzzy-q, selected or one of "
+                             f"{', '.join(GRID)}")
+    return expanded
 
 
-def load(out: Path) -> dict[str, list[dict[str, Any]]]:
+def cmd_run(a: argparse.Namespace) -> None:
+    rooms = ROOMS[a.rooms]
+    check_rooms(rooms)
+    for name in _configs(a.configs, a.out):
+        if name == "fuzzy-q" and a.phase == "screen":
+            continue  # (fuzzy-q gets no tuning here: its preset is its author's)
+        for seed in range(a.from_seed, a.seeds):
+            d = job_dir(a.out, a.phase, name, seed)
+            if (d / "train.json").exists():
+                continue
+            t0 = time.perf_counter()
+            if name == "fuzzy-q":
+                run_fuzzy(seed, d, rooms)
+            else:
+                stop = int(GRID[name][2][-1] * SCREEN_FRACTION) if a.phase == "screen" else None
+                train_sb3(name, seed, d, rooms["train"], stop)
+            print(f"trained {d} in {time.perf_counter() - t0:.0f} s", flush=True)
+
+
+def cmd_score(a: argparse.Namespace) -> None:
+    rooms = ROOMS[a.rooms]
+    check_rooms(rooms)
+    for train in sorted((a.out / a.phase).glob("*/seed-*/train.json")):
+        d = train.parent
+        if (d / "score.json").exists():
+            continue
+        t0 = time.process_time()
+        fn = score_fuzzy if d.parent.name == "fuzzy-q" else score_sb3
+        res = fn(d, rooms, test=a.phase == "final")
+        res["score_cpu_s"] = time.process_time() - t0
+        (d / "score.json").write_text(json.dumps(res, indent=1))
+        print(f"scored {d} in {res['score_cpu_s']:.0f} s CPU", flush=True)
+
+
+def load(out: Path, phase: str) -> dict[str, list[dict[str, Any]]]:
+    """Every scored job of ``phase``, by set, in seed order."""
     runs: dict[str, list[dict[str, Any]]] = {}
-    for p in sorted(out.glob("*.json")):
+    for p in sorted((out / phase).glob("*/seed-*/score.json"),
+                    key=lambda p: (p.parent.parent.name, int(p.parent.name[5:]))):
         r = json.loads(p.read_text())
         runs.setdefault(r["config"], []).append(r)
     return runs
 
 
-def curves(runs: list[dict[str, Any]], key: str) -> tuple[np.ndarray, np.ndarray]:
-    """Checkpoint steps (median over seeds) and the (seeds, checkpoints) values of ``key``."""
-    n = min(len(r["rows"]) for r in runs)
-    steps = np.median([[row["steps"] for row in r["rows"][:n]] for r in runs], axis=0)
-    return steps, np.array([[row[key] for row in r["rows"][:n]] for r in runs], dtype=float)
+def rank_key(jobs: list[dict[str, Any]]) -> tuple[float, float, float]:
+    """A set's key in the tuning (higher is better): the share of seeds whose best checkpoint
+    is safe on the validation rooms, their median coverage, minus their median collisions."""
+    best = [j["rows"][j["best"]]["valid"] for j in jobs]
+    return (float(np.mean([b["collisions_per_1000"] <= SAFE for b in best])),
+            float(np.median([b["coverage"] for b in best])),
+            -float(np.median([b["collisions_per_1000"] for b in best])))
 
 
-def targets(runs: dict[str, list[dict[str, Any]]], prefix: str = "") -> tuple[float, float]:
-    """fuzzy-q's final frozen policies: median collisions per 1000 and median coverage.
-
-    ``prefix`` ``"train_"`` gives the training room's scores, ``""`` the unseen rooms'.
-    """
-    if "fuzzy-q" not in runs:
-        raise SystemExit("no fuzzy-q results yet: its scores are the targets")
-    _s, c = curves(runs["fuzzy-q"], f"{prefix}collisions_per_1000")
-    _s, v = curves(runs["fuzzy-q"], f"{prefix}coverage")
-    return float(np.median(c[:, -1])), float(np.median(v[:, -1]))
-
-
-def _band(ax: Any, x: np.ndarray, v: np.ndarray, label: str) -> None:
-    """Median line and IQR band over the rows (seeds) of ``v`` (seeds, checkpoints)."""
-    q1, med, q3 = np.percentile(v, [25, 50, 75], axis=0)
-    line, = ax.plot(x, med, "o-", ms=3, label=label)
-    ax.fill_between(x, q1, q3, color=line.get_color(), alpha=0.15)
-
-
-def _axes_style(ax: Any, xkey: str, key: str, tc: float, tv: float) -> None:
-    from matplotlib.ticker import FuncFormatter, NullFormatter
-
-    ax.set_xscale("log")
-    ax.xaxis.set_minor_formatter(NullFormatter())
-    if xkey == "steps":
-        ax.set_xlabel("environment steps (fuzzy-q: collected samples + iterations)")
-        ax.set_xticks([2500, 5000, 10_000, 20_000, 50_000, 100_000])
-        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _p: f"{x / 1000:g}k"))
-    else:
-        ax.set_xlabel("training CPU seconds (median over seeds)")
-        ax.set_xticks([2, 5, 10, 20, 50, 100, 200])
-        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _p: f"{x:g}"))
-    if key.endswith("collisions_per_1000"):
-        ax.set_yscale("symlog", linthresh=1.0)
-        ax.set_ylim(bottom=0.0)
-        ax.axhline(tc, color="k", ls=":", lw=1, label="fuzzy-q final (median)")
-    if key.endswith("coverage"):
-        ax.axhline(tv, color="k", ls=":", lw=1, label="fuzzy-q final (median)")
-    ax.grid(alpha=0.3)
-
-
-def tune_figure(runs: dict[str, list[dict[str, Any]]], path: Path) -> None:
-    """Every set of the grid in the training room (the selection's view), DQN and PPO rows."""
-    from matplotlib.figure import Figure
-
-    tc, tv = targets(runs, "train_")
-    fig = Figure(figsize=(12, 8.5))
-    for row, algo in zip(fig.subplots(2, 2), ("dqn", "ppo"), strict=True):
-        for ax, key, label in zip(row, ("train_collisions_per_1000", "train_coverage"),
-                                  ("collisions / 1000 iterations", "coverage"), strict=True):
-            for name, rs in runs.items():
-                if name.startswith(algo):
-                    _band(ax, curves(rs, "steps")[0], curves(rs, key)[1],
-                          f"{name} ({len(rs)} seeds)")
-            _axes_style(ax, "steps", key, tc, tv)
-            ax.set_xlabel("environment steps")
-            ax.set_ylabel(f"{label}, training room")
-        row[0].legend(fontsize=7, ncol=2)
-    fig.suptitle("Tuning: frozen policies scored in the training room (median and IQR over "
-                 "the seeds every set has)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-
-
-def duel_figure(runs: dict[str, list[dict[str, Any]]], path: Path) -> None:
-    """The duel: fuzzy-q and the selected sets in the unseen rooms, four panels."""
-    from matplotlib.figure import Figure
-
-    tc, tv = targets(runs)
-    panels = [("steps", "collisions_per_1000", "collisions / 1000 iterations, unseen rooms"),
-              ("steps", "coverage", "coverage, unseen rooms"),
-              ("steps", "learning_collisions", "collisions while learning (cumulative)"),
-              ("cpu_s", "collisions_per_1000", "collisions / 1000 iterations, unseen rooms")]
-    fig = Figure(figsize=(12, 8.5))
-    axes = fig.subplots(2, 2).ravel()
-    for ax, (xkey, key, label) in zip(axes, panels, strict=True):
-        for name, rs in runs.items():
-            _band(ax, np.median(curves(rs, xkey)[1], axis=0), curves(rs, key)[1],
-                  f"{name} ({len(rs)} seeds)")
-        _axes_style(ax, xkey, key, tc, tv)
-        ax.set_ylabel(label)
-        if key == "learning_collisions":
-            ax.set_yscale("log")
-    axes[0].legend(fontsize=8)
-    fig.suptitle("Obstacle avoidance, frozen policies scored in two unseen rooms "
-                 "(median and IQR over seeds)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-
-
-def report(out: Path, min_seeds: int) -> None:
-    """Tuning table + ``tune.png`` (training room), then the duel's table + ``duel.png``.
-
-    The duel shows fuzzy-q and every set with at least ``min_seeds`` seeds (the
-    selected ones, run with more seeds after the tuning).
-    """
-    runs = load(out)
-    n = min(len(rs) for k, rs in runs.items() if k != "fuzzy-q")  # the seeds every set has
-    tuning = {k: rs if k == "fuzzy-q" else rs[:n] for k, rs in runs.items()}
-    tune_figure(tuning, out / "tune.png")
-    print(tune_table(tuning, *targets(tuning, "train_")))
-    duel = {k: rs for k, rs in runs.items() if k == "fuzzy-q" or len(rs) >= min_seeds}
-    if len(duel) > 1:
-        duel_figure(duel, out / "duel.png")
-        print("\n" + table(duel, *targets(duel)))
-    print(f"\nfigures: {out / 'tune.png'} {out / 'duel.png' if len(duel) > 1 else ''}")
-
-
-def tune_table(runs: dict[str, list[dict[str, Any]]], tc: float, tv: float) -> str:
-    """Markdown: the grid ranked by the selection rule, training-room scores only.
-
-    Rule: over seeds x the checkpoints in the second half of the budget, the share
-    of frozen policies that meet fuzzy-q's training-room collision rate *and*
-    coverage (higher first), then the median collisions per 1000 there (lower
-    first). Later checkpoints count so that a set which reaches the target and
-    loses it again scores lower than one that holds it.
-    """
-    lines = [f"Target (fuzzy-q's final frozen policies in the training room, median over "
-             f"seeds): {tc:.1f} collisions/1000, coverage {tv:.3f}\n",
-             "| set | seeds | budget | share meeting both (2nd half) | collisions/1000 "
-             "(2nd half, median) | coverage (2nd half, median) | collisions while learning "
-             "(final, median) | training CPU s (median) |", "|" + "---|" * 8]
-    ranked = []
-    for name, rs in runs.items():
-        if name == "fuzzy-q":
-            continue
-        steps, c = curves(rs, "train_collisions_per_1000")
-        late = steps >= steps[-1] / 2
-        _s, v = curves(rs, "train_coverage")
-        _s, lc = curves(rs, "learning_collisions")
-        _s, w = curves(rs, "cpu_s")
-        met = float(np.mean((c[:, late] <= tc) & (v[:, late] >= tv)))
-        ranked.append((name.split("-")[0], -met, float(np.median(c[:, late])), name,
-                       f"| {name} | {len(rs)} | {int(steps[-1]):,} | {met:.2f} | "
-                       f"{np.median(c[:, late]):.1f} | {np.median(v[:, late]):.3f} | "
-                       f"{np.median(lc[:, -1]):.0f} | {np.median(w[:, -1]):.0f} |"))
-    ranked.sort()
-    lines += [r[-1] for r in ranked]
+def selected(screen: dict[str, list[dict[str, Any]]]) -> dict[str, str]:
+    """The best set per algorithm by :func:`rank_key` (validation rooms only)."""
     best: dict[str, str] = {}
-    for r in ranked:
-        best.setdefault(r[0], r[3])
-    lines.append("\nselected: " + ", ".join(f"{k}: {v}" for k, v in best.items()))
+    for name in sorted(screen, key=lambda n: rank_key(screen[n]), reverse=True):
+        best.setdefault(GRID[name][0], name)
+    if not best:
+        raise SystemExit("no screened sets yet: run and score --phase screen first")
+    return best
+
+
+# ----------------------------------------------------------------------------- report
+
+def _q(x: Sequence[float], fmt: str) -> str:
+    """``median [q1–q3]`` of ``x``."""
+    q1, m, q3 = np.percentile(np.asarray(x, float), [25, 50, 75])
+    return f"{m:{fmt}} [{q1:{fmt}}–{q3:{fmt}}]"
+
+
+def to_quality(job: dict[str, Any]) -> int:
+    """Counted steps until the job first reached its own final quality: the first checkpoint
+    whose test scores are at least as good (collisions and coverage) as the chosen one's."""
+    rows = job["rows"]
+    fin = rows[job["best"]]["test"]
+    for r in rows:
+        t = r["test"]
+        if t["collisions_per_1000"] <= fin["collisions_per_1000"] and \
+                t["coverage"] >= fin["coverage"]:
+            return int(r["counted_steps"])
+    raise AssertionError("the chosen checkpoint reaches its own quality")
+
+
+@dataclass
+class Summary:
+    """One method's final figures over its seeds (each seed at its chosen checkpoint)."""
+
+    name: str
+    seeds: int
+    collisions: np.ndarray
+    coverage: np.ndarray
+    counted: np.ndarray
+    to_quality: np.ndarray
+    learning_collisions: np.ndarray
+    cpu_s: np.ndarray
+    score_cpu_s: np.ndarray
+
+    @classmethod
+    def of(cls, name: str, jobs: list[dict[str, Any]]) -> Summary:
+        fin = [j["rows"][j["best"]]["test"] for j in jobs]
+        cpu = [j["cpu_s"] if "cpu_s" in j else j["rows"][-1]["cpu_s"] for j in jobs]
+        return cls(name, len(jobs), np.array([f["collisions_per_1000"] for f in fin]),
+                   np.array([f["coverage"] for f in fin]),
+                   np.array([j["counted_steps"] for j in jobs], float),
+                   np.array([to_quality(j) for j in jobs], float),
+                   np.array([j["counted_collisions"] for j in jobs], float),
+                   np.array(cpu, float), np.array([j["score_cpu_s"] for j in jobs], float))
+
+
+def duel_table(sums: list[Summary]) -> str:
+    """Markdown: every method's final figures in the test rooms, and its costs."""
+    lines = ["| method | seeds | collisions/1000: median [IQR], worst | coverage: median "
+             "[IQR], worst | counted steps, whole run | counted steps to its own final "
+             "quality | collisions while learning (whole run) | training CPU s (median) |",
+             "|" + "---|" * 8]
+    for s in sums:
+        lines.append(f"| {s.name} | {s.seeds} | {_q(s.collisions, '.1f')}, "
+                     f"{s.collisions.max():.1f} | {_q(s.coverage, '.3f')}, "
+                     f"{s.coverage.min():.3f} | {_q(s.counted, ',.0f')} | "
+                     f"{_q(s.to_quality, ',.0f')} | {_q(s.learning_collisions, '.0f')} | "
+                     f"{np.median(s.cpu_s):.0f} |")
     return "\n".join(lines)
 
 
-def table(runs: dict[str, list[dict[str, Any]]], target_c: float, target_v: float) -> str:
-    """Markdown: final scores, steps each seed needs to reach fuzzy-q's final median scores."""
-    lines = [f"Target (fuzzy-q's final frozen policies, median over seeds): {target_c:.1f} "
-             f"collisions/1000, coverage {target_v:.3f}\n",
-             "| method | seeds | budget (steps) | collisions/1000, final: median [IQR] | "
-             "coverage, final: median [IQR] | steps to reach the collision rate, per seed | "
-             "steps to reach both | seeds meeting both at the end | collisions while learning "
-             "(final) | training CPU s |",
-             "|" + "---|" * 10]
-
-    def iqr(x: np.ndarray, fmt: str) -> str:
-        q1, m, q3 = np.percentile(x, [25, 50, 75])
-        return f"{m:{fmt}} [{q1:{fmt}}–{q3:{fmt}}]"
-
-    for name, rs in runs.items():
-        steps, c = curves(rs, "collisions_per_1000")
-        _s, v = curves(rs, "coverage")
-        _s, lc = curves(rs, "learning_collisions")
-        _s, w = curves(rs, "cpu_s")
-
-        rc = " ".join(_first(steps, c[k] <= target_c) for k in range(len(rs)))
-        rb = " ".join(_first(steps, (c[k] <= target_c) & (v[k] >= target_v))
-                      for k in range(len(rs)))
-        end = int(np.sum((c[:, -1] <= target_c) & (v[:, -1] >= target_v)))
-        if name == "fuzzy-q":
-            rc = rb = "(the target)"
-        lines.append(f"| {name} | {len(rs)} | {int(steps[-1]):,} | {iqr(c[:, -1], '.1f')} | "
-                     f"{iqr(v[:, -1], '.3f')} | {rc} | {rb} | {end} of {len(rs)} | "
-                     f"{iqr(lc[:, -1], '.0f')} | {np.median(w[:, -1]):.0f} |")
+def targets_table(fq: Summary, deep: list[Summary]) -> str:
+    """Markdown: the issue's targets for fuzzy-q against the best deep-RL method (the lower
+    median test collision rate; coverage breaks a tie)."""
+    best = min(deep, key=lambda s: (np.median(s.collisions), -np.median(s.coverage)))
+    rows = [
+        (f"median collisions/1000 <= {best.name}'s median", np.median(fq.collisions),
+         np.median(best.collisions), np.median(fq.collisions) <= np.median(best.collisions)),
+        ("worst seed's collisions/1000 <= 3", fq.collisions.max(), 3.0,
+         fq.collisions.max() <= 3.0),
+        ("median coverage >= 0.50", np.median(fq.coverage), 0.50,
+         np.median(fq.coverage) >= 0.50),
+        ("worst seed's coverage >= 0.40", fq.coverage.min(), 0.40, fq.coverage.min() >= 0.40),
+        (f"steps <= 1/5 of {best.name}'s steps to its own final quality",
+         np.median(fq.counted), np.median(best.to_quality) / 5,
+         np.median(fq.counted) <= np.median(best.to_quality) / 5),
+        (f"collisions while learning <= 1/20 of {best.name}'s",
+         np.median(fq.learning_collisions), np.median(best.learning_collisions) / 20,
+         np.median(fq.learning_collisions) <= np.median(best.learning_collisions) / 20),
+    ]
+    lines = [f"Best deep-RL method: {best.name} (lower median test collision rate).\n",
+             "| target (fuzzy-q) | fuzzy-q | bound | met |", "|---|---|---|---|"]
+    lines += [f"| {t} | {_num(v)} | {_num(b)} | {'yes' if ok else '**no**'} |"
+              for t, v, b, ok in rows]
     return "\n".join(lines)
 
 
-def _first(steps: np.ndarray, ok: np.ndarray) -> str:
-    """The first checkpoint (in thousands of steps) where ``ok`` holds, or a dash."""
-    i = np.flatnonzero(ok)
-    return f"{steps[i[0]] / 1000:g}k" if i.size else "—"
+def _num(v: float) -> str:
+    """A figure of the targets' table: steps and counts whole, rates to 3 digits."""
+    return f"{v:,.0f}" if abs(v) >= 100 else f"{v:.3g}"
+
+
+def tuning_table(screen: dict[str, list[dict[str, Any]]]) -> str:
+    """Markdown: the grid ranked by :func:`rank_key` (validation rooms only)."""
+    chosen = set(selected(screen).values())
+    lines = ["| set | change | seeds | screened to (steps) | share of seeds safe | validation "
+             "collisions/1000 at best checkpoint (median) | validation coverage (median) | "
+             "best checkpoints (steps) | selected |", "|" + "---|" * 9]
+    for name in sorted(screen, key=lambda n: (GRID[n][0], [-x for x in
+                                                            rank_key(screen[n])])):
+        jobs = screen[name]
+        share, cov, neg = rank_key(jobs)
+        best = " ".join(f"{j['rows'][j['best']]['steps'] / 1000:g}k" for j in jobs)
+        lines.append(f"| {name} | {GRID[name][3]} | {len(jobs)} | "
+                     f"{jobs[0]['stopped_at']:,} | {share:.2f} | {-neg:.1f} | {cov:.3f} | "
+                     f"{best} | {'**yes**' if name in chosen else ''} |")
+    return "\n".join(lines)
+
+
+def _curve(jobs: list[dict[str, Any]], key: str) -> tuple[np.ndarray, np.ndarray]:
+    """Counted steps (median over seeds) and (seeds, checkpoints) test values of ``key``
+    (``learning_collisions``: training and validation collisions so far)."""
+    n = min(len(j["rows"]) for j in jobs)
+    x = np.median([[r["counted_steps"] for r in j["rows"][:n]] for j in jobs], axis=0)
+    if key == "learning_collisions":
+        v = [np.cumsum([r.get("valid_collisions", 0) for r in j["rows"][:n]])
+             + [r["learning_collisions"] for r in j["rows"][:n]] for j in jobs]
+    else:
+        v = [[r["test"][key] for r in j["rows"][:n]] for j in jobs]
+    return x, np.asarray(v, float)
+
+
+def curves_figure(final: dict[str, list[dict[str, Any]]], path: Path) -> None:
+    """Test-room collisions/1000, coverage and collisions while learning against counted
+    steps: median and IQR band over seeds per deep-RL set, fuzzy-q's point (median, IQR)."""
+    from matplotlib.figure import Figure
+
+    panels = [("collisions_per_1000", "collisions / 1000 iterations, 22 unseen rooms", SAFE),
+              ("coverage", "coverage, 22 unseen rooms", 0.5),
+              ("learning_collisions", "collisions while learning (cumulative)", None)]
+    fig = Figure(figsize=(15, 5.8))
+    for ax, (key, label, bar) in zip(fig.subplots(1, 3), panels, strict=True):
+        for name, jobs in final.items():
+            x, v = _curve(jobs, key)
+            q1, med, q3 = np.percentile(v, [25, 50, 75], axis=0)
+            if name == "fuzzy-q":
+                ax.errorbar(x, med, yerr=[med - q1, q3 - med], fmt="*", ms=14, color="k",
+                            capsize=4, label=f"fuzzy-q ({len(jobs)} seeds)", zorder=5)
+                continue
+            line, = ax.plot(x, med, "o-", ms=3, label=f"{name} ({len(jobs)} seeds)")
+            ax.fill_between(x, q1, q3, color=line.get_color(), alpha=0.18)
+            if key != "learning_collisions":  # the duel's score: each seed's chosen checkpoint
+                fin = [j["rows"][j["best"]]["test"][key] for j in jobs]
+                ax.plot(x[-1], np.median(fin), "D", mfc="none", mew=2, ms=10,
+                        color=line.get_color(), label=f"{name}: at the checkpoints chosen on "
+                        "validation rooms (median)")
+        if bar is not None:
+            ax.axhline(bar, color="grey", ls=":", lw=1, label="the issue's bar")
+        ax.set_xscale("log")
+        ax.set_xlabel("environment steps counted (training + validation)")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+        if key != "coverage":
+            ax.set_yscale("symlog", linthresh=1.0 if key != "learning_collisions" else 10.0)
+            ax.set_ylim(bottom=0)
+    fig.legend(*fig.axes[0].get_legend_handles_labels(), loc="lower center", ncol=3,
+               fontsize=9, frameon=False)
+    fig.suptitle("Duel v2: frozen policies at each checkpoint in the 22 test rooms (median and "
+                 "IQR over seeds; fuzzy-q: its final policy)")
+    fig.tight_layout(rect=(0, 0.11, 1, 1))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+
+
+def cmd_report(a: argparse.Namespace) -> None:
+    from common.publish import publish
+
+    screen = load(a.out, "screen")
+    if screen and a.table == "duel":
+        publish("duel-tuning", tuning_table(screen) + "\n\nSelected (validation rooms only): "
+                + ", ".join(selected(screen).values()) + ".")
+        jobs = [j for js in screen.values() for j in js]
+        print(f"screening CPU s: training {sum(j['checkpoints'][-1]['cpu_s'] for j in jobs):.0f}"
+              f", scoring {sum(j['score_cpu_s'] for j in jobs):.0f}")
+    final = load(a.out, "final")
+    if "fuzzy-q" not in final or len(final) < 2:
+        raise SystemExit("report: expected fuzzy-q and at least one deep-RL set in --phase final")
+    sums = [Summary.of(n, jobs) for n, jobs in final.items()]
+    fq = next(s for s in sums if s.name == "fuzzy-q")
+    deep = [s for s in sums if s.name != "fuzzy-q"]
+    publish(a.table, duel_table([fq, *deep]) + "\n\n" + targets_table(fq, deep))
+    curves_figure(final, a.figure)
+    print(f"figure: {a.figure}")
+    print("CPU s per method (training + scoring, summed over seeds): " + ", ".join(
+        f"{s.name} {s.cpu_s.sum():.0f} + {s.score_cpu_s.sum():.0f}" for s in sums))
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("command", choices=("run", "report"))
-    ap.add_argument("--out", type=Path, default=Path("duel"))
-    ap.add_argument("--seeds", type=int, default=2, help="seeds 0 .. N-1 of every set")
-    ap.add_argument("--from-seed", type=int, default=0,
-                    help="skip seeds below this one (to split a run between processes)")
-    ap.add_argument("--configs", nargs="+", default=["fuzzy-q", *CONFIGS],
-                    help=f"any of fuzzy-q {' '.join(CONFIGS)} (default all)")
-    ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--starts", type=int, default=5, help="start poses per evaluation room")
-    ap.add_argument("--eval-iterations", type=int, default=1000)
-    ap.add_argument("--eval-seed", type=int, default=12345)
-    ap.add_argument("--min-seeds", type=int, default=5,
-                    help="report: sets with this many seeds enter the duel's table and figure")
-    ap.add_argument("--save-models", action="store_true", help="keep the final SB3 models")
+    ap.add_argument("command", choices=("run", "score", "report"))
+    ap.add_argument("--out", type=Path, default=Path("duel2"))
+    ap.add_argument("--phase", choices=("screen", "final"), default="final")
+    ap.add_argument("--rooms", choices=tuple(ROOMS), default="gen",
+                    help="room sets (shipped: the shipped worlds, to try the harness)")
+    ap.add_argument("--configs", nargs="+", default=[*GRID],
+                    help=f"fuzzy-q, selected (the screening's choice) or any of {' '.join(GRID)}")
+    ap.add_argument("--seeds", type=int, default=SCREEN_SEEDS, help="seeds 0 .. N-1")
+    ap.add_argument("--from-seed", type=int, default=0)
+    ap.add_argument("--figure", type=Path, default=FIGURE, help="report: the figure's path")
+    ap.add_argument("--table", default="duel",
+                    help="report: the published table's name (a second duel beside the first)")
     a = ap.parse_args()
     a.out.mkdir(parents=True, exist_ok=True)
-    if a.command == "report":
-        report(a.out, a.min_seeds)
-        return
-    for c in a.configs:
-        if c != "fuzzy-q" and c not in CONFIGS:
-            raise SystemExit(f"--configs: unknown '{c}'; expected fuzzy-q or one of "
-                             f"{', '.join(CONFIGS)}")
-    jobs = [(c, s, a) for c in a.configs for s in range(a.from_seed, a.seeds)]  # set by set
-    with Pool(a.workers, maxtasksperchild=1) as pool:
-        for msg in pool.imap_unordered(job, jobs):
-            print(msg, flush=True)
+    {"run": cmd_run, "score": cmd_score, "report": cmd_report}[a.command](a)
 
 
 if __name__ == "__main__":

@@ -18,10 +18,16 @@ Step
     sensor code paths of a sitframe trial (:func:`sitframe.sim.robot.step_robot`,
     the sensor plugin's ``read``), rewarded by the config's reward plugin.
 Episode
-    See :mod:`sitframe.gym.task` (start poses, goals, time limit, termination).
-    All randomness (start poses, goals, sensor noise, the simulator's
-    tie-breaks) flows from the env's seeded generator ``np_random``:
-    ``reset(seed=s)`` gives the same episode for the same actions.
+    See :mod:`sitframe.gym.task` (worlds, start poses, goals, time limit,
+    termination). All randomness (the episode's world when the env has several,
+    start poses, goals, sensor noise, the simulator's tie-breaks) flows from the
+    env's seeded generator ``np_random``: ``reset(seed=s)`` gives the same
+    episode for the same actions.
+Several worlds
+    ``make_env(config, worlds=["gen:1000000", "gen:1000001", ...])`` trains over
+    a family of rooms: each ``reset`` draws the episode's world uniformly from
+    ``np_random`` (then its start pose, as with one world);
+    ``reset(options={"world": name})`` picks one; ``info["world"]`` names it.
 """
 
 from __future__ import annotations
@@ -52,8 +58,8 @@ class SitframeEnv(gym.Env):
         ``None`` or ``"rgb_array"`` (an (H, W, 3) uint8 frame of the world, the
         robot, its sensor beams and the goal).
     **task
-        Passed to :meth:`sitframe.gym.task.Task.from_config`: ``world``,
-        ``reward``, ``reward_params``, ``max_steps``, ``normalize``,
+        Passed to :meth:`sitframe.gym.task.Task.from_config`: ``world`` or
+        ``worlds``, ``reward``, ``reward_params``, ``max_steps``, ``normalize``,
         ``start_margin``, ``terminate_on_collision``, ``plugins_dirs``.
     """
 
@@ -86,17 +92,20 @@ class SitframeEnv(gym.Env):
               ) -> tuple[np.ndarray, dict[str, Any]]:
         """Start an episode at a random free pose (and goal) drawn from ``np_random``.
 
-        ``options`` may give ``{"pose": (x, y, theta)}`` (and ``"goal": (x, y, radius)``)
-        to start from a chosen pose instead.
+        With several worlds the episode's world is drawn first (or named by
+        ``options={"world": name}``). ``options`` may give ``{"pose": (x, y, theta)}``
+        (and ``"goal": (x, y, radius)``) to start from a chosen pose instead.
         """
         super().reset(seed=seed)
         rng = self.np_random
-        self.pose, self.goal = self.task.draw_start(rng)
+        self.world = self.task.pick_world(rng, (options or {}).get("world"))
+        self.pose, self.goal = self.task.draw_start(rng, self.world)
         if options:
-            self.pose, self.goal = _chosen_start(self.task, options, self.pose, self.goal)
+            self.pose, self.goal = _chosen_start(self.task, self.world, options, self.pose,
+                                                 self.goal)
         self.t = 0
         if hasattr(self.reward_fn, "trial_start"):
-            self.reward_fn.trial_start(self.task.trial_info(rng))
+            self.reward_fn.trial_start(self.task.trial_info(rng, self.world))
         self._reading = self.sensor.read(self.world, self.pose, rng)
         return self.task.observe(self._reading, self.pose, self.goal), self._info(None)
 
@@ -105,12 +114,12 @@ class SitframeEnv(gym.Env):
             raise RuntimeError("call reset() before step()")
         task, rng = self.task, self.np_random
         cmd = task.command(action, self.continuous)
-        before = task.context(self.t, self.pose, self._reading, self.goal)
+        before = task.context(self.t, self.pose, self._reading, self.goal, world=self.world)
         out = step_robot(self.world, self.pose, cmd, task.res.robot, rng)
         self.pose = out.pose
         self._reading = self.sensor.read(self.world, self.pose, rng)
         self.t += 1
-        after = task.context(self.t, self.pose, self._reading, self.goal)
+        after = task.context(self.t, self.pose, self._reading, self.goal, world=self.world)
         reward = float(self.reward_fn(Transition(before, cmd, out, after)))
         terminated = task.terminated(after, out.collided)
         truncated = not terminated and self.t >= task.max_steps
@@ -119,7 +128,8 @@ class SitframeEnv(gym.Env):
 
     def _info(self, out: Any) -> dict[str, Any]:
         return {"pose": self.pose.copy(), "collided": bool(out is not None and out.collided),
-                "distance_m": 0.0 if out is None else float(out.distance_m)}
+                "distance_m": 0.0 if out is None else float(out.distance_m),
+                "world": self.world.name}
 
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":
@@ -128,13 +138,13 @@ class SitframeEnv(gym.Env):
                             self.task.res.robot.radius)
 
 
-def _chosen_start(task: Task, options: dict[str, Any], pose: np.ndarray,
+def _chosen_start(task: Task, world: Any, options: dict[str, Any], pose: np.ndarray,
                   goal: Any) -> tuple[np.ndarray, Any]:
     if "pose" in options:
         p = np.asarray(options["pose"], dtype=float).reshape(-1)
-        if p.shape != (3,) or not task.world.is_free(p[None, :2], task.res.robot.radius)[0]:
+        if p.shape != (3,) or not world.is_free(p[None, :2], task.res.robot.radius)[0]:
             raise ValueError(f"options['pose']: expected a free (x, y, theta) pose in world "
-                             f"'{task.world.name}', got {options['pose']!r}")
+                             f"'{world.name}', got {options['pose']!r}")
         pose = p
     if "goal" in options:
         g = np.asarray(options["goal"], dtype=float).reshape(-1)

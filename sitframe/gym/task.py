@@ -17,6 +17,12 @@ Choices the issue leaves open (also in docs/how-to/gymnasium.md):
 - **Reward**: the task behaviour's reward plugin. A goal config whose
   behaviours learn nothing (the ``goal-finding`` preset) gets
   ``goal-progress`` (``plugins/learned_arbiter.py``). ``reward=`` overrides both.
+- **Worlds**: one (``world=``, default the config's ``experiment.world``) or several
+  (``worlds=[...]``, any names a config accepts, e.g. generated rooms ``"gen:SEED"``):
+  with several, each episode's world is drawn uniformly from the env's generator
+  ``np_random`` at ``reset`` (before its start pose), so ``reset(seed=s)`` repeats
+  the world too; ``options={"world": name}`` picks one. A single world draws
+  nothing (its episodes are those of before the option existed).
 - **Episodes**: a start pose drawn uniformly among free poses with
   ``start_margin`` (0.1 m) of clearance beyond the robot's radius; goal tasks
   draw start and goal from the protocol (``[goal]`` table: min_distance,
@@ -33,6 +39,7 @@ from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -70,7 +77,7 @@ class Task:
     res
         The resolved config (its components are created fresh per env).
     world
-        The world episodes run in.
+        The world episodes run in (the first of :attr:`worlds`).
     headings, speeds
         (H,) heading changes [deg] and (V,) speeds [m/s] of the discrete actions
         (``speeds`` holds only ``default_speed`` when the config learns no speed).
@@ -89,6 +96,9 @@ class Task:
         Clearance beyond the robot's radius of random start poses [m].
     terminate_on_collision
         Whether a collision ends the episode.
+    worlds
+        Every world an episode may run in (each episode draws one when there are
+        several); ``(world,)`` for one.
     """
 
     res: Resolved
@@ -103,17 +113,23 @@ class Task:
     normalize: bool
     start_margin: float
     terminate_on_collision: bool
+    worlds: tuple[World, ...] = ()
     _bounds: tuple[np.ndarray, np.ndarray] | None = None
     _commands: list[Command] | None = None
 
     @classmethod
     def from_config(cls, config: str | dict[str, Any] = "obstacle-avoidance", *,
-                    world: str | None = None, reward: str | None = None,
+                    world: str | None = None, worlds: Sequence[str] | None = None,
+                    reward: str | None = None,
                     reward_params: dict[str, Any] | None = None, max_steps: int | None = None,
                     normalize: bool = True, start_margin: float = 0.1,
                     terminate_on_collision: bool = False,
                     plugins_dirs: tuple[str, ...] = ()) -> Task:
         """Resolve ``config`` (preset name, TOML path or a validated config dict).
+
+        ``world`` names the one world of every episode (default: the config's
+        ``experiment.world``); ``worlds`` names several, one drawn per episode
+        (not both).
 
         Raises
         ------
@@ -129,8 +145,10 @@ class Task:
         label = _task_behaviour(cfg, source)
         table = cfg["behaviours"][label]
         registry = Registry.collect(get_plugin_manager(plugins_dirs=plugins_dirs))
-        wname = world or cfg["experiment"]["world"]
-        res = Resolved.build(cfg, registry, source, worlds=(wname,), base_dir=base)
+        names = _world_names(world, worlds, cfg["experiment"]["world"])
+        res = Resolved.build(cfg, registry, source, worlds=names, base_dir=base)
+        loaded = tuple(res.world(n, key="worlds" if worlds is not None else "world")
+                       for n in names)
         goal_task = res.protocol_name() == "goal-episodes"
         rname = reward or table.get("reward") or (GOAL_REWARD if goal_task else None)
         if rname is None:
@@ -143,7 +161,8 @@ class Task:
             proto = res.protocol("goal-episodes")
             proto.episodes = 1
             if hasattr(proto, "check_world"):
-                proto.check_world(res.world(wname, key="world"))
+                for w in loaded:
+                    proto.check_world(w)
         if max_steps is None:
             max_steps = int((proto or res.protocol(res.protocol_name())).iterations)
         if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
@@ -154,10 +173,10 @@ class Task:
         learns_speed = speeds.size > 0
         if not learns_speed:
             speeds = np.array([float(cfg["experiment"]["default_speed"])])
-        task = cls(res, res.world(wname, key="world"),
+        task = cls(res, loaded[0],
                    np.asarray(table["headings"], dtype=np.float64), speeds, learns_speed,
                    rname, rparams, proto, int(max_steps), bool(normalize), float(start_margin),
-                   bool(terminate_on_collision))
+                   bool(terminate_on_collision), loaded)
         task.make_reward()  # a bad reward name or parameter fails here, not at the first step
         return task
 
@@ -186,9 +205,22 @@ class Task:
 
     @property
     def diagonal(self) -> float:
-        """Diagonal of the world's bounding box [m]: the largest goal distance."""
-        x0, y0, x1, y1 = self.world.bounds
-        return math.hypot(x1 - x0, y1 - y0)
+        """Diagonal of the worlds' bounding boxes [m] (the largest of them): the largest goal
+        distance."""
+        return max(math.hypot(w.bounds[2] - w.bounds[0], w.bounds[3] - w.bounds[1])
+                   for w in self.worlds or (self.world,))
+
+    def pick_world(self, rng: np.random.Generator, name: str | None = None) -> World:
+        """The world of a new episode: ``name`` if given (one of :attr:`worlds`), else one
+        drawn uniformly from ``rng`` when there are several (nothing is drawn for one)."""
+        worlds = self.worlds or (self.world,)
+        if name is not None:
+            for w in worlds:
+                if w.name == name:
+                    return w
+            raise ValueError(f"options['world']: expected one of the env's worlds "
+                             f"({', '.join(w.name for w in worlds)}), got {name!r}")
+        return worlds[int(rng.integers(len(worlds)))] if len(worlds) > 1 else worlds[0]
 
     def observation_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper bounds, (d,) or (d + 2,) with goal distance and bearing."""
@@ -242,30 +274,48 @@ class Task:
         return self._commands[i]
 
     # -- episodes -------------------------------------------------------------
-    def draw_start(self, rng: np.random.Generator) -> tuple[np.ndarray, Goal | None]:
-        """A random free start pose (3,) and, for goal tasks, a goal, drawn from ``rng``."""
+    def draw_start(self, rng: np.random.Generator, world: World | None = None
+                   ) -> tuple[np.ndarray, Goal | None]:
+        """A random free start pose (3,) and, for goal tasks, a goal, drawn from ``rng`` in
+        ``world`` (default :attr:`world`)."""
+        world = self.world if world is None else world
         if self.protocol is None:
-            return self.world.random_free_pose(rng, self.res.robot.radius,
-                                               margin=self.start_margin), None
-        starts, goals = self.protocol.episode_starts(self.world, rng, self.res.robot)
+            return world.random_free_pose(rng, self.res.robot.radius,
+                                          margin=self.start_margin), None
+        starts, goals = self.protocol.episode_starts(world, rng, self.res.robot)
         g = None if goals is None else Goal(np.asarray(goals[0][:2], float), float(goals[0][2]))
         return np.asarray(starts[0], dtype=float), g
 
-    def trial_info(self, rng: np.random.Generator) -> TrialInfo:
-        return TrialInfo(0, "learn", self.world, self.max_steps, rng)
+    def trial_info(self, rng: np.random.Generator, world: World | None = None) -> TrialInfo:
+        """What a reward is told when an episode starts (in ``world``, default :attr:`world`)."""
+        return TrialInfo(0, "learn", self.world if world is None else world, self.max_steps, rng)
 
     def context(self, t: int, pose: np.ndarray, reading: np.ndarray, goal: Goal | None,
-                nearest: float | None = None) -> Context:
+                nearest: float | None = None, world: World | None = None) -> Context:
         """The loop's context for the reward (no memberships: the env has no interpreter);
-        ``nearest`` is the reading's smallest range (computed if not given)."""
+        ``nearest`` is the reading's smallest range (computed if not given); ``world``
+        the episode's (default :attr:`world`)."""
         return Context(t, pose, reading, _NO_U,
-                       float(reading.min()) if nearest is None else nearest, self.world, goal)
+                       float(reading.min()) if nearest is None else nearest,
+                       self.world if world is None else world, goal)
 
     def terminated(self, ctx: Context, collided: bool) -> bool:
         """Goal reached (goal tasks), or a collision with ``terminate_on_collision``."""
         if collided and self.terminate_on_collision:
             return True
         return self.protocol is not None and bool(self.protocol.terminated(ctx))
+
+
+def _world_names(world: str | None, worlds: Sequence[str] | None, default: str
+                 ) -> tuple[str, ...]:
+    """The env's world names: ``worlds`` (several), ``world`` (one), else the config's."""
+    if worlds is None:
+        return (world or default,)
+    if world is not None:
+        raise ValueError("world and worlds: expected one of them, not both")
+    if isinstance(worlds, str) or not worlds or not all(isinstance(w, str) for w in worlds):
+        raise ValueError(f"worlds: expected a non-empty list of world names, got {worlds!r}")
+    return tuple(dict.fromkeys(worlds))
 
 
 def _task_behaviour(cfg: dict[str, Any], source: str | None) -> str:

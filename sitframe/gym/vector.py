@@ -19,6 +19,10 @@ What stays per robot is what a reward plugin needs: the contexts, the
 :class:`~sitframe.contract.records.Transition` and the reward call. Without the
 compiled kernels the robots are stepped one by one (the numpy reference).
 
+With several worlds (``worlds=[...]``) each robot draws its episode's world as
+the single env does, and the robots are moved and read world by world (each
+robot's own generator, so still bit-identical to its single env).
+
 Episodes end as in the single env; a finished robot is reset at the next
 ``step`` (Gymnasium's ``AutoresetMode.NEXT_STEP``: that step's action is
 ignored, its reward is 0).
@@ -42,7 +46,8 @@ __all__ = ["SitframeVectorEnv"]
 
 
 class SitframeVectorEnv(VectorEnv):
-    """``num_envs`` robots of one config in one world, stepped together.
+    """``num_envs`` robots of one config, stepped together (in one world, or each in the world
+    its episode drew).
 
     Parameters
     ----------
@@ -116,20 +121,19 @@ class SitframeVectorEnv(VectorEnv):
             robots = [envs[i] for i in live]
             cmds = self._commands((acts if live is self._all else acts[live]).tolist())
             rngs = [e.np_random for e in robots]
-            outs = step_robots(task.world, [e.pose for e in robots], cmds, task.res.robot, rngs)
+            outs, at, readings = self._move(robots, cmds, rngs)
             poses = [o.pose for o in outs]
-            at = np.array(poses)  # (M, 3)
-            readings = self._read(robots, poses, at, rngs)
             nearest = readings.min(axis=1).tolist()
-            world, limit = task.world, task.max_steps
+            limit = task.max_steps
             ends, ctx = task.protocol is not None or task.terminate_on_collision, self._ctx
             for j, (i, env, out, reading) in enumerate(zip(live, robots, outs, readings,
                                                            strict=True)):
                 # what stays per robot: the contexts and the reward (as SitframeEnv.step)
-                before = ctx[i] or task.context(env.t, env.pose, env._reading, env.goal)
+                before = ctx[i] or task.context(env.t, env.pose, env._reading, env.goal,
+                                                world=env.world)
                 env.pose, env._reading = out.pose, reading
                 env.t += 1
-                ctx[i] = after = Context(env.t, out.pose, reading, _NO_U, nearest[j], world,
+                ctx[i] = after = Context(env.t, out.pose, reading, _NO_U, nearest[j], env.world,
                                          env.goal)
                 rew[i] = float(env.reward_fn(Transition(before, cmds[j], out, after)))
                 term[i] = ends and task.terminated(after, out.collided)
@@ -157,14 +161,40 @@ class SitframeVectorEnv(VectorEnv):
             table = self._table = [task.command(a, False) for a in range(task.n_actions)]
         return [table[a] for a in acts]
 
-    def _read(self, robots: list[SitframeEnv], poses: list[np.ndarray], at: np.ndarray,
+    def _move(self, robots: list[SitframeEnv], cmds: list[Any],
+              rngs: list[np.random.Generator]) -> tuple[list[Any], np.ndarray, np.ndarray]:
+        """Step ``robots`` by ``cmds`` and read their sensors: the outcomes, the new poses
+        (M, 3) and the readings (M, d); world by world when the robots are in several."""
+        task = self.task
+        if len(task.worlds) <= 1:
+            outs = step_robots(task.world, [e.pose for e in robots], cmds, task.res.robot, rngs)
+            at = np.array([o.pose for o in outs])  # (M, 3)
+            return outs, at, self._read(task.world, robots, at, rngs)
+        groups: dict[int, list[int]] = {}
+        for j, e in enumerate(robots):
+            groups.setdefault(id(e.world), []).append(j)
+        outs: list[Any] = [None] * len(robots)
+        at = np.empty((len(robots), 3))
+        readings = np.empty((len(robots), task.sensor_dim))
+        for js in groups.values():
+            world, g_rngs = robots[js[0]].world, [rngs[j] for j in js]
+            g_outs = step_robots(world, [robots[j].pose for j in js], [cmds[j] for j in js],
+                                 task.res.robot, g_rngs)
+            g_at = np.array([o.pose for o in g_outs])
+            readings[js] = self._read(world, [robots[j] for j in js], g_at, g_rngs)
+            at[js] = g_at
+            for j, o in zip(js, g_outs, strict=True):
+                outs[j] = o
+        return outs, at, readings
+
+    def _read(self, world: Any, robots: list[SitframeEnv], at: np.ndarray,
               rngs: list[np.random.Generator]) -> np.ndarray:
-        """The sensor readings (M, d) of ``robots`` at ``poses`` (``at``: the same, (M, 3)),
+        """The sensor readings (M, d) of ``robots`` in ``world`` at poses ``at`` (M, 3),
         batched if the sensor can."""
         if self._many is not None:
-            return self._many(self.task.world, at, rngs)
-        return np.stack([e.sensor.read(e.world, p, g)
-                         for e, p, g in zip(robots, poses, rngs, strict=True)])
+            return self._many(world, at, rngs)
+        return np.stack([e.sensor.read(world, p, g)
+                         for e, p, g in zip(robots, at, rngs, strict=True)])
 
     def _infos(self, collided: np.ndarray, poses: np.ndarray | None = None) -> dict[str, Any]:
         """``pose`` (N, 3) (``poses``, if given, are every robot's) and ``collided`` (N,)."""
