@@ -199,8 +199,7 @@ def headline() -> str:
         rows.append(f"| {label} | {result} | [{page}]({page}.md) |")
     rows.append(f"| Learned arbitration (own situations per behaviour, route planner) | "
                 f"{_paired_arbiters()} | [learned-arbitration](learned-arbitration.md) |")
-    rows.append("| The duel: fuzzy Q vs DQN and PPO | its own tables, made by "
-                "`python benchmarks/duel.py report` | [duel](duel.md) |")
+    rows.append(f"| The duel: fuzzy Q vs DQN and PPO | {_duel()} | [duel](duel.md) |")
     return "\n".join(rows)
 
 
@@ -226,6 +225,24 @@ def _generalisation() -> str:
     return (f"{r[2]} seeds, one trial each, judged in 20 generated rooms it never saw: "
             f"{r[3].split(' ')[0]} collisions / 1000 iterations (median; worst seed {r[4]}), "
             f"coverage {r[5]} (worst seed {r[6]}); {r[7]} of the evaluations above 10")
+
+
+def _duel() -> str:
+    """The duel's row, read from the table benchmarks/duel.py published (duel.md): per
+    method, test-room collisions and coverage (median, worst seed), its steps and the
+    collisions it had while learning."""
+    table = tables_dir() / "duel.md"
+    rows = [[c.strip() for c in line.split("|")[1:-1]]
+            for line in (table.read_text("utf-8").splitlines() if table.is_file() else [])
+            if line.startswith("| ") and not line.startswith(("| method", "| target"))]
+    rows = [r for r in rows if len(r) >= 7 and r[1].isdigit()]
+    if not rows:
+        return "not yet regenerated: `python benchmarks/duel.py report` (the page)"
+    parts = [f"{r[0]}: {r[2].split(' ')[0]} collisions / 1000 (worst seed "
+             f"{r[2].rsplit(' ', 1)[-1]}), coverage {r[3].split(' ')[0]}, "
+             f"{r[4].split(' ')[0]} steps, {r[6].split(' ')[0]} collisions while learning"
+             for r in rows]
+    return f"22 rooms no method saw, {rows[0][1]} seeds each: " + "; ".join(parts)
 
 
 def _paired_arbiters() -> str:
