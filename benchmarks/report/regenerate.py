@@ -283,8 +283,8 @@ def readme_table(table: str) -> str:
 
 #: Tables another script makes on its own (not from here): name -> how.
 ELSEWHERE = {
-    "duel-tuning": "python benchmarks/duel.py report --out duel",
-    "duel": "python benchmarks/duel.py report --out duel",
+    "duel-tuning": "python benchmarks/duel.py report --out logs/duel2",
+    "duel": "python benchmarks/duel.py report --out logs/duel2",
 }
 #: The table each sub-table is made with (a recipe may write several tables).
 WRITES = {"speed": ("speed-situations", "speed-clearance", "speed-safety")}
