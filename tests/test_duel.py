@@ -114,6 +114,7 @@ class _Moves:
 def test_step_accounting_equals_the_simulator_steps(duel: Any, tmp_path: Path, algo: str,
                                                     kw: dict, checkpoints: tuple, stop: Any,
                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    pytest.importorskip("stable_baselines3", reason="the baselines extra is not installed")
     moves = _Moves(monkeypatch)
     rooms = duel.ROOMS["shipped"]
     res = duel.train_sb3("tiny", 0, tmp_path, rooms["train"], stop=stop,
