@@ -118,8 +118,9 @@ class Cluster:
         # A task whose worker is killed is run again elsewhere; under steady churn one task
         # may lose several workers in a row, more than Dask's default three.
         with dask.config.set({"distributed.scheduler.allowed-failures": self.allowed_failures}):
+            # (dashboard_address=None still serves HTTP on 8787 and warns if that is taken)
             self.cluster = LocalCluster(n_workers=0, processes=False, protocol="tcp",
-                                        host="127.0.0.1", dashboard_address=None)
+                                        host="127.0.0.1", dashboard_address="127.0.0.1:0")
         for _ in range(self.n):
             self._start_worker()
         self.wait_for_workers()

@@ -45,7 +45,7 @@ def test_dask_cluster_log_identical_to_serial(serial_log, tmp_path, capsys):
     out = tmp_path / "dask.h5"
     with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
                                   protocol="tcp", host="127.0.0.1",
-                                  dashboard_address=None) as cluster:
+                                  dashboard_address="127.0.0.1:0") as cluster:
         run_json(capsys, "run", str(cfg), "--out", str(out), "--scheduler",
              cluster.scheduler_address, "--json")
     assert open_log(out).status == "complete"
@@ -202,7 +202,7 @@ def test_a_dask_task_on_a_worker_of_another_arithmetic_fails_the_run_in_one_line
     capsys.readouterr()
     with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
                                   protocol="tcp", host="127.0.0.1",
-                                  dashboard_address=None) as cluster:
+                                  dashboard_address="127.0.0.1:0") as cluster:
         code = main(["run", str(cfg), "--out", str(out), "--scheduler",
                      cluster.scheduler_address])
     err = capsys.readouterr().err

@@ -242,7 +242,7 @@ def test_sweep_on_a_two_worker_dask_cluster_gives_the_local_summaries(swept, tmp
     out = tmp_path / "dask"
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
                                   protocol="tcp", host="127.0.0.1",
-                                  dashboard_address=None) as cluster:
+                                  dashboard_address="127.0.0.1:0") as cluster:
         assert main(["sweep", str(d / "dask.toml"), "--out", str(out), "--scheduler",
                      cluster.scheduler_address, "--json"]) == 0
         ran = [w.state.executed_count for w in cluster.workers.values()]
