@@ -53,8 +53,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from sitframe import RunContext, World, hookimpl, rim_ranges
+from sitframe import hookimpl
 from sitframe import params as P
+
+from .sonar import RimRangeSensor
 
 __all__ = ["LaserScanner", "sitframe_sensors"]
 
@@ -63,7 +65,7 @@ __all__ = ["LaserScanner", "sitframe_sensors"]
 MAX_BEAMS = 1024
 
 
-class LaserScanner:
+class LaserScanner(RimRangeSensor):
     """Planar laser scanner: ``beams`` ranges [m] from the robot's rim over ``fov_deg``.
 
     Parameters
@@ -120,42 +122,8 @@ class LaserScanner:
             fan = np.linspace(-self.fov_deg / 2, self.fov_deg / 2, n) if n > 1 else np.zeros(1)
         self.angles_deg = (fan + offset + 180.0) % 360.0 - 180.0
         self.angles_deg.setflags(write=False)
-        self._angles_rad = np.radians(self.angles_deg)
-
-    def bind(self, run: RunContext) -> None:
-        """Measure ranges from the run robot's rim unless ``robot_radius`` was given."""
-        if not self._radius_given:
-            self.robot_radius = float(run.robot.radius)
-
-    def read(self, world: World, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """Scan at ``pose``.
-
-        Parameters
-        ----------
-        world
-            The world.
-        pose
-            (3,) x [m], y [m], theta [rad].
-        rng
-            Used only for noise and dropout.
-
-        Returns
-        -------
-        numpy.ndarray
-            (beams,) ranges [m] from the rim, in [0, max_range], ordered as
-            :attr:`angles_deg`.
-        """
-        exact = self.noise_std == 0.0 and self.dropout == 0.0  # (then clipped in the same call)
-        reading = rim_ranges(world.segment_set, pose[0], pose[1],
-                             self._angles_rad + float(pose[2]), self.max_range, self.robot_radius,
-                             clip=exact)
-        if exact:
-            return reading
-        if self.noise_std > 0.0:
-            reading = reading + rng.normal(0.0, self.noise_std, self.beams)
-        if self.dropout > 0.0:
-            reading = np.where(rng.random(self.beams) < self.dropout, self.max_range, reading)
-        return np.clip(reading, 0.0, self.max_range)
+        self._ray_rel = np.radians(self.angles_deg)  # one ray per beam
+        self.rays_per_beam, self._n = 1, n
 
     def __repr__(self) -> str:
         return (f"LaserScanner({self.beams} beams over {self.fov_deg:g} deg, "

@@ -63,7 +63,7 @@ import numpy as np
 from sitframe import RunContext, World, hookimpl, rim_ranges, rim_ranges_many
 from sitframe import params as P
 
-__all__ = ["PIONEER_ANGLES_DEG", "SonarRing", "sitframe_sensors"]
+__all__ = ["PIONEER_ANGLES_DEG", "RimRangeSensor", "SonarRing", "sitframe_sensors"]
 
 #: Bearings of the Pioneer 2DX's 8 front sonars, degrees, positive = left (the
 #: project's one definition; everything else asks the run's sensor).
@@ -75,7 +75,97 @@ PIONEER_ANGLES_DEG: tuple[float, ...] = (90.0, 50.0, 30.0, 10.0, -10.0, -30.0, -
 MAX_RAYS_PER_BEAM = 256
 
 
-class SonarRing:
+class RimRangeSensor:
+    """Range finders on the robot's rim, read by ray casting: the shared half of
+    :class:`SonarRing` and the laser scanner.
+
+    A subclass sets, in its ``__init__``: ``max_range`` [m], ``robot_radius`` [m] (with
+    ``_radius_given``: whether the config gave it), ``noise_std`` [m], ``dropout``,
+    ``rays_per_beam`` (rays per reading; the reading is the nearest hit), ``_n`` (the number
+    of readings) and ``_ray_rel``: the ``(_n * rays_per_beam,)`` ray bearings [rad]
+    relative to the heading, reading by reading.
+    """
+
+    max_range: float
+    robot_radius: float
+    noise_std: float
+    dropout: float
+    rays_per_beam: int
+    _radius_given: bool
+    _n: int
+    _ray_rel: np.ndarray
+
+    def bind(self, run: RunContext) -> None:
+        """Measure ranges from the run robot's rim unless ``robot_radius`` was given."""
+        if not self._radius_given:
+            self.robot_radius = float(run.robot.radius)
+
+    def read(self, world: World, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Read every range finder at ``pose``.
+
+        Parameters
+        ----------
+        world
+            The world.
+        pose
+            (3,) x [m], y [m], theta [rad].
+        rng
+            Used only for noise and dropout.
+
+        Returns
+        -------
+        numpy.ndarray
+            (d,) ranges [m] from the rim, in [0, max_range], one per reading (a sonar, a
+            laser beam) in the sensor's order.
+        """
+        exact = self.noise_std == 0.0 and self.dropout == 0.0  # (then clipped in the same call)
+        reading = rim_ranges(world.segment_set, pose[0], pose[1], self._ray_rel + float(pose[2]),
+                             self.max_range, self.robot_radius, self.rays_per_beam, clip=exact)
+        if exact:
+            return reading
+        if self.noise_std > 0.0:
+            reading = reading + rng.normal(0.0, self.noise_std, self._n)
+        if self.dropout > 0.0:
+            reading = np.where(rng.random(self._n) < self.dropout, self.max_range, reading)
+        return np.clip(reading, 0.0, self.max_range)
+
+    def read_many(self, world: World, poses: np.ndarray,
+                  rngs: Sequence[np.random.Generator]) -> np.ndarray:
+        """Read the range finders of N robots in one ray-casting call (the vector env's batch).
+
+        Row ``i`` equals ``read(world, poses[i], rngs[i])``: the same rays and, for noise
+        and dropout, the same draws from robot ``i``'s own generator.
+
+        Parameters
+        ----------
+        poses
+            (N, 3) x [m], y [m], theta [rad].
+        rngs
+            N generators, one per robot.
+
+        Returns
+        -------
+        numpy.ndarray
+            (N, d) ranges [m] from the rim, in [0, max_range].
+        """
+        poses = np.asarray(poses, dtype=np.float64)
+        exact = self.noise_std == 0.0 and self.dropout == 0.0  # (as read())
+        readings = rim_ranges_many(world.segment_set, poses[:, :2],
+                                   self._ray_rel[None, :] + poses[:, 2:3],  # as read() adds
+                                   self.max_range, self.robot_radius, self.rays_per_beam,
+                                   clip=exact)
+        if exact:
+            return readings
+        for i in range(poses.shape[0]):
+            if self.noise_std > 0.0:
+                readings[i] = readings[i] + rngs[i].normal(0.0, self.noise_std, self._n)
+            if self.dropout > 0.0:
+                readings[i] = np.where(rngs[i].random(self._n) < self.dropout, self.max_range,
+                                       readings[i])
+        return np.clip(readings, 0.0, self.max_range)
+
+
+class SonarRing(RimRangeSensor):
     """Front sonar ring: one range per sonar, metres from the robot's rim.
 
     Parameters
@@ -139,74 +229,6 @@ class SonarRing:
             spread = np.zeros(1)
         self._ray_rel = np.radians((angles[:, None] + spread[None, :]).reshape(-1))
         self._n = angles.size
-
-    def bind(self, run: RunContext) -> None:
-        """Measure ranges from the run robot's rim unless ``robot_radius`` was given."""
-        if not self._radius_given:
-            self.robot_radius = float(run.robot.radius)
-
-    def read(self, world: World, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """Read all sonars at ``pose``.
-
-        Parameters
-        ----------
-        world
-            The world.
-        pose
-            (3,) x [m], y [m], theta [rad].
-        rng
-            Used only for noise and dropout.
-
-        Returns
-        -------
-        numpy.ndarray
-            (d,) ranges [m] from the rim, in [0, max_range].
-        """
-        exact = self.noise_std == 0.0 and self.dropout == 0.0  # (then clipped in the same call)
-        reading = rim_ranges(world.segment_set, pose[0], pose[1], self._ray_rel + float(pose[2]),
-                             self.max_range, self.robot_radius, self.rays_per_beam, clip=exact)
-        if exact:
-            return reading
-        if self.noise_std > 0.0:
-            reading = reading + rng.normal(0.0, self.noise_std, self._n)
-        if self.dropout > 0.0:
-            reading = np.where(rng.random(self._n) < self.dropout, self.max_range, reading)
-        return np.clip(reading, 0.0, self.max_range)
-
-    def read_many(self, world: World, poses: np.ndarray,
-                  rngs: Sequence[np.random.Generator]) -> np.ndarray:
-        """Read the sonars of N robots in one ray-casting call (the vector env's batch).
-
-        Row ``i`` equals ``read(world, poses[i], rngs[i])``: the same rays and, for noise
-        and dropout, the same draws from robot ``i``'s own generator.
-
-        Parameters
-        ----------
-        poses
-            (N, 3) x [m], y [m], theta [rad].
-        rngs
-            N generators, one per robot.
-
-        Returns
-        -------
-        numpy.ndarray
-            (N, d) ranges [m] from the rim, in [0, max_range].
-        """
-        poses = np.asarray(poses, dtype=np.float64)
-        exact = self.noise_std == 0.0 and self.dropout == 0.0  # (as read())
-        readings = rim_ranges_many(world.segment_set, poses[:, :2],
-                                   self._ray_rel[None, :] + poses[:, 2:3],  # as read() adds
-                                   self.max_range, self.robot_radius, self.rays_per_beam,
-                                   clip=exact)
-        if exact:
-            return readings
-        for i in range(poses.shape[0]):
-            if self.noise_std > 0.0:
-                readings[i] = readings[i] + rngs[i].normal(0.0, self.noise_std, self._n)
-            if self.dropout > 0.0:
-                readings[i] = np.where(rngs[i].random(self._n) < self.dropout, self.max_range,
-                                       readings[i])
-        return np.clip(readings, 0.0, self.max_range)
 
     def __repr__(self) -> str:
         return (f"SonarRing({self._n} beams, max_range={self.max_range:g} m, "

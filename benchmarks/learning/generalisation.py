@@ -155,19 +155,29 @@ RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
     "rooms-mu50-ep100": ("rooms-mu50 with 100-iteration episodes", {
         **_ROOMS, "experiment": {**_ROOMS["experiment"], "episode_iterations": 100},
         **_MU50}),
+    # Recipes named shipped-* change the shipped preset (not the one before issue 39): the
+    # step budget (the duel's 1/5 of deep RL's steps) spent on fewer collected samples.
+    "shipped-w100": ("shipped, 100 wander samples per collection room instead of 300",
+                     {"collect": {"wander_samples": 100}}),
+    "shipped-w50": ("shipped, 50 wander samples per collection room instead of 300",
+                    {"collect": {"wander_samples": 50}}),
+    "shipped-gen200": ("shipped, collecting only by wandering 200 samples in each generated "
+                       "training room (no forced trajectories in collect-1 ... collect-5)",
+                       {"collect": {"wander_samples": 200, "worlds": [TRAIN]}}),
 }
 
 
 def recipe_config(name: str, train: list[str] | None = None) -> dict[str, Any]:
     """Recipe ``name``'s config: the ``obstacle-avoidance`` preset as it was before issue 39
-    (:data:`BEFORE`; ``shipped``: as it is now) with the recipe's keys set, ``train``
-    (default :data:`TRAIN_ROOMS`) as its training rooms, and no evaluate stage (the script
-    judges)."""
+    (:data:`BEFORE`; ``shipped`` and ``shipped-*``: as it is now) with the recipe's keys set,
+    ``train`` (default :data:`TRAIN_ROOMS`) as its training rooms, and no evaluate stage (the
+    script judges)."""
     import tomllib
 
     from sitframe.contract.config import preset_text
 
-    cfg = tomllib.loads(preset_text("obstacle-avoidance") if name == "shipped"
+    shipped = name == "shipped" or name.startswith("shipped-")
+    cfg = tomllib.loads(preset_text("obstacle-avoidance") if shipped
                         else BEFORE.read_text("utf-8"))
     _merge(cfg, copy.deepcopy(RECIPES[name][1]), TRAIN_ROOMS if train is None else train)
     cfg["experiment"]["name"] = f"generalisation-{name}"

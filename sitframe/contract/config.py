@@ -627,25 +627,32 @@ def complete_tables(cfg: dict[str, Any], index: PluginTables, *,
     cfg.update(done)
 
 
+def _component_table(name: str, table: Any, what: str, component: str, file: str | None,
+                     key: str) -> dict[str, Any]:
+    """A copy of the table ``[...NAME]`` after checking that ``name`` (a ``what``) can name an
+    HDF5 group and that the table names its ``component`` (described for the error)."""
+    if name in ("", ".") or "/" in name:
+        raise InputError(f"expected a {what} that can name an HDF5 group (not empty, not '.', "
+                         f"no '/'), got {name!r}", file=file, key=key)
+    if not isinstance(table, dict):
+        raise InputError(f"expected a table, got {type(table).__name__}", file=file, key=key)
+    if "component" not in table:
+        raise InputError(f"missing 'component' ({component})", file=file, key=key)
+    _at(P.string, "component", table["component"], file, key)
+    return dict(table)
+
+
 def _validate_spaces(value: dict[str, Any], file: str | None) -> dict[str, Any]:
     """The ``[spaces.NAME]`` tables: names, reserved keys (the interpreter's own parameters
     are checked when the run resolves it, the ``view`` against the sensor's readings)."""
     out = {}
     for name, table in value.items():
         key = f"spaces.{name}"
-        if name in ("", ".") or "/" in name:
-            raise InputError(f"expected a space name that can name an HDF5 group (not empty, "
-                             f"not '.', no '/'), got {name!r}", file=file, key=key)
         if name == DEFAULT_SPACE:
             raise InputError(f"'{DEFAULT_SPACE}' is the name of the [interpreter]'s space; "
                              "expected another name for a space of its own", file=file, key=key)
-        if not isinstance(table, dict):
-            raise InputError(f"expected a table, got {type(table).__name__}", file=file, key=key)
-        t = dict(table)
-        if "component" not in t:
-            raise InputError("missing 'component' (the space's interpreter, e.g. \"fcm\")",
-                             file=file, key=key)
-        _at(P.string, "component", t["component"], file, key)
+        t = _component_table(name, table, "space name", "the space's interpreter, e.g. \"fcm\"",
+                             file, key)
         if "view" in t:
             view = t["view"]
             if not isinstance(view, list) or not view:
@@ -743,16 +750,8 @@ def _validate_behaviours(value: dict[str, Any], file: str | None) -> dict[str, A
     out = {}
     for label, table in value.items():
         key = f"behaviours.{label}"
-        if label in ("", ".") or "/" in label:
-            raise InputError(f"expected a behaviour label that can name an HDF5 group (not "
-                             f"empty, not '.', no '/'), got {label!r}", file=file, key=key)
-        if not isinstance(table, dict):
-            raise InputError(f"expected a table, got {type(table).__name__}", file=file, key=key)
-        if "component" not in table:
-            raise InputError("missing 'component' (the behaviour's registered name)",
-                             file=file, key=key)
-        t = dict(table)
-        _at(P.string, "component", t["component"], file, key)
+        t = _component_table(label, table, "behaviour label", "the behaviour's registered name",
+                             file, key)
         _check_meta(t, file, key, META_KEYS)
         if "policy_from" in t:
             pf = t["policy_from"]

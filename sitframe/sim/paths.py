@@ -32,6 +32,8 @@ from __future__ import annotations
 
 import math
 import weakref
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from scipy.sparse import csr_matrix
@@ -142,11 +144,17 @@ def _clear_from(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> np
     return out
 
 
+def _built_once(memo: weakref.WeakKeyDictionary[World, dict[float, Any]], build: Callable[..., Any],
+                world: World, radius: float) -> Any:
+    """``build(world, radius)``, made once per world and radius in this process."""
+    per_world = memo.setdefault(world, {})
+    if float(radius) not in per_world:
+        per_world[float(radius)] = build(world, float(radius))
+    return per_world[float(radius)]
+
+
 def _graph(world: World, radius: float) -> _Graph:
-    memo = _GRAPHS.setdefault(world, {})
-    if float(radius) not in memo:
-        memo[float(radius)] = _Graph(world, float(radius))
-    return memo[float(radius)]
+    return _built_once(_GRAPHS, _Graph, world, radius)
 
 
 def shortest_path_length(world: World, start: np.ndarray, goal: np.ndarray, *,
@@ -339,10 +347,7 @@ _ROUTES: weakref.WeakKeyDictionary[World, dict[float, RouteGraph]] = weakref.Wea
 
 def route_graph(world: World, radius: float) -> RouteGraph:
     """The :class:`RouteGraph` of ``world`` for a disc of ``radius``, built once per process."""
-    memo = _ROUTES.setdefault(world, {})
-    if float(radius) not in memo:
-        memo[float(radius)] = RouteGraph(world, float(radius))
-    return memo[float(radius)]
+    return _built_once(_ROUTES, RouteGraph, world, radius)
 
 
 def shortest_route(world: World, start: np.ndarray, goal: np.ndarray, *,
