@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import copy
+import hashlib
 import io
 import json
 import sys
@@ -72,7 +73,7 @@ _EVOLVING = {"component": "evolving", "capacity": 48, "create_distance": 1.8,
 #: Recipe -> (what it changes, the keys it sets on the shipped preset, merged table by table).
 RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
     "base": ("the preset before issue 39: learn in `training` only", {}),
-    "shipped": ("the `obstacle-avoidance` preset as shipped now (rooms-evolving-heading, "
+    "shipped": ("the `obstacle-avoidance` preset as shipped now (rooms-evolving-heading-gen200, "
                 "its evaluation rooms aside)", {}),
     "rooms": ("collect also in the 10 generated training rooms (wander); learn in "
               "250-iteration episodes over them, room and free start pose drawn per episode",
@@ -155,29 +156,35 @@ RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
     "rooms-mu50-ep100": ("rooms-mu50 with 100-iteration episodes", {
         **_ROOMS, "experiment": {**_ROOMS["experiment"], "episode_iterations": 100},
         **_MU50}),
-    # Recipes named shipped-* change the shipped preset (not the one before issue 39): the
-    # step budget (the duel's 1/5 of deep RL's steps) spent on fewer collected samples.
-    "shipped-w100": ("shipped, 100 wander samples per collection room instead of 300",
-                     {"collect": {"wander_samples": 100}}),
-    "shipped-w50": ("shipped, 50 wander samples per collection room instead of 300",
-                    {"collect": {"wander_samples": 50}}),
-    "shipped-gen200": ("shipped, collecting only by wandering 200 samples in each generated "
-                       "training room (no forced trajectories in collect-1 ... collect-5)",
-                       {"collect": {"wander_samples": 200, "worlds": [TRAIN]}}),
+    "rooms-evolving-heading-w100": (
+        "rooms-evolving-heading, 100 wander samples per collection room instead of 300",
+        _ROOMS | {"interpreter": _EVOLVING, "behaviours": {"avoid": {
+            "reward_params": {"heading_cost": 0.3}}},
+            "collect": {**_ROOMS["collect"], "wander_samples": 100}}),
+    "rooms-evolving-heading-w50": (
+        "rooms-evolving-heading, 50 wander samples per collection room instead of 300",
+        _ROOMS | {"interpreter": _EVOLVING, "behaviours": {"avoid": {
+            "reward_params": {"heading_cost": 0.3}}},
+            "collect": {**_ROOMS["collect"], "wander_samples": 50}}),
+    "rooms-evolving-heading-gen200": (
+        "rooms-evolving-heading, collecting only by wandering 200 samples in each generated "
+        "training room (no forced trajectories in collect-1 ... collect-5)",
+        _ROOMS | {"interpreter": _EVOLVING, "behaviours": {"avoid": {
+            "reward_params": {"heading_cost": 0.3}}},
+            "collect": {"worlds": [TRAIN], "wander_samples": 200}}),
 }
 
 
 def recipe_config(name: str, train: list[str] | None = None) -> dict[str, Any]:
     """Recipe ``name``'s config: the ``obstacle-avoidance`` preset as it was before issue 39
-    (:data:`BEFORE`; ``shipped`` and ``shipped-*``: as it is now) with the recipe's keys set,
+    (:data:`BEFORE`; ``shipped``: as it is now) with the recipe's keys set,
     ``train`` (default :data:`TRAIN_ROOMS`) as its training rooms, and no evaluate stage (the
     script judges)."""
     import tomllib
 
     from sitframe.contract.config import preset_text
 
-    shipped = name == "shipped" or name.startswith("shipped-")
-    cfg = tomllib.loads(preset_text("obstacle-avoidance") if shipped
+    cfg = tomllib.loads(preset_text("obstacle-avoidance") if name == "shipped"
                         else BEFORE.read_text("utf-8"))
     _merge(cfg, copy.deepcopy(RECIPES[name][1]), TRAIN_ROOMS if train is None else train)
     cfg["experiment"]["name"] = f"generalisation-{name}"
@@ -194,6 +201,15 @@ def _merge(into: dict[str, Any], keys: dict[str, Any], train: list[str]) -> None
             into[k] = [r for x in v for r in rooms.get(x, [x])]
         else:
             into[k] = v
+
+
+def config_key(name: str, train: list[str] | None = None) -> str:
+    """A digest of recipe ``name``'s config (its name aside): a cached seed is reused only
+    while its recipe's config, and so the preset or ``before.toml`` it starts from, is
+    unchanged."""
+    cfg = recipe_config(name, train)
+    del cfg["experiment"]["name"]
+    return hashlib.sha256(json.dumps(cfg, sort_keys=True).encode()).hexdigest()[:16]
 
 
 def write_config(name: str, folder: Path, train: list[str] | None = None) -> Path:
@@ -234,7 +250,8 @@ def run_seed(name: str, seed: int, out: Path, rooms: list[str],
             "validation": int(s.get("validation_iterations", 0)),
             "steps": samples + int(s["iterations"]) + int(s.get("validation_iterations", 0)),
             "learn_collisions": int(s["collisions"]), "converged": bool(s["converged"]),
-            "learn_seconds": learn_s, "judge_seconds": time.perf_counter() - t0 - learn_s,
+            "config": config_key(name, train), "learn_seconds": learn_s,
+            "judge_seconds": time.perf_counter() - t0 - learn_s,
             "rooms": {w: {"collisions": int(r["collisions"]), "iterations": int(r["iterations"]),
                           "coverage": float(r["coverage"])} for w, r in per_room.items()}}
 
@@ -297,8 +314,10 @@ def main(argv: list[str] | None = None) -> int:
         results = []
         for seed in range(a.seeds):
             cache = a.out / name / f"seed-{seed}.json"
-            if cache.is_file() and json.loads(cache.read_text())["rooms"].keys() == set(a.rooms):
-                results.append(json.loads(cache.read_text()))
+            cached = json.loads(cache.read_text()) if cache.is_file() else {}
+            if (cached.get("config") == config_key(name, a.train_rooms)
+                    and cached["rooms"].keys() == set(a.rooms)):
+                results.append(cached)
                 continue
             r = run_seed(name, seed, a.out, a.rooms, a.train_rooms)
             cache.write_text(json.dumps(r, indent=1))
