@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import hashlib
 import io
 import json
 import os
@@ -75,11 +76,19 @@ def run_seed(preset: str, seed: int, out: Path, rooms: list[str],
     evals = {f"{k}@{w}": evaluate_log(str(log), world=w, trial=k, iterations=1000, checked=lg)
              for k in lg.trial_indices() for w in rooms}
     return {"preset": preset, "seed": seed, "seconds": time.perf_counter() - t0,
+            "config": preset_key(preset),
             "rooms": rooms, "trials": trials,
             "converged": [bool(lg.trial(k).summary["converged"]) for k in lg.trial_indices()],
             "evaluations": {key: {"collisions_per_1000": float(r["collisions_per_1000"]),
                                   "coverage": float(r["coverage"])}
                             for key, r in evals.items()}}
+
+
+def preset_key(preset: str) -> str:
+    """A digest of the preset's text: a cached seed is reused only while it is unchanged."""
+    from sitframe.contract.config import preset_text
+
+    return hashlib.sha256(preset_text(preset).encode()).hexdigest()[:16]
 
 
 def row(preset: str, results: list[dict[str, Any]]) -> str:
@@ -117,7 +126,8 @@ def main(argv: list[str] | None = None) -> int:
         for seed in range(a.seeds):
             cache = a.out / preset / f"seed-{seed}.json"
             old = json.loads(cache.read_text()) if cache.is_file() else {}
-            if old.get("rooms") == a.rooms and old.get("trials") == a.trials:
+            if (old.get("rooms") == a.rooms and old.get("trials") == a.trials
+                    and old.get("config") == preset_key(preset)):
                 results.append(old)
                 continue
             r = run_seed(preset, seed, a.out, a.rooms, a.trials)
