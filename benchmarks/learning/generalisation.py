@@ -70,6 +70,15 @@ _EVOLVING = {"component": "evolving", "capacity": 48, "create_distance": 1.8,
              "split_ratio": 4.0, "split_min_updates": 100, "split_min_distance": 0.4,
              "error_decay": 0.9, "prune_after": 0, "check_every": 50}
 
+def _reh(collect: dict[str, Any], iterations: int | None = None) -> dict[str, Any]:
+    """rooms-evolving-heading's keys with another ``[collect]`` (and learning length)."""
+    keys = _ROOMS | {"interpreter": _EVOLVING, "collect": collect, "behaviours": {"avoid": {
+        "reward_params": {"heading_cost": 0.3}}}}
+    if iterations is not None:
+        keys["experiment"] = {**_ROOMS["experiment"], "iterations": iterations}
+    return keys
+
+
 #: Recipe -> (what it changes, the keys it sets on the shipped preset, merged table by table).
 RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
     "base": ("the preset before issue 39: learn in `training` only", {}),
@@ -158,20 +167,22 @@ RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
         **_MU50}),
     "rooms-evolving-heading-w100": (
         "rooms-evolving-heading, 100 wander samples per collection room instead of 300",
-        _ROOMS | {"interpreter": _EVOLVING, "behaviours": {"avoid": {
-            "reward_params": {"heading_cost": 0.3}}},
-            "collect": {**_ROOMS["collect"], "wander_samples": 100}}),
+        _reh({**_ROOMS["collect"], "wander_samples": 100})),
     "rooms-evolving-heading-w50": (
         "rooms-evolving-heading, 50 wander samples per collection room instead of 300",
-        _ROOMS | {"interpreter": _EVOLVING, "behaviours": {"avoid": {
-            "reward_params": {"heading_cost": 0.3}}},
-            "collect": {**_ROOMS["collect"], "wander_samples": 50}}),
+        _reh({**_ROOMS["collect"], "wander_samples": 50})),
     "rooms-evolving-heading-gen200": (
         "rooms-evolving-heading, collecting only by wandering 200 samples in each generated "
         "training room (no forced trajectories in collect-1 ... collect-5)",
-        _ROOMS | {"interpreter": _EVOLVING, "behaviours": {"avoid": {
-            "reward_params": {"heading_cost": 0.3}}},
-            "collect": {"worlds": [TRAIN], "wander_samples": 200}}),
+        _reh({"worlds": [TRAIN], "wander_samples": 200})),
+    "rooms-evolving-heading-gen200-l5500": (
+        "rooms-evolving-heading-gen200 learning 5500 iterations instead of 5000 (the duel's "
+        "step bound, 8500, with the evaluate stage's 1000)",
+        _reh({"worlds": [TRAIN], "wander_samples": 200}, 5500)),
+    "rooms-evolving-heading-gen150-l6000": (
+        "rooms-evolving-heading, 150 wander samples in each generated training room, "
+        "learning 6000 iterations",
+        _reh({"worlds": [TRAIN], "wander_samples": 150}, 6000)),
 }
 
 

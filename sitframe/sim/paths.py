@@ -82,21 +82,29 @@ class _Graph:
     """The arc points of a world for a disc and which of them see each other."""
 
     def __init__(self, world: World, radius: float) -> None:
-        verts = np.unique(np.vstack([world.segments[:, :2], world.segments[:, 2:]]), axis=0)
-        ang = 2 * math.pi * np.arange(ARC_POINTS) / ARC_POINTS
-        ring = (radius / math.cos(math.pi / ARC_POINTS) * (1 + 1e-9)
-                * np.stack([np.cos(ang), np.sin(ang)], axis=1))
-        pts = (verts[:, None, :] + ring[None]).reshape(-1, 2)
-        self.nodes = pts[world.is_free(pts, radius)]
-        n = self.nodes.shape[0]
-        iu, ju = np.triu_indices(n, k=1)
-        ok = _clear_moves(world, self.nodes[iu], self.nodes[ju], radius)
-        lengths = np.zeros((n, n))
-        d = np.hypot(*(self.nodes[iu[ok]] - self.nodes[ju[ok]]).T)
-        lengths[iu[ok], ju[ok]] = d
-        lengths[ju[ok], iu[ok]] = d
+        self.nodes, lengths = _visibility(world, radius)
         #: (n, n) shortest path between every two arc points (inf: not connected)
-        self.between = dijkstra(csr_matrix(lengths), directed=True)
+        self.between = dijkstra(lengths, directed=True)
+
+
+def _visibility(world: World, radius: float) -> tuple[np.ndarray, csr_matrix]:
+    """The arc points free for the disc ((n, 2) [m]: ``ARC_POINTS`` around every vertex of
+    the world's edges) and the (n, n) lengths [m] of the clear straight moves between them
+    (0: no move)."""
+    verts = np.unique(np.vstack([world.segments[:, :2], world.segments[:, 2:]]), axis=0)
+    ang = 2 * math.pi * np.arange(ARC_POINTS) / ARC_POINTS
+    ring = (radius / math.cos(math.pi / ARC_POINTS) * (1 + 1e-9)
+            * np.stack([np.cos(ang), np.sin(ang)], axis=1))
+    pts = (verts[:, None, :] + ring[None]).reshape(-1, 2)
+    nodes = pts[world.is_free(pts, radius)] if pts.size else pts
+    n = nodes.shape[0]
+    iu, ju = np.triu_indices(n, k=1)
+    ok = _clear_moves(world, nodes[iu], nodes[ju], radius)
+    lengths = np.zeros((n, n))
+    d = np.hypot(*(nodes[iu[ok]] - nodes[ju[ok]]).T)
+    lengths[iu[ok], ju[ok]] = d
+    lengths[ju[ok], iu[ok]] = d
+    return nodes, csr_matrix(lengths)
 
 
 def _clear_moves(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> np.ndarray:
@@ -279,23 +287,10 @@ class RouteGraph:
         if not radius > 0:
             raise ValueError(f"radius must be > 0 metres (the disc's), got {radius!r}")
         self.world, self.radius = world, float(radius)
-        verts = np.unique(np.vstack([world.segments[:, :2], world.segments[:, 2:]]), axis=0)
-        ang = 2 * math.pi * np.arange(ARC_POINTS) / ARC_POINTS
-        ring = (radius / math.cos(math.pi / ARC_POINTS) * (1 + 1e-9)
-                * np.stack([np.cos(ang), np.sin(ang)], axis=1))
-        pts = (verts[:, None, :] + ring[None]).reshape(-1, 2)
         #: (n, 2) the arc points free for the disc
-        self.nodes = pts[world.is_free(pts, radius)] if pts.size else pts
-        n = self.nodes.shape[0]
-        iu, ju = np.triu_indices(n, k=1)
-        ok = _clear_moves(world, self.nodes[iu], self.nodes[ju], radius)
-        lengths = np.zeros((n, n))
-        d = np.hypot(*(self.nodes[iu[ok]] - self.nodes[ju[ok]]).T)
-        lengths[iu[ok], ju[ok]] = d
-        lengths[ju[ok], iu[ok]] = d
-        if n:
-            between, pred = dijkstra(csr_matrix(lengths), directed=True,
-                                     return_predecessors=True)
+        self.nodes, lengths = _visibility(world, radius)
+        if self.nodes.shape[0]:
+            between, pred = dijkstra(lengths, directed=True, return_predecessors=True)
         else:
             between, pred = np.zeros((0, 0)), np.zeros((0, 0), dtype=np.int32)
         #: (n, n) shortest path between every two arc points [m] (inf: not connected)
