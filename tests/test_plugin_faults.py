@@ -690,7 +690,7 @@ class Bad(ObstacleAvoidanceReward):
 @hookimpl
 def sitframe_rewards():
     return [Bad]
-''', 2, "fault.toml: behaviours.avoid.reward.collision:", "'collision' is a positional-only "
+''', 2, "fault.toml: behaviours.avoid.reward_params.collision:", "'collision' is a positional-only "
           "parameter of 'bad'", cfg={**REWARD, "p = 5": "p = 5\nreward_params = {collision = 1}"}),
     fault("hook-name-misspelt", '''
 @hookimpl

@@ -424,13 +424,20 @@ class Config:
 
     def world_key(self, name: str) -> str:
         """The config key that names world ``name`` (for messages): ``experiment.world``,
-        ``experiment.rooms[j]``, else ``worlds``."""
+        ``experiment.rooms[j]``, ``collect.worlds[j]``, a plugin table's ``worlds[j]`` (e.g.
+        ``evaluate.worlds[j]``), else ``worlds``."""
         e = self.experiment
         if name == e.world:
             return "experiment.world"
-        for key, names in (("rooms", e.rooms), ("validation_rooms", e.validation_rooms)):
+        lists = [("experiment.rooms", e.rooms), ("experiment.validation_rooms",
+                                                  e.validation_rooms)]
+        if "collect" in e.stages:
+            lists.append(("collect.worlds", self.collect.worlds))
+        lists += [(f"{t}.worlds", body["worlds"]) for t, body in self.tables.items()
+                  if isinstance(body, dict) and isinstance(body.get("worlds"), list)]
+        for key, names in lists:
             if name in names:
-                return f"experiment.{key}[{names.index(name)}]"
+                return f"{key}[{list(names).index(name)}]"
         return "worlds"
 
     def worlds(self) -> list[str]:

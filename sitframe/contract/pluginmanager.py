@@ -363,20 +363,23 @@ class Registry:
         *,
         file: str | None = None,
         key: str | None = None,
+        params_key: str | None = None,
     ) -> Any:
         """Create component ``name`` with keyword ``params``.
 
         Unknown parameter names, wrong values (``ValueError``/``TypeError``
         raised by the component) are reported as an :class:`InputError` located
-        at ``file`` / ``key``; any other exception is a :class:`PluginError`
-        naming the plugin.
+        at ``file`` / ``key`` (a parameter at ``params_key``, default ``key``: a
+        reward's parameters live in ``reward_params``, not under ``reward``); any
+        other exception is a :class:`PluginError` naming the plugin.
         """
         entry = self.get(kind, name, file=file, key=key)
-        check_params(entry.factory, params, file=file, key=key)
+        params_key = key if params_key is None else params_key
+        check_params(entry.factory, params, file=file, key=params_key)
         try:
             return entry.factory(**params)
         except InputError as exc:
-            raise exc.at(file=file, key_prefix=key) from None
+            raise exc.at(file=file, key_prefix=params_key) from None
         except (ValueError, TypeError) as exc:
             f = entry.factory  # an instance where a class belongs: its __call__ was called
             hint = "" if isinstance(f, type) or inspect.isroutine(f) or hasattr(f, "func") \

@@ -56,6 +56,7 @@ class Resolved:
     file: str | None = None
     robot: RobotParams = field(default_factory=RobotParams)
     _worlds: dict[str, World] = field(default_factory=dict)
+    _fits: set[str] = field(default_factory=set)  # worlds whose start pose holds the robot
     origins: dict[str, Origin] = field(default_factory=dict)
     run: RunContext | None = None
     base_dir: str = "."
@@ -207,7 +208,8 @@ class Resolved:
 
     def _create(self, kind: str, key: str, table: Component, *, bind: bool = True,
                 needs: tuple[str, ...] = ()) -> Any:
-        comp = self.registry.create(kind, table.name, table.params, file=self.file, key=key)
+        comp = self.registry.create(kind, table.name, table.params, file=self.file, key=key,
+                                    params_key=f"{key}_params" if kind == "reward" else None)
         entry = self.registry.get(kind, table.name)
         origin = Origin(self.registry.describe_plugin(entry.plugin), kind, entry.name, key,
                         entry.plugin)
@@ -363,12 +365,16 @@ class Resolved:
                     where = f" ({exc.file})" if exc.file else ""
                     raise InputError(f"{exc.message}{where}", file=self.file, key=key) from None
                 raise
-            w = self._worlds[name]
+        w = self._worlds[name]
+        # (collection rooms followed along their trajectories are not driven from the start
+        # pose; a room is checked where it is first used from its start, whatever loaded it)
+        along = key.startswith("collect") and self.config.collect.mode == "trajectory"
+        if not along and name not in self._fits:
             clear = float(w.clearance(w.start[None, :2])[0])
-            # (collection rooms are driven along their trajectories, not from the start pose)
-            if not key.startswith("collect") and clear < self.robot.radius:
+            if clear < self.robot.radius:
                 raise InputError(f"the robot disc (radius {self.robot.radius:g} m) does not fit at "
                                  f"the start pose of world '{name}' (clearance {clear:.3g} m); "
                                  f"expected robot.radius <= {clear:.3g} or another world",
                                  file=self.file, key="robot.radius")
-        return self._worlds[name]
+            self._fits.add(name)
+        return w
