@@ -264,13 +264,15 @@ def sb3_frozen(path: Path) -> Frozen:
     return Frozen(act, continuous=False, normalize=True)
 
 
-def fuzzy_scores(log_path: Path, rooms: Sequence[str], spec: EvalSpec, trial: int = 0
-                 ) -> dict[str, Any]:
+def fuzzy_scores(log_path: Path, rooms: Sequence[str], spec: EvalSpec, trial: int = 0,
+                 keep: list[Any] | None = None) -> dict[str, Any]:
     """Trial ``trial``'s frozen policies from a fuzzy-q log, scored as :func:`drive` scores a
     deep-RL policy (same rooms, start poses, iterations) by the loop ``sitframe evaluate``
     runs (:func:`sitframe.runs.loop.simulate`, frozen, the log's situations and rule base).
     Start 0 of each room (its own start pose) gets ``sitframe evaluate``'s default seed, so
-    that run *is* ``sitframe evaluate LOG --world ROOM --iterations N``."""
+    that run *is* ``sitframe evaluate LOG --world ROOM --iterations N``. ``keep``, a list,
+    receives every run's :class:`~sitframe.runs.loop.TrialResult` (room by room, start by
+    start), for a closer look (``benchmarks/learning/stuck.py``)."""
     from sitframe.contract.config import DEFAULT_PROTOCOL, validate_config
     from sitframe.contract.pluginmanager import Registry, get_plugin_manager
     from sitframe.contract.resolve import Resolved
@@ -305,6 +307,8 @@ def fuzzy_scores(log_path: Path, rooms: Sequence[str], spec: EvalSpec, trial: in
                                           start=tuple(pose)))
             d["collisions"] += int(out.summary["collisions"])
             d["coverage"] += float(out.summary["coverage"]) / spec.starts
+            if keep is not None:
+                keep.append(out)
     n = len(rooms) * spec.starts * spec.iterations
     return {"collisions_per_1000": 1000.0 * sum(d["collisions"] for d in per_room.values()) / n,
             "coverage": float(np.mean([d["coverage"] for d in per_room.values()])),
