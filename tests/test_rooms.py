@@ -86,7 +86,12 @@ def test_other_seeds_draw_other_rooms_and_starts(tmp_path):
      "experiment.episode_iterations", "integer"),
     (lambda t: t.replace('rooms = ["training", "novel-1", "novel-2"]\n', ""),
      "experiment.episode_iterations", "experiment.rooms"),
-], ids=["empty", "unknown-room", "zero-episode", "episode-without-rooms"])
+    (lambda t: t.replace("episode_iterations = 60", "episode_iterations = 60\n"
+                         "tight_starts = 1.5"), "experiment.tight_starts", "[0.0, 1.0]"),
+    (lambda t: t.replace('rooms = ["training", "novel-1", "novel-2"]\nepisode_iterations = 60',
+                         "tight_starts = 0.5"), "experiment.tight_starts", "experiment.rooms"),
+], ids=["empty", "unknown-room", "zero-episode", "episode-without-rooms", "tight-above-1",
+        "tight-without-rooms"])
 def test_a_bad_rooms_key_is_one_line_naming_it(tmp_path, capsys, edit, key, says):
     cfg = tmp_path / "bad.toml"
     cfg.write_text(edit(rooms_config()))
@@ -95,6 +100,29 @@ def test_a_bad_rooms_key_is_one_line_naming_it(tmp_path, capsys, edit, key, says
     assert len(err.splitlines()) == 1, err
     assert err.startswith("sitframe: error:") and f"{cfg}: {key}:" in err and says in err, err
     assert not (tmp_path / "bad.h5").exists()
+
+
+def test_tight_starts_begin_episodes_nearer_the_walls():
+    """``tight_starts = 1``: every episode starts at the free pose nearest a wall of those
+    drawn, so much nearer the walls than uniform starts, the same for the same seed; 0 draws
+    exactly what a config without the key draws."""
+    from sitframe.runs.loop import RoomEpisodes
+    from sitframe.sim.robot import RobotParams
+
+    worlds = [load_world(r) for r in ROOMS]
+
+    def starts(tight: float, seed: int = 7) -> np.ndarray:
+        eps = RoomEpisodes(worlds, 50, seed, RobotParams(), tight)
+        got = [next(eps.pairs) for _ in range(30)]
+        return np.array([w.clearance(p[None, :2])[0] for p, _g, w in got]), \
+            np.array([p for p, _g, _w in got])
+
+    (near, pn), (uniform, pu) = starts(1.0), starts(0.0)
+    assert np.median(near) < 0.5 * np.median(uniform), (np.median(near), np.median(uniform))
+    assert np.array_equal(pn, starts(1.0)[1])
+    legacy = RoomEpisodes(worlds, 50, 7, RobotParams())
+    assert np.array_equal(pu, np.array([next(legacy.pairs)[0] for _ in range(30)]))
+    assert (near >= RobotParams().radius + RoomEpisodes.MARGIN).all()
 
 
 def test_a_config_without_rooms_keeps_its_text():

@@ -183,6 +183,16 @@ RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
         "rooms-evolving-heading, 150 wander samples in each generated training room, "
         "learning 6000 iterations",
         _reh({"worlds": [TRAIN], "wander_samples": 150}, 6000)),
+    "rooms-evolving-heading-gen200-tight30": (
+        "rooms-evolving-heading-gen200 with 30 % of the episodes starting in a tight place "
+        "(`tight_starts = 0.3`: the free pose nearest a wall of 20 drawn), so that situations "
+        "rarely met (dead ends, corners) get learnt",
+        _reh({"worlds": [TRAIN], "wander_samples": 200}) | {"experiment": {
+            **_ROOMS["experiment"], "tight_starts": 0.3}}),
+    "rooms-evolving-heading-gen200-tight60": (
+        "rooms-evolving-heading-gen200-tight30 with 60 % of the episodes starting in a tight "
+        "place", _reh({"worlds": [TRAIN], "wander_samples": 200}) | {"experiment": {
+            **_ROOMS["experiment"], "tight_starts": 0.6}}),
 }
 
 

@@ -168,6 +168,10 @@ EXPERIMENT = Table("experiment", doc="What runs, how long and where.", keys=(
         "Generator (the rooms in shuffled rounds); absent: the trial runs in world only"),
     Key("episode_iterations", "integer", ABSENT, "iterations of one episode of a learning "
         "trial over rooms (needs rooms; default 250)", lo=1, hi=MAX_ITERATIONS),
+    Key("tight_starts", "number", ABSENT, "the share of a learning trial's episodes over "
+        "rooms that start in a tight place (the least clearance of 20 free poses drawn) "
+        "instead of a uniform free pose: a curriculum for rarely met situations (needs "
+        "rooms; default 0)", lo=0.0, hi=1.0),
     Key("candidates", "integer", ABSENT, "rule bases a learning trial learns one after "
         "another (iterations / candidates each, the learners reset in between), keeping the "
         "one that scores best in validation_rooms (needs them; default 1)", lo=1, hi=1000),
@@ -351,6 +355,7 @@ class ExperimentSection:
     candidates: int = 1
     validation_rooms: tuple[str, ...] = ()
     validation_iterations: int = VALIDATION_ITERATIONS
+    tight_starts: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -397,7 +402,8 @@ class Config:
                               tuple(e.get("rooms", ())),
                               int(e.get("episode_iterations", ROOM_EPISODE_ITERATIONS)),
                               int(e.get("candidates", 1)), tuple(e.get("validation_rooms", ())),
-                              int(e.get("validation_iterations", VALIDATION_ITERATIONS))),
+                              int(e.get("validation_iterations", VALIDATION_ITERATIONS)),
+                              float(e.get("tight_starts", 0.0))),
             dict(cfg["robot"]), Component.of(cfg["sensor"]),
             CollectSection(c["mode"], tuple(c["worlds"]), float(c["speed"]),
                            float(c["rate_hz"]), int(c["wander_samples"])),
@@ -796,7 +802,8 @@ def _check_selection(sel: dict[str, Any], file: str | None, key: str) -> None:
 #: is the one reported).
 _CHECK_ORDER = {"experiment": ("name", "description", "seed", "trials", "iterations",
                                "default_speed", "world", "clusters_from", "stages", "rooms",
-                               "episode_iterations", "candidates", "validation_rooms",
+                               "episode_iterations", "tight_starts", "candidates",
+                               "validation_rooms",
                                "validation_iterations"),
                 "collect": ("mode", "worlds", "speed", "rate_hz", "wander_samples"),
                 "plugins": ("dirs",)}
@@ -821,6 +828,7 @@ def _check_together(e: dict[str, Any], file: str | None) -> None:
     """The ``[experiment]`` keys that need one another (rooms, candidates, validation)."""
     for key, needs, what in (
             ("episode_iterations", "rooms", "the rooms whose episodes last this long"),
+            ("tight_starts", "rooms", "the rooms whose episodes start in tight places"),
             ("validation_iterations", "candidates", "the candidates judged this long"),
             ("validation_rooms", "candidates", "the candidates judged there"),
             ("candidates", "validation_rooms", "the rooms the candidates are judged in")):

@@ -808,7 +808,9 @@ class RoomEpisodes:
     The trial is a chain of episodes of ``episode_iterations`` iterations (the
     last one ends with the trial). Each episode runs in one of the rooms, from a
     start pose drawn uniformly among the room's free poses (the robot disc and a
-    margin of :attr:`MARGIN` clear of every wall), heading uniform; the rooms
+    margin of :attr:`MARGIN` clear of every wall), heading uniform (with ``tight`` > 0 that
+    share of the episodes starts at the free pose nearest a wall among
+    :attr:`TIGHT_DRAWS`: a curriculum for situations rarely met); the rooms
     come in rounds, each round every room once in an order shuffled anew. Rooms,
     orders and poses come from a Generator of their own seeded by the trial's
     seed (``spawn_key = (3,)``), so the trial's other draws are those of a trial
@@ -833,14 +835,19 @@ class RoomEpisodes:
         The trial's seed.
     robot
         The robot (its radius decides which poses are free).
+    tight
+        The share of episodes, in [0, 1], that start in a tight place.
     """
 
     #: Clearance [m] beyond the robot's radius of an episode's start position.
     MARGIN = 0.1
 
+    #: Free poses drawn for a tight start; the one nearest a wall or edge is taken.
+    TIGHT_DRAWS = 20
+
     def __init__(self, worlds: list[World], episode: int, seed: int,
-                 robot: RobotParams) -> None:
-        self.worlds, self.episode, self.robot = worlds, int(episode), robot
+                 robot: RobotParams, tight: float = 0.0) -> None:
+        self.worlds, self.episode, self.robot, self.tight = worlds, int(episode), robot, tight
         self.rng = np.random.default_rng(np.random.SeedSequence(seed % 2**64, spawn_key=(3,)))
         self.first: list[int] = [0]
         self.rooms: list[int] = []
@@ -851,8 +858,18 @@ class RoomEpisodes:
             for i in self.rng.permutation(len(self.worlds)):
                 world = self.worlds[int(i)]
                 self.rooms.append(int(i))
-                yield (world.random_free_pose(self.rng, self.robot.radius, margin=self.MARGIN),
-                       world.goal, world)
+                yield self._start(world), world.goal, world
+
+    def _start(self, world: World) -> np.ndarray:
+        """An episode's start pose: uniform among the free poses, or (a share ``tight`` of
+        the episodes, decided by a draw made only when ``tight`` > 0) the one nearest a wall
+        of :attr:`TIGHT_DRAWS` such poses."""
+        draws = 1 if not self.tight or self.rng.random() >= self.tight else self.TIGHT_DRAWS
+        poses = [world.random_free_pose(self.rng, self.robot.radius, margin=self.MARGIN)
+                 for _ in range(draws)]
+        if draws == 1:
+            return poses[0]
+        return poses[int(np.argmin(world.clearance(np.asarray(poses)[:, :2])))]
 
     def over(self, ctx: Context, t: int, limit: int) -> bool:
         """Whether the episode ends after iteration ``t`` of a trial of ``limit`` (never at
@@ -887,7 +904,7 @@ def _room_episodes(res: Resolved, spec: TrialSpec) -> RoomEpisodes | None:
     if not spec.learn or not e.rooms:
         return None
     worlds = [res.world(name, key=f"experiment.rooms[{j}]") for j, name in enumerate(e.rooms)]
-    return RoomEpisodes(worlds, e.episode_iterations, spec.seed, res.robot)
+    return RoomEpisodes(worlds, e.episode_iterations, spec.seed, res.robot, e.tight_starts)
 
 
 def _training_episodes(res: Resolved, spec: TrialSpec, world: World) -> _TrainingEpisodes | None:
