@@ -58,7 +58,7 @@ def main() -> None:
           "| ratio | per episode [ms] |\n|---|---|---|---|---|---|")
     for wname in WORLDS:
         t0 = time.perf_counter()
-        paths._graph(load_world(wname), 0.15)
+        paths.route_graph(load_world(wname), 0.15)
         build = time.perf_counter() - t0
         spec = TrialSpec(index=0, seed=3, world=wname, iterations=60, learn=False,
                          interpreter_state=state, protocol="goal-episodes")

@@ -32,8 +32,6 @@ from __future__ import annotations
 
 import math
 import weakref
-from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 from scipy.sparse import csr_matrix
@@ -45,7 +43,6 @@ from sitframe.sim.world import World
 
 #: Points of the polygon that stands in for the disc's arc around each vertex.
 ARC_POINTS = 12
-_GRAPHS: weakref.WeakKeyDictionary[World, dict[float, _Graph]] = weakref.WeakKeyDictionary()
 _QUERIES: weakref.WeakKeyDictionary[World, dict[tuple[float, ...], float]] = (
     weakref.WeakKeyDictionary())
 _MAX_QUERIES = 4096  # answers kept per world (a goal pair is asked when drawn, then scored)
@@ -76,35 +73,6 @@ def segment_clear(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> 
     b = np.asarray(b, dtype=np.float64).reshape(-1, 2)
     return _clear_moves(world, np.broadcast_to(np.asarray(a, dtype=np.float64).reshape(2),
                                                b.shape), b, radius)
-
-
-class _Graph:
-    """The arc points of a world for a disc and which of them see each other."""
-
-    def __init__(self, world: World, radius: float) -> None:
-        self.nodes, lengths = _visibility(world, radius)
-        #: (n, n) shortest path between every two arc points (inf: not connected)
-        self.between = dijkstra(lengths, directed=True)
-
-
-def _visibility(world: World, radius: float) -> tuple[np.ndarray, csr_matrix]:
-    """The arc points free for the disc ((n, 2) [m]: ``ARC_POINTS`` around every vertex of
-    the world's edges) and the (n, n) lengths [m] of the clear straight moves between them
-    (0: no move)."""
-    verts = np.unique(np.vstack([world.segments[:, :2], world.segments[:, 2:]]), axis=0)
-    ang = 2 * math.pi * np.arange(ARC_POINTS) / ARC_POINTS
-    ring = (radius / math.cos(math.pi / ARC_POINTS) * (1 + 1e-9)
-            * np.stack([np.cos(ang), np.sin(ang)], axis=1))
-    pts = (verts[:, None, :] + ring[None]).reshape(-1, 2)
-    nodes = pts[world.is_free(pts, radius)] if pts.size else pts
-    n = nodes.shape[0]
-    iu, ju = np.triu_indices(n, k=1)
-    ok = _clear_moves(world, nodes[iu], nodes[ju], radius)
-    lengths = np.zeros((n, n))
-    d = np.hypot(*(nodes[iu[ok]] - nodes[ju[ok]]).T)
-    lengths[iu[ok], ju[ok]] = d
-    lengths[ju[ok], iu[ok]] = d
-    return nodes, csr_matrix(lengths)
 
 
 def _clear_moves(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> np.ndarray:
@@ -152,19 +120,6 @@ def _clear_from(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> np
     return out
 
 
-def _built_once(memo: weakref.WeakKeyDictionary[World, dict[float, Any]], build: Callable[..., Any],
-                world: World, radius: float) -> Any:
-    """``build(world, radius)``, made once per world and radius in this process."""
-    per_world = memo.setdefault(world, {})
-    if float(radius) not in per_world:
-        per_world[float(radius)] = build(world, float(radius))
-    return per_world[float(radius)]
-
-
-def _graph(world: World, radius: float) -> _Graph:
-    return _built_once(_GRAPHS, _Graph, world, radius)
-
-
 def shortest_path_length(world: World, start: np.ndarray, goal: np.ndarray, *,
                          radius: float) -> float:
     """Length [m] of the shortest path of a disc from ``start`` to ``goal`` (module docstring).
@@ -198,7 +153,7 @@ def shortest_path_length(world: World, start: np.ndarray, goal: np.ndarray, *,
     if key not in answers:
         if len(answers) >= _MAX_QUERIES:
             answers.clear()
-        answers[key] = _shortest(world, a, b, float(radius))
+        answers[key] = route_graph(world, float(radius)).route(a, b)[1]
     return answers[key]
 
 
@@ -238,7 +193,7 @@ class PathDistance:
             raise ValueError(f"radius must be > 0 metres (the disc's), got {radius!r}")
         self.world, self.radius = world, float(radius)
         self.goal = np.asarray(goal, dtype=np.float64).reshape(2)
-        g = _graph(world, self.radius)
+        g = route_graph(world, self.radius)
         self.nodes = g.nodes
         db = _in_sight(world, self.goal, g.nodes, self.radius)
         #: (n,) shortest path from each arc point to the goal [m]
@@ -255,22 +210,12 @@ class PathDistance:
         return float((np.hypot(*(self.nodes[ok[1:]] - p).T) + self.to_goal[ok[1:]]).min())
 
 
-def _shortest(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> float:
-    """:func:`shortest_path_length`, computed (the arguments checked)."""
-    if segment_clear(world, a, b[None], radius)[0]:
-        return float(math.hypot(*(b - a)))
-    g = _graph(world, radius)
-    if g.nodes.shape[0] == 0:
-        return math.inf
-    da, db = (_in_sight(world, p, g.nodes, radius) for p in (a, b))
-    return float((da[:, None] + g.between + db[None, :]).min())
-
-
 class RouteGraph:
     """A world's visibility graph for a disc, with the routes between its arc points.
 
-    The same arc points as :func:`shortest_path_length` uses (``ARC_POINTS`` around
-    every vertex of the world's edges, at the disc's radius), and the shortest path
+    The arc points (``ARC_POINTS`` around every vertex of the world's edges, at the
+    disc's radius) that :func:`shortest_path_length` and :class:`PathDistance` use too,
+    and the shortest path
     between every two of them with its predecessors, so that a route (the list of
     waypoints, not only its length) costs one visibility check of the start and of
     the goal. Built once per world and radius (:func:`route_graph`).
@@ -287,10 +232,23 @@ class RouteGraph:
         if not radius > 0:
             raise ValueError(f"radius must be > 0 metres (the disc's), got {radius!r}")
         self.world, self.radius = world, float(radius)
+        verts = np.unique(np.vstack([world.segments[:, :2], world.segments[:, 2:]]), axis=0)
+        ang = 2 * math.pi * np.arange(ARC_POINTS) / ARC_POINTS
+        ring = (radius / math.cos(math.pi / ARC_POINTS) * (1 + 1e-9)
+                * np.stack([np.cos(ang), np.sin(ang)], axis=1))
+        pts = (verts[:, None, :] + ring[None]).reshape(-1, 2)
         #: (n, 2) the arc points free for the disc
-        self.nodes, lengths = _visibility(world, radius)
-        if self.nodes.shape[0]:
-            between, pred = dijkstra(lengths, directed=True, return_predecessors=True)
+        self.nodes = pts[world.is_free(pts, radius)] if pts.size else pts
+        n = self.nodes.shape[0]
+        iu, ju = np.triu_indices(n, k=1)
+        ok = _clear_moves(world, self.nodes[iu], self.nodes[ju], radius)
+        lengths = np.zeros((n, n))
+        d = np.hypot(*(self.nodes[iu[ok]] - self.nodes[ju[ok]]).T)
+        lengths[iu[ok], ju[ok]] = d
+        lengths[ju[ok], iu[ok]] = d
+        if n:
+            between, pred = dijkstra(csr_matrix(lengths), directed=True,
+                                     return_predecessors=True)
         else:
             between, pred = np.zeros((0, 0)), np.zeros((0, 0), dtype=np.int32)
         #: (n, n) shortest path between every two arc points [m] (inf: not connected)
@@ -341,8 +299,12 @@ _ROUTES: weakref.WeakKeyDictionary[World, dict[float, RouteGraph]] = weakref.Wea
 
 
 def route_graph(world: World, radius: float) -> RouteGraph:
-    """The :class:`RouteGraph` of ``world`` for a disc of ``radius``, built once per process."""
-    return _built_once(_ROUTES, RouteGraph, world, radius)
+    """The :class:`RouteGraph` of ``world`` for a disc of ``radius``, built once per process
+    (what :func:`shortest_path_length`, :class:`PathDistance` and the route planner share)."""
+    per_world = _ROUTES.setdefault(world, {})
+    if float(radius) not in per_world:
+        per_world[float(radius)] = RouteGraph(world, float(radius))
+    return per_world[float(radius)]
 
 
 def shortest_route(world: World, start: np.ndarray, goal: np.ndarray, *,
