@@ -28,6 +28,8 @@ Config (``[behaviours.LABEL]``)::
     min_updates = 0        # convergence also needs every situation updated this often
     tie_break = "first"    # greedy ties (never-updated situations): "first" or "centre"
     alpha_visits = 0       # learning rate alpha * k / (k + n) after n updates (0: constant)
+    replay = 0             # stored transitions learnt from again per iteration (0: none)
+    replay_priority = "rare"  # or "uniform": rarely updated situations' transitions first
     q_init = "constant"
     q_init_value = 0.0
     new_row_optimism = 0.5 # evolving situations: a new row's pull towards q_init_value
@@ -95,6 +97,8 @@ class FuzzyQBehaviour:
         tie_break: str = "first",
         new_row_optimism: float = 0.5,
         alpha_visits: float = 0.0,
+        replay: int = 0,
+        replay_priority: str = "rare",
     ) -> None:
         self.singletons: dict[str, np.ndarray] = {
             "heading": np.asarray(P.number_list("headings", list(headings), lo=-90, hi=90,
@@ -115,7 +119,8 @@ class FuzzyQBehaviour:
             temperature_min=temperature_min, q_init=q_init, q_init_value=q_init_value,
             q_init_spread=q_init_spread, update=update, activation=activation,
             terminal_on_collision=terminal_on_collision, min_updates=min_updates,
-            tie_break=tie_break, alpha_visits=alpha_visits,
+            tie_break=tie_break, alpha_visits=alpha_visits, replay=replay,
+            replay_priority=replay_priority,
         )
         self.new_row_optimism = float(P.number("new_row_optimism", new_row_optimism,
                                                lo=0.0, hi=1.0))

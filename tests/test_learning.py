@@ -91,6 +91,8 @@ def test_params_validate_with_key():
     ("min_updates", [-1, 0.5], [0]),
     ("tie_break", ["middle"], ["centre"]),
     ("alpha_visits", [-1.0, "x"], [0.0, 20.0]),
+    ("replay", [-1, 1.5], [0, 4]),
+    ("replay_priority", ["rarest"], ["uniform", "rare"]),
 ])
 def test_every_learning_parameter_is_checked_at_its_bounds(key, bad, good):
     """Table A.1's ranges: a value outside is refused naming the key; the bound itself (or
@@ -163,6 +165,68 @@ def test_alpha_visits_decays_the_rate_per_rule_and_action():
     for _ in range(4):
         const.update(u, 8.0, u, False, 0)
     assert const.q[0, 0] == pytest.approx(8.0 * (1 - 0.5 ** 4))
+
+
+def test_replay_learns_again_from_stored_transitions_with_the_current_q():
+    """``replay = k``: after its own update the learner repeats k stored transitions (drawn by
+    its generator), each toward r + gamma V(s') under the Q of then; 0 changes nothing."""
+    lr = _learner(alpha=0.5, gamma=0.0, activation=0.3, update="standard", b=100, replay=3)
+    lr.q[:] = 0.0
+    lr.rule_base[:] = [0, 1]
+    one = np.array([1.0, 0.0])
+    lr.update(one, 8.0, one, False, 0)  # 1 update of its own, then 3 replays of the same
+    assert lr.q[0, 0] == pytest.approx(8.0 * (1 - 0.5 ** 4))
+    assert lr.updates.tolist() == [4, 0] and lr.replayed == 3
+    assert lr.data(1)["replayed"] == 3
+    plain = _learner(alpha=0.5, gamma=0.0, activation=0.3, update="standard", b=100)
+    plain.q[:] = 0.0
+    plain.rule_base[:] = [0, 1]
+    plain.update(one, 8.0, one, False, 0)
+    assert plain.q[0, 0] == 4.0 and "replayed" not in plain.data(1)
+
+
+def test_rare_replay_draws_rarely_updated_situations_more_often():
+    """``replay_priority = "rare"`` draws a transition with probability ~ 1 / (1 + updates of
+    its strongest rule): a situation met once is replayed about as often as one met 50 times;
+    ``"uniform"`` replays in proportion to how often each was met."""
+    counts = {}
+    for priority in ("rare", "uniform"):
+        lr = _learner(alpha=0.1, gamma=0.0, activation=0.3, update="standard", b=10**6,
+                      replay=1, replay_priority=priority)
+        lr.rule_base[:] = [0, 0]
+        for it in range(50):
+            lr.update(np.array([1.0, 0.0]), 1.0, np.array([1.0, 0.0]), False, it)
+        before = lr.updates[1]
+        lr.update(np.array([0.0, 1.0]), 1.0, np.array([0.0, 1.0]), False, 50)  # rule 1 once
+        start = lr.updates.copy()
+        for it in range(200):  # situation 0 again: replays of situation 1 show in its count
+            lr.update(np.array([1.0, 0.0]), 1.0, np.array([1.0, 0.0]), False, 51 + it)
+        counts[priority] = int(lr.updates[1] - start[1])
+        assert before == 0
+    assert counts["rare"] > 5 * max(counts["uniform"], 1)
+
+
+def test_replay_is_deterministic_and_skips_removed_situations():
+    """Replays are drawn from the trial's generator (same seed, same Q); a transition that
+    involves a row an evolving interpreter removed is not replayed (the row stays reset)."""
+    def run(seed: int, remove: bool) -> FuzzyQLearner:
+        lr = FuzzyQLearner(2, 3, QLearningParams(activation=0.3, update="standard", b=5,
+                                                  replay=2), np.random.default_rng(seed), 400)
+        g = np.random.default_rng(seed + 100)
+        for it in range(300):
+            u = g.dirichlet([0.3, 0.3])
+            if remove and it >= 150:
+                u = np.array([1.0, 0.0])  # (only row 0 active from now on)
+            lr.update(u, float(g.normal()), g.dirichlet([0.3, 0.3]), bool(g.random() < 0.1),
+                      it)
+            if remove and it == 149:
+                lr.removed[1], lr.q[1], lr.updates[1] = True, 0.0, 0
+        return lr
+    assert np.array_equal(run(1, False).q, run(1, False).q)
+    assert not np.array_equal(run(1, False).q, run(2, False).q)
+    removed = run(1, True)
+    assert removed.q[1].tolist() == [0.0, 0.0, 0.0] and removed.updates[1] == 0
+    assert removed.replayed > 0
 
 
 def test_rule_base_changes_after_b_iterations_or_collision():

@@ -79,6 +79,26 @@ def _reh(collect: dict[str, Any], iterations: int | None = None) -> dict[str, An
     return keys
 
 
+def _mu(keys: dict[str, Any], n: int) -> dict[str, Any]:
+    """``keys`` with ``min_updates = n`` for the avoid behaviour."""
+    avoid = {**keys["behaviours"]["avoid"], "min_updates": n}
+    return keys | {"behaviours": {"avoid": avoid}}
+
+
+def _mu20_with(interpreter: dict[str, Any], avoid: dict[str, Any]) -> dict[str, Any]:
+    """rooms-evolving-heading-gen200-mu20 with some interpreter and avoid keys changed."""
+    keys = _mu(_reh({"worlds": [TRAIN], "wander_samples": 200}), 20)
+    return keys | {"interpreter": {**keys["interpreter"], **interpreter},
+                   "behaviours": {"avoid": {**keys["behaviours"]["avoid"], **avoid}}}
+
+
+def _rooms_n(n: int, samples: int, episode: int) -> dict[str, Any]:
+    """rooms-evolving-heading-gen200-mu20 over the first ``n`` generated training rooms."""
+    rooms = [f"gen:{1_000_000 + i}" for i in range(n)]
+    keys = _mu(_reh({"worlds": rooms, "wander_samples": samples}), 20)
+    return keys | {"experiment": {"rooms": rooms, "episode_iterations": episode}}
+
+
 #: Recipe -> (what it changes, the keys it sets on the shipped preset, merged table by table).
 RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
     "base": ("the preset before issue 39: learn in `training` only", {}),
@@ -183,6 +203,43 @@ RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
         "rooms-evolving-heading, 150 wander samples in each generated training room, "
         "learning 6000 iterations",
         _reh({"worlds": [TRAIN], "wander_samples": 150}, 6000)),
+    "rooms-evolving-heading-gen200-mu50": (
+        "rooms-evolving-heading-gen200 + convergence needs 50 updates of every live "
+        "situation's rules (`min_updates = 50`): no rule base frozen while a situation is "
+        "barely learnt", _mu(_reh({"worlds": [TRAIN], "wander_samples": 200}), 50)),
+    "rooms-evolving-heading-gen200-mu20": (
+        "rooms-evolving-heading-gen200 with `min_updates = 20`",
+        _mu(_reh({"worlds": [TRAIN], "wander_samples": 200}), 20)),
+    **{f"rooms-evolving-heading-gen200-mu20-{tag}": (
+        f"rooms-evolving-heading-gen200-mu20 with {what}",
+        _mu20_with(interp, avoid)) for tag, what, interp, avoid in [
+        ("ca6", "`create_after = 6` (a situation is made from 6 poorly covered readings in a "
+         "row, not 3)", {"create_after": 6}, {}),
+        ("cd22", "`create_distance = 2.2` (fewer readings count as poorly covered)",
+         {"create_distance": 2.2}, {}),
+        ("grow3000", "`grow_until = 3000` (no situation made or split in the last 2000 "
+         "iterations, so every one is learnt for at least 2000)", {"grow_until": 3000}, {}),
+        ("opt0", "`new_row_optimism = 0` (a new situation's row is its parents' rows, not "
+         "pulled towards the optimistic start)", {}, {"new_row_optimism": 0.0}),
+        ("merge08", "`merge_distance = 0.8` (near-duplicate situations merged at twice the "
+         "distance)", {"merge_distance": 0.8}, {}),
+        ("c12", "12 fitted situations to start from", {"c": 12}, {}),
+    ]},
+    **{f"rooms{n}-evolving-heading-w{w}-mu20": (
+        f"rooms-evolving-heading-gen200-mu20 over {n} generated training rooms "
+        f"(gen:1000000 ... gen:{1_000_000 + n - 1}), {w} wander samples in each, "
+        f"{ep}-iteration episodes", _rooms_n(n, w, ep)) for n, w, ep in [
+        (20, 100, 250), (40, 50, 125)]},
+    "rooms-evolving-heading-gen200-replay4": (
+        "rooms-evolving-heading-gen200 + 4 stored transitions learnt from again per "
+        "iteration, rarely updated situations' first (`replay = 4`)",
+        _reh({"worlds": [TRAIN], "wander_samples": 200}) | {"behaviours": {"avoid": {
+            "reward_params": {"heading_cost": 0.3}, "replay": 4}}}),
+    "rooms-evolving-heading-gen200-mu20-replay4": (
+        "rooms-evolving-heading-gen200-mu20 + `replay = 4`",
+        _mu(_reh({"worlds": [TRAIN], "wander_samples": 200}), 20) | {"behaviours": {
+            "avoid": {"reward_params": {"heading_cost": 0.3}, "min_updates": 20,
+                      "replay": 4}}}),
     "rooms-evolving-heading-gen200-tight30": (
         "rooms-evolving-heading-gen200 with 30 % of the episodes starting in a tight place "
         "(`tight_starts = 0.3`: the free pose nearest a wall of 20 drawn), so that situations "

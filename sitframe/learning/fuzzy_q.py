@@ -113,6 +113,23 @@ class QLearningParams:
         0 deg in a symmetric heading set). Exact ties arise in situations
         whose rules were never updated (all still at ``q_init_value``); with
         ``"first"`` such a situation gets the first heading (+90 deg).
+    replay
+        Stored transitions learnt from again after each learning iteration
+        (0 = none, the thesis). Every learning iteration's active rules (their
+        strengths and executed actions), reward, next memberships and collision
+        flag are kept for the trial; after the iteration's own update ``replay``
+        of them are drawn by the trial's generator and each is learnt from with
+        the current Q (target ``r + gamma V(s')``; off-policy as any Q-learning
+        update: each rule learns about the action it executed then). No
+        environment step is added; rows an evolving interpreter removed are
+        skipped. Replayed updates count in ``updates`` (and so in
+        ``min_updates``); the log's ``replayed`` says how many there were.
+    replay_priority
+        How replayed transitions are drawn: ``"uniform"``, or ``"rare"`` (the
+        default): with probability proportional to ``1 / (1 + n)``, ``n`` the
+        updates so far of the transition's strongest rule, so that situations met
+        a few times (a dead end, a tight corner) are learnt from about as often as
+        common ones instead of staying near their initial Q.
     """
 
     alpha: float = 0.3
@@ -134,6 +151,8 @@ class QLearningParams:
     alpha_visits: float = 0.0
     groups: int = 1
     min_group_updates: int = 0
+    replay: int = 0
+    replay_priority: str = "rare"
 
     def __post_init__(self) -> None:
         P.number("alpha", self.alpha, lo=0.0, hi=1.0, lo_open=True)
@@ -155,9 +174,12 @@ class QLearningParams:
         P.number("alpha_visits", self.alpha_visits, lo=0.0)
         P.number("groups", self.groups, lo=1, integer=True)
         P.number("min_group_updates", self.min_group_updates, lo=0, integer=True)
+        P.number("replay", self.replay, lo=0, integer=True)
+        P.choice("replay_priority", self.replay_priority, REPLAY_PRIORITIES)
 
 
 TIE_BREAKS = ("first", "centre")
+REPLAY_PRIORITIES = ("rare", "uniform")
 
 
 def greedy_actions(q: np.ndarray, tie_break: str = "first") -> np.ndarray:
@@ -268,6 +290,13 @@ class FuzzyQLearner:
         #: (-1: not yet); only with ``groups > 1``
         self.group_stable = np.zeros(g, dtype=np.int64)
         self.group_converged_at = np.full(g, -1, dtype=np.int64)
+        #: stored transitions for ``replay``: (active rules, strengths, actions, reward,
+        #: next memberships, collided), and each one's strongest rule
+        self._buffer: list[tuple[list[int], list[float], list[int], float, np.ndarray,
+                                 bool]] = []
+        self._buffer_key: list[int] = []
+        #: replayed updates so far (the log's ``replayed``)
+        self.replayed = 0
 
     @property
     def temperature(self) -> float:
@@ -315,7 +344,6 @@ class FuzzyQLearner:
             return False
         self._vmax = None  # (q changes below)
         prm = self.params
-        q = self.q
         # Scalar Python: usually one or two rules are active, and a handful of numpy
         # calls on such tiny arrays would cost more than the arithmetic. The operations
         # (and their order) are those of the array expressions they replaced.
@@ -325,29 +353,58 @@ class FuzzyQLearner:
         if self.track_td:
             self.td_abs[:] = 0.0
         if active:
-            v_next = 0.0 if (collided and prm.terminal_on_collision) else \
-                float(u_after @ np.maximum.reduce(q, axis=1))
             rules = self.rule_base.tolist()
-            alpha, gamma, thesis = prm.alpha, prm.gamma, prm.update == "thesis"
-            target = reward + gamma * v_next
-            kappa = prm.alpha_visits
-            for i in active:
-                w, a = u0[i], rules[i]
-                cur = q.item(i, a)
-                if kappa:
-                    n = self._visits.get((i, a), 0)
-                    self._visits[i, a] = n + 1
-                    alpha = prm.alpha * kappa / (kappa + n)
-                delta = (w * reward + gamma * w * v_next - cur) if thesis else target - cur
-                q[i, a] = cur + alpha * delta if thesis else cur + alpha * w * delta
-                self.updates[i] += 1
-                if self.track_td:
-                    self.td_abs[i] = abs(delta)
+            weights, actions = [u0[i] for i in active], [rules[i] for i in active]
+            self._learn_one(list(active), weights, actions, reward, u_after, collided,
+                            self.track_td)
+            if prm.replay:
+                self._buffer.append((list(active), weights, actions, reward, u_after.copy(),
+                                     collided))
+                self._buffer_key.append(active[int(np.argmax(weights))])
+                self._replay()
         self.since_change += 1
         if collided or self.since_change >= prm.b:
             self._change(iteration)
             return True
         return False
+
+    def _learn_one(self, active: list[int], weights: list[float], actions: list[int],
+                   reward: float, u_after: np.ndarray, collided: bool, track: bool) -> None:
+        """One fuzzy-Q update of rules ``active`` (strengths ``weights``, executed
+        ``actions``) from a transition with ``reward`` and next memberships ``u_after``."""
+        prm, q = self.params, self.q
+        v_next = 0.0 if (collided and prm.terminal_on_collision) else \
+            float(u_after @ np.maximum.reduce(q, axis=1))
+        alpha, gamma, thesis = prm.alpha, prm.gamma, prm.update == "thesis"
+        target = reward + gamma * v_next
+        kappa = prm.alpha_visits
+        for i, w, a in zip(active, weights, actions, strict=True):
+            cur = q.item(i, a)
+            if kappa:
+                n = self._visits.get((i, a), 0)
+                self._visits[i, a] = n + 1
+                alpha = prm.alpha * kappa / (kappa + n)
+            delta = (w * reward + gamma * w * v_next - cur) if thesis else target - cur
+            q[i, a] = cur + alpha * delta if thesis else cur + alpha * w * delta
+            self.updates[i] += 1
+            if track:
+                self.td_abs[i] = abs(delta)
+
+    def _replay(self) -> None:
+        """Learn again from ``params.replay`` stored transitions (see :class:`QLearningParams`)."""
+        keys = np.asarray(self._buffer_key)
+        if self.params.replay_priority == "rare":
+            w = 1.0 / (1.0 + self.updates[keys])
+        else:
+            w = np.ones(keys.size)
+        cdf = np.cumsum(w)
+        picks = np.searchsorted(cdf, self.rng.random(self.params.replay) * cdf[-1], side="right")
+        for t in np.minimum(picks, keys.size - 1).tolist():
+            active, weights, actions, reward, u_after, collided = self._buffer[t]
+            if self.removed[active].any():
+                continue  # (a row an evolving interpreter merged away or pruned)
+            self._learn_one(active, weights, actions, reward, u_after, collided, False)
+            self.replayed += 1
 
     def _monitor(self, u_before: np.ndarray, reward: float, u_after: np.ndarray,
                  collided: bool) -> None:
@@ -485,6 +542,7 @@ class FuzzyQLearner:
             "rule_base": self.rules_per_iteration[:iterations].copy(),
             "final_rule_base": self.final_rule_base().astype(np.int16),
             "updates": self.updates.copy(),
+            **({"replayed": self.replayed} if self.params.replay else {}),
             "converged": self.converged_at is not None,
             "convergence_iteration": -1 if self.converged_at is None else int(self.converged_at),
         }
