@@ -102,8 +102,8 @@ def _rooms_n(n: int, samples: int, episode: int) -> dict[str, Any]:
 #: Recipe -> (what it changes, the keys it sets on the shipped preset, merged table by table).
 RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
     "base": ("the preset before issue 39: learn in `training` only", {}),
-    "shipped": ("the `obstacle-avoidance` preset as shipped now (rooms-evolving-heading-gen200, "
-                "its evaluation rooms aside)", {}),
+    "shipped": ("the `obstacle-avoidance` preset as shipped now "
+                "(rooms-evolving-heading-gen200-mu20-merge08, its evaluation rooms aside)", {}),
     "rooms": ("collect also in the 10 generated training rooms (wander); learn in "
               "250-iteration episodes over them, room and free start pose drawn per episode",
               _ROOMS),
@@ -224,6 +224,10 @@ RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
         ("merge08", "`merge_distance = 0.8` (near-duplicate situations merged at twice the "
          "distance)", {"merge_distance": 0.8}, {}),
         ("c12", "12 fitted situations to start from", {"c": 12}, {}),
+        ("merge06", "`merge_distance = 0.6`", {"merge_distance": 0.6}, {}),
+        ("merge10", "`merge_distance = 1.0`", {"merge_distance": 1.0}, {}),
+        ("merge08-mu0", "`merge_distance = 0.8` and no `min_updates` (the thesis's "
+         "convergence alone)", {"merge_distance": 0.8}, {"min_updates": 0}),
     ]},
     **{f"rooms{n}-evolving-heading-w{w}-mu20": (
         f"rooms-evolving-heading-gen200-mu20 over {n} generated training rooms "
