@@ -54,7 +54,7 @@ def run_seed(preset: str, seed: int, out: Path, rooms: list[str],
     from sitframe.logs.reader import open_log
     from sitframe.runs.evaluation import evaluate_log
 
-    log = out / preset / f"seed-{seed}.h5"
+    log = out / label(preset) / f"seed-{seed}.h5"
     log.parent.mkdir(parents=True, exist_ok=True)
     argv = ["run", preset, "--seed", str(seed), "--workers", "1", "--out", str(log.resolve())]
     if trials is not None:
@@ -85,10 +85,17 @@ def run_seed(preset: str, seed: int, out: Path, rooms: list[str],
 
 
 def preset_key(preset: str) -> str:
-    """A digest of the preset's text: a cached seed is reused only while it is unchanged."""
+    """A digest of the preset's (or config file's) text: a cached seed is reused only while it
+    is unchanged."""
     from sitframe.contract.config import preset_text
 
-    return hashlib.sha256(preset_text(preset).encode()).hexdigest()[:16]
+    text = Path(preset).read_text("utf-8") if preset.endswith(".toml") else preset_text(preset)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def label(preset: str) -> str:
+    """A preset's name, or a config file's name without ``.toml`` (a candidate preset)."""
+    return Path(preset).stem if preset.endswith(".toml") else preset
 
 
 def row(preset: str, results: list[dict[str, Any]]) -> str:
@@ -97,7 +104,7 @@ def row(preset: str, results: list[dict[str, Any]]) -> str:
     coll = np.array([e["collisions_per_1000"] for e in ev])
     cov = np.array([e["coverage"] for e in ev])
     conv = [c for r in results for c in r["converged"]]
-    return (f"| `{preset}` | {len(results)} × {len(results[0]['converged'])} | {len(ev)} | "
+    return (f"| `{label(preset)}` | {len(results)} × {len(results[0]['converged'])} | {len(ev)} | "
             f"{np.mean(coll > BAD):.1%} | {np.median(coll):.2f} | {coll.max():.1f} | "
             f"{np.median(cov):.3f} | {np.mean(conv):.0%} |")
 
@@ -108,7 +115,9 @@ HEADER = ("| preset | seeds × trials | evaluations | > 10 coll./1000 | coll./10
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--presets", nargs="+", default=list(PRESETS), choices=list(PRESETS))
+    ap.add_argument("--presets", nargs="+", default=list(PRESETS), metavar="PRESET",
+                    help="shipped presets, or config files (*.toml) of candidate presets "
+                         "(default every preset that drives alone)")
     ap.add_argument("--seeds", type=int, default=10, help="run seeds 0..N-1 (default 10)")
     ap.add_argument("--trials", type=int, default=None,
                     help="trials per run (default: the preset's own)")
@@ -119,12 +128,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--publish", action="store_true",
                     help="write docs/results/tables/preset-safety.md")
     a = ap.parse_args(argv)
+    a.presets = [str(Path(p).resolve()) if p.endswith(".toml") else p for p in a.presets]
     a.out.mkdir(parents=True, exist_ok=True)
     rows = []
     for preset in a.presets:
         results = []
         for seed in range(a.seeds):
-            cache = a.out / preset / f"seed-{seed}.json"
+            cache = a.out / label(preset) / f"seed-{seed}.json"
             old = json.loads(cache.read_text()) if cache.is_file() else {}
             if (old.get("rooms") == a.rooms and old.get("trials") == a.trials
                     and old.get("config") == preset_key(preset)):
@@ -133,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
             r = run_seed(preset, seed, a.out, a.rooms, a.trials)
             cache.write_text(json.dumps(r, indent=1))
             bad = np.mean([e["collisions_per_1000"] > BAD for e in r["evaluations"].values()])
-            print(f"{preset} seed {seed}: {bad:.1%} above {BAD:g} ({r['seconds']:.0f} s)",
+            print(f"{label(preset)} seed {seed}: {bad:.1%} above {BAD:g} ({r['seconds']:.0f} s)",
                   file=sys.stderr)
             results.append(r)
         rows.append(row(preset, results))

@@ -12,8 +12,8 @@ collisions, their rule's updates while learning and their greedy heading; with
 The runs are the duel's scoring (``benchmarks/duel.py``'s :func:`fuzzy_scores`: the same
 start poses, seed and iterations), so a duel figure can be looked at closely::
 
-    python benchmarks/learning/stuck.py logs/duel2/final/fuzzy-q/seed-2/run.h5 gen:3000010 \\
-        --figure docs/results/figures/duel-worst-seed.png
+    python benchmarks/learning/stuck.py logs/duel2/fuzzy-q-preset-43e4e07/seed-2/run.h5 \\
+        gen:3000010 --figure docs/results/figures/duel-worst-seed.png
 """
 
 from __future__ import annotations

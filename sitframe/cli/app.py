@@ -547,7 +547,8 @@ def print_run(result: Any) -> None:
         t.add_row(str(tr.index),
                   str(s["convergence_iteration"]) if s["converged"] else "not converged",
                   str(s["collisions"]),
-                  f"{s['collisions_per_1000_after_convergence']:.1f}",
+                  f"{s['collisions_per_1000_after_convergence']:.1f}" if s["converged"]
+                  else "–",  # (nothing after: it learnt to the end of its budget)
                   f"{s['coverage']:.2f}")
     console.print(t)
     if result.trials:
