@@ -240,10 +240,7 @@ RECIPES: dict[str, tuple[str, dict[str, Any]]] = {
         _reh({"worlds": [TRAIN], "wander_samples": 200}) | {"behaviours": {"avoid": {
             "reward_params": {"heading_cost": 0.3}, "replay": 4}}}),
     "rooms-evolving-heading-gen200-mu20-replay4": (
-        "rooms-evolving-heading-gen200-mu20 + `replay = 4`",
-        _mu(_reh({"worlds": [TRAIN], "wander_samples": 200}), 20) | {"behaviours": {
-            "avoid": {"reward_params": {"heading_cost": 0.3}, "min_updates": 20,
-                      "replay": 4}}}),
+        "rooms-evolving-heading-gen200-mu20 + `replay = 4`", _mu20_with({}, {"replay": 4})),
     "rooms-evolving-heading-gen200-tight30": (
         "rooms-evolving-heading-gen200 with 30 % of the episodes starting in a tight place "
         "(`tight_starts = 0.3`: the free pose nearest a wall of 20 drawn), so that situations "

@@ -294,7 +294,7 @@ class FuzzyQLearner:
         #: next memberships, collided), and each one's strongest rule
         self._buffer: list[tuple[list[int], list[float], list[int], float, np.ndarray,
                                  bool]] = []
-        self._buffer_key: list[int] = []
+        self._buffer_key = np.zeros(0, dtype=np.int64)  # (grown by doubling; first len(_buffer))
         #: replayed updates so far (the log's ``replayed``)
         self.replayed = 0
 
@@ -360,7 +360,10 @@ class FuzzyQLearner:
             if prm.replay:
                 self._buffer.append((list(active), weights, actions, reward, u_after.copy(),
                                      collided))
-                self._buffer_key.append(active[int(np.argmax(weights))])
+                n = len(self._buffer)
+                if n > self._buffer_key.size:
+                    self._buffer_key = np.resize(self._buffer_key, 2 * n)
+                self._buffer_key[n - 1] = active[int(np.argmax(weights))]
                 self._replay()
         self.since_change += 1
         if collided or self.since_change >= prm.b:
@@ -392,7 +395,7 @@ class FuzzyQLearner:
 
     def _replay(self) -> None:
         """Learn again from ``params.replay`` stored transitions (see :class:`QLearningParams`)."""
-        keys = np.asarray(self._buffer_key)
+        keys = self._buffer_key[:len(self._buffer)]
         if self.params.replay_priority == "rare":
             w = 1.0 / (1.0 + self.updates[keys])
         else:
