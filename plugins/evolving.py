@@ -266,13 +266,6 @@ class EvolvingInterpreter(FCMInterpreter):
         finally:
             self.c = c_cfg
 
-    def _check_space(self, state: dict[str, Any]) -> None:
-        transform = str(state.get("transform", "range"))
-        if transform != self.transform or float(state.get("offset", self.offset)) != self.offset:
-            raise ValueError(f"logged situations use transform '{transform}' (offset "
-                             f"{state.get('offset', self.offset)}), this config "
-                             f"'{self.transform}' (offset {self.offset})")
-
     def _set_prototypes(self, feat: np.ndarray, ids: np.ndarray, evidence: np.ndarray,
                         next_id: int) -> None:
         """(Re)build the per-trial arrays from prototypes ``feat`` (n, d) with ``ids``."""

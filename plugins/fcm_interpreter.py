@@ -237,12 +237,16 @@ class FCMInterpreter:
         return {"centers": self.centers, "feature_centers": self.feature_centers, "m": self.m,
                 "transform": self.transform, "offset": self.offset}
 
-    def load_state(self, state: dict[str, Any]) -> None:
+    def _check_space(self, state: dict[str, Any]) -> None:
+        """A logged state's feature space (transform, offset) must be this config's."""
         transform = str(state.get("transform", "range"))
         if transform != self.transform or float(state.get("offset", self.offset)) != self.offset:
             raise ValueError(f"logged situations use transform '{transform}' (offset "
                              f"{state.get('offset', self.offset)}), this config "
                              f"'{self.transform}' (offset {self.offset})")
+
+    def load_state(self, state: dict[str, Any]) -> None:
+        self._check_space(state)
         centers = np.asarray(state["centers"], dtype=float)
         if self.auto and centers.ndim == 2 and centers.shape[0] >= 1:
             self.c = centers.shape[0]  # (c = "auto": the logged clustering's c)

@@ -46,7 +46,11 @@ situation, from which the interpreter splits situations the task finds hard.
 
 from __future__ import annotations
 
-from typing import Any
+import dataclasses
+import functools
+import inspect
+from collections.abc import Callable
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -65,9 +69,52 @@ from sitframe import (
 from sitframe import params as P
 
 OUTPUTS = ("heading", "speed")
+T = TypeVar("T")
+
+
+def q_learning_keys(*, leave_out: tuple[str, ...] = ("groups", "min_group_updates"),
+                    **defaults: Any) -> Callable[[type[T]], type[T]]:
+    """Class decorator: the component's ``__init__`` also takes the fields of
+    :class:`~sitframe.QLearningParams` as keyword arguments, one config key each.
+
+    The fields but ``leave_out`` are added, keyword-only, to the signature (so a config's
+    keys are checked against them and ``sitframe plugins`` lists them), with the
+    dataclass's defaults or the ones given in ``defaults``; the wrapped ``__init__``
+    receives their values as one dict, its ``qparams`` argument. One list of the learning
+    parameters (the dataclass) then serves every component that learns by fuzzy Q.
+    """
+    fields = [f for f in dataclasses.fields(QLearningParams) if f.name not in leave_out]
+    unknown = set(defaults) - {f.name for f in fields}
+    if unknown:
+        raise TypeError(f"q_learning_keys: no such QLearningParams field: {sorted(unknown)}")
+
+    def decorate(cls: type[T]) -> type[T]:
+        init = cls.__init__
+        own = [q for q in inspect.signature(init).parameters.values() if q.name != "qparams"]
+        sig = inspect.Signature(own + [
+            inspect.Parameter(f.name, inspect.Parameter.KEYWORD_ONLY, annotation=f.type,
+                              default=defaults.get(f.name, f.default)) for f in fields])
+
+        @functools.wraps(init)
+        def __init__(self: T, *args: Any, **kwargs: Any) -> None:
+            bound = sig.bind(self, *args, **kwargs)
+            bound.apply_defaults()
+            given = dict(bound.arguments)
+            given.pop("self")
+            init(self, **{k: v for k, v in given.items() if k not in names},
+                 qparams={k: given[k] for k in names})
+
+        names = [f.name for f in fields]
+        __init__.__signature__ = sig  # type: ignore[attr-defined]
+        cls.__init__ = __init__  # type: ignore[method-assign]
+        return cls
+
+    return decorate
+
 UNITS = {"heading": "deg", "speed": "m/s"}
 
 
+@q_learning_keys()
 class FuzzyQBehaviour:
     """A situation FCS whose rule base is learned by fuzzy Q-learning."""
 
@@ -79,26 +126,8 @@ class FuzzyQBehaviour:
         headings: list[float] = (90, 60, 30, 0, -30, -60, -90),  # type: ignore[assignment]
         speeds: list[float] = (),  # type: ignore[assignment]
         learn: list[str] = ("heading",),  # type: ignore[assignment]
-        alpha: float = 0.3,
-        gamma: float = 0.9,
-        b: int = 5,
-        p: int = 50,
-        temperature: float = 0.25,
-        temperature_mode: str = "relative",
-        temperature_decay: float = 1.0,
-        temperature_min: float = 0.0,
-        q_init: str = "constant",
-        q_init_value: float = 0.0,
-        q_init_spread: float = 0.0,
-        update: str = "thesis",
-        activation: float = 0.3,
-        terminal_on_collision: bool = False,
-        min_updates: int = 0,
-        tie_break: str = "first",
         new_row_optimism: float = 0.5,
-        alpha_visits: float = 0.0,
-        replay: int = 0,
-        replay_priority: str = "rare",
+        qparams: dict[str, Any],
     ) -> None:
         self.singletons: dict[str, np.ndarray] = {
             "heading": np.asarray(P.number_list("headings", list(headings), lo=-90, hi=90,
@@ -113,15 +142,7 @@ class FuzzyQBehaviour:
         for o in self.learn_outputs:
             if o not in self.singletons:
                 raise ValueError(f"learn names '{o}' but no '{o}s' singletons are configured")
-        self.qparams = QLearningParams(
-            alpha=alpha, gamma=gamma, b=b, p=p, temperature=temperature,
-            temperature_mode=temperature_mode, temperature_decay=temperature_decay,
-            temperature_min=temperature_min, q_init=q_init, q_init_value=q_init_value,
-            q_init_spread=q_init_spread, update=update, activation=activation,
-            terminal_on_collision=terminal_on_collision, min_updates=min_updates,
-            tie_break=tie_break, alpha_visits=alpha_visits, replay=replay,
-            replay_priority=replay_priority,
-        )
+        self.qparams = QLearningParams(**qparams)
         self.new_row_optimism = float(P.number("new_row_optimism", new_row_optimism,
                                                lo=0.0, hi=1.0))
         self.learners: dict[str, FuzzyQLearner] = {}

@@ -130,6 +130,7 @@ from sitframe import (
 from sitframe import params as P
 
 from .arbiters import _label_index
+from .fuzzy_q import q_learning_keys
 
 #: What the reward's ``d`` measures (module docstring).
 DISTANCES = ("straight", "path")
@@ -283,6 +284,9 @@ def default_actions(labels: Sequence[str]) -> list[dict[str, float]]:
     return acts
 
 
+@q_learning_keys(leave_out=("q_init", "q_init_spread", "tie_break", "groups",
+                            "min_group_updates", "replay", "replay_priority"),
+                 update="standard", terminal_on_collision=True)
 class FuzzyQArbiter:
     """Learned arbitration: fuzzy Q-learning of a behaviour weighting per situation x context.
 
@@ -321,22 +325,9 @@ class FuzzyQArbiter:
         proximity: Sequence[float] = (),
         safety: Sequence[float] = (),
         safety_behaviour: str | None = None,
-        alpha: float = 0.3,
-        gamma: float = 0.9,
-        b: int = 5,
-        p: int = 50,
-        temperature: float = 0.25,
-        temperature_mode: str = "relative",
-        temperature_decay: float = 1.0,
-        temperature_min: float = 0.0,
-        q_init_value: float = 0.0,
-        update: str = "standard",
-        activation: float = 0.3,
-        terminal_on_collision: bool = True,
-        min_updates: int = 0,
-        alpha_visits: float = 0.0,
         convergence: str = "rule base",
         min_context_updates: int = 0,
+        qparams: dict[str, Any],
     ) -> None:
         self.sectors = int(P.number("sectors", sectors, lo=1, integer=True))
         if self.sectors not in SECTOR_NAMES:
@@ -361,12 +352,7 @@ class FuzzyQArbiter:
         self.convergence = P.choice("convergence", convergence, CONVERGENCE)
         every = self.convergence == "every context"
         self.qparams = QLearningParams(
-            alpha=alpha, gamma=gamma, b=b, p=p, temperature=temperature,
-            temperature_mode=temperature_mode, temperature_decay=temperature_decay,
-            temperature_min=temperature_min, q_init_value=q_init_value, update=update,
-            activation=activation, terminal_on_collision=terminal_on_collision,
-            min_updates=min_updates, alpha_visits=alpha_visits,
-            groups=len(names) if every else 1,
+            **qparams, groups=len(names) if every else 1,
             min_group_updates=int(P.number("min_context_updates", min_context_updates, lo=0,
                                            integer=True)))
         self.visits = np.zeros(len(names), dtype=np.int64)

@@ -226,18 +226,9 @@ def plot_measures_by_trial(trials: ClusteringTrials, *, units: str = "m") -> Fig
 def plot_measures_by_c(sweep: SweepResult, *, units: str = "m") -> Figure:
     """Validity measures of the chosen partition against the number of clusters (Fig. 4.5).
 
-    Hollow markers mark numbers of clusters where no trial had ``min_card > 0``.
-
-    Parameters
-    ----------
-    sweep : SweepResult
-        Output of :func:`sitframe.situations.clustering.sweep_c`.
-    units : str, default "m"
-        Units of the clustered data (for ``J_m``'s axis label).
-
-    Returns
-    -------
-    matplotlib.figure.Figure
+    ``sweep`` is the output of :func:`sitframe.situations.clustering.sweep_c`; ``units`` and
+    the returned figure are as in :func:`plot_measures_by_trial`. Hollow markers mark numbers
+    of clusters where no trial had ``min_card > 0``.
     """
     order = np.argsort(sweep.cs)
     cs = sweep.cs[order]

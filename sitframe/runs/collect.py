@@ -96,15 +96,9 @@ def trajectory_poses(
     return poses
 
 
-def collect_trajectories(
-    worlds: list[World],
-    sensor: Sensor,
-    rng: np.random.Generator,
-    *,
-    speed: float = 0.15,
-    rate_hz: float = 2.0,
-    params: RobotParams | None = None,
-) -> Collected:
+def collect_trajectories(worlds: list[World], sensor: Sensor, rng: np.random.Generator, *,
+                         speed: float = 0.15, rate_hz: float = 2.0,
+                         params: RobotParams | None = None) -> Collected:
     """Drive every world's forced trajectories and read the sensor (``trajectory`` mode)."""
     params = params or RobotParams()
     spacing = speed / rate_hz

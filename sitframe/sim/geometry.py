@@ -178,14 +178,20 @@ def point_segment_distance(points: np.ndarray, segments: np.ndarray | SegmentSet
     return np.sqrt(_dist2(p[:, 0:1], p[:, 1:2], s))
 
 
-def _dist2(px: np.ndarray, py: np.ndarray, s: SegmentSet) -> np.ndarray:
-    """Squared distances, px/py shaped (k, 1) → (k, S)."""
+def _project(px: np.ndarray, py: np.ndarray, s: SegmentSet
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each point's projection on each segment, px/py shaped (k, 1): the segment parameter
+    ``t`` in [0, 1] and the offset (dx, dy) from the projected point, each (k, S)."""
     wx = px - s.ax
     wy = py - s.ay
     t = (wx * s.ex + wy * s.ey) * s.inv_len2
     np.clip(t, 0.0, 1.0, out=t)
-    dx = wx - t * s.ex
-    dy = wy - t * s.ey
+    return t, wx - t * s.ex, wy - t * s.ey
+
+
+def _dist2(px: np.ndarray, py: np.ndarray, s: SegmentSet) -> np.ndarray:
+    """Squared distances, px/py shaped (k, 1) → (k, S)."""
+    _t, dx, dy = _project(px, py, s)
     return dx * dx + dy * dy
 
 
@@ -215,11 +221,7 @@ def nearest_on_segments(
     s = _segment_set(segments)
     if s.n == 0:
         raise ValueError("nearest_on_segments needs at least one segment, got 0")
-    wx = p[:, 0:1] - s.ax
-    wy = p[:, 1:2] - s.ay
-    t = np.clip((wx * s.ex + wy * s.ey) * s.inv_len2, 0.0, 1.0)
-    dx = wx - t * s.ex
-    dy = wy - t * s.ey
+    t, dx, dy = _project(p[:, 0:1], p[:, 1:2], s)
     d2 = dx * dx + dy * dy
     idx = np.argmin(d2, axis=1)
     rows = np.arange(p.shape[0])
@@ -229,21 +231,8 @@ def nearest_on_segments(
 
 
 def min_distance(points: np.ndarray, segments: np.ndarray | SegmentSet) -> np.ndarray:
-    """Distance from every point to the nearest segment.
-
-    Parameters
-    ----------
-    points
-        (k, 2) query points [m].
-    segments
-        (S, 4) segments [m] or a :class:`SegmentSet`; with S = 0 every
-        distance is ``inf``.
-
-    Returns
-    -------
-    numpy.ndarray
-        (k,) distances [m].
-    """
+    """Distance from every point to the nearest segment: (k,) [m], the row minimum of
+    :func:`point_segment_distance` (same parameters); with no segment (S = 0) ``inf``."""
     p = _as_points(points)
     s = _segment_set(segments)
     if s.n == 0:
@@ -333,27 +322,12 @@ def _check_rays(segments: Any, x: float, y: float, ang: np.ndarray, max_range: f
 
 def cast_rays(segments: SegmentSet, x: float, y: float, angles_rad: np.ndarray,
               max_range: float) -> np.ndarray:
-    """Fast ray casting from one point, for sensors in the control loop.
+    """Fast ray casting from one point ``(x, y)`` [m], for sensors in the control loop.
 
-    The unchecked core of :func:`raycast` for the common case of a sensor:
-    every ray starts at the robot's centre. Pass ``world.segment_set`` (every
-    wall and obstacle edge, cached by the world).
-
-    Parameters
-    ----------
-    segments
-        The world's :class:`SegmentSet` (``world.segment_set``).
-    x, y
-        Ray origin [m].
-    angles_rad
-        (n,) world-frame ray directions [rad].
-    max_range
-        Rays that hit nothing within ``max_range`` [m] read ``max_range``.
-
-    Returns
-    -------
-    numpy.ndarray
-        (n,) distances [m] in ``[0, max_range]``.
+    The unchecked core of :func:`raycast` (same ``angles_rad``, ``max_range`` and result)
+    for the common case of a sensor: every ray starts at the robot's centre, and
+    ``segments`` is a :class:`SegmentSet` (pass ``world.segment_set``: every wall and
+    obstacle edge, cached by the world).
     """
     ang = np.asarray(angles_rad, dtype=np.float64)
     _check_rays(segments, x, y, ang, max_range)
@@ -426,23 +400,9 @@ def cast_rays_many(segments: SegmentSet, xy: np.ndarray, angles_rad: np.ndarray,
     others cannot be hit nearer), padded with repeats of its first one, so the
     (N, K, n) arrays are a fraction of (N, S, n). Element by element the
     arithmetic is :func:`cast_rays`' own: row ``i`` is bit-identical to
-    ``cast_rays(segments, *xy[i], angles_rad[i], max_range)``.
-
-    Parameters
-    ----------
-    segments
-        The world's :class:`SegmentSet`.
-    xy
-        (N, 2) ray origins [m].
-    angles_rad
-        (N, n) world-frame ray directions [rad], one row per origin.
-    max_range
-        Rays that hit nothing within ``max_range`` [m] read ``max_range``.
-
-    Returns
-    -------
-    numpy.ndarray
-        (N, n) distances [m] in ``[0, max_range]``.
+    ``cast_rays(segments, *xy[i], angles_rad[i], max_range)``: ``xy`` is (N, 2) ray
+    origins [m], ``angles_rad`` (N, n) world-frame directions [rad], one row per origin,
+    and the result (N, n) distances [m] in ``[0, max_range]``.
     """
     ang = np.asarray(angles_rad, dtype=np.float64)
     xy = np.asarray(xy, dtype=np.float64)

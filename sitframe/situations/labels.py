@@ -42,13 +42,8 @@ TIE_M = 0.05
 STEP_M = 0.05
 
 
-def describe_prototypes(
-    centers: np.ndarray,
-    angles_deg: np.ndarray,
-    *,
-    near: float = 0.5,
-    far: float = 0.9,
-) -> list[str]:
+def describe_prototypes(centers: np.ndarray, angles_deg: np.ndarray, *, near: float = 0.5,
+                        far: float = 0.9) -> list[str]:
     """One label per prototype of a set, no two alike (the module docstring).
 
     Parameters
