@@ -3,9 +3,13 @@
 Question: For each shipped preset whose frozen policies drive alone (obstacle avoidance,
 wall following, speed), in what share of evaluations in unseen rooms does a frozen policy
 exceed 10 collisions per 1000 iterations, over 10 run seeds x the preset's trials?
-Output: a Markdown table (one row per preset: evaluations, share above 10 per 1000, median
-and worst collisions per 1000, median coverage), printed and with ``--publish`` written to
+Output: a Markdown table (one row per preset: evaluations, share above 10 per 1000, share
+of learners (frozen rule bases) with any evaluation above it, median and worst collisions
+per 1000, median coverage, share of trials converged), printed and with ``--publish`` written to
 ``docs/results/tables/preset-safety.md``; per-seed figures cached as JSON in ``--out``.
+Candidate presets (config files, ``benchmarks/learning/preset_candidates/*.toml``, each
+saying in its first line what it changes) are judged the same way and published with
+``--publish preset-safety-candidates``.
 
 For each preset and seed ``S``: ``sitframe run PRESET --seed S --workers 1`` (the
 preset as shipped, its own prerequisites made first in ``--out``), then every trial's
@@ -19,6 +23,8 @@ Usage (one core, one process)::
     taskset -c 0 nice -n 5 python benchmarks/learning/preset_safety.py --seeds 10 --publish
     python benchmarks/learning/preset_safety.py --presets obstacle-avoidance --seeds 2 \\
         --rooms gen:2000000 gen:2000001
+    python benchmarks/learning/preset_safety.py --seeds 10 \\
+        --presets benchmarks/learning/preset_candidates/*.toml --publish preset-safety-candidates
 """
 
 from __future__ import annotations
@@ -39,8 +45,8 @@ import numpy as np
 DEV_ROOMS = [f"gen:{2_000_000 + i}" for i in range(20)]
 #: The presets whose frozen policies drive alone (the goal presets fuse behaviours and are
 #: judged in goal episodes).
-PRESETS = ("obstacle-avoidance", "obstacle-avoidance-12", "obstacle-avoidance-16",
-           "obstacle-avoidance-evolving", "obstacle-avoidance-online",
+PRESETS = ("obstacle-avoidance", "obstacle-avoidance-8", "obstacle-avoidance-12",
+           "obstacle-avoidance-16", "obstacle-avoidance-evolving", "obstacle-avoidance-online",
            "obstacle-avoidance-thesis", "speed", "wall-following", "wall-following-12",
            "wall-following-evolving")
 #: An evaluation above this many collisions per 1000 iterations is unsafe.
@@ -105,12 +111,23 @@ def row(preset: str, results: list[dict[str, Any]]) -> str:
     cov = np.array([e["coverage"] for e in ev])
     conv = [c for r in results for c in r["converged"]]
     return (f"| `{label(preset)}` | {len(results)} × {len(results[0]['converged'])} | {len(ev)} | "
-            f"{np.mean(coll > BAD):.1%} | {np.median(coll):.2f} | {coll.max():.1f} | "
-            f"{np.median(cov):.3f} | {np.mean(conv):.0%} |")
+            f"{np.mean(coll > BAD):.1%} | {unsafe_learners(results):.0%} | "
+            f"{np.median(coll):.2f} | {coll.max():.1f} | {np.median(cov):.3f} | "
+            f"{np.mean(conv):.0%} |")
 
 
-HEADER = ("| preset | seeds × trials | evaluations | > 10 coll./1000 | coll./1000 median | "
-          "worst | coverage median | trials converged |\n|---|---|---|---|---|---|---|---|")
+def unsafe_learners(results: list[dict[str, Any]]) -> float:
+    """The share of learners (seed x trial: one frozen rule base each) with at least one
+    evaluation above :data:`BAD`: how the unsafe evaluations are spread over rule bases."""
+    bad = [any(e["collisions_per_1000"] > BAD for key, e in r["evaluations"].items()
+               if key.split("@")[0] == str(k))
+           for r in results for k in range(len(r["converged"]))]
+    return float(np.mean(bad))
+
+
+HEADER = ("| preset | seeds × trials | evaluations | > 10 coll./1000 | learners with one > 10 | "
+          "coll./1000 median | worst | coverage median | trials converged |\n"
+          "|---|---|---|---|---|---|---|---|---|")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -125,8 +142,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="the rooms judged in (default the 20 development rooms)")
     ap.add_argument("--out", type=Path, default=Path("logs/preset-safety"),
                     help="logs and cached per-seed figures (default %(default)s)")
-    ap.add_argument("--publish", action="store_true",
-                    help="write docs/results/tables/preset-safety.md")
+    ap.add_argument("--publish", nargs="?", const="preset-safety", default=None,
+                    metavar="TABLE", help="write docs/results/tables/TABLE.md (default "
+                    "preset-safety; candidates: preset-safety-candidates)")
     a = ap.parse_args(argv)
     a.presets = [str(Path(p).resolve()) if p.endswith(".toml") else p for p in a.presets]
     a.out.mkdir(parents=True, exist_ok=True)
@@ -153,7 +171,7 @@ def main(argv: list[str] | None = None) -> int:
         sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
         from common.publish import publish
 
-        publish("preset-safety", table)
+        publish(a.publish, table)
     return 0
 
 

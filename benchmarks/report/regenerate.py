@@ -144,10 +144,7 @@ RECIPES: dict[str, Recipe] = {
     "generalisation": Recipe((), (
         f"{PY} benchmarks/learning/generalisation.py --seeds 10 --publish",), 50),
     "preset-safety": Recipe((), (
-        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --rooms gen:2000000 "
-        "gen:2000001 gen:2000002 --presets obstacle-avoidance obstacle-avoidance-12 "
-        "obstacle-avoidance-16 obstacle-avoidance-evolving obstacle-avoidance-online speed "
-        "wall-following --publish",), 40),
+        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --publish",), 60),
     "select-avoidance": Recipe((), (
         f"capture {PY} benchmarks/learning/select_avoidance.py logs/obstacle-avoidance-12.h5 "
         "--short 100 --short-world goal-training --test 100 --worlds goal novel-1 novel-2 "
