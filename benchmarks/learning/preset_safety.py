@@ -135,7 +135,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--presets", nargs="+", default=list(PRESETS), metavar="PRESET",
                     help="shipped presets, or config files (*.toml) of candidate presets "
                          "(default every preset that drives alone)")
-    ap.add_argument("--seeds", type=int, default=10, help="run seeds 0..N-1 (default 10)")
+    ap.add_argument("--seeds", type=int, default=10, help="how many run seeds (default 10)")
+    ap.add_argument("--first-seed", type=int, default=0,
+                    help="the first run seed (default 0; a candidate chosen on seeds 0-9 is "
+                         "confirmed on others)")
     ap.add_argument("--trials", type=int, default=None,
                     help="trials per run (default: the preset's own)")
     ap.add_argument("--rooms", nargs="+", default=DEV_ROOMS,
@@ -151,7 +154,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for preset in a.presets:
         results = []
-        for seed in range(a.seeds):
+        for seed in range(a.first_seed, a.first_seed + a.seeds):
             cache = a.out / label(preset) / f"seed-{seed}.json"
             old = json.loads(cache.read_text()) if cache.is_file() else {}
             if (old.get("rooms") == a.rooms and old.get("trials") == a.trials

@@ -145,6 +145,15 @@ RECIPES: dict[str, Recipe] = {
         f"{PY} benchmarks/learning/generalisation.py --seeds 10 --publish",), 50),
     "preset-safety": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --publish",), 60),
+    "preset-safety-candidates": Recipe((), (
+        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets "
+        + " ".join(sorted(p.relative_to(ROOT).as_posix() for p in
+                          (ROOT / "benchmarks/learning/preset_candidates").glob("*.toml")))
+        + " --publish preset-safety-candidates",), 40),
+    "preset-safety-held-out": Recipe((), (
+        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --first-seed 10 --presets "
+        "benchmarks/learning/preset_candidates/oa-evolving-rooms-collision100.toml "
+        "--publish preset-safety-held-out",), 7),
     "select-avoidance": Recipe((), (
         f"capture {PY} benchmarks/learning/select_avoidance.py logs/obstacle-avoidance-12.h5 "
         "--short 100 --short-world goal-training --test 100 --worlds goal novel-1 novel-2 "
