@@ -153,7 +153,9 @@ RECIPES: dict[str, Recipe] = {
     "preset-safety-held-out": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --first-seed 10 --presets "
         "benchmarks/learning/preset_candidates/oa-evolving-rooms-collision100.toml "
-        "--publish preset-safety-held-out",), 7),
+        "benchmarks/learning/preset_candidates/wf-evolving-collision100.toml "
+        "wall-following-evolving "
+        "--publish preset-safety-held-out",), 20),
     "select-avoidance": Recipe((), (
         f"capture {PY} benchmarks/learning/select_avoidance.py logs/obstacle-avoidance-12.h5 "
         "--short 100 --short-world goal-training --test 100 --worlds goal novel-1 novel-2 "
