@@ -84,7 +84,8 @@ def q_learning_keys(*, leave_out: tuple[str, ...] = ("groups", "min_group_update
     parameters (the dataclass) then serves every component that learns by fuzzy Q.
     """
     fields = [f for f in dataclasses.fields(QLearningParams) if f.name not in leave_out]
-    unknown = set(defaults) - {f.name for f in fields}
+    names = [f.name for f in fields]
+    unknown = set(defaults) - set(names)
     if unknown:
         raise TypeError(f"q_learning_keys: no such QLearningParams field: {sorted(unknown)}")
 
@@ -104,12 +105,12 @@ def q_learning_keys(*, leave_out: tuple[str, ...] = ("groups", "min_group_update
             init(self, **{k: v for k, v in given.items() if k not in names},
                  qparams={k: given[k] for k in names})
 
-        names = [f.name for f in fields]
         __init__.__signature__ = sig  # type: ignore[attr-defined]
         cls.__init__ = __init__  # type: ignore[method-assign]
         return cls
 
     return decorate
+
 
 UNITS = {"heading": "deg", "speed": "m/s"}
 

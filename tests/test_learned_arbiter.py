@@ -250,3 +250,23 @@ def test_a_protocols_training_starts_breaking_the_contract_is_one_clear_error(
     monkeypatch.setattr(GoalEpisodes, "training_starts", value)
     with pytest.raises(getattr(E, error), match=match):
         Experiment(goal_run()).run(interpreter_state=STATE)
+
+
+def test_the_arbiter_takes_the_fuzzy_q_learning_keys_with_its_own_defaults():
+    """One list of fuzzy-Q keys (QLearningParams) serves behaviour and arbiter: a key given
+    in config reaches the learner, the arbiter's defaults are its own, and a key it leaves
+    out is refused by the config check in one line naming it."""
+    from sitframe.params import check_params
+    from sitframe.plugins.fuzzy_q import FuzzyQBehaviour
+    from sitframe.plugins.learned_arbiter import FuzzyQArbiter
+
+    arb = FuzzyQArbiter(alpha=0.1, min_updates=7)
+    assert (arb.qparams.alpha, arb.qparams.min_updates) == (0.1, 7)
+    assert (arb.qparams.update, arb.qparams.terminal_on_collision) == ("standard", True)
+    beh = FuzzyQBehaviour(replay=2)
+    assert (beh.qparams.replay, beh.qparams.update) == (2, "thesis")
+    with pytest.raises(InputError, match="unknown parameter 'q_init'"):
+        check_params(FuzzyQArbiter, {"q_init": "random"}, file="run.toml",
+                     key="arbiter")
+    with pytest.raises(InputError, match="alpha"):
+        FuzzyQBehaviour(alpha=2.0)
