@@ -154,8 +154,7 @@ RECIPES: dict[str, Recipe] = {
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --first-seed 10 --presets "
         "benchmarks/learning/preset_candidates/oa-evolving-rooms-collision100.toml "
         "benchmarks/learning/preset_candidates/wf-evolving-collision100.toml "
-        "wall-following-evolving "
-        "--publish preset-safety-held-out",), 20),
+        "wall-following-evolving obstacle-avoidance --publish preset-safety-held-out",), 27),
     "select-avoidance": Recipe((), (
         f"capture {PY} benchmarks/learning/select_avoidance.py logs/obstacle-avoidance-12.h5 "
         "--short 100 --short-world goal-training --test 100 --worlds goal novel-1 novel-2 "
