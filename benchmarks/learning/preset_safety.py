@@ -7,9 +7,9 @@ Output: a Markdown table (one row per preset: evaluations, share above 10 per 10
 of learners (frozen rule bases) with any evaluation above it, median and worst collisions
 per 1000, median coverage, share of trials converged), printed and with ``--publish`` written to
 ``docs/results/tables/preset-safety.md``; per-seed figures cached as JSON in ``--out``.
-Candidate presets (config files, ``benchmarks/learning/preset_candidates/*.toml``, each
-saying in its first line what it changes) are judged the same way and published with
-``--publish preset-safety-candidates``.
+Candidate presets (``benchmarks/learning/preset_candidates/*.toml``: a base and the keys
+changed, :func:`candidate_config`; the first line says why) are judged the same way and
+published with ``--publish preset-safety-candidates``.
 
 For each preset and seed ``S``: ``sitframe run PRESET --seed S --workers 1`` (the
 preset as shipped, its own prerequisites made first in ``--out``), then every trial's
@@ -62,7 +62,11 @@ def run_seed(preset: str, seed: int, out: Path, rooms: list[str],
 
     log = out / label(preset) / f"seed-{seed}.h5"
     log.parent.mkdir(parents=True, exist_ok=True)
-    argv = ["run", preset, "--seed", str(seed), "--workers", "1", "--out", str(log.resolve())]
+    cfg = candidate_config(preset)
+    if cfg is not None:  # (a candidate: its config written out, paths resolving beside it)
+        (log.parent / "config.toml").write_text(cfg, "utf-8")
+    config = str((log.parent / "config.toml").resolve()) if cfg is not None else preset
+    argv = ["run", config, "--seed", str(seed), "--workers", "1", "--out", str(log.resolve())]
     if trials is not None:
         argv += ["--trials", str(trials)]
     t0 = time.perf_counter()
@@ -91,12 +95,43 @@ def run_seed(preset: str, seed: int, out: Path, rooms: list[str],
 
 
 def preset_key(preset: str) -> str:
-    """A digest of the preset's (or config file's) text: a cached seed is reused only while it
-    is unchanged."""
+    """A digest of the preset's (or config file's, or candidate's config) text: a cached seed
+    is reused only while it is unchanged."""
     from sitframe.contract.config import preset_text
 
-    text = Path(preset).read_text("utf-8") if preset.endswith(".toml") else preset_text(preset)
+    text = preset_text(preset) if not preset.endswith(".toml") else \
+        candidate_config(preset) or Path(preset).read_text("utf-8")
     return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def candidate_config(path: str) -> str | None:
+    """A candidate file's config as TOML text, or None for a plain config file.
+
+    A candidate (``benchmarks/learning/preset_candidates/*.toml``) names what it starts
+    from, ``base = "..."`` (a shipped preset, or a config file relative to the candidate),
+    and the keys it changes as tables under ``[set]`` (e.g. ``[set.behaviours.avoid]``),
+    merged into the base's own: tables key by key, any other value replaced.
+    """
+    import tomllib
+
+    from sitframe.contract.config import preset_text, to_toml
+
+    spec = tomllib.loads(Path(path).read_text("utf-8"))
+    if "base" not in spec:
+        return None
+    base = spec["base"]
+    cfg = tomllib.loads((Path(path).parent / base).read_text("utf-8") if base.endswith(".toml")
+                        else preset_text(base))
+    _merge(cfg, spec.get("set", {}))
+    return to_toml(cfg)
+
+
+def _merge(into: dict[str, Any], keys: dict[str, Any]) -> None:
+    for k, v in keys.items():
+        if isinstance(v, dict) and isinstance(into.get(k), dict):
+            _merge(into[k], v)
+        else:
+            into[k] = v
 
 
 def label(preset: str) -> str:
