@@ -42,6 +42,7 @@ situations came from (the speed preset's ``clusters_from``). Prints:
 from __future__ import annotations
 
 import argparse
+import glob
 import sys
 from pathlib import Path
 
@@ -65,7 +66,7 @@ def _pooled(folder: str, behaviour: str) -> tuple[np.ndarray, dict[str, np.ndarr
     the evaluations' commanded speeds and readings (one array per evaluation)."""
     conv, speeds, updates, qs, cmd, reading = [], [], [], [], [], []
     files = sorted(Path(folder).glob("*.h5")) if Path(folder).is_dir() else \
-        sorted(Path().glob(folder))
+        sorted(Path(f) for f in glob.glob(folder))  # (a relative or an absolute pattern)
     for f in files:
         lg = open_log(f)
         for k in lg.trial_indices():
