@@ -118,10 +118,10 @@ RECIPES: dict[str, Recipe] = {
         + " ".join(shlex.quote(_situations_c(c)) for c in ("8", "10", "12", "14", "16")),),
         30),
     "speed-convergence": Recipe(("speed-convergence",), (
-        f"{SPEED} {S}/speed-convergence logs/obstacle-avoidance.h5 "
+        f"{SPEED} {S}/speed-convergence logs/obstacle-avoidance-12.h5 "
         "--publish convergence=speed-convergence",), 3),
     "speed": Recipe(("speed",), (
-        f"{SPEED} {S}/speed logs/obstacle-avoidance.h5 --publish situations=speed-situations "
+        f"{SPEED} {S}/speed logs/obstacle-avoidance-12.h5 --publish situations=speed-situations "
         "--publish clearance=speed-clearance",
         f"{POOLED} --publish speed-safety {S}/speed"), 4),
     "wall-following": Recipe(("wall-following",), (
