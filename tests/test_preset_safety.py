@@ -11,9 +11,13 @@ situations).
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import io
+import tomllib
+from pathlib import Path
 
 from sitframe.cli.app import main
+from sitframe.contract.config import preset_text
 from sitframe.runs.evaluation import evaluate_log
 
 ROOMS = ("gen:2000000", "gen:2000001", "gen:2000002")
@@ -28,3 +32,30 @@ def test_the_main_presets_frozen_rule_bases_are_safe_in_unseen_rooms(tmp_path, m
     rates = {(k, w): evaluate_log(str(out), world=w, trial=k)["collisions_per_1000"]
              for k in range(3) for w in ROOMS}
     assert max(rates.values()) <= 10.0, rates
+
+
+def _preset_safety():
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "learning" / "preset_safety.py"
+    spec = importlib.util.spec_from_file_location("preset_safety", path)
+    assert spec and spec.loader
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_a_candidate_is_its_base_preset_with_the_keys_it_sets(tmp_path):
+    ps = _preset_safety()
+    cand = tmp_path / "wf-c100.toml"
+    cand.write_text('# why\nbase = "wall-following"\n[set.behaviours.follow]\n'
+                    'reward_params = {collision = -100.0}\nreplay = 4\n')
+    got = tomllib.loads(ps.candidate_config(str(cand)))
+    want = tomllib.loads(preset_text("wall-following"))
+    follow = want["behaviours"]["follow"]
+    follow["reward_params"]["collision"] = -100.0  # merged into the preset's table
+    follow["replay"] = 4
+    assert got == want
+    assert got["behaviours"]["follow"]["reward_params"]["near"] == 0.15  # kept
+    # a shipped preset's name, or a config file without a base, is not a candidate
+    assert ps.candidate_config("wall-following") is None
+    (tmp_path / "plain.toml").write_text('[experiment]\nname = "x"\n')
+    assert ps.candidate_config(str(tmp_path / "plain.toml")) is None

@@ -105,7 +105,8 @@ def preset_key(preset: str) -> str:
 
 
 def candidate_config(path: str) -> str | None:
-    """A candidate file's config as TOML text, or None for a plain config file.
+    """A candidate file's config as TOML text, or None for a plain config file or a
+    shipped preset's name.
 
     A candidate (``benchmarks/learning/preset_candidates/*.toml``) names what it starts
     from, ``base = "..."`` (a shipped preset, or a config file relative to the candidate),
@@ -116,6 +117,8 @@ def candidate_config(path: str) -> str | None:
 
     from sitframe.contract.config import preset_text, to_toml
 
+    if not path.endswith(".toml"):
+        return None
     spec = tomllib.loads(Path(path).read_text("utf-8"))
     if "base" not in spec:
         return None
