@@ -64,7 +64,8 @@ def _load(log: str, trial: int, arbiter: str | None) -> Any:
         if arbiter is not None:
             params = cfg["arbiter"] if cfg["arbiter"].get("component") == arbiter else {}
             cfg["arbiter"] = {**params, "component": arbiter}
-        _LOADED[key] = (cfg, policies, state, Registry.collect(get_plugin_manager()))
+        _LOADED[key] = (cfg, policies, (state, lg.space_states()),
+                        Registry.collect(get_plugin_manager()))
     return _LOADED[key]
 
 
@@ -76,12 +77,13 @@ def _batch(log: str, trial: int, arbiter: str | None, world: str, seed: int,
     from sitframe.contract.resolve import Resolved
     from sitframe.runs.loop import STAGE_BATCH, TrialSpec, simulate, stage_seed
 
-    cfg, policies, state, registry = _load(log, trial, arbiter)
+    cfg, policies, (state, spaces), registry = _load(log, trial, arbiter)
     cfg = {**cfg, "goal": {**cfg["goal"], "episodes": episodes}}
     res = Resolved.build(cfg, registry, log)
     spec = TrialSpec(index=trial, seed=stage_seed(seed, STAGE_BATCH, 0), world=world,
                      iterations=int(cfg["goal"]["timeout"]), learn=False,
-                     interpreter_state=state, policies=policies, protocol="goal-episodes")
+                     interpreter_state=state, policies=policies, protocol="goal-episodes",
+                     space_states=spaces)  # (situation spaces of their own, as evaluate_log)
     return simulate(res, spec, step_hook=step_hook)
 
 

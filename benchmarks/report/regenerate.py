@@ -70,9 +70,6 @@ OA = ("obstacle-avoidance", "obstacle-avoidance-q150-t5", "obstacle-avoidance-12
 POOLED = f"{PY} benchmarks/report/pooled_table.py"
 SPEED = f"{PY} benchmarks/learning/speed_openness.py"
 SITUATIONS = f"{PY} benchmarks/report/situations.py"
-ARBITERS = f"{PY} benchmarks/learning/compare_arbiters.py --seeds 10 --episodes 50"
-OWN_ROOMS = " ".join(f"benchmarks/worlds/{w}.toml"
-                     for w in ("office", "pillars", "deep-trap", "l-room"))
 
 #: Every table of docs/results/tables/, by name.
 RECIPES: dict[str, Recipe] = {
@@ -135,12 +132,6 @@ RECIPES: dict[str, Recipe] = {
         f"{PY} benchmarks/sim/bench_gym.py --steps 3200 --repeats 5 --publish gym-speed",), 2),
     "goal-finding-learned": Recipe(("goal-finding-learned",), (
         f"{POOLED} --publish goal-finding-learned {S}/goal-finding-learned",), 35),
-    "arbiters": Recipe((), (
-        f"{ARBITERS} --figure docs/results/figures/arbiters-multi-room.png "
-        "--publish arbiters",), 30, runs=("goal-finding-learned", "goal-finding")),
-    "arbiters-own-rooms": Recipe((), (
-        f"{ARBITERS} --worlds {OWN_ROOMS} --publish arbiters-own-rooms",), 20,
-        runs=("goal-finding-learned", "goal-finding")),
     "generalisation": Recipe((), (
         f"{PY} benchmarks/learning/generalisation.py --seeds 10 --publish",), 50),
     "preset-safety": Recipe((), (
@@ -152,13 +143,10 @@ RECIPES: dict[str, Recipe] = {
         + " --publish preset-safety-candidates",), 40),
     "preset-safety-held-out": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --first-seed 10 --presets "
-        "benchmarks/learning/preset_candidates/oa-evolving-rooms-collision100.toml "
-        "benchmarks/learning/preset_candidates/wf-evolving-collision100.toml "
-        "wall-following-evolving obstacle-avoidance --publish preset-safety-held-out",), 27),
-    "select-avoidance": Recipe((), (
-        f"capture {PY} benchmarks/learning/select_avoidance.py logs/obstacle-avoidance-12.h5 "
-        "--short 100 --short-world goal-training --test 100 --worlds goal novel-1 novel-2 "
-        "multi-room u-trap",), 25, runs=("obstacle-avoidance-12",)),
+        + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in (
+            "oa-evolving-rooms-collision100", "wf-evolving-collision100", "wf-evolving-replay4",
+            "wf-p150", "speed-near3-av20"))
+        + " obstacle-avoidance --publish preset-safety-held-out",), 33),
 }
 def headline() -> str:
     """The README's and the results index's short table, from the sweeps' logs (a row

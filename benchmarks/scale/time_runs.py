@@ -14,6 +14,10 @@ Reports per install the median wall time and CPU time (user + system of the run'
 process tree) and each one's ratio to the first install's; the table goes to ``--out``
 (Markdown, written here).
 
+An install whose preset needs other prerequisites than the others' (an older version of the
+preset, e.g. the one before situation spaces) gets a folder of its own: ``NAME=EXE@FOLDER``
+(its prerequisites made there once by that install, so its runs reuse them).
+
 Usage::
 
     python benchmarks/scale/time_runs.py goal-finding-learned --folder RUN_FOLDER \\
@@ -53,15 +57,17 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("preset")
     ap.add_argument("--folder", required=True)
-    ap.add_argument("--sitframe", action="append", required=True, metavar="NAME=EXE")
+    ap.add_argument("--sitframe", action="append", required=True, metavar="NAME=EXE[@FOLDER]")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--out", required=True)
     args = ap.parse_args(argv)
     installs = [tuple(s.split("=", 1)) for s in args.sitframe]
+    folders = {name: exe.partition("@")[2] or args.folder for name, exe in installs}
+    installs = [(name, exe.partition("@")[0]) for name, exe in installs]
     times: dict[str, list[tuple[float, float]]] = {name: [] for name, _exe in installs}
     for _ in range(args.repeats):
         for name, exe in installs:
-            times[name].append(one_run(exe, args.preset, args.folder))
+            times[name].append(one_run(exe, args.preset, folders[name]))
             print(name, times[name][-1], file=sys.stderr)
     load = os.getloadavg()
     base = installs[0][0]
