@@ -52,12 +52,14 @@ def _commit() -> str:
 
 def this_command() -> str:
     """The command line of this process, as a user would type it from the repository."""
-    script = Path(sys.argv[0]).resolve()
-    try:
-        script = script.relative_to(ROOT)
-    except ValueError:
-        pass
-    return shlex.join(["python", str(script), *sys.argv[1:]])
+    def from_root(arg: str) -> str:  # (a path in the repository, as typed from its root)
+        try:
+            return Path(arg).resolve().relative_to(ROOT).as_posix()
+        except ValueError:
+            return arg
+
+    args = [a if not Path(a).is_absolute() else from_root(a) for a in sys.argv[1:]]
+    return shlex.join(["python", from_root(sys.argv[0]), *args])
 
 
 def publish(name: str, table: str, *, command: str | None = None) -> Path:
