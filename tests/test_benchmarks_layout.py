@@ -22,3 +22,17 @@ def test_scripts_live_in_their_groups() -> None:
 def test_each_script_says_its_question_and_its_output(script: Path) -> None:
     doc = ast.get_docstring(ast.parse(script.read_text("utf-8"))) or ""
     assert "\nQuestion: " in doc and "\nOutput: " in doc, script
+
+
+def test_a_published_table_names_the_repositorys_files_from_its_root(monkeypatch) -> None:
+    import sys
+
+    monkeypatch.syspath_prepend(str(BENCH))
+    from common.publish import this_command
+
+    cand = BENCH / "learning" / "preset_candidates" / "wf-p150.toml"
+    monkeypatch.setattr(sys, "argv", [str(BENCH / "learning" / "preset_safety.py"), "--presets",
+                                      str(cand), "speed", "/elsewhere/x.toml", "logs/a.h5"])
+    assert this_command() == (
+        "python benchmarks/learning/preset_safety.py --presets "
+        "benchmarks/learning/preset_candidates/wf-p150.toml speed /elsewhere/x.toml logs/a.h5")
