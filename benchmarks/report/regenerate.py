@@ -140,7 +140,7 @@ RECIPES: dict[str, Recipe] = {
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets "
         + " ".join(sorted(p.relative_to(ROOT).as_posix() for p in
                           (ROOT / "benchmarks/learning/preset_candidates").glob("*.toml")))
-        + " --publish preset-safety-candidates",), 40),
+        + " --publish preset-safety-candidates",), 190),
     "preset-safety-held-out": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --first-seed 10 --presets "
         + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in (
