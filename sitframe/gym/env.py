@@ -87,6 +87,7 @@ class SitframeEnv(gym.Env):
         self.goal = None
         self.t = 0
         self._reading: np.ndarray | None = None
+        self._ctx: Any = None  # the last step's context: the next step's ``before``
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
               ) -> tuple[np.ndarray, dict[str, Any]]:
@@ -107,6 +108,7 @@ class SitframeEnv(gym.Env):
         if hasattr(self.reward_fn, "trial_start"):
             self.reward_fn.trial_start(self.task.trial_info(rng, self.world))
         self._reading = self.sensor.read(self.world, self.pose, rng)
+        self._ctx = None
         return self.task.observe(self._reading, self.pose, self.goal), self._info(None)
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
@@ -114,12 +116,14 @@ class SitframeEnv(gym.Env):
             raise RuntimeError("call reset() before step()")
         task, rng = self.task, self.np_random
         cmd = task.command(action, self.continuous)
-        before = task.context(self.t, self.pose, self._reading, self.goal, world=self.world)
+        before = self._ctx or task.context(self.t, self.pose, self._reading, self.goal,
+                                           world=self.world)
         out = step_robot(self.world, self.pose, cmd, task.res.robot, rng)
         self.pose = out.pose
         self._reading = self.sensor.read(self.world, self.pose, rng)
         self.t += 1
-        after = task.context(self.t, self.pose, self._reading, self.goal, world=self.world)
+        after = self._ctx = task.context(self.t, self.pose, self._reading, self.goal,
+                                         world=self.world)
         reward = float(self.reward_fn(Transition(before, cmd, out, after)))
         terminated = task.terminated(after, out.collided)
         truncated = not terminated and self.t >= task.max_steps

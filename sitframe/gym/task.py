@@ -239,7 +239,11 @@ class Task:
 
     def observe(self, reading: np.ndarray, pose: np.ndarray, goal: Goal | None) -> np.ndarray:
         """The observation of ``reading`` at ``pose`` (float32, in :meth:`observation_bounds`)."""
-        return self.observe_many(reading[None, :], pose[None, :], [goal])[0]
+        if self.protocol is not None:
+            return self.observe_many(reading[None, :], pose[None, :], [goal])[0]
+        obs = (reading / self.max_range if self.normalize else reading).astype(np.float32)
+        lo, hi = self.observation_bounds()  # the ranges alone: observe_many's steps, unbatched
+        return np.minimum(np.maximum(obs, lo, out=obs), hi, out=obs)
 
     def observe_many(self, readings: np.ndarray, poses: np.ndarray | list[np.ndarray],
                      goals: list[Goal | None]) -> np.ndarray:
