@@ -71,6 +71,8 @@ POOLED = f"{PY} benchmarks/report/pooled_table.py"
 SPEED = f"{PY} benchmarks/learning/speed_openness.py"
 SITUATIONS = f"{PY} benchmarks/report/situations.py"
 
+#: The third round of preset candidates (issue 39), published in a table of their own.
+ROUND_3 = ("oa-12-cand3", "oa-12-rooms", "oa-16-cand3", "oa-8-rooms")
 #: Every table of docs/results/tables/, by name.
 RECIPES: dict[str, Recipe] = {
     "oa-presets": Recipe(OA, (f"{POOLED} --publish oa-presets " +
@@ -139,8 +141,17 @@ RECIPES: dict[str, Recipe] = {
     "preset-safety-candidates": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets "
         + " ".join(sorted(p.relative_to(ROOT).as_posix() for p in
-                          (ROOT / "benchmarks/learning/preset_candidates").glob("*.toml")))
+                          (ROOT / "benchmarks/learning/preset_candidates").glob("*.toml")
+                          if p.stem not in ROUND_3))
         + " --publish preset-safety-candidates",), 190),
+    "preset-safety-candidates-3": Recipe((), (
+        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets "
+        + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in ROUND_3)
+        + " --publish preset-safety-candidates-3",), 20),
+    "preset-safety-held-out-3": Recipe((), (
+        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --first-seed 10 --presets "
+        "benchmarks/learning/preset_candidates/oa-12-rooms.toml obstacle-avoidance-12"
+        " --publish preset-safety-held-out-3",), 12),
     "preset-safety-held-out": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --first-seed 10 --presets "
         + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in (
