@@ -73,6 +73,8 @@ SITUATIONS = f"{PY} benchmarks/report/situations.py"
 
 #: The third round of preset candidates (issue 39), published in a table of their own.
 ROUND_3 = ("oa-12-cand3", "oa-12-rooms", "oa-16-cand3", "oa-8-rooms")
+#: The presets whose failing evaluations ``failing_rules.py`` takes apart.
+FAILING = ("obstacle-avoidance-12", "obstacle-avoidance-8", "wall-following-12")
 #: Every table of docs/results/tables/, by name.
 RECIPES: dict[str, Recipe] = {
     "oa-presets": Recipe(OA, (f"{POOLED} --publish oa-presets " +
@@ -148,6 +150,10 @@ RECIPES: dict[str, Recipe] = {
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets "
         + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in ROUND_3)
         + " --publish preset-safety-candidates-3",), 20),
+    "failing-rules": Recipe((), (
+        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets " + " ".join(FAILING),
+        f"{PY} benchmarks/learning/failing_rules.py "
+        + " ".join(f"logs/preset-safety/{p}" for p in FAILING) + " --publish"), 25),
     "preset-safety-held-out-3": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --first-seed 10 --presets "
         "benchmarks/learning/preset_candidates/oa-12-rooms.toml obstacle-avoidance-12"
