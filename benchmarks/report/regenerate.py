@@ -73,6 +73,9 @@ SITUATIONS = f"{PY} benchmarks/report/situations.py"
 
 #: The third round of preset candidates (issue 39), published in a table of their own.
 ROUND_3 = ("oa-12-cand3", "oa-12-rooms", "oa-16-cand3", "oa-8-rooms")
+#: The fourth round: learning over rooms with the stricter convergence window, or longer.
+ROUND_4 = ("oa-12-rooms-p150", "oa-16-rooms-p150", "oa-16-rooms-p150-i8000", "oa-8-rooms-p100",
+           "oa-8-rooms-p150", "oa-8-rooms-p150-i8000", "oa-online-rooms-p150", "wf-12-rooms")
 #: The presets whose failing evaluations ``failing_rules.py`` takes apart.
 FAILING = ("obstacle-avoidance-12", "obstacle-avoidance-8", "wall-following-12")
 #: Every table of docs/results/tables/, by name.
@@ -144,12 +147,16 @@ RECIPES: dict[str, Recipe] = {
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets "
         + " ".join(sorted(p.relative_to(ROOT).as_posix() for p in
                           (ROOT / "benchmarks/learning/preset_candidates").glob("*.toml")
-                          if p.stem not in ROUND_3))
+                          if p.stem not in ROUND_3 + ROUND_4))
         + " --publish preset-safety-candidates",), 190),
     "preset-safety-candidates-3": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets "
         + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in ROUND_3)
         + " --publish preset-safety-candidates-3",), 20),
+    "preset-safety-candidates-4": Recipe((), (
+        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets "
+        + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in ROUND_4)
+        + " --publish preset-safety-candidates-4",), 35),
     "failing-rules": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets " + " ".join(FAILING),
         f"{PY} benchmarks/learning/failing_rules.py "
@@ -158,6 +165,12 @@ RECIPES: dict[str, Recipe] = {
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --first-seed 10 --presets "
         "benchmarks/learning/preset_candidates/oa-12-rooms.toml obstacle-avoidance-12"
         " --publish preset-safety-held-out-3",), 12),
+    "preset-safety-held-out-4": Recipe((), (
+        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --first-seed 10 --presets "
+        + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in (
+            "oa-8-rooms-p150", "oa-8-rooms-p150-i8000", "oa-12-rooms-p150"))
+        + " obstacle-avoidance-8"
+        " --publish preset-safety-held-out-4",), 12),
     "preset-safety-held-out": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --first-seed 10 --presets "
         + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in (
