@@ -75,7 +75,12 @@ SITUATIONS = f"{PY} benchmarks/report/situations.py"
 ROUND_3 = ("oa-12-cand3", "oa-12-rooms", "oa-16-cand3", "oa-8-rooms")
 #: The fourth round: learning over rooms with the stricter convergence window, or longer.
 ROUND_4 = ("oa-12-rooms-p150", "oa-16-rooms-p150", "oa-16-rooms-p150-i8000", "oa-8-rooms-p100",
-           "oa-8-rooms-p150", "oa-8-rooms-p150-i8000", "oa-online-rooms-p150", "wf-12-rooms")
+           "oa-8-rooms-p150", "oa-8-rooms-p150-i8000", "oa-online-rooms-p100-i12000",
+           "oa-online-rooms-p100-i8000", "oa-online-rooms-p100-i8000-g1500",
+           "oa-online-rooms-p150", "oa-online-rooms-p150-i12000-g1500",
+           "oa-online-rooms-p150-i20000-g1500", "oa-online-rooms-p150-i8000",
+           "oa-online-rooms-p150-i8000-g1000", "oa-online-rooms-p150-i8000-g1500",
+           "oa-online-rooms-p75-i8000", "wf-12-rooms")
 #: The presets whose failing evaluations ``failing_rules.py`` takes apart.
 FAILING = ("obstacle-avoidance-12", "obstacle-avoidance-8", "wall-following-12")
 #: Every table of docs/results/tables/, by name.
@@ -156,7 +161,7 @@ RECIPES: dict[str, Recipe] = {
     "preset-safety-candidates-4": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets "
         + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in ROUND_4)
-        + " --publish preset-safety-candidates-4",), 35),
+        + " --publish preset-safety-candidates-4",), 90),
     "failing-rules": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets " + " ".join(FAILING),
         f"{PY} benchmarks/learning/failing_rules.py "
