@@ -88,6 +88,16 @@ Config (``[interpreter]``)::
     check_every = 50
     grow_until = 0        # readings of a learning trial after which nothing is created
                           # or split (0 = no limit); merges, prunes and adaptation go on
+    freeze_with_rules = false  # true: the situations stop changing (no adaptation, merge,
+                          # prune, creation or split) once every learner has converged
+
+``freeze_with_rules``: a learner that converged keeps its rule base for the rest of the
+trial, but by default its situations go on adapting, merging and pruning until the trial
+ends, so the frozen rules are finally judged over situations that moved away from those
+they were learnt on (the longer the trial after convergence, the farther:
+docs/results/generalisation.md). With ``true`` the core's ``rules_converged()`` call, made
+once every learning behaviour reports ``learning_converged()``, freezes the situations
+too, as a frozen evaluation does.
 """
 
 from __future__ import annotations
@@ -127,7 +137,7 @@ class EvolvingInterpreter(FCMInterpreter):
                  merge_distance: float = 0.4, split_ratio: float = 4.0,
                  split_min_updates: int = 100, split_min_distance: float = 0.4,
                  error_decay: float = 0.9, prune_after: int = 0, check_every: int = 50,
-                 grow_until: int = 0, **fcm: Any) -> None:
+                 grow_until: int = 0, freeze_with_rules: bool = False, **fcm: Any) -> None:
         super().__init__(**fcm)
         self.capacity = int(P.number("capacity", capacity, lo=2, hi=MAX_CAPACITY, integer=True))
         self.create_d2 = float(P.number("create_distance", create_distance, lo=0.0,
@@ -145,6 +155,7 @@ class EvolvingInterpreter(FCMInterpreter):
         self.prune_after = int(P.number("prune_after", prune_after, lo=0, integer=True))
         self.check_every = int(P.number("check_every", check_every, lo=1, integer=True))
         self.grow_until = int(P.number("grow_until", grow_until, lo=0, integer=True))
+        self.freeze_with_rules = P.boolean("freeze_with_rules", freeze_with_rules)
         self.dim: int | None = None
         self._set_prototypes(np.zeros((0, 0)), np.zeros(0, dtype=np.int64), np.zeros(0), 0)
         self.frozen = False
@@ -173,6 +184,12 @@ class EvolvingInterpreter(FCMInterpreter):
 
     def trial_start(self, trial: Any) -> None:
         self.frozen = trial.kind != "learn"
+
+    def rules_converged(self) -> None:
+        """Every learner of the trial has converged: with ``freeze_with_rules``, stop
+        changing the situations for the rest of the trial."""
+        if self.freeze_with_rules:
+            self.frozen = True
 
     def memberships(self, reading: np.ndarray) -> np.ndarray:
         x = reading if self.transform == "range" else self.features(reading)

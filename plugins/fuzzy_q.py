@@ -217,6 +217,11 @@ class FuzzyQBehaviour:
             lr.situations_changed(event, self.new_row_optimism)
             self.fcs[out].set_rules(lr.rule_base)
 
+    def learning_converged(self) -> bool:
+        """Whether every learned output's rule base has converged (frozen for the trial;
+        ``True`` when this behaviour learns nothing)."""
+        return all(lr.converged_at is not None for lr in self.learners.values())
+
     def situation_errors(self) -> np.ndarray | None:
         """(c,) absolute TD errors of the last ``learn``, summed over the learned outputs."""
         if not self.learners:

@@ -292,3 +292,43 @@ def test_auto_c_run_logs_its_sweep_and_the_report_draws_it(tmp_path) -> None:
     rep = analyse(out, tmp_path / "report", dpi=40)
     assert "auto_c.png" in {name for _sec, name, _cap in rep.files}
     assert (tmp_path / "report" / "auto_c.png").stat().st_size > 0
+
+
+def test_situations_freeze_with_the_rules_only_when_asked() -> None:
+    """``rules_converged()`` (the core's call once every learner converged) stops every
+    change with ``freeze_with_rules``, and changes nothing without it."""
+    rng = np.random.default_rng(3)
+    first, later = rng.uniform(0, 3, (20, 4)), rng.uniform(0, 3, (40, 4))
+    moved = {}
+    for freeze in (False, True):
+        ev = _interp(adapt=True, freeze_with_rules=freeze)
+        _start(ev)
+        for x in first:
+            ev.memberships(x)
+        ev.events()
+        before = ev.state()
+        ev.rules_converged()
+        for x in later:
+            ev.memberships(x)
+        after = ev.state()
+        moved[freeze] = (not np.array_equal(before["centers"], after["centers"])
+                         or before["ids"].size != after["ids"].size or bool(ev.events()))
+    assert moved == {False: True, True: False}
+
+
+def test_an_online_run_freezes_its_situations_when_its_rules_converge(tmp_path) -> None:
+    """With ``freeze_with_rules`` no situation event comes after the rule base converged,
+    and the trial is the same as without it up to that iteration."""
+    logs = {}
+    for freeze in ("false", "true"):
+        cfg = _online_config(600).replace(
+            "create_distance = 1.2", f"create_distance = 1.2\nfreeze_with_rules = {freeze}")
+        (tmp_path / freeze).mkdir()
+        logs[freeze] = open_log(str(run_config(tmp_path / freeze, cfg, "online.h5")[1]))
+    tl = logs["true"].trial(0)
+    conv = int(tl.summary["convergence_iteration"])
+    assert tl.summary["converged"] and 0 < conv < 600
+    assert tl.situations_part("events")["iteration"].max() <= conv
+    other = logs["false"].trial(0)
+    assert np.array_equal(tl.arrays["memberships"][:conv], other.arrays["memberships"][:conv])
+    assert not np.array_equal(tl.arrays["memberships"], other.arrays["memberships"])

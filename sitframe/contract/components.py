@@ -78,7 +78,10 @@ class SituationInterpreter(Protocol):
     learning iteration and handed to every behaviour's optional
     ``situations_changed(event)``), optionally ``observe_errors(errors)``
     (the learners' per-situation absolute TD errors, see
-    :meth:`Behaviour.situation_errors`). It must not change in a frozen
+    :meth:`Behaviour.situation_errors`) and optionally ``rules_converged()`` (called
+    once in a learning trial, after the iteration at which every learning behaviour's
+    :meth:`Behaviour.learning_converged` first holds; an interpreter may stop changing
+    its situations from then on). It must not change in a frozen
     evaluation (``trial_start`` with kind ``"evaluate"``); its ``state()``
     after a learning trial is that trial's own final situations, logged under
     ``/trials/NNNN/situations`` and used by the trial's evaluations and by
@@ -200,6 +203,15 @@ class Behaviour(Protocol):
         (``event.removed`` absorbed into ``event.id``) or pruned. Called after
         ``learn`` and before the next ``propose``; events come in order.
         """
+        ...
+
+    def learning_converged(self) -> bool:
+        """Optional. Whether this behaviour's learning has converged (its rule base is
+        frozen for the rest of the trial).
+
+        Asked after ``learn`` in every learning iteration of a run whose interpreter is
+        evolving and has ``rules_converged()``, until every behaviour and learning arbiter
+        that has this method says ``True``; the interpreter is then told once."""
         ...
 
     def situation_errors(self) -> np.ndarray | None:

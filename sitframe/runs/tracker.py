@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from sitframe.contract.checks import BoundaryError, fault
+from sitframe.contract.checks import BoundaryError, check_flag, fault
 from sitframe.errors import PLUGIN_ERRORS, InputError, PluginFault
 from sitframe.sim.kernels import kernels
 from sitframe.situations.events import SituationEvent, history_arrays
@@ -41,18 +41,26 @@ class SituationTracker:
         ``(origin, situations_changed)`` of each component that follows the events.
     error_sources
         ``(origin, situation_errors)`` of each learning behaviour that reports TD errors.
+    converged_sources
+        ``(origin, learning_converged)`` of each learning behaviour (and arbiter) that
+        says when its learning converged; once all do, the interpreter's optional
+        ``rules_converged()`` is called, once.
     origin, trial
         The interpreter's origin and the trial's index (to name a plugin on a fault).
     """
 
     def __init__(self, interpreter: Any, followers: list[tuple[Any, Any]],
                  error_sources: list[tuple[Any, Any]], origin: Any = "interpreter",
-                 trial: int | None = None) -> None:
+                 trial: int | None = None,
+                 converged_sources: list[tuple[Any, Any]] | None = None) -> None:
         self.interp = interpreter
         self.c = int(interpreter.n_situations)
         self.followers = followers
         self.observe = getattr(interpreter, "observe_errors", None) if error_sources else None
         self.error_sources = error_sources
+        self.converged_sources = converged_sources or []
+        self.tell = getattr(interpreter, "rules_converged", None) if self.converged_sources \
+            else None
         self.origin, self.trial = origin, trial
         self.log: list[tuple[int, SituationEvent]] = []
 
@@ -63,11 +71,12 @@ class SituationTracker:
 
         ``components`` are ``(config key, component)`` of the trial; behaviours
         and the arbiter with ``situations_changed`` follow the events, those
-        with ``situation_errors`` feed the interpreter's ``observe_errors``.
+        with ``situation_errors`` feed the interpreter's ``observe_errors``, and those
+        with ``learning_converged`` decide when its ``rules_converged`` is called.
         """
         if not (learning and getattr(interpreter, "evolving", False)):
             return None
-        follow, errors = [], []
+        follow, errors, converged = [], [], []
         for key, comp in components:
             if not (key.startswith("behaviours.") or key == "arbiter") or key.endswith(".reward"):
                 continue
@@ -75,7 +84,9 @@ class SituationTracker:
                 follow.append((origins[key], comp.situations_changed))
             if hasattr(comp, "situation_errors"):
                 errors.append((origins[key], comp.situation_errors))
-        return cls(interpreter, follow, errors, origins["interpreter"], trial)
+            if hasattr(comp, "learning_converged"):
+                converged.append((origins[key], comp.learning_converged))
+        return cls(interpreter, follow, errors, origins["interpreter"], trial, converged)
 
     def step(self, iteration: int) -> None:
         """After iteration ``iteration``'s learning: pass TD errors on, deliver the events.
@@ -96,6 +107,15 @@ class SituationTracker:
                 if errs is not None:
                     origin, method = self.origin, "observe_errors"
                     self.observe(errs)
+            if self.tell is not None:
+                method = "learning_converged"
+                for origin, done in self.converged_sources:  # noqa: B007 - names the caller
+                    if not check_flag(done()):
+                        break
+                else:
+                    origin, method = self.origin, "rules_converged"
+                    tell, self.tell = self.tell, None
+                    tell()
             origin, method = self.origin, "events"
             events = self.interp.events()
             if events.__class__ is list and not events:  # (most iterations change nothing)
