@@ -76,9 +76,11 @@ ROUND_3 = ("oa-12-cand3", "oa-12-rooms", "oa-16-cand3", "oa-8-rooms")
 #: The fourth round: learning over rooms with the stricter convergence window, or longer.
 ROUND_4 = ("oa-12-rooms-p150", "oa-16-rooms-p150", "oa-16-rooms-p150-i8000", "oa-8-rooms-p100",
            "oa-8-rooms-p150", "oa-8-rooms-p150-i8000", "oa-online-rooms-p100-i12000",
+           "oa-online-rooms-p100-i20000-g1500-freeze",
            "oa-online-rooms-p100-i8000", "oa-online-rooms-p100-i8000-g1500",
            "oa-online-rooms-p150", "oa-online-rooms-p150-i12000-g1500",
-           "oa-online-rooms-p150-i20000-g1500", "oa-online-rooms-p150-i8000",
+           "oa-online-rooms-p150-i12000-g1500-freeze", "oa-online-rooms-p150-i20000-g1500",
+           "oa-online-rooms-p150-i20000-g1500-freeze", "oa-online-rooms-p150-i8000",
            "oa-online-rooms-p150-i8000-g1000", "oa-online-rooms-p150-i8000-g1500",
            "oa-online-rooms-p75-i8000", "wf-12-rooms")
 #: The presets whose failing evaluations ``failing_rules.py`` takes apart.
@@ -161,7 +163,7 @@ RECIPES: dict[str, Recipe] = {
     "preset-safety-candidates-4": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets "
         + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in ROUND_4)
-        + " --publish preset-safety-candidates-4",), 90),
+        + " --publish preset-safety-candidates-4",), 120),
     "failing-rules": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets " + " ".join(FAILING),
         f"{PY} benchmarks/learning/failing_rules.py "
@@ -173,9 +175,10 @@ RECIPES: dict[str, Recipe] = {
     "preset-safety-held-out-4": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --first-seed 10 --presets "
         + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in (
-            "oa-8-rooms-p150", "oa-8-rooms-p150-i8000", "oa-12-rooms-p150"))
-        + " obstacle-avoidance-8"
-        " --publish preset-safety-held-out-4",), 12),
+            "oa-8-rooms-p150", "oa-8-rooms-p150-i8000", "oa-12-rooms-p150",
+            "oa-online-rooms-p100-i20000-g1500-freeze"))
+        + " obstacle-avoidance-8 obstacle-avoidance-online"
+        " --publish preset-safety-held-out-4",), 25),
     "preset-safety-held-out": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --first-seed 10 --presets "
         + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in (
