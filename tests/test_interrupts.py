@@ -4,11 +4,18 @@ from __future__ import annotations
 
 import os
 import signal
+import sys
+import time
 
 import pytest
 
 from sitframe.contract.records import RunInfo
-from sitframe.logs.interrupts import deferred_interrupt
+from sitframe.logs.interrupts import (
+    Terminated,
+    deferred_interrupt,
+    redeliver,
+    terminate_as_interrupt,
+)
 from sitframe.logs.reader import open_log
 from sitframe.logs.writer import LogWriter
 
@@ -58,3 +65,42 @@ def test_sigint_during_a_log_transaction_leaves_the_transaction_complete(default
             f.attrs["status"] = "aborted"  # runs: the interrupt is held back
     assert open_log(path).status == "aborted"
     assert not w.part.exists()
+
+
+class _RaisesWhenCollected:
+    """Stands for a finaliser that a signal interrupted: it raises the signal's exception
+    where Python can only print it and go on."""
+
+    def __init__(self, exc: type[BaseException]) -> None:
+        self.exc = exc
+
+    def __del__(self) -> None:
+        raise self.exc
+
+
+@pytest.mark.parametrize("exc", [Terminated, KeyboardInterrupt])
+def test_an_interrupt_swallowed_by_a_finaliser_is_delivered_again(default_sigint, capsys, exc):
+    """SIGTERM or Ctrl-C landing in a finaliser or weakref callback (a garbage collection)
+    is not lost and prints no traceback: it is raised in the interrupted code after."""
+    reached = False
+    with pytest.raises(exc), terminate_as_interrupt():
+        obj = _RaisesWhenCollected(exc)
+        del obj  # Python calls sys.unraisablehook here instead of raising
+        time.sleep(5)  # the signal comes again and ends the wait
+        reached = True
+    assert not reached
+    assert "Exception ignored" not in capsys.readouterr().err
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+
+
+def test_other_unraisable_exceptions_go_to_the_hook_before():
+    seen = []
+    with terminate_as_interrupt():
+        previous = sys.unraisablehook
+        sys.unraisablehook = lambda u: redeliver(u, seen.append)
+        try:
+            obj = _RaisesWhenCollected(ValueError)
+            del obj
+        finally:
+            sys.unraisablehook = previous
+    assert [type(u.exc_value) for u in seen] == [ValueError]

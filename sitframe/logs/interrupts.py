@@ -14,11 +14,21 @@ once :func:`terminate_as_interrupt` is installed (the CLI does): it raises
 :class:`Terminated`, a ``KeyboardInterrupt``, so the run is marked
 ``aborted`` the same way, and it is deferred around transactions the same
 way; the CLI then exits with status 143 (128 + SIGTERM) instead of 130.
+
+A signal that arrives while Python runs a finaliser or a weakref callback (a garbage
+collection, at any moment) would raise there, where Python cannot propagate it: it prints
+"Exception ignored in ..." with a traceback and goes on, and the interrupt would be lost.
+Within :func:`terminate_as_interrupt` such a swallowed :class:`Terminated` or
+``KeyboardInterrupt`` is delivered again (:func:`redeliver`): the signal is raised anew and
+its handler runs in the interrupted code once the callback has returned (should it land in
+a callback again, it is delivered again).
 """
 
 from __future__ import annotations
 
+import os
 import signal
+import sys
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -34,20 +44,38 @@ def raise_terminated(_signum: int, _frame: Any) -> None:
     raise Terminated
 
 
+def redeliver(unraisable: Any, previous: Any = sys.__unraisablehook__) -> None:
+    """``sys.unraisablehook``: an interrupt swallowed in a finaliser or weakref callback is
+    raised again as its signal (SIGTERM for :class:`Terminated`, SIGINT for any other
+    ``KeyboardInterrupt``); anything else goes to ``previous``."""
+    exc = unraisable.exc_value
+    if isinstance(exc, KeyboardInterrupt):  # (sent from another thread a moment later: a
+        # handler run now would raise inside this hook, still in the callback, and be lost)
+        sig = signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT
+        threading.Timer(0.001, os.kill, (os.getpid(), sig)).start()
+    else:
+        previous(unraisable)
+
+
 @contextmanager
 def terminate_as_interrupt() -> Iterator[None]:
-    """Within the block, SIGTERM raises :class:`Terminated` (if SIGTERM has its default action).
+    """Within the block, SIGTERM raises :class:`Terminated` (if SIGTERM has its default action),
+    and an interrupt swallowed by a finaliser or weakref callback is delivered again.
 
-    The previous handler is restored at the end. Only acts in the main thread.
+    The previous handler and ``sys.unraisablehook`` are restored at the end. Only acts in
+    the main thread.
     """
     if (threading.current_thread() is not threading.main_thread()
             or signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL):
         yield
         return
     signal.signal(signal.SIGTERM, raise_terminated)
+    hook = sys.unraisablehook
+    sys.unraisablehook = lambda u: redeliver(u, hook)
     try:
         yield
     finally:
+        sys.unraisablehook = hook
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
