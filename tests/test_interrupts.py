@@ -13,7 +13,6 @@ from sitframe.contract.records import RunInfo
 from sitframe.logs.interrupts import (
     Terminated,
     deferred_interrupt,
-    redeliver,
     terminate_as_interrupt,
 )
 from sitframe.logs.reader import open_log
@@ -93,14 +92,10 @@ def test_an_interrupt_swallowed_by_a_finaliser_is_delivered_again(default_sigint
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
 
 
-def test_other_unraisable_exceptions_go_to_the_hook_before():
+def test_other_unraisable_exceptions_go_to_the_hook_before(monkeypatch):
     seen = []
+    monkeypatch.setattr(sys, "unraisablehook", seen.append)
     with terminate_as_interrupt():
-        previous = sys.unraisablehook
-        sys.unraisablehook = lambda u: redeliver(u, seen.append)
-        try:
-            obj = _RaisesWhenCollected(ValueError)
-            del obj
-        finally:
-            sys.unraisablehook = previous
+        obj = _RaisesWhenCollected(ValueError)
+        del obj
     assert [type(u.exc_value) for u in seen] == [ValueError]
