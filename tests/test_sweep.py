@@ -214,7 +214,7 @@ def test_sweep_file_errors(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("name", ["ablation", "oa12-optimism", "oa8-optimism", "sensors",
-                                  "sensors-beams", "obstacle-avoidance"])
+                                  "sensors-beams", "obstacle-avoidance", "obstacle-avoidance-12"])
 def test_shipped_sweeps_load(name):
     """The sweep files the README cites resolve every point (keys, values, presets)."""
     from pathlib import Path

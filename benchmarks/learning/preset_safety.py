@@ -95,12 +95,19 @@ def run_seed(preset: str, seed: int, out: Path, rooms: list[str],
 
 
 def preset_key(preset: str) -> str:
-    """A digest of the preset's (or config file's, or candidate's config) text: a cached seed
-    is reused only while it is unchanged."""
+    """A digest of the preset's (or config file's, or candidate's config) text and of its
+    prerequisites' (the logs it builds on, e.g. speed on obstacle-avoidance-12): a cached
+    seed is reused only while none of them changed."""
+    import tomllib
+
     from sitframe.contract.config import preset_text
 
     text = preset_text(preset) if not preset.endswith(".toml") else \
         candidate_config(preset) or Path(preset).read_text("utf-8")
+    needs = tomllib.loads(text).get("prerequisites", {}).values()
+    if needs:  # (a preset without prerequisites keeps the key of its text alone)
+        text += "".join(preset_key(str(Path(preset).parent / n) if n.endswith(".toml") else n)
+                        for n in needs)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -123,8 +130,15 @@ def candidate_config(path: str) -> str | None:
     if "base" not in spec:
         return None
     base = spec["base"]
-    cfg = tomllib.loads((Path(path).parent / base).read_text("utf-8") if base.endswith(".toml")
-                        else preset_text(base))
+    if not base.endswith(".toml"):
+        cfg = tomllib.loads(preset_text(base))
+    else:  # (its prerequisites' config files are named relative to the base's folder)
+        file = Path(path).parent / base
+        cfg = tomllib.loads(file.read_text("utf-8"))
+        needs = cfg.get("prerequisites", {})
+        for log, name in needs.items():
+            if name.endswith(".toml"):
+                needs[log] = str((file.parent / name).resolve())
     _merge(cfg, spec.get("set", {}))
     return to_toml(cfg)
 
@@ -151,7 +165,7 @@ def row(preset: str, results: list[dict[str, Any]]) -> str:
     return (f"| `{label(preset)}` | {len(results)} × {len(results[0]['converged'])} | {len(ev)} | "
             f"{np.mean(coll > BAD):.1%} | {unsafe_learners(results):.0%} | "
             f"{np.median(coll):.2f} | {coll.max():.1f} | {np.median(cov):.3f} | "
-            f"{np.mean(conv):.0%} |")
+            f"{np.mean(conv):.1%} |")
 
 
 def unsafe_learners(results: list[dict[str, Any]]) -> float:
