@@ -15,7 +15,7 @@ seed 0; the collision counts equal the cached ones, checked). "Never tried" mean
 greedy action's Q equals ``q_init_value`` exactly (an update landing exactly on it is not
 told apart). Usage::
 
-    python benchmarks/learning/failing_rules.py logs/preset-safety/obstacle-avoidance-12 \\
+    python benchmarks/learning/failing_rules.py logs/preset-safety/obstacle-avoidance-12-one-room \\
         logs/preset-safety/obstacle-avoidance-8 --publish
 """
 
@@ -38,8 +38,10 @@ JUDGED = EvalSpec(starts=1, iterations=1000, seed=0)
 BAD = 10.0
 
 
-def deciding_rules(folder: Path, behaviour: str) -> dict[str, Any]:
-    """For every failing evaluation cached in ``folder``: each collision's deciding rule."""
+def deciding_rules(folder: Path, behaviour: str, seeds: range = range(10)) -> dict[str, Any]:
+    """For every failing evaluation cached in ``folder`` for ``seeds`` (the run seeds
+    ``preset_safety.py`` judged; a folder may hold others, e.g. seeds 10-19 held out):
+    each collision's deciding rule."""
     from sitframe.logs.reader import open_log
 
     untried = tried = 0
@@ -48,7 +50,10 @@ def deciding_rules(folder: Path, behaviour: str) -> dict[str, Any]:
     all_updates: list[int] = []  # every situation of the failing learners, for scale
     n_eval = n_fail = 0
     seen: set[tuple[int, int]] = set()
-    for js in sorted(folder.glob("seed-*.json")):
+    for js in [folder / f"seed-{s}.json" for s in seeds]:
+        if not js.is_file():
+            raise SystemExit(f"{folder}: no {js.name} (run preset_safety.py for seed "
+                             f"{js.stem.removeprefix('seed-')} first)")
         d = json.loads(js.read_text("utf-8"))
         log_path = js.with_suffix(".h5")
         log = open_log(str(log_path))
@@ -114,12 +119,15 @@ def main(argv: list[str] | None = None) -> int:
                     help="preset_safety.py's per-preset folders (seed-K.json + seed-K.h5)")
     ap.add_argument("--behaviour", default=None,
                     help="the learning behaviour's label (default: the config's only one)")
+    ap.add_argument("--seeds", type=int, default=10, help="how many run seeds (default 10)")
+    ap.add_argument("--first-seed", type=int, default=0, help="the first run seed (default 0)")
     ap.add_argument("--publish", nargs="?", const="failing-rules", default=None)
     a = ap.parse_args(argv)
+    seeds = range(a.first_seed, a.first_seed + a.seeds)
     rows = []
     for folder in a.folders:
         beh = a.behaviour or _behaviour(folder)
-        rows.append((folder.name, deciding_rules(folder, beh)))
+        rows.append((folder.name, deciding_rules(folder, beh, seeds)))
         print(f"{folder.name}: done", file=sys.stderr, flush=True)
     md = table(rows)
     print(md)

@@ -83,6 +83,8 @@ ROUND_4 = ("oa-12-rooms-p150", "oa-16-rooms-p150", "oa-16-rooms-p150-i8000", "oa
            "oa-online-rooms-p150-i20000-g1500-freeze", "oa-online-rooms-p150-i8000",
            "oa-online-rooms-p150-i8000-g1000", "oa-online-rooms-p150-i8000-g1500",
            "oa-online-rooms-p75-i8000", "wf-12-rooms")
+#: The fifth round: the wall follower over 12 situations of its own.
+ROUND_5 = ("wf-12-own-space",)
 #: ``obstacle-avoidance-12`` as it was before issue 39 moved it over rooms (one room).
 OA12_ONE_ROOM = "sweeps/bases/obstacle-avoidance-12-one-room.toml"
 #: The presets whose failing evaluations ``failing_rules.py`` takes apart, as they were when
@@ -158,7 +160,7 @@ RECIPES: dict[str, Recipe] = {
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets "
         + " ".join(sorted(p.relative_to(ROOT).as_posix() for p in
                           (ROOT / "benchmarks/learning/preset_candidates").glob("*.toml")
-                          if p.stem not in ROUND_3 + ROUND_4))
+                          if p.stem not in ROUND_3 + ROUND_4 + ROUND_5))
         + " --publish preset-safety-candidates",), 190),
     "preset-safety-candidates-3": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets "
@@ -168,6 +170,14 @@ RECIPES: dict[str, Recipe] = {
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets "
         + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in ROUND_4)
         + " --publish preset-safety-candidates-4",), 120),
+    "preset-safety-candidates-5": Recipe((), (
+        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets "
+        + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in ROUND_5)
+        + " --publish preset-safety-candidates-5",), 5),
+    "preset-safety-held-out-5": Recipe((), (
+        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --first-seed 10 --presets "
+        + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in ROUND_5)
+        + " speed --publish preset-safety-held-out-5",), 10),
     "failing-rules": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets " + " ".join(FAILING),
         f"{PY} benchmarks/learning/failing_rules.py "
