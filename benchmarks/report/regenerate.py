@@ -100,7 +100,8 @@ RECIPES: dict[str, Recipe] = {
         f"-o logs/compare-q250-q150",), 4),
     "oa12-optimism": Recipe(("oa12-optimism",), (
         f"{POOLED} --publish oa12-optimism " + " ".join(
-            _glob(f"{q}, {t}{' (the preset)' if (q, t) == (250, 2) else ''}", "oa12-optimism",
+            _glob(f"{q}, {t}{' (the one-room preset)' if (q, t) == (250, 2) else ''}",
+                  "oa12-optimism",
                   f"*q_init_value={q}_temperature={t}_*.h5")
             for q, t in ((150, 5), (150, 2), (250, 5), (250, 2))),), 6),
     "fuzzy-vs-crisp": Recipe(("fuzzy-vs-crisp",), (
