@@ -91,6 +91,16 @@ OA12_ONE_ROOM = "sweeps/bases/obstacle-avoidance-12-one-room.toml"
 #: they failed: the one-room ``obstacle-avoidance-12`` and ``wall-following-12`` over its
 #: situations (before issue 39 changed both), whose failures the page explains.
 FAILING = (OA12_ONE_ROOM, "obstacle-avoidance-8", "sweeps/bases/wall-following-12-shared.toml")
+def _safety(table: str, candidates: tuple[str, ...] | list[str],
+            presets: tuple[str, ...] = (), held_out: bool = False) -> str:
+    """``preset_safety.py`` over candidate files (by name) and shipped presets or config
+    files, 10 seeds (``held_out``: seeds 10-19, which chose nothing), published as ``table``."""
+    names = [f"benchmarks/learning/preset_candidates/{c}.toml" for c in candidates]
+    return (f"{PY} benchmarks/learning/preset_safety.py --seeds 10"
+            f"{' --first-seed 10' if held_out else ''} --presets "
+            + " ".join([*names, *presets]) + f" --publish {table}")
+
+
 #: Every table of docs/results/tables/, by name.
 RECIPES: dict[str, Recipe] = {
     "oa-presets": Recipe(OA, (f"{POOLED} --publish oa-presets " +
@@ -157,49 +167,31 @@ RECIPES: dict[str, Recipe] = {
         f"{PY} benchmarks/learning/generalisation.py --seeds 10 --publish",), 50),
     "preset-safety": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --publish",), 60),
-    "preset-safety-candidates": Recipe((), (
-        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets "
-        + " ".join(sorted(p.relative_to(ROOT).as_posix() for p in
-                          (ROOT / "benchmarks/learning/preset_candidates").glob("*.toml")
-                          if p.stem not in ROUND_3 + ROUND_4 + ROUND_5))
-        + " --publish preset-safety-candidates",), 190),
-    "preset-safety-candidates-3": Recipe((), (
-        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets "
-        + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in ROUND_3)
-        + " --publish preset-safety-candidates-3",), 20),
-    "preset-safety-candidates-4": Recipe((), (
-        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets "
-        + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in ROUND_4)
-        + " --publish preset-safety-candidates-4",), 120),
-    "preset-safety-candidates-5": Recipe((), (
-        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets "
-        + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in ROUND_5)
-        + " --publish preset-safety-candidates-5",), 5),
+    "preset-safety-candidates": Recipe((), (_safety("preset-safety-candidates", [
+        p.stem for p in sorted((ROOT / "benchmarks/learning/preset_candidates").glob("*.toml"))
+        if p.stem not in ROUND_3 + ROUND_4 + ROUND_5]),), 190),
+    "preset-safety-candidates-3": Recipe((), (_safety("preset-safety-candidates-3", ROUND_3),), 20),
+    "preset-safety-candidates-4": Recipe((), (_safety("preset-safety-candidates-4", ROUND_4),),
+                                         120),
+    "preset-safety-candidates-5": Recipe((), (_safety("preset-safety-candidates-5", ROUND_5),), 5),
     "preset-safety-held-out-5": Recipe((), (
-        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --first-seed 10 --presets "
-        + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in ROUND_5)
-        + " speed --publish preset-safety-held-out-5",), 10),
+        _safety("preset-safety-held-out-5", ROUND_5, ("speed",), held_out=True),), 10),
     "failing-rules": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets " + " ".join(FAILING),
         f"{PY} benchmarks/learning/failing_rules.py "
         + " ".join(f"logs/preset-safety/{Path(p).stem}" for p in FAILING) + " --publish"), 25),
     "preset-safety-held-out-3": Recipe((), (
-        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --first-seed 10 --presets "
-        f"benchmarks/learning/preset_candidates/oa-12-rooms.toml {OA12_ONE_ROOM}"
-        " --publish preset-safety-held-out-3",), 12),
-    "preset-safety-held-out-4": Recipe((), (
-        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --first-seed 10 --presets "
-        + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in (
-            "oa-8-rooms-p150", "oa-8-rooms-p150-i8000", "oa-12-rooms-p150",
-            "oa-online-rooms-p100-i20000-g1500-freeze"))
-        + " obstacle-avoidance-8 obstacle-avoidance-online"
-        " --publish preset-safety-held-out-4",), 25),
-    "preset-safety-held-out": Recipe((), (
-        f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --first-seed 10 --presets "
-        + " ".join(f"benchmarks/learning/preset_candidates/{c}.toml" for c in (
-            "oa-evolving-rooms-collision100", "wf-evolving-collision100", "wf-evolving-replay4",
-            "wf-p150", "speed-near3-av20"))
-        + " obstacle-avoidance --publish preset-safety-held-out",), 33),
+        _safety("preset-safety-held-out-3", ("oa-12-rooms",), (OA12_ONE_ROOM,),
+                held_out=True),), 12),
+    "preset-safety-held-out-4": Recipe((), (_safety(
+        "preset-safety-held-out-4", ("oa-8-rooms-p150", "oa-8-rooms-p150-i8000",
+                                     "oa-12-rooms-p150",
+                                     "oa-online-rooms-p100-i20000-g1500-freeze"),
+        ("obstacle-avoidance-8", "obstacle-avoidance-online"), held_out=True),), 25),
+    "preset-safety-held-out": Recipe((), (_safety(
+        "preset-safety-held-out", ("oa-evolving-rooms-collision100", "wf-evolving-collision100",
+                                   "wf-evolving-replay4", "wf-p150", "speed-near3-av20"),
+        ("obstacle-avoidance",), held_out=True),), 33),
 }
 def headline() -> str:
     """The README's and the results index's short table, from the sweeps' logs (a row
