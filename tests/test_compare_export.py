@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from sitframe.analysis.compare import _compare, _holm, compare_logs, compare_sweeps
+from sitframe.analysis.compare import _compare, _holm, compare_logs, compare_sweeps, trial_metrics
 from sitframe.analysis.replay_data import replay_payload
 from sitframe.cli.app import main
 from sitframe.logs.reader import open_log
@@ -112,6 +112,23 @@ def test_plugin_figures_are_compared_in_a_family_of_their_own():
         np.testing.assert_equal(m[r.key].p_holm, r.p_holm)  # (NaN: not tested)
     assert "2 tested plugin figures" in " ".join(both.table().notes)
     assert {x["key"]: x["family"] for x in both.to_json()["metrics"]}[near.key] == "plugin"
+
+
+def test_a_behaviour_column_repeating_the_runs_own_is_not_a_second_metric():
+    """One learned behaviour with one output logs its convergence again under
+    ``behaviours.<label>.`` (and ``.heading.``): the same trials' values are one metric, not
+    three; a behaviour column that differs from the run's stays."""
+    rng = np.random.default_rng(4)
+    s = _summary(rng.normal(1000, 100, 11).round(), rng.poisson(2, 11).astype(float))
+    extra = [("behaviours.avoid.converged", "?"), ("behaviours.avoid.heading.converged", "?"),
+             ("behaviours.speed.converged", "?")]
+    out = np.zeros(s.size, dtype=s.dtype.descr + extra)
+    for n in s.dtype.names:
+        out[n] = s[n]
+    out["behaviours.avoid.converged"] = out["behaviours.avoid.heading.converged"] = s["converged"]
+    out["behaviours.speed.converged"] = ~s["converged"].astype(bool)
+    keys = [k for k in trial_metrics(out) if k.startswith("behaviours.")]
+    assert keys == ["behaviours.speed.converged"]
 
 
 def test_compare_command_on_two_logs(two_runs, tmp_path, capsys):

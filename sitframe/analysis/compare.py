@@ -219,7 +219,7 @@ def trial_metrics(summary: np.ndarray) -> dict[str, tuple[str, str, np.ndarray]]
             if (key := summary_key("eval", w, k, sep=".")) in names:
                 out[key] = (f"{w}: {lab} (goal episodes)", "median", col(key))
     for name in names:  # plugins' per-trial scalars (Log.summary(plugins=True))
-        if name.startswith(PLUGIN_PREFIXES):
+        if name.startswith(PLUGIN_PREFIXES) and not _repeats_run_column(summary, name):
             kind, owner, key = name.split(".", 2)
             share = summary[name].dtype.kind == "b"
             out[name] = (f"{kind[:-1]} {owner}: {key}", "share" if share else "median",
@@ -229,6 +229,18 @@ def trial_metrics(summary: np.ndarray) -> dict[str, tuple[str, str, np.ndarray]]
 
 #: Summary columns that are plugins' per-trial scalars (the plugin family of metrics).
 PLUGIN_PREFIXES = ("plugins.", "behaviours.")
+
+
+def _repeats_run_column(summary: np.ndarray, name: str) -> bool:
+    """Whether the plugin column ``name`` (e.g. ``behaviours.avoid.heading.converged``) holds,
+    trial for trial, the run's own column of its last name (``converged``): a run of one
+    learned behaviour with one output repeats its convergence there, and a metric shown twice
+    tells the reader nothing new."""
+    leaf = name.rsplit(".", 1)[-1]
+    names = summary.dtype.names or ()
+    return leaf in names and np.array_equal(np.asarray(summary[name], dtype=np.float64),
+                                            np.asarray(summary[leaf], dtype=np.float64),
+                                            equal_nan=True)
 
 
 def _boot(runs: list[list[np.ndarray]], statistic: str,
