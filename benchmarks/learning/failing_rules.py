@@ -16,7 +16,7 @@ greedy action's Q equals ``q_init_value`` exactly (an update landing exactly on 
 told apart). Usage::
 
     python benchmarks/learning/failing_rules.py logs/preset-safety/obstacle-avoidance-12-one-room \\
-        logs/preset-safety/obstacle-avoidance-8 --publish
+        logs/preset-safety/obstacle-avoidance-8-one-room --publish
 """
 
 from __future__ import annotations

@@ -85,12 +85,18 @@ ROUND_4 = ("oa-12-rooms-p150", "oa-16-rooms-p150", "oa-16-rooms-p150-i8000", "oa
            "oa-online-rooms-p75-i8000", "wf-12-rooms")
 #: The fifth round: the wall follower over 12 situations of its own.
 ROUND_5 = ("wf-12-own-space",)
+#: The sixth round: -8 and -16 over rooms (Q start 250 for -16, 12,000 iterations at most for
+#: -8), the on-line interpreter for up to 30,000 iterations, the literal thesis over rooms.
+ROUND_6 = ("oa-16-rooms-p150-q250-t2", "oa-8-rooms-p150-i12000",
+           "oa-online-rooms-p150-i30000-g1500-freeze", "oa-thesis-rooms")
 #: ``obstacle-avoidance-12`` as it was before issue 39 moved it over rooms (one room).
 OA12_ONE_ROOM = "sweeps/bases/obstacle-avoidance-12-one-room.toml"
+#: ``obstacle-avoidance-8`` as it was before issue 39 moved it over rooms (one room).
+OA8_ONE_ROOM = "sweeps/bases/obstacle-avoidance-8-one-room.toml"
 #: The presets whose failing evaluations ``failing_rules.py`` takes apart, as they were when
-#: they failed: the one-room ``obstacle-avoidance-12`` and ``wall-following-12`` over its
-#: situations (before issue 39 changed both), whose failures the page explains.
-FAILING = (OA12_ONE_ROOM, "obstacle-avoidance-8", "sweeps/bases/wall-following-12-shared.toml")
+#: they failed: the one-room ``obstacle-avoidance-12`` and ``-8`` and ``wall-following-12``
+#: over -12's situations (before issue 39 changed them), whose failures the page explains.
+FAILING = (OA12_ONE_ROOM, OA8_ONE_ROOM, "sweeps/bases/wall-following-12-shared.toml")
 def _safety(table: str, candidates: tuple[str, ...] | list[str],
             presets: tuple[str, ...] = (), held_out: bool = False) -> str:
     """``preset_safety.py`` over candidate files (by name) and shipped presets or config
@@ -169,13 +175,17 @@ RECIPES: dict[str, Recipe] = {
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --publish",), 60),
     "preset-safety-candidates": Recipe((), (_safety("preset-safety-candidates", [
         p.stem for p in sorted((ROOT / "benchmarks/learning/preset_candidates").glob("*.toml"))
-        if p.stem not in ROUND_3 + ROUND_4 + ROUND_5]),), 190),
+        if p.stem not in ROUND_3 + ROUND_4 + ROUND_5 + ROUND_6]),), 190),
     "preset-safety-candidates-3": Recipe((), (_safety("preset-safety-candidates-3", ROUND_3),), 20),
     "preset-safety-candidates-4": Recipe((), (_safety("preset-safety-candidates-4", ROUND_4),),
                                          120),
     "preset-safety-candidates-5": Recipe((), (_safety("preset-safety-candidates-5", ROUND_5),), 5),
     "preset-safety-held-out-5": Recipe((), (
         _safety("preset-safety-held-out-5", ROUND_5, ("speed",), held_out=True),), 10),
+    "preset-safety-candidates-6": Recipe((), (_safety("preset-safety-candidates-6", ROUND_6),),
+                                         25),
+    "preset-safety-held-out-6": Recipe((), (
+        _safety("preset-safety-held-out-6", ROUND_6[:3], held_out=True),), 25),
     "failing-rules": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets " + " ".join(FAILING),
         f"{PY} benchmarks/learning/failing_rules.py "
@@ -187,7 +197,7 @@ RECIPES: dict[str, Recipe] = {
         "preset-safety-held-out-4", ("oa-8-rooms-p150", "oa-8-rooms-p150-i8000",
                                      "oa-12-rooms-p150",
                                      "oa-online-rooms-p100-i20000-g1500-freeze"),
-        ("obstacle-avoidance-8", "obstacle-avoidance-online"), held_out=True),), 25),
+        (OA8_ONE_ROOM, "obstacle-avoidance-online"), held_out=True),), 25),
     "preset-safety-held-out": Recipe((), (_safety(
         "preset-safety-held-out", ("oa-evolving-rooms-collision100", "wf-evolving-collision100",
                                    "wf-evolving-replay4", "wf-p150", "speed-near3-av20"),
