@@ -117,18 +117,22 @@ def test_plugin_figures_are_compared_in_a_family_of_their_own():
 def test_a_behaviour_column_repeating_the_runs_own_is_not_a_second_metric():
     """One learned behaviour with one output logs its convergence again under
     ``behaviours.<label>.`` (and ``.heading.``): the same trials' values are one metric, not
-    three; a behaviour column that differs from the run's stays."""
+    three. A behaviour's convergence that differs from the run's stays, and so does any
+    other plugin figure, even one equal to a core column (a protocol's own collision count)."""
     rng = np.random.default_rng(4)
     s = _summary(rng.normal(1000, 100, 11).round(), rng.poisson(2, 11).astype(float))
     extra = [("behaviours.avoid.converged", "?"), ("behaviours.avoid.heading.converged", "?"),
-             ("behaviours.speed.converged", "?")]
+             ("behaviours.avoid.convergence_iteration", "f8"),
+             ("behaviours.speed.converged", "?"), ("plugins.p.convergence_iteration", "f8")]
     out = np.zeros(s.size, dtype=s.dtype.descr + extra)
     for n in s.dtype.names:
         out[n] = s[n]
     out["behaviours.avoid.converged"] = out["behaviours.avoid.heading.converged"] = s["converged"]
+    out["behaviours.avoid.convergence_iteration"] = s["convergence_iteration"]
+    out["plugins.p.convergence_iteration"] = s["convergence_iteration"]
     out["behaviours.speed.converged"] = ~s["converged"].astype(bool)
-    keys = [k for k in trial_metrics(out) if k.startswith("behaviours.")]
-    assert keys == ["behaviours.speed.converged"]
+    keys = [k for k in trial_metrics(out) if k.startswith(("behaviours.", "plugins."))]
+    assert keys == ["behaviours.speed.converged", "plugins.p.convergence_iteration"]
 
 
 def test_compare_command_on_two_logs(two_runs, tmp_path, capsys):

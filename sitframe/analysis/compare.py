@@ -229,18 +229,21 @@ def trial_metrics(summary: np.ndarray) -> dict[str, tuple[str, str, np.ndarray]]
 
 #: Summary columns that are plugins' per-trial scalars (the plugin family of metrics).
 PLUGIN_PREFIXES = ("plugins.", "behaviours.")
+#: The run's convergence columns, which a learned behaviour also reports for itself.
+_CONVERGENCE = ("converged", "convergence_iteration")
 
 
 def _repeats_run_column(summary: np.ndarray, name: str) -> bool:
-    """Whether the plugin column ``name`` (e.g. ``behaviours.avoid.heading.converged``) holds,
-    trial for trial, the run's own column of its last name (``converged``): a run of one
-    learned behaviour with one output repeats its convergence there, and a metric shown twice
-    tells the reader nothing new."""
+    """Whether the behaviour column ``name`` (e.g. ``behaviours.avoid.heading.converged``) is
+    a learner's convergence that holds, trial for trial, the run's own (``converged``,
+    ``convergence_iteration``): the run's convergence is its learners', so a run of one
+    learned behaviour with one output repeats it there, and a metric shown twice tells the
+    reader nothing new. Other plugin columns stay, whatever their values."""
     leaf = name.rsplit(".", 1)[-1]
     names = summary.dtype.names or ()
-    return leaf in names and np.array_equal(np.asarray(summary[name], dtype=np.float64),
-                                            np.asarray(summary[leaf], dtype=np.float64),
-                                            equal_nan=True)
+    return name.startswith("behaviours.") and leaf in _CONVERGENCE and leaf in names and \
+        np.array_equal(np.asarray(summary[name], dtype=np.float64),
+                       np.asarray(summary[leaf], dtype=np.float64), equal_nan=True)
 
 
 def _boot(runs: list[list[np.ndarray]], statistic: str,
