@@ -307,9 +307,18 @@ def _paired_arbiters() -> str:
             if line.startswith("| office | learned |")] if office.is_file() else []
     if pooled is None or not rows:
         return "not yet regenerated: `python benchmarks/learning/paired_arbiters.py` (the page)"
+    verdicts: dict[str, bool] = {}  # room -> learned >= CDB on every figure (paired, Holm)
+    for table in (rooms, office):
+        for line in table.read_text("utf-8").splitlines():
+            cells = [c.strip() for c in line.strip("|").split("|")]
+            if len(cells) == 9 and cells[-1] in ("yes", "**no**"):
+                verdicts[cells[0]] = verdicts.get(cells[0], True) and cells[-1] == "yes"
+    worse = [r for r, ok in verdicts.items() if not ok]
     return (f"7 rooms × 10 seeds × 50 goal pairs: collision-free {pooled[1]} pooled (CDB "
             f"{pooled[2]}); office with doors: success {float(rows[0][4]):.2f}, SPL "
-            f"{float(rows[0][10]):.2f}")
+            f"{float(rows[0][10]):.2f}; at least CDB's equal on success, collision-free and "
+            f"SPL (paired, Holm) in {len(verdicts) - len(worse)} of {len(verdicts)} rooms"
+            + (f" (not: {', '.join(worse)})" if worse else ""))
 
 
 def publish_headline() -> None:
