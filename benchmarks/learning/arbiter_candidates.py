@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -104,10 +105,15 @@ def row(name: str, log: Path, episodes: int) -> str:
             f"{succ['learned']:.3f} / {succ['cdb']:.3f} |")
 
 
+def _natural(path: Path) -> list[Any]:
+    """Sort key: numbers in a name compare as numbers (p50 before p100)."""
+    return [int(s) if s.isdigit() else s for s in re.split(r"(\d+)", path.stem)]
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--candidates", nargs="+", type=Path,
-                    default=sorted((HERE / "arbiter_candidates").glob("*.toml")))
+                    default=sorted((HERE / "arbiter_candidates").glob("*.toml"), key=_natural))
     ap.add_argument("--episodes", type=int, default=50, help="pairs per room (default 50)")
     ap.add_argument("--out", type=Path, default=Path("logs/arbiter-candidates"))
     ap.add_argument("--publish", nargs="?", const="arbiter-candidates", default=None)

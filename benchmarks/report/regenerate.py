@@ -182,6 +182,8 @@ RECIPES: dict[str, Recipe] = {
     "preset-safety-candidates-5": Recipe((), (_safety("preset-safety-candidates-5", ROUND_5),), 5),
     "preset-safety-held-out-5": Recipe((), (
         _safety("preset-safety-held-out-5", ROUND_5, ("speed",), held_out=True),), 10),
+    "arbiter-candidates": Recipe((), (
+        f"{PY} benchmarks/learning/arbiter_candidates.py --publish",), 50),
     "preset-safety-candidates-6": Recipe((), (_safety("preset-safety-candidates-6", ROUND_6),),
                                          25),
     "preset-safety-held-out-6": Recipe((), (
