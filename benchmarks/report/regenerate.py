@@ -86,9 +86,11 @@ ROUND_4 = ("oa-12-rooms-p150", "oa-16-rooms-p150", "oa-16-rooms-p150-i8000", "oa
 #: The fifth round: the wall follower over 12 situations of its own.
 ROUND_5 = ("wf-12-own-space",)
 #: The sixth round: -8 and -16 over rooms (Q start 250 for -16, 12,000 iterations at most for
-#: -8), the on-line interpreter for up to 30,000 iterations, the literal thesis over rooms.
+#: -8), the on-line interpreter for up to 30,000 iterations (also frozen only after 20 updates
+#: per situation), the literal thesis over rooms.
 ROUND_6 = ("oa-16-rooms-p150-q250-t2", "oa-8-rooms-p150-i12000",
-           "oa-online-rooms-p150-i30000-g1500-freeze", "oa-thesis-rooms")
+           "oa-online-rooms-p150-i30000-g1500-freeze",
+           "oa-online-rooms-p150-i30000-g1500-freeze-mu20", "oa-thesis-rooms")
 #: ``obstacle-avoidance-12`` as it was before issue 39 moved it over rooms (one room).
 OA12_ONE_ROOM = "sweeps/bases/obstacle-avoidance-12-one-room.toml"
 #: ``obstacle-avoidance-8`` as it was before issue 39 moved it over rooms (one room).
@@ -187,7 +189,7 @@ RECIPES: dict[str, Recipe] = {
     "preset-safety-candidates-6": Recipe((), (_safety("preset-safety-candidates-6", ROUND_6),),
                                          25),
     "preset-safety-held-out-6": Recipe((), (
-        _safety("preset-safety-held-out-6", ROUND_6[:3], held_out=True),), 25),
+        _safety("preset-safety-held-out-6", ROUND_6[:4], held_out=True),), 35),
     "failing-rules": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets " + " ".join(FAILING),
         f"{PY} benchmarks/learning/failing_rules.py "
