@@ -40,6 +40,9 @@ from typing import Any
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))  # (preset_safety: candidate files, the same format)
+from preset_safety import candidate_config  # noqa: E402
+
 ROOMS = ["goal-training"] + [f"gen:{2_000_000 + i}" for i in range(5)]
 HEADER = ("| candidate | trials converged | SPL learned - CDB, per trial: median [IQR] (worst) "
           "| trials with SPL >= CDB | collision-free learned - CDB: median [IQR] (worst) "
@@ -48,9 +51,6 @@ HEADER = ("| candidate | trials converged | SPL learned - CDB, per trial: median
 
 def run(candidate: Path, out: Path) -> Path:
     """Learn the candidate's arbitration (once: a complete log is reused); return the log."""
-    sys.path.insert(0, str(HERE))
-    from preset_safety import candidate_config
-
     text = candidate_config(str(candidate)) or candidate.read_text("utf-8")
     config = out / f"{candidate.stem}.toml"  # (its prerequisites' logs resolve in out/logs)
     log = out / candidate.stem / "arbitration.h5"
@@ -88,11 +88,11 @@ def _spread(x: np.ndarray) -> str:
 
 def row(name: str, log: Path, episodes: int) -> str:
     """One candidate's row over every trial of its log."""
-    import h5py
+    from sitframe.logs.reader import open_log
 
-    with h5py.File(log, "r") as f:
-        conv = np.asarray(f["summary"]["converged"], dtype=bool)
-    per = [judge(log, k, episodes)["rooms"] for k in range(conv.size)]
+    summary = open_log(str(log)).summary()
+    conv = np.asarray(summary["converged"], dtype=bool)
+    per = [judge(log, int(k), episodes)["rooms"] for k in summary["trial"]]
 
     def gap(fig: str) -> np.ndarray:
         return np.array([np.mean([r[w]["learned"][fig] - r[w]["cdb"][fig] for w in r])

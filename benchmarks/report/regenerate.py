@@ -99,6 +99,8 @@ OA8_ONE_ROOM = "sweeps/bases/obstacle-avoidance-8-one-room.toml"
 #: they failed: the one-room ``obstacle-avoidance-12`` and ``-8`` and ``wall-following-12``
 #: over -12's situations (before issue 39 changed them), whose failures the page explains.
 FAILING = (OA12_ONE_ROOM, OA8_ONE_ROOM, "sweeps/bases/wall-following-12-shared.toml")
+
+
 def _safety(table: str, candidates: tuple[str, ...] | list[str],
             presets: tuple[str, ...] = (), held_out: bool = False) -> str:
     """``preset_safety.py`` over candidate files (by name) and shipped presets or config
