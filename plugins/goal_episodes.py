@@ -52,6 +52,7 @@ heading change over total path length of all episodes),
 from __future__ import annotations
 
 import math
+import weakref
 from typing import Any, ClassVar
 
 import numpy as np
@@ -104,6 +105,33 @@ GOAL = ConfigTable("goal", (
     ConfigKey("detour_ratio", "number", ABSENT, "shortest path over straight distance of a "
               "detour pair (default 1.25)", lo=1.0, lo_open=True),
 ), "The goal-episodes protocol's parameters (a goal run's evaluate stage).", always=True)
+
+#: Pairs already drawn, per world, by the Generator's state and the draw's parameters
+#: (:func:`_drawn_pairs`); at most ``_MAX_DRAWN`` per world, the oldest dropped first.
+_DRAWN: weakref.WeakKeyDictionary[World, dict[tuple[Any, ...], tuple[np.ndarray, np.ndarray,
+                                                                   dict[str, Any]]]] = (
+    weakref.WeakKeyDictionary())
+_MAX_DRAWN = 64
+
+
+def _drawn_pairs(world: World, n: int, rng: np.random.Generator, **kw: Any
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`goal_pairs`, drawn once per process for each Generator state: every trial's
+    evaluation in a world, and every trial a ``policy_from.trial`` selection scores, draws
+    the same pairs from the same seed (some 0.1 s a draw, a tenth of a short goal run). A
+    repeated draw returns copies of the first one's pairs and leaves ``rng`` in the state the
+    first one left it, so results are bit-identical with and without this memory."""
+    memo = _DRAWN.setdefault(world, {})
+    key = (n, repr(rng.bit_generator.state), tuple(sorted(kw.items())))
+    drawn = memo.get(key)
+    if drawn is None:
+        starts, goals = goal_pairs(world, n, rng, **kw)
+        if len(memo) >= _MAX_DRAWN:
+            del memo[next(iter(memo))]
+        memo[key] = drawn = (starts, goals, rng.bit_generator.state)
+    else:
+        rng.bit_generator.state = drawn[2]
+    return drawn[0].copy(), drawn[1].copy()
 
 
 def goal_pairs(
@@ -259,10 +287,10 @@ class GoalEpisodes:
         self._world = world  # (score_episode measures the shortest path in it)
         if self.pairs == "world":
             return world_pairs(world, self.episodes)
-        return goal_pairs(world, self.episodes, rng, min_distance=self.min_distance,
-                          goal_radius=self.radius, robot_radius=robot.radius,
-                          margin=self.margin, detour_share=detour_share,
-                          detour_ratio=self.detour_ratio)
+        return _drawn_pairs(world, self.episodes, rng, min_distance=self.min_distance,
+                            goal_radius=self.radius, robot_radius=robot.radius,
+                            margin=self.margin, detour_share=detour_share,
+                            detour_ratio=self.detour_ratio)
 
     def terminated(self, context: Context) -> bool:
         """Whether the robot's centre is within the goal disc."""

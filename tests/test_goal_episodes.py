@@ -75,6 +75,27 @@ def test_random_pairs_are_free_far_apart_and_deterministic():
         goal_pairs(w, 1, np.random.default_rng(0), min_distance=50.0, max_tries=20)
 
 
+def test_a_repeated_draw_gives_the_same_pairs_and_leaves_the_generator_alike():
+    """Trials drawing their evaluation pairs from one seed get them from memory after the
+    first: the same pairs, and the Generator left where a fresh draw leaves it (so what
+    comes after the pairs, the episodes, stays bit-identical)."""
+    from sitframe.sim.robot import RobotParams
+
+    w, proto, robot = load_world("goal"), GoalEpisodes(episodes=5), RobotParams()
+    rng = np.random.default_rng(8)
+    s0, g0 = goal_pairs(w, 5, rng, min_distance=proto.min_distance, goal_radius=proto.radius,
+                        robot_radius=robot.radius, margin=proto.margin)
+    after = rng.random(4)
+    for _ in range(3):  # the first draw through the protocol, then from memory
+        rng = np.random.default_rng(8)
+        starts, goals = proto.episode_starts(w, rng, robot)
+        np.testing.assert_array_equal(starts, s0)
+        np.testing.assert_array_equal(goals, g0)
+        np.testing.assert_array_equal(rng.random(4), after)
+        starts[:] = 0.0  # a caller's change does not reach the memory
+    assert not np.array_equal(proto.episode_starts(w, np.random.default_rng(9), robot)[0], s0)
+
+
 def test_world_pairs_need_a_goal():
     s, g = world_pairs(load_world("goal"), 2)
     assert g[0].tolist() == [9.0, 7.0, 0.3]

@@ -7,6 +7,7 @@ a preset's logs must not depend on whether numba is installed.
 
 from __future__ import annotations
 
+import functools
 import math
 import unittest.mock as mock
 from pathlib import Path
@@ -390,3 +391,38 @@ def test_the_pioneer_cone_reads_the_same_on_both_paths(room: World,
         fast, slow = both(monkeypatch, lambda x=x, y=y, th=th: geo.cast_rays(s, x, y, rel + th,
                                                                              3.15))
         assert np.array_equal(fast, slow), (x, y, th)
+
+
+@settings(max_examples=60, deadline=None)
+@given(reading=st.lists(st.one_of(st.floats(-1.0, 5.0, width=64), st.just(math.nan),
+                                  st.sampled_from([0.0, 3.0, 1e-320])), min_size=8, max_size=8),
+       normalize=st.booleans())
+def test_the_gym_observation_is_the_same_on_both_paths(reading: list, normalize: bool) -> None:
+    """The env's observation and its nearest range (which the reward reads), NaN included."""
+    task = _gym_task(normalize)
+    r = np.array(reading)
+    with pytest.MonkeyPatch.context() as mp:
+        fast, slow = both(mp, lambda: task.observe_nearest(r, np.zeros(3), None))
+    assert fast[0].dtype == slow[0].dtype == np.float32
+    assert np.array_equal(fast[0], slow[0], equal_nan=True)
+    assert fast[1] == slow[1] or math.isnan(fast[1]) and math.isnan(slow[1])
+
+
+@functools.cache
+def _gym_task(normalize: bool):  # noqa: ANN202 - a sitframe.gym.task.Task
+    from sitframe.gym.task import Task
+
+    return Task.from_config("obstacle-avoidance", normalize=normalize)
+
+
+@settings(max_examples=80, deadline=None)
+@given(poly=st.lists(st.tuples(coord, coord), min_size=0, max_size=9),
+       pts=st.lists(st.tuples(coord, coord), min_size=1, max_size=6))
+def test_point_in_polygon_is_the_same_on_both_paths(poly: list, pts: list) -> None:
+    """Which points a room's outline or an obstacle holds (every free start pose asks it):
+    points on vertices and edges, horizontal edges and degenerate polygons included."""
+    p, q = np.array(pts, dtype=float), np.array(poly, dtype=float).reshape(-1, 2)
+    with pytest.MonkeyPatch.context() as mp:
+        fast, slow = both(mp, lambda: geo.point_in_polygon(p, q))
+    assert fast.dtype == slow.dtype == np.bool_
+    assert np.array_equal(fast, slow)

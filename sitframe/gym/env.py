@@ -122,12 +122,12 @@ class SitframeEnv(gym.Env):
         self.pose = out.pose
         self._reading = self.sensor.read(self.world, self.pose, rng)
         self.t += 1
-        after = self._ctx = task.context(self.t, self.pose, self._reading, self.goal,
+        obs, nearest = task.observe_nearest(self._reading, self.pose, self.goal)
+        after = self._ctx = task.context(self.t, self.pose, self._reading, self.goal, nearest,
                                          world=self.world)
         reward = float(self.reward_fn(Transition(before, cmd, out, after)))
         terminated = task.terminated(after, out.collided)
         truncated = not terminated and self.t >= task.max_steps
-        obs = task.observe(self._reading, self.pose, self.goal)
         return obs, reward, terminated, truncated, self._info(out)
 
     def _info(self, out: Any) -> dict[str, Any]:

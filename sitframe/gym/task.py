@@ -50,6 +50,7 @@ from sitframe.contract.pluginmanager import Registry, get_plugin_manager
 from sitframe.contract.records import Context, TrialInfo
 from sitframe.contract.resolve import Resolved
 from sitframe.errors import InputError
+from sitframe.sim.kernels import kernels
 from sitframe.sim.robot import Command
 from sitframe.sim.world import Goal, World
 
@@ -244,6 +245,19 @@ class Task:
         obs = (reading / self.max_range if self.normalize else reading).astype(np.float32)
         lo, hi = self.observation_bounds()  # the ranges alone: observe_many's steps, unbatched
         return np.minimum(np.maximum(obs, lo, out=obs), hi, out=obs)
+
+    def observe_nearest(self, reading: np.ndarray, pose: np.ndarray, goal: Goal | None
+                        ) -> tuple[np.ndarray, float]:
+        """:meth:`observe` and the reading's smallest range (the context's ``nearest``), the
+        pair in one compiled call when the kernels are loaded (the same numbers either way)."""
+        k = kernels()
+        lo, hi = self.observation_bounds()
+        if (k is None or self.protocol is not None or reading.dtype != np.float64
+                or reading.shape != lo.shape):
+            return self.observe(reading, pose, goal), float(reading.min())
+        out = np.empty(lo.size, np.float32)
+        nearest = k.observe(reading, self.max_range if self.normalize else 1.0, lo, hi, out)
+        return out, nearest
 
     def observe_many(self, readings: np.ndarray, poses: np.ndarray | list[np.ndarray],
                      goals: list[Goal | None]) -> np.ndarray:

@@ -563,6 +563,11 @@ def point_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
     """
     p = _as_points(points)
     poly = _as_points(polygon, "polygon")
+    k = kernels()
+    if k is not None:
+        out = np.empty(p.shape[0], dtype=np.bool_)
+        k.point_in_polygon(np.ascontiguousarray(p), np.ascontiguousarray(poly), out)
+        return out
     x0, y0 = poly[:, 0], poly[:, 1]
     x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
     py = p[:, 1:2]

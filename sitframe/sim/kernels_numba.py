@@ -40,8 +40,8 @@ from numba.core import config as numba_config
 
 __all__ = ["arc_angles", "arc_poses", "backoff", "backoffs", "cast", "cast_each", "clear_from",
            "contact_points", "fcm_ratios", "first_contact", "label_strengths", "linspace",
-           "near_segments", "nearest_point", "normalize", "ranges", "ranges_many", "refine",
-           "sweep_begin", "sweep_end"]
+           "near_segments", "nearest_point", "normalize", "observe", "point_in_polygon", "ranges",
+           "ranges_many", "refine", "sweep_begin", "sweep_end"]
 
 _EPS = 1e-12  # the hit tolerance of sitframe.sim.geometry._raycast
 _INV_PI = 1.0 / math.pi
@@ -557,6 +557,48 @@ def fcm_ratios(d2: np.ndarray, floor: float, out: np.ndarray) -> float:  # pragm
         r = dmin / d2[i]
         out[i] = r if (r >= floor or r != r) else floor
     return dmin
+
+
+@njit(**_JIT)
+def observe(reading: np.ndarray, scale: float, lo: np.ndarray, hi: np.ndarray,
+            out: np.ndarray) -> float:  # pragma: no cover - compiled
+    """``out[:] = clip(float32(reading / scale), lo, hi)``; returns ``reading.min()``.
+
+    The Gym env's observation of one reading (:meth:`sitframe.gym.task.Task.observe`) and
+    its nearest range, in one call; NaN propagates as in numpy's ``maximum``, ``minimum``
+    and ``min``.
+    """
+    nearest = reading[0]
+    for i in range(reading.size):
+        r = reading[i]
+        if (r < nearest or r != r) and nearest == nearest:
+            nearest = r
+        v = np.float32(r / scale)
+        if v < lo[i]:
+            v = lo[i]
+        if v > hi[i]:
+            v = hi[i]
+        out[i] = v
+    return nearest
+
+
+@njit(**_JIT)
+def point_in_polygon(p: np.ndarray, poly: np.ndarray, out: np.ndarray
+                     ) -> None:  # pragma: no cover - compiled
+    """``out[i]``: whether point ``p[i]`` lies inside polygon ``poly`` (m, 2), even-odd, as
+    :func:`sitframe.sim.geometry.point_in_polygon` (the same crossing, operation by operation)."""
+    m = poly.shape[0]
+    for i in range(p.shape[0]):
+        px, py = p[i, 0], p[i, 1]
+        crossings = 0
+        for j in range(m):
+            x0, y0 = poly[j, 0], poly[j, 1]
+            x1, y1 = poly[(j + 1) % m, 0], poly[(j + 1) % m, 1]
+            if (y0 > py) != (y1 > py):
+                dy = y1 - y0 if y1 != y0 else 1.0
+                if px < x0 + ((py - y0) / dy) * (x1 - x0):
+                    crossings += 1
+        out[i] = crossings % 2 == 1
 
 
 @njit(**_JIT)
