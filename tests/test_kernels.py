@@ -11,6 +11,7 @@ import functools
 import math
 import unittest.mock as mock
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -426,3 +427,37 @@ def test_point_in_polygon_is_the_same_on_both_paths(poly: list, pts: list) -> No
         fast, slow = both(mp, lambda: geo.point_in_polygon(p, q))
     assert fast.dtype == slow.dtype == np.bool_
     assert np.array_equal(fast, slow)
+
+
+@settings(max_examples=80, deadline=None)
+@given(segs=segment_sets(), moves=st.lists(st.tuples(coord, coord, coord, coord), min_size=1,
+                                           max_size=6),
+       radius=st.one_of(st.floats(0.01, 2.0), st.sampled_from([0.5, 1.0])))
+def test_clear_moves_are_the_same_on_both_paths(segs: np.ndarray, moves: list,
+                                                 radius: float) -> None:
+    """Whether a disc moves straight between two points (every shortest path, so every goal
+    pair and its SPL, asks it): touching, crossing, zero-length moves and edges included."""
+    from sitframe.sim import paths
+
+    world = SimpleNamespace(segments=segs, segment_set=geo.SegmentSet(segs))  # what it reads
+    m = np.array(moves, dtype=float)
+    with pytest.MonkeyPatch.context() as mp:
+        fast, slow = both(mp, lambda: paths._clear_chunk(world, m[:, :2], m[:, 2:], radius))
+    assert np.array_equal(fast, slow)
+
+
+@pytest.mark.parametrize("name", ["goal", "u-trap", "multi-room"])
+def test_clear_moves_in_rooms_are_the_same_on_both_paths(monkeypatch: pytest.MonkeyPatch,
+                                                         name: str) -> None:
+    """Thousands of moves in a room, grazing and crossing walls, as goal pairs ask them."""
+    from sitframe.sim import paths
+    from sitframe.sim.world import load_world
+
+    world, rng = load_world(name), np.random.default_rng(5)
+    x0, y0, x1, y1 = world.bounds
+    a = rng.uniform((x0, y0), (x1, y1), (3000, 2))
+    b = a + rng.normal(0.0, 1.5, (3000, 2))
+    for radius in (0.15, 0.45):
+        fast, slow = both(monkeypatch, lambda r=radius: paths._clear_chunk(world, a, b, r))
+        assert np.array_equal(fast, slow)
+        assert 0.1 < fast.mean() < 0.9  # both kinds of move were asked

@@ -39,13 +39,14 @@ from numba import njit
 from numba.core import config as numba_config
 
 __all__ = ["arc_angles", "arc_poses", "backoff", "backoffs", "cast", "cast_each", "clear_from",
-           "contact_points", "fcm_ratios", "first_contact", "label_strengths", "linspace",
-           "near_segments", "nearest_point", "normalize", "observe", "point_in_polygon", "ranges",
-           "ranges_many", "refine", "sweep_begin", "sweep_end"]
+           "clear_moves", "contact_points", "fcm_ratios", "first_contact", "label_strengths",
+           "linspace", "near_segments", "nearest_point", "normalize", "observe",
+           "point_in_polygon", "ranges", "ranges_many", "refine", "sweep_begin", "sweep_end"]
 
 _EPS = 1e-12  # the hit tolerance of sitframe.sim.geometry._raycast
 _INV_PI = 1.0 / math.pi
 _SINC_EPS = float(np.finfo(np.float64).eps)  # numpy.sinc's stand-in for 0
+_TINY = float(np.finfo(np.float64).tiny)  # SegmentSet: shorter segments are points
 
 #: ``cache``: only where :mod:`sitframe.sim.numba_cache` pointed numba at a writable folder of
 #: the user's (it sets ``CACHE_DIR`` when imported, before this module; with none, numba would
@@ -728,6 +729,55 @@ def _seg_d2(px: float, py: float, ax: float, ay: float, ex: float, ey: float,
     t = min(max((wx * ex + wy * ey) * inv, 0.0), 1.0)
     dx, dy = wx - t * ex, wy - t * ey
     return dx * dx + dy * dy
+
+
+@njit(**_JIT)
+def _seg_dist(px: float, py: float, ax: float, ay: float, ex: float, ey: float,
+              inv: float) -> float:  # pragma: no cover - compiled
+    """:func:`sitframe.sim.geometry.point_segment_distance` of one point and one segment,
+    operation by operation (``t`` clipped as ``numpy.clip``: NaN stays)."""
+    wx, wy = px - ax, py - ay
+    t = (wx * ex + wy * ey) * inv
+    if t == t:
+        t = t if t > 0.0 else 0.0
+        t = t if t < 1.0 else 1.0
+    dx, dy = wx - t * ex, wy - t * ey
+    return math.sqrt(dx * dx + dy * dy)
+
+
+@njit(**_JIT)
+def _orient(ax: float, ay: float, bx: float, by: float, cx: float,
+            cy: float) -> float:  # pragma: no cover - compiled
+    return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+
+
+@njit(**_JIT)
+def clear_moves(a: np.ndarray, b: np.ndarray, seg: np.ndarray, packed: np.ndarray, r: float,
+                out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """``out[i]``: whether the disc moved straight from ``a[i]`` to ``b[i]`` (k, 2) is clear
+    of the edges ``seg`` (E, 4) (``packed``: their :attr:`SegmentSet.packed
+    <sitframe.sim.geometry.SegmentSet>`), ``r`` the radius less its rounding allowance: the
+    bit twin of :func:`sitframe.sim.paths._clear_chunk`, which shortest paths and goal pairs
+    (figures of a log) depend on."""
+    for i in range(a.shape[0]):
+        px, py, qx, qy = a[i, 0], a[i, 1], b[i, 0], b[i, 1]
+        mx, my = qx - px, qy - py
+        ml2 = mx * mx + my * my
+        minv = 1.0 / ml2 if ml2 >= _TINY else 0.0
+        ok = True
+        for j in range(seg.shape[0]):
+            ax, ay, bx, by = seg[j, 0], seg[j, 1], seg[j, 2], seg[j, 3]
+            sax, say, sex, sey, sinv = packed[0, j], packed[1, j], packed[2, j], \
+                packed[3, j], packed[4, j]
+            if (_orient(ax, ay, bx, by, px, py) * _orient(ax, ay, bx, by, qx, qy) < 0.0
+                    and _orient(px, py, qx, qy, ax, ay) * _orient(px, py, qx, qy, bx, by) < 0.0) \
+                    or _seg_dist(px, py, sax, say, sex, sey, sinv) < r \
+                    or _seg_dist(qx, qy, sax, say, sex, sey, sinv) < r \
+                    or _seg_dist(ax, ay, px, py, mx, my, minv) < r \
+                    or _seg_dist(bx, by, px, py, mx, my, minv) < r:
+                ok = False
+                break
+        out[i] = ok
 
 
 @njit(**_JIT)

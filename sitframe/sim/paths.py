@@ -93,6 +93,12 @@ def _clear_chunk(world: World, a: np.ndarray, b: np.ndarray, radius: float) -> n
     e = world.segments
     if e.shape[0] == 0 or a.shape[0] == 0:
         return np.ones(a.shape[0], dtype=bool)
+    kern = kernels()
+    if kern is not None:  # the same test, operation by operation (bit twin)
+        out = np.empty(a.shape[0], dtype=np.bool_)
+        kern.clear_moves(np.ascontiguousarray(a), np.ascontiguousarray(b), e,
+                         world.segment_set.packed, radius * (1 - 1e-9), out)
+        return out
     px, py, qx, qy = a[:, :1], a[:, 1:], b[:, :1], b[:, 1:]  # moves as (k, 1) columns
     ax, ay, bx, by = e[:, 0], e[:, 1], e[:, 2], e[:, 3]  # edges as (E,) rows
     crossed = ((geo._orient(ax, ay, bx, by, px, py) * geo._orient(ax, ay, bx, by, qx, qy)) < 0) \
