@@ -119,8 +119,9 @@ class RimRangeSensor:
             laser beam) in the sensor's order.
         """
         exact = self.noise_std == 0.0 and self.dropout == 0.0  # (then clipped in the same call)
-        reading = rim_ranges(world.segment_set, pose[0], pose[1], self._ray_rel + float(pose[2]),
-                             self.max_range, self.robot_radius, self.rays_per_beam, clip=exact)
+        reading = rim_ranges(world.segment_set, pose[0], pose[1], self._ray_rel, self.max_range,
+                             self.robot_radius, self.rays_per_beam, clip=exact,
+                             heading=float(pose[2]))
         if exact:
             return reading
         if self.noise_std > 0.0:

@@ -392,6 +392,11 @@ def test_the_pioneer_cone_reads_the_same_on_both_paths(room: World,
         fast, slow = both(monkeypatch, lambda x=x, y=y, th=th: geo.cast_rays(s, x, y, rel + th,
                                                                              3.15))
         assert np.array_equal(fast, slow), (x, y, th)
+        # relative angles and the heading: the sum, sines and cosines in the compiled call
+        fast, slow = both(monkeypatch, lambda x=x, y=y, th=th: geo.rim_ranges(
+            s, x, y, rel, 3.0, 0.15, 5, clip=True, heading=th))
+        assert np.array_equal(fast, slow), (x, y, th)
+        assert np.array_equal(fast, geo.rim_ranges(s, x, y, rel + th, 3.0, 0.15, 5, clip=True))
 
 
 @settings(max_examples=60, deadline=None)
@@ -461,3 +466,27 @@ def test_clear_moves_in_rooms_are_the_same_on_both_paths(monkeypatch: pytest.Mon
         fast, slow = both(monkeypatch, lambda r=radius: paths._clear_chunk(world, a, b, r))
         assert np.array_equal(fast, slow)
         assert 0.1 < fast.mean() < 0.9  # both kinds of move were asked
+
+
+def test_the_fused_steps_run_only_where_compiled_sines_are_numpys(
+        room: World, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A numpy whose sines differ from the C library's (its own vector code) must not get the
+    fused steps: the robot then steps and reads through the unfused kernels, the same
+    numbers as the fused ones where both agree."""
+    assert kernels.fused() is K  # (this machine: numpy's sin and cos are the C library's)
+    rng = np.random.default_rng(2)
+    xy = rng.uniform([0.05, 0.05], [4.95, 3.95], (200, 2))
+    poses = [np.array([x, y, th]) for (x, y), th in zip(xy, rng.uniform(-4, 4, 200),
+                                                          strict=True)]
+    fused_run = _wander(room, RobotParams(), poses)
+
+    def off_by_one_ulp(x: np.ndarray, out: np.ndarray) -> None:
+        out[0], out[1] = np.nextafter(np.sin(x), 2.0), np.cos(x)
+
+    monkeypatch.setattr(kernels, "_TRIG_AGREES", [])
+    monkeypatch.setattr(K, "trig", off_by_one_ulp)
+    assert kernels.fused() is None
+    calls = []
+    monkeypatch.setattr(K, "step_free", lambda *a: calls.append(a))
+    assert _wander(room, RobotParams(), poses) == fused_run
+    assert not calls

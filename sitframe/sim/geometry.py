@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from sitframe.sim.kernels import kernels
+from sitframe.sim.kernels import fused, kernels
 
 __all__ = [
     "SegmentSet",
@@ -344,7 +344,7 @@ def cast_rays(segments: SegmentSet, x: float, y: float, angles_rad: np.ndarray,
 
 def rim_ranges(segments: SegmentSet, x: float, y: float, angles_rad: np.ndarray,
                max_range: float, radius: float, group: int = 1, *,
-               clip: bool = False) -> np.ndarray:
+               clip: bool = False, heading: float | None = None) -> np.ndarray:
     """What a range finder on a disc reads: ranges from the rim, for sensors in the loop.
 
     Rays of ``max_range + radius`` from the disc's centre ``(x, y)``; a ray
@@ -370,6 +370,10 @@ def rim_ranges(segments: SegmentSet, x: float, y: float, angles_rad: np.ndarray,
     clip
         Clip the readings to ``[0, max_range]`` as well (a sensor without
         noise: ``numpy.clip`` of the result, in the same call).
+    heading
+        When given [rad], ``angles_rad`` are relative to it (a sensor's own ray angles, the
+        robot's heading): the rays point at ``angles_rad + heading``, the sum and the rays'
+        sines and cosines then computed in the compiled call (the same numbers).
 
     Returns
     -------
@@ -383,6 +387,14 @@ def rim_ranges(segments: SegmentSet, x: float, y: float, angles_rad: np.ndarray,
                          "expected a positive group size that divides the number of rays")
     n = ang.shape[0] // group
     k = kernels()
+    fast = None if k is None or heading is None else fused()
+    if fast is not None:
+        out = np.empty(n)
+        fast.ranges_at(float(x), float(y), float(heading), ang, segments.packed,
+                       float(max_range), float(radius), int(group), bool(clip), out)
+        return out
+    if heading is not None:
+        ang = ang + float(heading)
     if k is None:
         return _rim(cast_rays(segments, x, y, ang, max_range + radius), max_range, radius,
                     group, clip)

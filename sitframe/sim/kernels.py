@@ -27,7 +27,9 @@ import os
 import sys
 from types import ModuleType
 
-__all__ = ["WARMUP_CALLS", "kernels", "load", "wanted"]
+import numpy as np
+
+__all__ = ["WARMUP_CALLS", "fused", "kernels", "load", "wanted"]
 
 #: Calls of :func:`kernels` answered with the numpy path before numba is loaded:
 #: a process that simulates only a few hundred iterations (a check of a config, a
@@ -73,3 +75,31 @@ def kernels() -> ModuleType | None:
         return load()
     _CALLS[0] += 1
     return None
+
+
+_TRIG_AGREES: list[bool] = []
+
+
+def fused() -> ModuleType | None:
+    """The compiled kernels for the fused steps, which compute sines and cosines themselves
+    (the C library's) instead of between kernels in numpy: :func:`kernels`, or ``None`` where
+    they differ from numpy's.
+
+    numpy computes float64 ``sin`` and ``cos`` with the C library on the CPUs measured
+    (numpy 2.4, AVX2 and AVX-512), so the two agree to the bit there; a numpy built with
+    its own vector versions would not. Checked once per process on 4,100 angles (uniform in
+    [-8, 8] rad, and zeros, multiples of pi/2, tiny and large ones): one difference and the
+    fused steps are not used, the unfused kernels are (the same results, slower).
+    """
+    k = kernels()
+    if k is None:
+        return None
+    if not _TRIG_AGREES:
+        x = np.concatenate([np.random.default_rng(0).uniform(-8.0, 8.0, 4000),
+                            np.pi / 2 * np.arange(-40, 41), [0.0, -0.0, 1e-300, 5e-324,
+                                                              1e3, -1e5, 3e7, 1e22]])
+        out = np.empty((2, x.size))
+        k.trig(x, out)
+        _TRIG_AGREES.append(bool(np.array_equal(out[0], np.sin(x))
+                                 and np.array_equal(out[1], np.cos(x))))
+    return k if _TRIG_AGREES[0] else None

@@ -8,12 +8,15 @@ the *same* IEEE operations in the same order as its numpy twin -- products,
 sums, quotients, comparisons, ``min``/``max`` -- so its results are
 bit-identical (``tests/test_kernels.py`` checks it). That rules out
 ``fastmath`` (which would reorder and fuse operations); a sum follows numpy's
-pairwise summation (:func:`_pairwise_sum`). It is also why every ``sin``,
-``cos``, ``log`` and power stays in numpy, between kernels: numpy takes them
-from the C library on some CPUs and from its own vector library (SVML) on
-others (AVX-512), and the two differ in the last bit; a kernel calling the C
-library would then change results on those CPUs. Dot products stay in numpy
-too (BLAS).
+pairwise summation (:func:`_pairwise_sum`). It is also why every ``log``, ``exp``
+and power stays in numpy, between kernels: numpy takes them from its own vector
+library (SVML) on AVX-512 CPUs, which differs from the C library in the last bit; a
+kernel calling the C library would then change results on those CPUs. Dot products
+stay in numpy too (BLAS). Sines and cosines are the exception: numpy computes
+float64 ``sin`` and ``cos`` with the C library, so :func:`step_free` and
+:func:`ranges_at` (the robot's step and a sensor's read fused into one call each)
+compute them here, and are used only where a check at load time finds them equal to
+numpy's (:func:`sitframe.sim.kernels.fused`).
 
 Why compiled: one sonar read is 40 rays against 40 wall edges and one robot
 step 31 substeps against the edges within reach; in numpy each costs some
@@ -41,7 +44,8 @@ from numba.core import config as numba_config
 __all__ = ["arc_angles", "arc_poses", "backoff", "backoffs", "cast", "cast_each", "clear_from",
            "clear_moves", "contact_points", "fcm_ratios", "first_contact", "label_strengths",
            "linspace", "near_segments", "nearest_point", "normalize", "observe",
-           "point_in_polygon", "ranges", "ranges_many", "refine", "sweep_begin", "sweep_end"]
+           "point_in_polygon", "ranges", "ranges_at", "ranges_many", "refine", "step_free",
+           "sweep_begin", "sweep_end", "trig"]
 
 _EPS = 1e-12  # the hit tolerance of sitframe.sim.geometry._raycast
 _INV_PI = 1.0 / math.pi
@@ -185,6 +189,20 @@ def ranges(x: float, y: float, dx: np.ndarray, dy: np.ndarray, seg: np.ndarray, 
         out[g] = v
 
 
+@njit(**_JIT)
+def ranges_at(x: float, y: float, heading: float, rel: np.ndarray, seg: np.ndarray,
+              max_range: float, radius: float, group: int, clip: bool,
+              out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """:func:`ranges` of rays at ``rel + heading`` [rad], their sines and cosines the C
+    library's (used where those are numpy's: :func:`sitframe.sim.kernels.fused`)."""
+    dx, dy = np.empty(rel.size), np.empty(rel.size)
+    for i in range(rel.size):
+        a = rel[i] + heading
+        dx[i] = math.cos(a)
+        dy[i] = math.sin(a)
+    ranges(x, y, dx, dy, seg, max_range, radius, group, clip, out)
+
+
 #: :func:`ranges_many` leaves out the segments farther than this many times the rays' reach.
 CULL = 1.01
 
@@ -315,6 +333,66 @@ def arc_poses(t: np.ndarray, plan: np.ndarray, sinc_arg: np.ndarray, sin_sinc: n
         out[0, i] = x0 + chord * cos_ang[i] + ts * cos_end
         out[1, i] = y0 + chord * sin_ang[i] + ts * sin_end
         out[2, i] = th0 + omega * tt
+
+
+@njit(**_JIT)
+def step_free(x0: float, y0: float, th0: float, v: float, omega: float, t_turn: float,
+              times: np.ndarray, seg: np.ndarray, reach2: float, r2: float,
+              out: np.ndarray) -> bool:  # pragma: no cover - compiled
+    """One robot step that touches nothing, in one call: ``out`` (3,) the end pose (x, y,
+    unwrapped theta) and ``False``; ``True`` (``out`` undefined) when the disc touches an edge
+    on the way, which :func:`sitframe.sim.robot.step_robot` then handles itself.
+
+    The steps of ``step_robot`` up to its contact test, operation by operation: the edges
+    within ``sqrt(reach2)`` (:func:`near_segments`); none: the closed form at the period's end
+    (``robot._pose_at``); else the poses at ``times`` (``robot._poses_at``: :func:`arc_angles`,
+    the sines and cosines, :func:`arc_poses`), each tested against those edges
+    (:func:`first_contact`). Its sines and cosines are the C library's, so it is used only
+    where they are numpy's too (:func:`sitframe.sim.kernels.fused`).
+    """
+    idx = np.empty(seg.shape[1], dtype=np.intp)
+    m = 0
+    for j in range(seg.shape[1]):
+        if _dist2(x0, y0, seg, j) < reach2:
+            idx[m] = j
+            m += 1
+    th_end = th0 + omega * t_turn
+    if m == 0:  # robot._pose_at(T, ...), T the period (the last of ``times``)
+        t = times[times.size - 1]
+        tt = t_turn if t_turn < t else t
+        half = 0.5 * omega * tt
+        chord = v * tt * (math.sin(half) / half if half != 0.0 else 1.0)
+        ts = v * (t - tt)
+        out[0] = x0 + chord * math.cos(th0 + half) + ts * math.cos(th_end)
+        out[1] = y0 + chord * math.sin(th0 + half) + ts * math.sin(th_end)
+        out[2] = th0 + omega * tt
+        return False
+    cos_end, sin_end = math.cos(th_end), math.sin(th_end)
+    for i in range(times.size):
+        t = times[i]
+        tt = t if t < t_turn else t_turn
+        half = (0.5 * omega) * tt
+        y = math.pi * (half * _INV_PI)
+        sarg = _SINC_EPS if y == 0.0 else y
+        ang = th0 + half
+        chord = (v * tt) * (math.sin(sarg) / sarg)
+        ts = v * (t - tt)
+        px = x0 + chord * math.cos(ang) + ts * cos_end
+        py = y0 + chord * math.sin(ang) + ts * sin_end
+        for jj in range(m):
+            if _dist2(px, py, seg, idx[jj]) < r2:
+                return True
+        out[0], out[1], out[2] = px, py, th0 + omega * tt
+    return False
+
+
+@njit(**_JIT)
+def trig(x: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """``out[0] = sin(x)``, ``out[1] = cos(x)`` as compiled code computes them (the C
+    library's), for :func:`sitframe.sim.kernels.fused` to compare with numpy's."""
+    for i in range(x.size):
+        out[0, i] = math.sin(x[i])
+        out[1, i] = math.cos(x[i])
 
 
 @njit(**_JIT)

@@ -59,7 +59,7 @@ import numpy as np
 from sitframe.params import choice, number
 from sitframe.sim import geometry as geo
 from sitframe.sim.fastinit import slot_init
-from sitframe.sim.kernels import kernels
+from sitframe.sim.kernels import fused, kernels
 
 if TYPE_CHECKING:  # (a world is read through its segments and start pose only)
     from sitframe.sim.world import World
@@ -343,8 +343,18 @@ def step_robot(
     path = v * T
     pose_before = pose if isinstance(pose, np.ndarray) else np.asarray(pose, dtype=float)
 
+    reach = path + r + params.recovery_backoff_m + 1e-9
+    fast = fused()
+    if fast is not None:  # steps 1 and 2 below in one call, when nothing is touched
+        end = np.empty(3)
+        if not fast.step_free(x0, y0, th0, v, omega, t_turn, _times(T, params.substep_s),
+                              world.segment_set.packed, reach * reach, r * r, end):
+            x, y, th = float(end[0]), float(end[1]), float(end[2])
+            final = np.array([x, y, _wrap(th)])
+            return StepOutcome(pose_before, final, False, _NAN2, final, path,
+                               math.degrees(th - th0))
     # --- 1. which segments can the swept disc (or the back-off) reach at all?
-    near = _near(world.segment_set, x0, y0, path + r + params.recovery_backoff_m + 1e-9)
+    near = _near(world.segment_set, x0, y0, reach)
     if near is None:  # open space: nothing to hit, pure-Python closed form
         x, y, th = _pose_at(T, *plan)
         final = np.array([x, y, _wrap(th)])
