@@ -37,8 +37,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from sitframe.contract.records import Transition
-from sitframe.gym.task import Task
+from sitframe.contract.records import Context, Transition
+from sitframe.gym.task import _NO_U, Task
 from sitframe.sim.robot import step_robot
 from sitframe.sim.world import Goal
 
@@ -114,7 +114,7 @@ class SitframeEnv(gym.Env):
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if self._reading is None:
             raise RuntimeError("call reset() before step()")
-        task, rng = self.task, self.np_random
+        task, rng = self.task, self._np_random  # (reset() made it)
         cmd = task.command(action, self.continuous)
         before = self._ctx or task.context(self.t, self.pose, self._reading, self.goal,
                                            world=self.world)
@@ -123,17 +123,20 @@ class SitframeEnv(gym.Env):
         self._reading = self.sensor.read(self.world, self.pose, rng)
         self.t += 1
         obs, nearest = task.observe_nearest(self._reading, self.pose, self.goal)
-        after = self._ctx = task.context(self.t, self.pose, self._reading, self.goal, nearest,
-                                         world=self.world)
+        # (Task.context, without its defaults' look-ups: this runs every step)
+        after = self._ctx = Context(self.t, self.pose, self._reading, _NO_U, nearest, self.world,
+                                    self.goal)
         reward = float(self.reward_fn(Transition(before, cmd, out, after)))
         terminated = task.terminated(after, out.collided)
         truncated = not terminated and self.t >= task.max_steps
         return obs, reward, terminated, truncated, self._info(out)
 
     def _info(self, out: Any) -> dict[str, Any]:
-        return {"pose": self.pose.copy(), "collided": bool(out is not None and out.collided),
-                "distance_m": 0.0 if out is None else float(out.distance_m),
-                "world": self.world.name}
+        if out is None:
+            return {"pose": self.pose.copy(), "collided": False, "distance_m": 0.0,
+                    "world": self.world.name}
+        return {"pose": self.pose.copy(), "collided": bool(out.collided),
+                "distance_m": float(out.distance_m), "world": self.world.name}
 
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":

@@ -117,6 +117,7 @@ class Task:
     worlds: tuple[World, ...] = ()
     _bounds: tuple[np.ndarray, np.ndarray] | None = None
     _commands: list[Command] | None = None
+    _scale: float | None = None  # what :meth:`observe_nearest` divides the ranges by
 
     @classmethod
     def from_config(cls, config: str | dict[str, Any] = "obstacle-avoidance", *,
@@ -251,13 +252,15 @@ class Task:
         """:meth:`observe` and the reading's smallest range (the context's ``nearest``), the
         pair in one compiled call when the kernels are loaded (the same numbers either way)."""
         k = kernels()
-        lo, hi = self.observation_bounds()
+        lo, hi = self._bounds or self.observation_bounds()
         if (k is None or self.protocol is not None or reading.dtype != np.float64
                 or reading.shape != lo.shape):
             return self.observe(reading, pose, goal), float(reading.min())
-        out = np.empty(lo.size, np.float32)
-        nearest = k.observe(reading, self.max_range if self.normalize else 1.0, lo, hi, out)
-        return out, nearest
+        scale = self._scale
+        if scale is None:
+            scale = self._scale = self.max_range if self.normalize else 1.0
+        out = np.empty_like(lo)
+        return out, k.observe(reading, scale, lo, hi, out)
 
     def observe_many(self, readings: np.ndarray, poses: np.ndarray | list[np.ndarray],
                      goals: list[Goal | None]) -> np.ndarray:
