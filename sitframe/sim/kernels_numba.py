@@ -795,9 +795,15 @@ def _warm() -> None:
     ro = np.ones(2)
     ro.setflags(write=False)  # (memberships reach the learner read-only)
     frozen_td(ro, 0.3, True, -1.0, 0.9, 0.5, two, np.zeros(2, dtype=np.intp), out)
+    step_free(0.0, 0.0, 0.0, 0.1, 0.0, 0.0, one, seg, 1.0, 0.01, np.empty(3))
+    ranges_at(0.0, 0.0, 0.0, one, seg, 3.0, 0.1, 1, True, out)
+    trig(one, two)
+    observe(one, 3.0, np.ones(2, dtype=np.float32), np.ones(2, dtype=np.float32),
+            np.empty(2, dtype=np.float32))
+    point_in_polygon(two, two, act)
+    clear_moves(two, two, np.ones((1, 4)), seg, 0.1, act)
 
 
-_warm()
 
 
 @njit(**_JIT)
@@ -890,3 +896,6 @@ def clear_from(px: float, py: float, targets: np.ndarray, seg: np.ndarray, r: fl
                 ok = False
                 break
         out[i] = ok
+
+
+_warm()
