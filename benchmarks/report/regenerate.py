@@ -91,10 +91,18 @@ ROUND_5 = ("wf-12-own-space",)
 ROUND_6 = ("oa-16-rooms-p150-q250-t2", "oa-8-rooms-p150-i12000",
            "oa-online-rooms-p150-i30000-g1500-freeze",
            "oa-online-rooms-p150-i30000-g1500-freeze-mu20", "oa-thesis-rooms")
+#: The seventh round: the on-line interpreter frozen only after 10, 5 or 3 updates per
+#: situation (up to 30,000 iterations), and after 5 with up to 45,000.
+ROUND_7 = ("oa-online-rooms-p150-i30000-g1500-freeze-mu10",
+           "oa-online-rooms-p150-i30000-g1500-freeze-mu5",
+           "oa-online-rooms-p150-i30000-g1500-freeze-mu3",
+           "oa-online-rooms-p150-i45000-g1500-freeze-mu5")
 #: ``obstacle-avoidance-12`` as it was before issue 39 moved it over rooms (one room).
 OA12_ONE_ROOM = "sweeps/bases/obstacle-avoidance-12-one-room.toml"
 #: ``obstacle-avoidance-8`` as it was before issue 39 moved it over rooms (one room).
 OA8_ONE_ROOM = "sweeps/bases/obstacle-avoidance-8-one-room.toml"
+#: ``obstacle-avoidance-online`` as it was before issue 39 moved it over rooms (one room).
+ONLINE_ONE_ROOM = "sweeps/bases/obstacle-avoidance-online-one-room.toml"
 #: The presets whose failing evaluations ``failing_rules.py`` takes apart, as they were when
 #: they failed: the one-room ``obstacle-avoidance-12`` and ``-8`` and ``wall-following-12``
 #: over -12's situations (before issue 39 changed them), whose failures the page explains.
@@ -179,7 +187,7 @@ RECIPES: dict[str, Recipe] = {
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --publish",), 60),
     "preset-safety-candidates": Recipe((), (_safety("preset-safety-candidates", [
         p.stem for p in sorted((ROOT / "benchmarks/learning/preset_candidates").glob("*.toml"))
-        if p.stem not in ROUND_3 + ROUND_4 + ROUND_5 + ROUND_6]),), 190),
+        if p.stem not in ROUND_3 + ROUND_4 + ROUND_5 + ROUND_6 + ROUND_7]),), 190),
     "preset-safety-candidates-3": Recipe((), (_safety("preset-safety-candidates-3", ROUND_3),), 20),
     "preset-safety-candidates-4": Recipe((), (_safety("preset-safety-candidates-4", ROUND_4),),
                                          120),
@@ -192,6 +200,10 @@ RECIPES: dict[str, Recipe] = {
                                          25),
     "preset-safety-held-out-6": Recipe((), (
         _safety("preset-safety-held-out-6", ROUND_6[:4], held_out=True),), 35),
+    "preset-safety-candidates-7": Recipe((), (_safety("preset-safety-candidates-7", ROUND_7),),
+                                         50),
+    "preset-safety-held-out-7": Recipe((), (
+        _safety("preset-safety-held-out-7", ROUND_7[3:], held_out=True),), 13),
     "failing-rules": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --presets " + " ".join(FAILING),
         f"{PY} benchmarks/learning/failing_rules.py "
@@ -203,7 +215,7 @@ RECIPES: dict[str, Recipe] = {
         "preset-safety-held-out-4", ("oa-8-rooms-p150", "oa-8-rooms-p150-i8000",
                                      "oa-12-rooms-p150",
                                      "oa-online-rooms-p100-i20000-g1500-freeze"),
-        (OA8_ONE_ROOM, "obstacle-avoidance-online"), held_out=True),), 25),
+        (OA8_ONE_ROOM, ONLINE_ONE_ROOM), held_out=True),), 25),
     "preset-safety-held-out": Recipe((), (_safety(
         "preset-safety-held-out", ("oa-evolving-rooms-collision100", "wf-evolving-collision100",
                                    "wf-evolving-replay4", "wf-p150", "speed-near3-av20"),
