@@ -85,9 +85,9 @@ def fused() -> ModuleType | None:
     (the C library's) instead of between kernels in numpy: :func:`kernels`, or ``None`` where
     they differ from numpy's.
 
-    numpy computes float64 ``sin`` and ``cos`` with the C library on the CPUs measured
-    (numpy 2.4, AVX2 and AVX-512), so the two agree to the bit there; a numpy built with
-    its own vector versions would not. Checked once per process on 4,100 angles (uniform in
+    numpy computes float64 ``sin`` and ``cos`` with the C library where measured (numpy 2.4
+    on an AVX-512 CPU, with and without its AVX-512 loops), so the two agree to the bit
+    there; a numpy built with vector versions of its own would not. Checked once per process on 4,100 angles (uniform in
     [-8, 8] rad, and zeros, multiples of pi/2, tiny and large ones): one difference and the
     fused steps are not used, the unfused kernels are (the same results, slower).
     """
