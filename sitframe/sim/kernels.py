@@ -87,9 +87,10 @@ def fused() -> ModuleType | None:
 
     numpy computes float64 ``sin`` and ``cos`` with the C library where measured (numpy 2.4
     on an AVX-512 CPU, with and without its AVX-512 loops), so the two agree to the bit
-    there; a numpy built with vector versions of its own would not. Checked once per process on 4,100 angles (uniform in
-    [-8, 8] rad, and zeros, multiples of pi/2, tiny and large ones): one difference and the
-    fused steps are not used, the unfused kernels are (the same results, slower).
+    there; a numpy built with vector versions of its own would not. Checked once per
+    process on 4,100 angles (uniform in [-8, 8] rad, and zeros, multiples of pi/2, tiny
+    and large ones): one difference and the fused steps are not used, the unfused kernels
+    are (the same results, slower).
     """
     k = kernels()
     if k is None:
