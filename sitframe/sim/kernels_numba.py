@@ -351,11 +351,7 @@ def step_free(x0: float, y0: float, th0: float, v: float, omega: float, t_turn: 
     where they are numpy's too (:func:`sitframe.sim.kernels.fused`).
     """
     idx = np.empty(seg.shape[1], dtype=np.intp)
-    m = 0
-    for j in range(seg.shape[1]):
-        if _dist2(x0, y0, seg, j) < reach2:
-            idx[m] = j
-            m += 1
+    m = near_segments(x0, y0, seg, reach2, idx)
     th_end = th0 + omega * t_turn
     if m == 0:  # robot._pose_at(T, ...), T the period (the last of ``times``)
         t = times[times.size - 1]
@@ -818,8 +814,9 @@ def _seg_d2(px: float, py: float, ax: float, ay: float, ex: float, ey: float,
 @njit(**_JIT)
 def _seg_dist(px: float, py: float, ax: float, ay: float, ex: float, ey: float,
               inv: float) -> float:  # pragma: no cover - compiled
-    """:func:`sitframe.sim.geometry.point_segment_distance` of one point and one segment,
-    operation by operation (``t`` clipped as ``numpy.clip``: NaN stays)."""
+    """:func:`sitframe.sim.geometry.point_segment_distance` of one point and a segment given
+    by its start, its vector and ``1 / |e|²`` (a move, which no packed set holds), operation
+    by operation (``t`` clipped as ``numpy.clip``: NaN stays)."""
     wx, wy = px - ax, py - ay
     t = (wx * ex + wy * ey) * inv
     if t == t:
@@ -851,12 +848,10 @@ def clear_moves(a: np.ndarray, b: np.ndarray, seg: np.ndarray, packed: np.ndarra
         ok = True
         for j in range(seg.shape[0]):
             ax, ay, bx, by = seg[j, 0], seg[j, 1], seg[j, 2], seg[j, 3]
-            sax, say, sex, sey, sinv = packed[0, j], packed[1, j], packed[2, j], \
-                packed[3, j], packed[4, j]
             if (_orient(ax, ay, bx, by, px, py) * _orient(ax, ay, bx, by, qx, qy) < 0.0
                     and _orient(px, py, qx, qy, ax, ay) * _orient(px, py, qx, qy, bx, by) < 0.0) \
-                    or _seg_dist(px, py, sax, say, sex, sey, sinv) < r \
-                    or _seg_dist(qx, qy, sax, say, sex, sey, sinv) < r \
+                    or math.sqrt(_dist2(px, py, packed, j)) < r \
+                    or math.sqrt(_dist2(qx, qy, packed, j)) < r \
                     or _seg_dist(ax, ay, px, py, mx, my, minv) < r \
                     or _seg_dist(bx, by, px, py, mx, my, minv) < r:
                 ok = False
