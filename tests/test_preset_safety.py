@@ -59,3 +59,21 @@ def test_a_candidate_is_its_base_preset_with_the_keys_it_sets(tmp_path):
     assert ps.candidate_config("wall-following") is None
     (tmp_path / "plain.toml").write_text('[experiment]\nname = "x"\n')
     assert ps.candidate_config(str(tmp_path / "plain.toml")) is None
+
+
+def test_the_interval_resamples_seeds_and_widens_when_one_seed_holds_the_failures():
+    ps = _preset_safety()
+
+    def seeds(bad_per_seed: list[int]) -> list[dict]:  # 100 evaluations per seed
+        return [{"evaluations": {f"{k}@r": {"collisions_per_1000": 50.0 if k < b else 0.0}
+                                 for k in range(100)}} for b in bad_per_seed]
+
+    def bounds(text: str) -> tuple[float, float]:
+        lo, hi = text.rstrip("%").split("–")
+        return float(lo), float(hi)
+
+    spread = bounds(ps.seed_interval(seeds([2] * 10)))  # 2 % in every seed: no doubt
+    assert spread == (2.0, 2.0)
+    lumped = bounds(ps.seed_interval(seeds([20] + [0] * 9)))  # 2 % pooled, all in one seed
+    assert lumped[0] == 0.0 and lumped[1] > 5.0
+    assert ps.seed_interval(seeds([0] * 10)) == "0.0–0.0%"
