@@ -198,6 +198,13 @@ def test_online_run_logs_history_and_evaluates_own_situations(tmp_path, capsys) 
                   "--iterations", "100", "--json")
     assert ev["iterations"] == 100
     assert ev["collisions"] == tl.summary["eval/novel-1/collisions"]
+    # its tables show the situations alive at the trial's end, by id, each described
+    from sitframe.analysis.results import lookup_table, rule_base_table, rule_bases_across_trials
+
+    for table in (rule_base_table(str(out), 0), lookup_table(str(out), 0)):
+        assert table.column("Situation") == sorted(int(i) + 1 for i in state["ids"])
+        assert all(table.column("Description")) and "left out" in table.notes[-1]
+    assert rule_bases_across_trials(str(out)).rows == []  # (no fitted situations to compare)
     # the report of an online run has its evolving-situations section
     from sitframe.analysis import analyse
     from sitframe.cli.app import main

@@ -32,6 +32,11 @@ def test_the_main_presets_frozen_rule_bases_are_safe_in_unseen_rooms(tmp_path, m
     rates = {(k, w): evaluate_log(str(out), world=w, trial=k)["collisions_per_1000"]
              for k in range(3) for w in ROOMS}
     assert max(rates.values()) <= 10.0, rates
+    # its evolving situations: across trials, the 8 fitted ones every trial starts from
+    from sitframe.analysis.results import rule_bases_across_trials
+
+    table = rule_bases_across_trials(str(out))
+    assert table.column("Situation") == list(range(1, 9)) and all(table.column("Description"))
 
 
 def _preset_safety():

@@ -623,18 +623,44 @@ def lookup_table(log: LogLike, trial: int | TrialLog, label: str | None = None,
     label, output = learned_output(tr, label, output)
     q = np.asarray(tr.behaviours[label][f"{output}/q"], dtype=np.float64)
     singles = _policy_output(tr, label, output).actions
-    labels = _labels_for(lg, q.shape[0], space_of(tr, label))
+    shown, labels, notes = _trial_situations(lg, tr, q.shape[0], space_of(tr, label))
     heading = output == "heading"
     cols = (["Situation", "Description"]
             + [_deg(float(a)) if heading else f"{a:g}" for a in singles]
             + ["Greedy [deg]" if heading else f"Greedy ({output})"])
-    rows = [[i + 1, labels[i], *map(float, q[i]), _num(singles[int(np.argmax(q[i]))])]
-            for i in range(q.shape[0])]
+    rows = [[i + 1, w, *map(float, q[i]), _num(singles[int(np.argmax(q[i]))])]
+            for i, w in zip(shown, labels, strict=True)]
     conv = convergence_iteration(tr, label)
     when = (f"at convergence (iteration {conv})" if conv is not None
             else f"after {tr.arrays['collision'].size} iterations, not converged")
     return Table(f"Lookup table Q of trial {tr.index}, behaviour '{label}' ({output}), {when}",
-                 cols, rows)
+                 cols, rows, notes=notes)
+
+
+def _trial_situations(lg: Log, tr: TrialLog, c: int, space: str = "default"
+                      ) -> tuple[list[int], list[str], list[str]]:
+    """The situations a trial's tables show: their rows (0-based), descriptions and notes.
+
+    With a fixed interpreter: all ``c``, described by the log's prototypes. With evolving
+    situations (the trial logged its final ones, ``situations/state``): only the
+    situations alive at the trial's end, each described by its final prototype (ids keep
+    their numbers, so row ``k`` is still situation ``k + 1`` of the memberships and Q); the
+    slots never used, merged or pruned away are left out and a note says how many.
+    """
+    st = tr.situations_part("state") if space == "default" else {}
+    if "ids" not in st:
+        return list(range(c)), _labels_for(lg, c, space), []
+    ids = np.asarray(st["ids"], dtype=np.intp)
+    centers = np.asarray(st["centers"], dtype=np.float64)
+    angles = sensor_angles(lg)
+    words = (describe_prototypes(centers, angles) if centers.ndim == 2 and ids.size
+             and centers.shape[1] == angles.size else [""] * ids.size)
+    order = np.argsort(ids)
+    shown = [int(ids[i]) for i in order if ids[i] < c]
+    notes = [f"Evolving situations: the {len(shown)} alive at the trial's end, each described "
+             f"by its final prototype; the other {c - len(shown)} of the {c} slots (never "
+             "used, or merged or pruned away) are left out."] if len(shown) < c else []
+    return shown, [words[i] for i in order if ids[i] < c], notes
 
 
 def _labels_for(log: Log, c: int, space: str = "default") -> list[str]:
@@ -663,20 +689,20 @@ def rule_base_table(log: LogLike, trial: int | TrialLog, label: str | None = Non
     q = None if po.q is None else np.asarray(po.q, dtype=np.float64)
     pol = np.asarray(po.rules, dtype=np.intp)
     c = pol.size
-    labels = _labels_for(lg, c, space_of(tr, label))
+    shown, labels, notes = _trial_situations(lg, tr, c, space_of(tr, label))
     u = space_memberships(tr, space_of(tr, label))
     counts = np.bincount(u.argmax(axis=1), minlength=c) if u.size else np.zeros(c)
     share = 100.0 * counts / max(int(counts.sum()), 1)
     head = f"Action [{po.unit}]" if po.unit else f"Action ({output})"
-    rows = [[i + 1, labels[i], _num(singles[pol[i]]),
+    rows = [[i + 1, w, _num(singles[pol[i]]),
              float(q[i].max()) if q is not None else float("nan"), float(share[i])]
-            for i in range(c)]
+            for i, w in zip(shown, labels, strict=True)]
     conv = convergence_iteration(tr, label)
     state = (f"converged at iteration {conv}" if conv is not None
              else "not converged: greedy rule base of the final Q")
     return Table(f"Learned rule base of trial {tr.index}, behaviour '{label}' ({output}), "
                  f"{state}", ["Situation", "Description", head, "Max Q", "Dominant [%]"], rows,
-                 digits=1)
+                 notes=notes, digits=1)
 
 
 def rule_bases_across_trials(log: LogLike, label: str | None = None,
@@ -698,6 +724,7 @@ def rule_bases_across_trials(log: LogLike, label: str | None = None,
     idx = lg.trial_indices()
     acts: list[np.ndarray] = []
     conv: list[bool] = []
+    alive: list[np.ndarray | None] = []  # evolving situations: the ids alive at a trial's end
     space = "default"
     for k in idx:
         tr = (read or lg.trial)(k)
@@ -705,19 +732,32 @@ def rule_bases_across_trials(log: LogLike, label: str | None = None,
         acts.append(_policy_output(tr, lb, out).values())
         conv.append(convergence_iteration(tr, lb) is not None)
         space = space_of(tr, lb)
+        ids = tr.situations_part("state").get("ids") if space == "default" else None
+        alive.append(None if ids is None else np.asarray(ids, dtype=np.intp))
     if not acts:
         raise InputError("the log has no finished learning trial", file=lg.path, key="trials")
-    A = np.stack(acts, axis=1)  # (c, T)
-    labels = _labels_for(lg, A.shape[0], space)
+    A = np.stack(acts, axis=1).astype(np.float64)  # (c, T)
+    notes = ["* trial did not converge (greedy rule base of its final Q)"] if not all(conv) else []
+    shown = range(A.shape[0])
+    if any(a is not None for a in alive):  # evolving: the seeded situations, where alive
+        labels = situation_labels(lg, numbered=False)
+        shown = range(min(len(labels), A.shape[0]))
+        for t, a in enumerate(alive):
+            if a is not None:
+                A[np.setdiff1d(np.arange(A.shape[0]), a), t] = np.nan
+        notes.append(f"Evolving situations: the {len(shown)} fitted ones every trial starts "
+                     "from (– where a trial merged or pruned it); the situations a trial made "
+                     "differ from trial to trial and are in each trial's rule base.")
+    else:
+        labels = _labels_for(lg, A.shape[0], space)
     rows = []
-    for i in range(A.shape[0]):
-        vals, cnt = np.unique(A[i], return_counts=True)
-        best = vals[np.argmax(cnt)]
-        rows.append([i + 1, labels[i], *map(float, A[i]), float(best),
-                     100.0 * cnt.max() / A.shape[1]])
+    for i in shown:
+        vals, cnt = np.unique(A[i][~np.isnan(A[i])], return_counts=True)
+        best = float(vals[np.argmax(cnt)]) if cnt.size else float("nan")
+        rows.append([i + 1, labels[i], *map(float, A[i]), best,
+                     100.0 * cnt.max() / cnt.sum() if cnt.size else float("nan")])
     cols = ["Situation", "Description"] + [f"T{k}" + ("" if c else "*")
                                            for k, c in zip(idx, conv, strict=True)]
-    notes = ["* trial did not converge (greedy rule base of its final Q)"] if not all(conv) else []
     return Table(f"Learned {output} action per situation in each trial "
                  f"({'degrees' if output == 'heading' else output})",
                  cols + ["Most frequent", "Agreement [%]"], rows, notes=notes, digits=0)
