@@ -460,13 +460,18 @@ def _trial_figures(W: _Writer, lg: Log, tr: TrialLog, worlds: dict[str, Any], wi
     conv = R.convergence_iteration(tr)
     L = int(np.asarray(tr.arrays["collision"]).size)
     state = f"converged at iteration {conv}" if conv is not None else "not converged"
-    sit = R.situation_labels(lg)
 
     def exploration() -> Any:
         lab, out = R.learned_output(tr)
         counts = R.exploration_counts(tr, lab, out)
         singles = tr.learned_policy(lab).outputs[out].actions
-        return LP.plot_exploration(counts, sit if len(sit) == counts.shape[0] else None,
+        # (evolving situations: the rows alive at the end or ever dominant, not every slot)
+        shown, words, _notes = R.trial_situations(lg, tr, counts.shape[0], R.space_of(tr, lab))
+        named = dict(zip(shown, words, strict=True))
+        rows = sorted(set(shown) | set(np.flatnonzero(counts.sum(axis=1)).tolist()))
+        labels = [f"S{i + 1}: {named[i]}" if named.get(i) else
+                  f"S{i + 1}" + ("" if i in named else " (merged or pruned)") for i in rows]
+        return LP.plot_exploration(counts[rows], labels,
                                    singles, action_unit="deg" if out == "heading" else "",
                                    title=f"Trial {k}: situation-action pairs over {L} "
                                    "iterations")

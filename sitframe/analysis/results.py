@@ -75,6 +75,7 @@ __all__ = [
     "space_of",
     "spaces_table",
     "sweep_result",
+    "trial_situations",
 ]
 
 LogLike = Log | str | os.PathLike[str]
@@ -623,7 +624,7 @@ def lookup_table(log: LogLike, trial: int | TrialLog, label: str | None = None,
     label, output = learned_output(tr, label, output)
     q = np.asarray(tr.behaviours[label][f"{output}/q"], dtype=np.float64)
     singles = _policy_output(tr, label, output).actions
-    shown, labels, notes = _trial_situations(lg, tr, q.shape[0], space_of(tr, label))
+    shown, labels, notes = trial_situations(lg, tr, q.shape[0], space_of(tr, label))
     heading = output == "heading"
     cols = (["Situation", "Description"]
             + [_deg(float(a)) if heading else f"{a:g}" for a in singles]
@@ -637,8 +638,8 @@ def lookup_table(log: LogLike, trial: int | TrialLog, label: str | None = None,
                  cols, rows, notes=notes)
 
 
-def _trial_situations(lg: Log, tr: TrialLog, c: int, space: str = "default"
-                      ) -> tuple[list[int], list[str], list[str]]:
+def trial_situations(lg: Log, tr: TrialLog, c: int, space: str = "default"
+                     ) -> tuple[list[int], list[str], list[str]]:
     """The situations a trial's tables show: their rows (0-based), descriptions and notes.
 
     With a fixed interpreter: all ``c``, described by the log's prototypes. With evolving
@@ -689,7 +690,7 @@ def rule_base_table(log: LogLike, trial: int | TrialLog, label: str | None = Non
     q = None if po.q is None else np.asarray(po.q, dtype=np.float64)
     pol = np.asarray(po.rules, dtype=np.intp)
     c = pol.size
-    shown, labels, notes = _trial_situations(lg, tr, c, space_of(tr, label))
+    shown, labels, notes = trial_situations(lg, tr, c, space_of(tr, label))
     u = space_memberships(tr, space_of(tr, label))
     counts = np.bincount(u.argmax(axis=1), minlength=c) if u.size else np.zeros(c)
     share = 100.0 * counts / max(int(counts.sum()), 1)
