@@ -185,6 +185,11 @@ RECIPES: dict[str, Recipe] = {
         f"{PY} benchmarks/learning/generalisation.py --seeds 10 --publish",), 50),
     "preset-safety": Recipe((), (
         f"{PY} benchmarks/learning/preset_safety.py --seeds 10 --publish",), 60),
+    "preset-safety-20": Recipe((), (
+        f"{PY} benchmarks/learning/preset_safety.py --seeds 20 --presets obstacle-avoidance "
+        "obstacle-avoidance-8 obstacle-avoidance-12 obstacle-avoidance-16 "
+        "obstacle-avoidance-evolving obstacle-avoidance-online speed wall-following "
+        "wall-following-12 wall-following-evolving --publish preset-safety-20",), 120),
     "preset-safety-candidates": Recipe((), (_safety("preset-safety-candidates", [
         p.stem for p in sorted((ROOT / "benchmarks/learning/preset_candidates").glob("*.toml"))
         if p.stem not in ROUND_3 + ROUND_4 + ROUND_5 + ROUND_6 + ROUND_7]),), 190),
