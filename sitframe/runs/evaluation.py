@@ -351,8 +351,6 @@ def rule_base_table(result: Any, space: str = "default") -> Any:
     the learning world; trial 0 when there is no such evaluation). Situations
     are described from their prototypes.
     """
-    from collections import Counter
-
     from rich.table import Table
 
     trials = result.trials
@@ -390,18 +388,38 @@ def rule_base_table(result: Any, space: str = "default") -> Any:
         if angles is not None and view is not None:
             angles = np.asarray(angles)[list(view)]
     rows: Any = range(outs[0][2].rules.size)
+    voters: dict[int, list[Any]] = {}  # evolving: who has situation i (alive at its end)
     if space == "default" and (own := getattr(best, "situations", {}).get("state")):
-        rows, centers = [int(i) for i in own["ids"]], own["centers"]  # evolving: the best's ids
+        rows, seeded = [int(i) for i in own["ids"]], np.shape(centers)[0] if centers is not \
+            None and np.ndim(centers) == 2 else 0
+        centers = own["centers"]  # the best trial's situations, described by its prototypes
+        alive = {t.index: {int(i) for i in t.situations["state"]["ids"]} for t in trials
+                 if getattr(t, "situations", {}).get("state")}
+        voters = {i: [t for t in trials if i in alive.get(t.index, ())] if i < seeded else []
+                  for i in rows}
+        table.caption = (f"most trials = the most frequent action of the trials that kept the "
+                         f"situation (how many of them); S{seeded + 1} on are situations trial "
+                         f"{best.index} made, each trial makes its own: no vote; {why}")
     descs = describe_prototypes(centers, angles) if centers is not None and \
         angles is not None and np.ndim(centers) == 2 and len(angles) == np.shape(centers)[1] \
         else []
     for n, i in enumerate(rows):
         row = [f"S{i + 1}", descs[n] if n < len(descs) else ""]
         for label, out, o in outs:
-            votes = Counter(int(t.policies[label].outputs[out].rules[i]) for t in trials
-                            if label in t.policies)
-            action, count = votes.most_common(1)[0]
-            row.append(f"{format_action(o.actions[action], o.unit)} ({count}/{len(trials)})")
+            row.append(_vote(voters[i] if voters else trials, label, out, o, i))
             row.append(format_action(o.actions[int(o.rules[i])], o.unit))
         table.add_row(*row)
     return table
+
+
+def _vote(trials: list[Any], label: str, out: str, o: Any, i: int) -> str:
+    """The action most of ``trials`` chose for situation ``i`` and in how many (``–``: none
+    has the situation)."""
+    from collections import Counter
+
+    votes = Counter(int(t.policies[label].outputs[out].rules[i]) for t in trials
+                    if label in t.policies)
+    if not votes:
+        return "–"
+    action, count = votes.most_common(1)[0]
+    return f"{format_action(o.actions[action], o.unit)} ({count}/{len(trials)})"
