@@ -720,6 +720,9 @@ def rule_bases_across_trials(log: LogLike, label: str | None = None,
         One row per situation: ``Situation``, ``Description``, one column per
         trial (``T0``, ``T1``, ...; action values, degrees for heading),
         ``Most frequent``, ``Agreement [%]`` (share of trials with that action).
+        With evolving situations, the rows are the fitted situations every trial
+        starts from (a trial's own situations differ between trials), empty where
+        a trial merged or pruned one, and the share counts the trials that kept it.
     """
     lg = as_log(log)
     idx = lg.trial_indices()

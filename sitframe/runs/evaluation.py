@@ -349,7 +349,10 @@ def rule_base_table(result: Any, space: str = "default") -> Any:
     A.2/A.3), and the action of the trial that ``policy_from.trial = "best"``
     would pick (:func:`best_trial`: collisions and coverage when evaluated in
     the learning world; trial 0 when there is no such evaluation). Situations
-    are described from their prototypes.
+    are described from their prototypes. With evolving situations the rows are the
+    best trial's own (those alive at its end): only the fitted situations every trial
+    starts from are voted on, by the trials that kept them; a situation a trial made is
+    its own (another trial's of that number is another situation) and gets no vote.
     """
     from rich.table import Table
 
@@ -390,9 +393,8 @@ def rule_base_table(result: Any, space: str = "default") -> Any:
     rows: Any = range(outs[0][2].rules.size)
     voters: dict[int, list[Any]] = {}  # evolving: who has situation i (alive at its end)
     if space == "default" and (own := getattr(best, "situations", {}).get("state")):
-        rows, seeded = [int(i) for i in own["ids"]], np.shape(centers)[0] if centers is not \
-            None and np.ndim(centers) == 2 else 0
-        centers = own["centers"]  # the best trial's situations, described by its prototypes
+        seeded = np.shape(centers)[0] if centers is not None and np.ndim(centers) == 2 else 0
+        rows, centers = [int(i) for i in own["ids"]], own["centers"]  # the best trial's own
         alive = {t.index: {int(i) for i in t.situations["state"]["ids"]} for t in trials
                  if getattr(t, "situations", {}).get("state")}
         voters = {i: [t for t in trials if i in alive.get(t.index, ())] if i < seeded else []
