@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections import Counter
 from typing import Any
 
 import numpy as np
@@ -417,8 +418,6 @@ def rule_base_table(result: Any, space: str = "default") -> Any:
 def _vote(trials: list[Any], label: str, out: str, o: Any, i: int) -> str:
     """The action most of ``trials`` chose for situation ``i`` and in how many (``–``: none
     has the situation)."""
-    from collections import Counter
-
     votes = Counter(int(t.policies[label].outputs[out].rules[i]) for t in trials
                     if label in t.policies)
     if not votes:

@@ -800,8 +800,6 @@ def _warm() -> None:
     clear_moves(two, two, np.ones((1, 4)), seg, 0.1, act)
 
 
-
-
 @njit(**_JIT)
 def _seg_d2(px: float, py: float, ax: float, ay: float, ex: float, ey: float,
             inv: float) -> float:  # pragma: no cover - compiled
