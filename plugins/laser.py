@@ -95,6 +95,10 @@ class LaserScanner(RimRangeSensor):
 
     name: ClassVar[str] = "laser"
 
+    def __repr__(self) -> str:
+        return (f"LaserScanner({self.beams} beams over {self.fov_deg:g} deg, "
+                f"max_range={self.max_range:g} m)")
+
     def __init__(
         self,
         *,
@@ -124,10 +128,6 @@ class LaserScanner(RimRangeSensor):
         self.angles_deg.setflags(write=False)
         self._ray_rel = np.radians(self.angles_deg)  # one ray per beam
         self.rays_per_beam, self._n = 1, n
-
-    def __repr__(self) -> str:
-        return (f"LaserScanner({self.beams} beams over {self.fov_deg:g} deg, "
-                f"max_range={self.max_range:g} m)")
 
 
 @hookimpl

@@ -25,11 +25,12 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import dataclasses
+import functools
 import inspect
 import math
 import numbers
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from typing import Any
+from typing import Any, Literal, get_args, get_origin, get_type_hints
 
 from sitframe.errors import InputError, InputTypeError, did_you_mean
 
@@ -158,6 +159,21 @@ def choice(name: str, value: Any, choices: Sequence[str]) -> str:
     """Check that ``value`` is one of ``choices``."""
     with _checking(lambda: Key(name, "choice", choices=tuple(choices))):
         return _choice(name, value, choices)
+
+
+def choice_field(obj: Any, name: str) -> str:
+    """Check a dataclass field annotated ``Literal[...]`` against the choices its type names.
+
+    The annotation is the one place the choices are written; the check, its error
+    message and the documentation's reference read them from there.
+    """
+    return choice(name, getattr(obj, name), literal_choices(type(obj))[name])
+
+
+@functools.cache
+def literal_choices(cls: type) -> dict[str, tuple[str, ...]]:
+    """The choices of each field of ``cls`` annotated ``Literal[...]``, by field name."""
+    return {n: get_args(t) for n, t in get_type_hints(cls).items() if get_origin(t) is Literal}
 
 
 def _choice(name: str, value: Any, choices: Sequence[str]) -> str:

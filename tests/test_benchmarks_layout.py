@@ -8,13 +8,13 @@ from pathlib import Path
 import pytest
 
 BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
-GROUPS = ("sim", "learning", "logs", "scale", "report")
+GROUPS = ("sim", "learning", "logs", "scale", "duel", "report")
 SCRIPTS = sorted(p for g in GROUPS for p in (BENCH / g).glob("*.py"))
 
 
 def test_scripts_live_in_their_groups() -> None:
     loose = sorted(p.name for p in BENCH.glob("*.py"))
-    assert loose == ["duel.py"], loose  # the duel keeps its place (its own issue)
+    assert loose == [], loose
     assert len(SCRIPTS) >= 20
 
 

@@ -1,4 +1,4 @@
-"""The duel (benchmarks/duel.py): its step accounting equals the steps the simulator executed,
+"""The duel (benchmarks/duel/duel.py): its step accounting equals the steps the simulator executed,
 fuzzy-q is scored as ``sitframe evaluate`` scores it, the rooms and the selection rule."""
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
 @pytest.fixture(scope="module")
 def duel() -> Any:
     sys.path.insert(0, str(BENCH))
-    spec = importlib.util.spec_from_file_location("duel", BENCH / "duel.py")
+    spec = importlib.util.spec_from_file_location("duel", BENCH / "duel" / "duel.py")
     assert spec and spec.loader
     module = importlib.util.module_from_spec(spec)
     sys.modules["duel"] = module  # (its dataclasses look their module up)

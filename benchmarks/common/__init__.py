@@ -4,8 +4,8 @@ process signalled at a moment, another git revision to time against.
 The benchmarks are grouped by what they measure: ``sim/`` (the simulator and the
 environments), ``learning/`` (learning trials, clustering, what the results pages' learning
 figures come from), ``logs/`` (writing logs), ``scale/`` (workers, kills, signals, hostile
-input), ``report/`` (analysis and the results tables); ``duel.py`` is the duel against deep
-RL. Each script's module docstring says its question and its output. A script puts this
+input), ``duel/`` (fuzzy Q against deep RL in unseen rooms), ``report/`` (analysis and the
+results tables). Each script's module docstring says its question and its output. A script puts this
 folder on ``sys.path`` (``sys.path.insert(0, str(Path(__file__).resolve().parents[1]))``)
 and imports ``common``; :mod:`common.publish` writes the results tables of the docs.
 """

@@ -9,7 +9,7 @@ and for the situations that decide in collisions (largest membership) their shar
 collisions, their rule's updates while learning and their greedy heading; with
 ``--figure PATH`` the paths (collisions marked) as one figure.
 
-The runs are the duel's scoring (``benchmarks/duel.py``'s :func:`fuzzy_scores`: the same
+The runs are the duel's scoring (``benchmarks/duel/duel.py``'s :func:`fuzzy_scores`: the same
 start poses, seed and iterations), so a duel figure can be looked at closely::
 
     python benchmarks/learning/stuck.py logs/duel2/fuzzy-q-preset-43e4e07/seed-2/run.h5 \\

@@ -301,7 +301,7 @@ def _generalisation() -> str:
 
 
 def _duel() -> str:
-    """The duel's row, read from the table benchmarks/duel.py published (duel.md): per
+    """The duel's row, read from the table benchmarks/duel/duel.py published (duel.md): per
     method, test-room collisions and coverage (median, worst seed), its steps and the
     collisions it had while learning."""
     table = tables_dir() / "duel.md"
@@ -310,7 +310,7 @@ def _duel() -> str:
             if line.startswith("| ") and not line.startswith(("| method", "| target"))]
     rows = [r for r in rows if len(r) >= 7 and r[1].isdigit()]
     if not rows:
-        return "not yet regenerated: `python benchmarks/duel.py report` (the page)"
+        return "not yet regenerated: `python benchmarks/duel/duel.py report` (the page)"
     parts = [f"{r[0]}: {r[2].split(' ')[0]} collisions / 1000 (worst seed "
              f"{r[2].rsplit(' ', 1)[-1]}), coverage {r[3].split(' ')[0]}, "
              f"{r[4].split(' ')[0]} steps, {r[6].split(' ')[0]} collisions while learning"
@@ -365,8 +365,8 @@ def readme_table(table: str) -> str:
 
 #: Tables another script makes on its own (not from here): name -> how.
 ELSEWHERE = {
-    "duel-tuning": "python benchmarks/duel.py report --out logs/duel2",
-    "duel": "python benchmarks/duel.py report --out logs/duel2",
+    "duel-tuning": "python benchmarks/duel/duel.py report --out logs/duel2",
+    "duel": "python benchmarks/duel/duel.py report --out logs/duel2",
 }
 #: The table each sub-table is made with (a recipe may write several tables).
 WRITES = {"speed": ("speed-situations", "speed-clearance", "speed-safety")}

@@ -11,15 +11,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sitframe.sim.fastinit import slot_init
+from sitframe.sim.fastinit import record
 
 if TYPE_CHECKING:
     from sitframe.sim.robot import Command, StepOutcome
     from sitframe.sim.world import Goal, World
 
 
-@slot_init
-@dataclass(frozen=True, slots=True)
+@record
 class Proposal:
     """What one behaviour wants: a relative heading change and optionally a speed.
 
@@ -59,8 +58,7 @@ class Proposal:
         return Proposal(heading, speed)
 
 
-@slot_init
-@dataclass(frozen=True, slots=True)
+@record
 class Context:
     """What every behaviour and arbiter sees at one iteration.
 
@@ -100,8 +98,7 @@ class Context:
     spaces: dict[str, np.ndarray] | None = None
 
 
-@slot_init
-@dataclass(frozen=True, slots=True)
+@record
 class Transition:
     """One iteration's cause and effect, given to rewards and learning behaviours.
 
@@ -126,8 +123,7 @@ class Transition:
         return bool(self.outcome.collided)
 
 
-@slot_init
-@dataclass(frozen=True, slots=True)
+@record
 class StepRecord:
     """Everything about one iteration, for ``sitframe_step`` observers."""
 
@@ -238,6 +234,10 @@ class TrialResult:
 class SensorSpec:
     """The geometry of a sensor's reading, known before anything runs.
 
+    Read from the sensor component when the run is resolved (its ``angles_deg``,
+    ``max_range`` and ``unit``), handed to every component in :class:`RunContext` and
+    written to the log, so a reader knows the reading's layout without the plugin.
+
     Attributes
     ----------
     name
@@ -265,6 +265,28 @@ class SensorSpec:
         """JSON-ready form (the log's ``sensor`` root attribute)."""
         return {"name": self.name, "angles_deg": [float(a) for a in self.angles_deg],
                 "max_range": float(self.max_range), "unit": self.unit, "dim": self.dim}
+
+
+@dataclass(frozen=True)
+class SpaceInfo:
+    """One situation space of a run (``[interpreter]`` or a ``[spaces.NAME]`` table).
+
+    Attributes
+    ----------
+    name
+        ``"default"`` (the ``[interpreter]``) or the table's name.
+    n_situations
+        Its number of situations (``None`` until fitted, e.g. ``c = "auto"``).
+    view
+        (d',) indices of the sensor's readings it sees (all, in order, for the default).
+    readers
+        The behaviour labels (and ``"arbiter"``) that read it.
+    """
+
+    name: str
+    n_situations: int | None
+    view: tuple[int, ...]
+    readers: tuple[str, ...]
 
 
 @dataclass(frozen=True)
@@ -319,28 +341,6 @@ class RunContext:
     tables: dict[str, dict[str, Any]] = field(default_factory=dict)
     space: str = "default"
     spaces: dict[str, SpaceInfo] = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
-class SpaceInfo:
-    """One situation space of a run (``[interpreter]`` or a ``[spaces.NAME]`` table).
-
-    Attributes
-    ----------
-    name
-        ``"default"`` (the ``[interpreter]``) or the table's name.
-    n_situations
-        Its number of situations (``None`` until fitted, e.g. ``c = "auto"``).
-    view
-        (d',) indices of the sensor's readings it sees (all, in order, for the default).
-    readers
-        The behaviour labels (and ``"arbiter"``) that read it.
-    """
-
-    name: str
-    n_situations: int | None
-    view: tuple[int, ...]
-    readers: tuple[str, ...]
 
 
 @dataclass(frozen=True)

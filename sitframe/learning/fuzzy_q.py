@@ -37,8 +37,8 @@ Choices where the thesis is ambiguous (all configurable):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from dataclasses import KW_ONLY, dataclass
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -48,9 +48,6 @@ from sitframe.sim.kernels import kernels
 if TYPE_CHECKING:
     from sitframe.situations.events import SituationEvent
 
-UPDATE_RULES = ("thesis", "standard")
-TEMPERATURE_MODES = ("relative", "absolute")
-Q_INITS = ("constant", "random")
 
 
 @dataclass(frozen=True)
@@ -136,23 +133,24 @@ class QLearningParams:
     gamma: float = 0.9
     b: int = 5
     p: int = 50
+    _: KW_ONLY  # alpha, gamma, b, p (the thesis' symbols) may come in order; the rest by name
     temperature: float = 0.25
-    temperature_mode: str = "relative"
+    temperature_mode: Literal["relative", "absolute"] = "relative"
     temperature_decay: float = 1.0
     temperature_min: float = 0.0
-    q_init: str = "constant"
+    q_init: Literal["constant", "random"] = "constant"
     q_init_value: float = 0.0
     q_init_spread: float = 0.0
-    update: str = "thesis"
+    update: Literal["thesis", "standard"] = "thesis"
     activation: float = 0.3
     terminal_on_collision: bool = False
     min_updates: int = 0
-    tie_break: str = "first"
+    tie_break: Literal["first", "centre"] = "first"
     alpha_visits: float = 0.0
     groups: int = 1
     min_group_updates: int = 0
     replay: int = 0
-    replay_priority: str = "rare"
+    replay_priority: Literal["rare", "uniform"] = "rare"
 
     def __post_init__(self) -> None:
         P.number("alpha", self.alpha, lo=0.0, hi=1.0, lo_open=True)
@@ -160,26 +158,22 @@ class QLearningParams:
         P.number("b", self.b, lo=1, integer=True)
         P.number("p", self.p, lo=1, integer=True)
         P.number("temperature", self.temperature, lo=0.0, lo_open=True)
-        P.choice("temperature_mode", self.temperature_mode, TEMPERATURE_MODES)
+        P.choice_field(self, "temperature_mode")
         P.number("temperature_decay", self.temperature_decay, lo=0.0, hi=1.0, lo_open=True)
         P.number("temperature_min", self.temperature_min, lo=0.0)
-        P.choice("q_init", self.q_init, Q_INITS)
+        P.choice_field(self, "q_init")
         P.number("q_init_value", self.q_init_value)
         P.number("q_init_spread", self.q_init_spread, lo=0.0)
-        P.choice("update", self.update, UPDATE_RULES)
+        P.choice_field(self, "update")
         P.number("activation", self.activation, lo=0.0, hi=1.0)
         P.boolean("terminal_on_collision", self.terminal_on_collision)
         P.number("min_updates", self.min_updates, lo=0, integer=True)
-        P.choice("tie_break", self.tie_break, TIE_BREAKS)
+        P.choice_field(self, "tie_break")
         P.number("alpha_visits", self.alpha_visits, lo=0.0)
         P.number("groups", self.groups, lo=1, integer=True)
         P.number("min_group_updates", self.min_group_updates, lo=0, integer=True)
         P.number("replay", self.replay, lo=0, integer=True)
-        P.choice("replay_priority", self.replay_priority, REPLAY_PRIORITIES)
-
-
-TIE_BREAKS = ("first", "centre")
-REPLAY_PRIORITIES = ("rare", "uniform")
+        P.choice_field(self, "replay_priority")
 
 
 def greedy_actions(q: np.ndarray, tie_break: str = "first") -> np.ndarray:

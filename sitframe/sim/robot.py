@@ -52,13 +52,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from sitframe.params import choice, number
+from sitframe.params import choice_field, number
 from sitframe.sim import geometry as geo
-from sitframe.sim.fastinit import slot_init
+from sitframe.sim.fastinit import record
 from sitframe.sim.kernels import fused, kernels
 
 if TYPE_CHECKING:  # (a world is read through its segments and start pose only)
@@ -66,7 +66,6 @@ if TYPE_CHECKING:  # (a world is read through its segments and start pose only)
 
 __all__ = ["Command", "RobotParams", "Simulator", "StepOutcome", "step_robot", "trajectory"]
 
-_RECOVERIES = ("backoff-turn", "none")
 _REFINE = 16  # subdivisions per refinement round
 _BACKOFF_SAMPLES = 11
 
@@ -74,6 +73,9 @@ _BACKOFF_SAMPLES = 11
 @dataclass(frozen=True)
 class RobotParams:
     """Physical and control parameters of the simulated robot.
+
+    A run's config sets them in its ``[robot]`` table (same names); the checks below are
+    the ones that table's values go through.
 
     Attributes
     ----------
@@ -104,7 +106,7 @@ class RobotParams:
     min_speed: float = 0.10
     max_speed: float = 0.30
     max_heading_change_deg: float = 90.0
-    recovery: str = "backoff-turn"
+    recovery: Literal["backoff-turn", "none"] = "backoff-turn"
     recovery_backoff_m: float = 0.05
     recovery_turn_deg: float = 45.0
 
@@ -116,7 +118,7 @@ class RobotParams:
         number("min_speed", self.min_speed, lo=0.0, unit="m/s")
         number("max_speed", self.max_speed, lo=0.0, lo_open=True, unit="m/s")
         number("max_heading_change_deg", self.max_heading_change_deg, lo=0.0, hi=180.0, unit="deg")
-        choice("recovery", self.recovery, _RECOVERIES)
+        choice_field(self, "recovery")
         number("recovery_backoff_m", self.recovery_backoff_m, lo=0.0, unit="m")
         number("recovery_turn_deg", self.recovery_turn_deg, lo=0.0, hi=180.0, unit="deg")
         if self.min_speed > self.max_speed:
@@ -136,8 +138,7 @@ class RobotParams:
             )
 
 
-@slot_init
-@dataclass(frozen=True, slots=True)
+@record
 class Command:
     """One control command, held for ``control_period_s``.
 
@@ -165,8 +166,7 @@ class Command:
                 raise ValueError(f"Command.{name} must be finite, got {v!r}")
 
 
-@slot_init
-@dataclass(frozen=True, slots=True)
+@record
 class StepOutcome:
     """What happened during one control period.
 

@@ -49,12 +49,12 @@ situations), from the same start poses.
 
 Run (extra ``baselines``; one core, one process, torch on one thread)::
 
-    taskset -c 1 nice -n 5 python benchmarks/duel.py run --out duel2 --phase screen
-    taskset -c 1 nice -n 5 python benchmarks/duel.py score --out duel2 --phase screen
-    taskset -c 1 nice -n 5 python benchmarks/duel.py run --out duel2 --phase final \\
+    taskset -c 1 nice -n 5 python benchmarks/duel/duel.py run --out duel2 --phase screen
+    taskset -c 1 nice -n 5 python benchmarks/duel/duel.py score --out duel2 --phase screen
+    taskset -c 1 nice -n 5 python benchmarks/duel/duel.py run --out duel2 --phase final \\
         --configs fuzzy-q selected --seeds 10
-    taskset -c 1 nice -n 5 python benchmarks/duel.py score --out duel2 --phase final
-    python benchmarks/duel.py report --out duel2
+    taskset -c 1 nice -n 5 python benchmarks/duel/duel.py score --out duel2 --phase final
+    python benchmarks/duel/duel.py report --out duel2
 
 A rerun skips finished jobs (training and scoring apart). CPU per job on one core: DQN
 100k steps about 70 s, PPO 200k about 95 s, fuzzy-q 2-4 s (its whole ``sitframe run``);
@@ -67,6 +67,7 @@ from __future__ import annotations
 import argparse
 import io
 import json
+import sys
 import time
 import zlib
 from collections.abc import Callable, Iterator, Sequence
@@ -79,7 +80,7 @@ import gymnasium as gym
 import numpy as np
 
 PRESET = "obstacle-avoidance"
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 FIGURE = ROOT / "docs" / "results" / "figures" / "duel-curves.png"
 
 
@@ -766,6 +767,7 @@ def curves_figure(final: dict[str, list[dict[str, Any]]], path: Path) -> None:
 
 
 def cmd_report(a: argparse.Namespace) -> None:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
     from common.publish import publish
 
     screen = load(a.out, "screen")
