@@ -11,8 +11,13 @@ Importing this package registers three ids::
     env = gym.make("sitframe/GoalFinding-v0")         # preset goal-finding (goal-progress reward)
 
 and :func:`make_env` makes one from any config (preset name or TOML path);
-:class:`SitframeVectorEnv` steps N robots together. Spaces, episodes and the
-choices behind them: :mod:`sitframe.gym.env` and :mod:`sitframe.gym.task`.
+:class:`SitframeVectorEnv` steps N robots together.
+
+What it holds
+    :mod:`~sitframe.gym.task` (a config seen as a reinforcement-learning task: its
+    spaces, reward, episode ends and the choices behind them, shared by both envs),
+    :mod:`~sitframe.gym.env` (one robot, :class:`SitframeEnv`) and
+    :mod:`~sitframe.gym.vector` (N robots stepped together, :class:`SitframeVectorEnv`).
 
 What it may import
     :mod:`sitframe.contract` (a config resolved into its sensor, interpreter and reward),
