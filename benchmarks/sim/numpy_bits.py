@@ -1,0 +1,239 @@
+"""Benchmark: can a compiled kernel give numpy's own bits for the arithmetic of a trial step?
+
+Question: The logs must stay bit-identical, so a compiled (numba) learning loop must
+compute every logarithm, power, dot product and row norm exactly as numpy does. numba's
+own ``np.log`` and ``**`` call the C library, whose last bit differs from numpy's vector
+library; can a kernel instead call numpy's own float64 loops, OpenBLAS's ``ddot`` (numpy's
+``@`` of two vectors) and einsum's row-norm order, and what does each cost inside a kernel?
+Output: a table printed: operation, sizes tried, results that differ from numpy's (of all
+tried), nanoseconds per call inside a compiled loop, and per numpy call from Python.
+
+How each is reached from a kernel:
+
+log, power
+    ``ufunc._resolve_dtypes_and_context`` and ``ufunc._get_strided_loop`` (numpy's
+    experimental API, NEP 43, made for numba) hand out the strided loop numpy itself runs
+    for float64, with its context; a kernel calls that C function through a ``ctypes``
+    pointer.
+``a @ b`` (two vectors)
+    numpy calls ``cblas_ddot`` of the OpenBLAS it ships (``numpy.libs``); a kernel calls the
+    same symbol.
+``np.einsum("ij,ij->i", X, X)``
+    numpy's einsum runs its sum-of-products loop compiled for the x86-64 baseline (two
+    lanes, no fused multiply-add): per lane, blocks of eight elements summed from the last
+    pair to the first, the tail in pairs (the missing lane 0), then ``0 + (lane0 + lane1)``.
+    Written out in the kernel.
+
+Run::
+
+    python benchmarks/sim/numpy_bits.py [--tries 2000] [--calls 200000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import ctypes
+import glob
+import os
+import time
+from collections.abc import Callable
+
+import numba
+import numpy as np
+
+F8 = np.dtype(np.float64)
+_CAPSULE = b"numpy_1.24_ufunc_call_info"
+_get_pointer = ctypes.pythonapi.PyCapsule_GetPointer
+_get_pointer.restype = ctypes.c_void_p
+_get_pointer.argtypes = [ctypes.py_object, ctypes.c_char_p]
+_LOOP = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p,
+                         ctypes.c_void_p, ctypes.c_void_p)
+_KEEP: list[object] = []  # (the capsules own the loops' context and auxiliary data)
+
+
+def ufunc_loop(ufunc: np.ufunc) -> tuple[Callable[..., int], int, int]:
+    """numpy's own contiguous float64 loop of ``ufunc``: (function, context, auxdata)."""
+    n = ufunc.nin + ufunc.nout
+    _dtypes, cap = ufunc._resolve_dtypes_and_context((F8,) * n)
+    ufunc._get_strided_loop(cap, fixed_strides=(8,) * n)
+    loop, context, aux = (ctypes.c_void_p * 3).from_address(_get_pointer(cap, _CAPSULE))
+    _KEEP.append(cap)
+    return _LOOP(loop), context, aux or 0
+
+
+def openblas_ddot() -> Callable[..., float] | None:
+    """``cblas_ddot`` of the OpenBLAS numpy ships, or None where numpy ships none."""
+    libs = glob.glob(os.path.join(os.path.dirname(np.__file__), os.pardir, "numpy.libs",
+                                  "libscipy_openblas*"))
+    for path in libs:
+        lib = ctypes.CDLL(path)
+        for name in ("scipy_cblas_ddot64_", "scipy_cblas_ddot", "cblas_ddot"):
+            if hasattr(lib, name):
+                f = getattr(lib, name)
+                f.restype = ctypes.c_double
+                f.argtypes = [ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64,
+                              ctypes.c_void_p, ctypes.c_int64]
+                return f
+    return None
+
+
+LOG, LOG_CTX, LOG_AUX = ufunc_loop(np.log)
+POW, POW_CTX, POW_AUX = ufunc_loop(np.power)
+DDOT = openblas_ddot()
+
+
+@numba.njit(cache=True)
+def _call1(loop, ctx, aux, x, out):  # type: ignore[no-untyped-def]
+    ptrs = np.empty(2, dtype=np.intp)
+    ptrs[0], ptrs[1] = x.ctypes.data, out.ctypes.data
+    dims = np.full(1, x.size, dtype=np.intp)
+    strides = np.full(2, 8, dtype=np.intp)
+    return loop(ctx, ptrs.ctypes.data, dims.ctypes.data, strides.ctypes.data, aux)
+
+
+@numba.njit(cache=True)
+def _call2(loop, ctx, aux, x, y, out):  # type: ignore[no-untyped-def]
+    ptrs = np.empty(3, dtype=np.intp)
+    ptrs[0], ptrs[1], ptrs[2] = x.ctypes.data, y.ctypes.data, out.ctypes.data
+    dims = np.full(1, x.size, dtype=np.intp)
+    strides = np.full(3, 8, dtype=np.intp)
+    return loop(ctx, ptrs.ctypes.data, dims.ctypes.data, strides.ctypes.data, aux)
+
+
+@numba.njit(cache=True)
+def row_norms(X, out):  # type: ignore[no-untyped-def]
+    """``np.einsum("ij,ij->i", X, X)`` in einsum's order (module docstring)."""
+    n, d = X.shape
+    for i in range(n):
+        lane0 = 0.0
+        lane1 = 0.0
+        k = 0
+        while d - k >= 8:
+            for j in (6, 4, 2, 0):
+                lane0 = X[i, k + j] * X[i, k + j] + lane0
+                lane1 = X[i, k + j + 1] * X[i, k + j + 1] + lane1
+            k += 8
+        while k < d:
+            lane0 = X[i, k] * X[i, k] + lane0
+            second = X[i, k + 1] if k + 1 < d else 0.0
+            lane1 = second * second + lane1
+            k += 2
+        out[i] = 0.0 + (lane0 + lane1)
+
+
+@numba.njit(cache=True)
+def _own_log_pow(x, y):  # type: ignore[no-untyped-def]
+    """numba's own ``np.log`` and ``**`` (the C library's), for comparison."""
+    return np.log(x), x ** y
+
+
+@numba.njit(cache=True)
+def _log_many(loop, ctx, aux, x, out, calls):  # type: ignore[no-untyped-def]
+    for _ in range(calls):
+        _call1(loop, ctx, aux, x, out)
+
+
+@numba.njit(cache=True)
+def _pow_many(loop, ctx, aux, x, y, out, calls):  # type: ignore[no-untyped-def]
+    for _ in range(calls):
+        _call2(loop, ctx, aux, x, y, out)
+
+
+@numba.njit(cache=True)
+def _ddot_many(f, a, b, calls):  # type: ignore[no-untyped-def]
+    s = 0.0
+    for _ in range(calls):
+        s += f(a.size, a.ctypes.data, 1, b.ctypes.data, 1)
+    return s
+
+
+@numba.njit(cache=True)
+def _norms_many(X, out, calls):  # type: ignore[no-untyped-def]
+    for _ in range(calls):
+        row_norms(X, out)
+
+
+def _ns(f: Callable[[], object], calls: int) -> float:
+    t = time.perf_counter()
+    f()
+    return (time.perf_counter() - t) / calls * 1e9
+
+
+def _python_ns(f: Callable[[], object], calls: int) -> float:
+    t = time.perf_counter()
+    for _ in range(calls):
+        f()
+    return (time.perf_counter() - t) / calls * 1e9
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--tries", type=int, default=2000, help="random inputs per size")
+    ap.add_argument("--calls", type=int, default=200_000, help="calls timed per operation")
+    a = ap.parse_args()
+    rng = np.random.default_rng(0)
+    rows = []
+    # log of a sonar reading (8 or 40 ranges), power of memberships' distances (48 rules)
+    bad, sizes = 0, (8, 40, 48)
+    for n in sizes:
+        for _ in range(a.tries):
+            x, out = rng.uniform(1e-3, 5.0, n), np.empty(n)
+            _call1(LOG, LOG_CTX, LOG_AUX, x, out)
+            bad += not np.array_equal(out, np.log(x))
+    x, out = rng.uniform(1e-3, 5.0, 40), np.empty(40)
+    _log_many(LOG, LOG_CTX, LOG_AUX, x, out, 1)
+    rows.append(("np.log", sizes, bad, a.tries * len(sizes),
+                 _ns(lambda: _log_many(LOG, LOG_CTX, LOG_AUX, x, out, a.calls), a.calls),
+                 _python_ns(lambda: np.log(x, out=out), a.calls)))
+    bad = 0
+    for n in sizes:
+        for _ in range(a.tries):
+            x, y, out = rng.uniform(1e-6, 50.0, n), np.full(n, -1.0 / rng.uniform(0.1, 2)), \
+                np.empty(n)
+            _call2(POW, POW_CTX, POW_AUX, x, y, out)
+            bad += not np.array_equal(out, np.power(x, y))
+    x, y, out = rng.uniform(1e-6, 50.0, 48), np.full(48, -2.5), np.empty(48)
+    _pow_many(POW, POW_CTX, POW_AUX, x, y, out, 1)
+    rows.append(("np.power", sizes, bad, a.tries * len(sizes),
+                 _ns(lambda: _pow_many(POW, POW_CTX, POW_AUX, x, y, out, a.calls), a.calls),
+                 _python_ns(lambda: np.power(x, y, out=out), a.calls)))
+    if DDOT is not None:
+        bad = 0
+        for n in (7, 48, 300):
+            for _ in range(a.tries):
+                u, v = rng.normal(size=n), rng.normal(size=n)
+                bad += DDOT(n, u.ctypes.data, 1, v.ctypes.data, 1) != float(u @ v)
+        u, v = rng.normal(size=48), rng.normal(size=48)
+        _ddot_many(DDOT, u, v, 1)
+        rows.append(("a @ b (vectors)", (7, 48, 300), bad, a.tries * 3,
+                     _ns(lambda: _ddot_many(DDOT, u, v, a.calls), a.calls),
+                     _python_ns(lambda: u @ v, a.calls)))
+    bad, total = 0, 0
+    for d in (1, 3, 7, 8, 9, 16, 40):
+        X = rng.normal(size=(a.tries, d)) * rng.uniform(1e-2, 1e2, (a.tries, 1))
+        out = np.empty(a.tries)
+        row_norms(X, out)
+        bad += int((out != np.einsum("ij,ij->i", X, X)).sum())
+        total += a.tries
+    X, out = rng.normal(size=(48, 8)), np.empty(48)
+    _norms_many(X, out, 1)
+    rows.append(('einsum("ij,ij->i") (48 x 8)', (1, 3, 7, 8, 9, 16, 40), bad, total,
+                 _ns(lambda: _norms_many(X, out, a.calls), a.calls),
+                 _python_ns(lambda: np.einsum("ij,ij->i", X, X), a.calls)))
+    x, y = rng.uniform(1e-3, 5.0, 100_000), np.full(100_000, -2.5)
+    own_log, own_pow = _own_log_pow(x, y)
+    own = (f"numba's own np.log and ** (the C library's): {(own_log != np.log(x)).sum()} and "
+           f"{(own_pow != np.power(x, y)).sum()} of 100000 differ from numpy's")
+    print(f"numpy {np.__version__}, numba {numba.__version__}")
+    print(own)
+    print(f"{'operation':<30} {'sizes':<24} {'differ':>12} {'ns in kernel':>13} "
+          f"{'ns numpy call':>14}")
+    for name, sz, b, n, k_ns, p_ns in rows:
+        print(f"{name:<30} {','.join(map(str, sz)):<24} {f'{b} of {n}':>12} {k_ns:>13.0f} "
+              f"{p_ns:>14.0f}")
+    if DDOT is None:
+        print("a @ b: skipped (this numpy ships no OpenBLAS in numpy.libs)")
+
+
+if __name__ == "__main__":
+    main()
