@@ -15,7 +15,12 @@ single
     ``SitframeEnv`` (``sitframe/ObstacleAvoidance-v0``) under random actions,
     reset when an episode ends;
 vector
-    ``SitframeVectorEnv`` with ``--num-envs`` robots (robot-steps per second).
+    ``SitframeVectorEnv`` with ``--num-envs`` robots (robot-steps per second);
+kernels
+    the vector env's simulator work alone: :func:`sitframe.sim.fleet.step_robots` and the
+    sonar's ``read_many`` for the same robots, poses and commands (recorded from a vector
+    run, not timed). No vector env can step faster than this, so kernels / single is the
+    ceiling of vector / single with today's kernels.
 
 Times are CPU seconds of this process (``time.process_time``): on a machine
 shared with other jobs, wall time mostly measures the others.
@@ -46,6 +51,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: com
 from common.publish import publish  # noqa: E402
 
 import sitframe.gym as sg  # noqa: E402
+from sitframe.sim.fleet import step_robots  # noqa: E402
 from sitframe.sim.robot import Command, step_robot  # noqa: E402
 
 
@@ -83,6 +89,24 @@ def vector(venv: sg.SitframeVectorEnv, steps: int, seed: int) -> float:
     return time.process_time() - t0
 
 
+def kernels(venv: sg.SitframeVectorEnv, steps: int, seed: int) -> float:
+    """Seconds for the simulator work of :func:`vector`'s steps alone (module docstring)."""
+    n, task = venv.num_envs, venv.task
+    acts = np.random.default_rng(seed).integers(0, venv.single_action_space.n, (steps // n, n))
+    venv.reset(seed=seed)
+    moves = []
+    for a in acts:  # (recorded, not timed)
+        moves.append(([e.pose for e in venv.envs], [task.command(int(x), False) for x in a]))
+        venv.step(a)
+    read_many, world, rp = venv.envs[0].sensor.read_many, task.world, task.res.robot
+    rngs = [np.random.default_rng(seed + i) for i in range(n)]
+    t0 = time.process_time()
+    for poses, cmds in moves:
+        outs = step_robots(world, poses, cmds, rp, rngs)
+        read_many(world, np.array([o.pose for o in outs]), rngs)
+    return time.process_time() - t0
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--steps", type=int, default=3000, help="(robot-)steps per timed loop")
@@ -97,24 +121,28 @@ def main() -> None:
     env = sg.make_env("obstacle-avoidance")
     venv = sg.make_vector_env("obstacle-avoidance", a.num_envs)
     steps = a.steps - a.steps % a.num_envs
-    for fn, obj in ((plain, env), (single, env), (vector, venv)):  # warm-up
+    for fn, obj in ((plain, env), (single, env), (vector, venv), (kernels, venv)):  # warm-up
         fn(obj, 200 - 200 % a.num_envs, 99)
-    t: dict[str, list[float]] = {"plain": [], "single": [], "vector": []}
+    t: dict[str, list[float]] = {"plain": [], "single": [], "vector": [], "kernels": []}
     for k in range(a.repeats):
         t["plain"].append(steps / plain(env, steps, k))
         t["single"].append(steps / single(env, steps, k))
         t["vector"].append(steps / vector(venv, steps, k))
+        t["kernels"].append(steps / kernels(venv, steps, k))
     m = {key: statistics.median(v) for key, v in t.items()}
     # each repeat times the three loops back to back: its ratios share the machine's load
     paired = {key: statistics.median(x / y for x, y in zip(t[num], t[den], strict=True))
               for key, num, den in (("single/plain", "single", "plain"),
-                                    ("vector/single", "vector", "single"))}
+                                    ("vector/single", "vector", "single"),
+                                    ("kernels/single", "kernels", "single"))}
     print(f"steps={steps} repeats={a.repeats} (medians)")
     print(f"plain simulator:   {m['plain']:10,.0f} iterations/s")
     print(f"single env:        {m['single']:10,.0f} steps/s   single/plain = "
           f"{m['single'] / m['plain']:.2f}  (issue 41: >= 0.8)")
     print(f"vector env N={a.num_envs:<3}: {m['vector']:10,.0f} robot-steps/s   vector/single = "
           f"{m['vector'] / m['single']:.2f}  (issue 41: >= 6)")
+    print(f"its kernels alone: {m['kernels']:10,.0f} robot-steps/s   kernels/single = "
+          f"{m['kernels'] / m['single']:.2f}  (the ceiling of vector/single)")
     print("median of the per-repeat ratios: " + ", ".join(f"{k} = {v:.2f}"
                                                           for k, v in paired.items()))
     if a.publish:
@@ -125,7 +153,10 @@ def main() -> None:
             f"| `SitframeEnv` | {m['single']:,.0f} steps/s | single ÷ plain "
             f"{m['single'] / m['plain']:.2f} / {paired['single/plain']:.2f} |",
             f"| `SitframeVectorEnv`, N = {a.num_envs} | {m['vector']:,.0f} robot-steps/s | "
-            f"vector ÷ single {m['vector'] / m['single']:.2f} / {paired['vector/single']:.2f} |"]))
+            f"vector ÷ single {m['vector'] / m['single']:.2f} / {paired['vector/single']:.2f} |",
+            f"| its kernels alone (`step_robots` + `read_many`) | {m['kernels']:,.0f} "
+            f"robot-steps/s | kernels ÷ single {m['kernels'] / m['single']:.2f} / "
+            f"{paired['kernels/single']:.2f} |"]))
 
 
 if __name__ == "__main__":
