@@ -26,27 +26,57 @@ pandas is an optional dependency (``pip install 'sitframe[pandas]'``); a
 clear :class:`ImportError` says so when it is missing. ``sitframe export``
 (:mod:`sitframe.analysis.export`) writes these tables as CSV or Parquet.
 
-This module imports nothing from sitframe (the reader imports it), so it
-takes the :class:`~sitframe.logs.reader.Log` it is given rather than a path.
+This module imports nothing from sitframe (the reader imports it): it takes the
+:class:`~sitframe.logs.reader.Log` it is given rather than a path, and names what it reads
+of it in two protocols, :class:`LogTables` and :class:`TrialTables`.
 """
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterable
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from sitframe.logs.reader import Log, TrialLog
-
-__all__ = ["evaluations_frame", "is_series", "iterations_frame", "plugin_series",
-           "summary_frame"]
+__all__ = ["LogTables", "TrialTables", "evaluations_frame", "is_series", "iterations_frame",
+           "plugin_series", "summary_frame"]
 
 _NAMED = {"pose": ("x", "y", "theta"), "command": ("heading", "speed"),
           "contact": ("contact_x", "contact_y")}
 _SINGULAR = {"reading": "reading", "memberships": "membership", "weights": "weight"}
+
+
+class TrialTables(Protocol):
+    """What the tables read of one trial (a :class:`~sitframe.logs.reader.TrialLog` has it)."""
+
+    index: int
+    """The trial's number."""
+    world: str
+    """The world it learnt in."""
+    arrays: dict[str, np.ndarray]
+    """Its per-iteration arrays, by name."""
+    episodes: dict[str, Any]
+    """Its evaluations' arrays, ``eval/<world>/<name>``."""
+    plugins: dict[str, dict[str, Any]]
+    """Plugin name -> what that plugin logged for the trial."""
+    behaviours: dict[str, dict[str, Any]]
+    """Behaviour label -> what that behaviour logged for the trial."""
+
+
+class LogTables(Protocol):
+    """What the tables read of a log (a :class:`~sitframe.logs.reader.Log` has it)."""
+
+    def summary(self, *, plugins: bool = False) -> np.ndarray:
+        """The summary table, one row per finished trial."""
+
+    def trial_indices(self) -> list[int]:
+        """The finished learning trials."""
+
+    def trial(self, index: int) -> TrialTables:
+        """Trial ``index``."""
+
+    def weight_labels(self, index: int) -> list[str] | None:
+        """The labels of trial ``index``'s weight columns, if the log names them."""
 
 
 def _pandas() -> Any:
@@ -58,7 +88,7 @@ def _pandas() -> Any:
     return pd
 
 
-def summary_frame(log: Log) -> Any:
+def summary_frame(log: LogTables) -> Any:
     """One row per finished trial: ``trial``, every summary scalar and every plugin's
     per-trial scalar (NaN = not logged)."""
     pd = _pandas()
@@ -122,7 +152,7 @@ def is_series(a: Any, n: int) -> bool:
     return a.ndim in (1, 2) and n > 0 and a.shape[0] in (n, n + 1) and a.dtype.kind in "biuf"
 
 
-def plugin_series(tr: TrialLog, world: str | None = None) -> dict[str, np.ndarray]:
+def plugin_series(tr: TrialTables, world: str | None = None) -> dict[str, np.ndarray]:
     """The arrays the plugins logged for a trial (``world``: for its evaluation there), by
     namespaced name (``plugins.<plugin>.<key>``, ``behaviours.<label>.<key>``); whether
     each is per iteration is for the caller to check (:func:`is_series`)."""
@@ -144,30 +174,20 @@ def plugin_series(tr: TrialLog, world: str | None = None) -> dict[str, np.ndarra
     return out
 
 
-def _weight_labels(log: Log, k: int) -> list[str] | None:
-    with log._file() as f:
-        ds = f.get(f"trials/{k:04d}/weights")
-        raw = ds.attrs.get("columns") if ds is not None else None
-    try:
-        return list(json.loads(raw)) if raw is not None else None
-    except (TypeError, ValueError):
-        return None
-
-
-def _trials(log: Log, trials: Iterable[int] | None) -> list[TrialLog]:
+def _trials(log: LogTables, trials: Iterable[int] | None) -> list[TrialTables]:
     return [log.trial(k) for k in (log.trial_indices() if trials is None else trials)]
 
 
-def iterations_frame(log: Log, trials: Iterable[int] | None = None) -> Any:
+def iterations_frame(log: LogTables, trials: Iterable[int] | None = None) -> Any:
     """One row per iteration of the learning trials (default all), with a ``trial`` column."""
     pd = _pandas()
     parts = [_frame(tr.arrays, {"trial": tr.index, "world": tr.world},
-                    _weight_labels(log, tr.index), plugin_series(tr))
+                    log.weight_labels(tr.index), plugin_series(tr))
              for tr in _trials(log, trials)]
     return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
 
 
-def _evaluations(tr: TrialLog) -> dict[str, dict[str, np.ndarray]]:
+def _evaluations(tr: TrialTables) -> dict[str, dict[str, np.ndarray]]:
     """World -> arrays of each frozen-policy evaluation (``episodes/eval/<world>/<name>``)."""
     out: dict[str, dict[str, np.ndarray]] = {}
     for key, val in tr.episodes.items():
@@ -177,7 +197,7 @@ def _evaluations(tr: TrialLog) -> dict[str, dict[str, np.ndarray]]:
     return out
 
 
-def evaluations_frame(log: Log, trials: Iterable[int] | None = None) -> Any:
+def evaluations_frame(log: LogTables, trials: Iterable[int] | None = None) -> Any:
     """One row per iteration of every frozen-policy evaluation (``trial``, ``world``, ...)."""
     pd = _pandas()
     parts = [_frame(arrays, {"trial": tr.index, "world": w}, None, plugin_series(tr, w))

@@ -423,6 +423,16 @@ class Log:
                 out[int(g.attrs.get("index", int(name)))] = row
         return out
 
+    def weight_labels(self, index: int) -> list[str] | None:
+        """The behaviour labels of trial ``index``'s ``weights`` columns (None: not named)."""
+        with self._file() as f:
+            ds = f.get(f"trials/{index:04d}/weights")
+            raw = ds.attrs.get("columns") if ds is not None else None
+        try:
+            return list(json.loads(raw)) if raw is not None else None
+        except (TypeError, ValueError):
+            return None
+
     def summary_frame(self) -> Any:
         """The summary table as a pandas DataFrame (needs pandas; see
         :func:`sitframe.logs.frames.summary_frame`)."""

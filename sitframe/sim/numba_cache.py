@@ -19,6 +19,9 @@ The first run after an install (or after :mod:`sitframe.sim.kernels_numba` chang
 10-40 s while numba compiles; later runs load the kernels from the cache in some 0.3 s. An
 audit took that wait for a stalled worker pool, so :func:`announce_compilation` says why on
 a terminal.
+
+It imports nothing of sitframe and prints its two lines itself: a worker pool's forkserver
+loads it first, before the kernels, and it stays at the foot of the house.
 """
 
 from __future__ import annotations
@@ -27,8 +30,6 @@ import os
 import sys
 import tempfile
 from pathlib import Path
-
-from sitframe.errors import warn
 
 __all__ = ["announce_compilation", "cache_dir", "compile_pending", "configure"]
 
@@ -81,9 +82,9 @@ def configure() -> bool:
         else:
             config.CACHE_DIR = ""  # (numba's own NUMBA_CACHE_DIR, if that was the one)
             _CONFIGURED.append(None)
-            warn(f"kernel cache folder {folder}: cannot write there ({problem}); the kernels "
-                 "are compiled in every process instead (set SITFRAME_CACHE_DIR to a writable "
-                 "folder to cache them)")
+            print(f"sitframe: warning: kernel cache folder {folder}: cannot write there "
+                  f"({problem}); the kernels are compiled in every process instead (set "
+                  "SITFRAME_CACHE_DIR to a writable folder to cache them)", file=sys.stderr)
     return _CONFIGURED[0] is not None
 
 
