@@ -16,7 +16,7 @@ by what :data:`GENERATORS` ``[NAME]`` returns for it:
 ``layers``
     The picture of the layers: import-linter's contracts in pyproject.toml for the order,
     grimp's import graph for the arrows (one per import between two subpackages that no
-    longer chain implies), as a Mermaid diagram; then the contracts, which ``lint-imports``
+    longer chain implies), as an SVG drawn here; then the contracts, which ``lint-imports``
     keeps in CI.
 ``subpackages``
     One row per subpackage: its job and what it may import, from its ``__init__``
@@ -348,7 +348,8 @@ def _reduce(edges: set[tuple[str, str]]) -> set[tuple[str, str]]:
 
 
 def layers_diagram(_arg: str | None = None) -> str:
-    """The layers as a Mermaid diagram, and the contracts that keep them."""
+    """The layers as an SVG picture drawn here (no script or network needed to see it), and
+    the contracts that keep them."""
     contracts = import_contracts()
     layered = next(c for c in contracts if c.get("type") == "layers")
     rows = [[m.strip() for m in layer.split("|")] for layer in layered["layers"]]
@@ -356,39 +357,78 @@ def layers_diagram(_arg: str | None = None) -> str:
 
     ground = [f"sitframe.{i.name}" for i in pkgutil.iter_modules(sitframe.__path__[:1])
               if not i.ispkg and not i.name.startswith("_")]
-    packages = [m for row in rows for m in row] + ground
-    edges = _reduce(_package_edges(packages))
+    edges = _reduce(_package_edges([m for row in rows for m in row] + ground))
 
-    def node(m: str) -> str:
+    def label(m: str) -> tuple[str, str]:
         mod = importlib.import_module(m)
-        short = m.removeprefix("sitframe.")
         count = sum(1 for _ in pkgutil.iter_modules(getattr(mod, "__path__", [])))
-        what = f"{count} modules" if hasattr(mod, "__path__") else "module"
-        return f'{short.replace(".", "_")}["<b>{short}</b><br/>{what}"]'
+        return m.removeprefix("sitframe."), f"{count} modules" if hasattr(mod, "__path__") \
+            else "module"
 
-    out = ["```mermaid", "flowchart TB",
-           '  plugins(["plugins/ (the built-ins)"]) -->|"from sitframe import ..."| face',
-           '  face{{"sitframe: the public face"}}']
-    for i, row in enumerate(rows):
-        out.append(f'  subgraph L{i}[" "]')
-        out.append("    direction LR")
-        out += [f"    {node(m)}" for m in row]
-        out.append("  end")
-    out.append('  subgraph G[" ground floor "]')
-    out.append("    direction LR")
-    out += [f"    {node(m)}" for m in ground]
-    out.append("  end")
-    order = [f"L{i}" for i in range(len(rows))] + ["G"]
-    out += [f"  {a} ~~~ {b}" for a, b in zip(order, order[1:], strict=False)]  # row order
-    for a, b in sorted(edges):
-        out.append(f"  {a.removeprefix('sitframe.').replace('.', '_')} --> "
-                   f"{b.removeprefix('sitframe.').replace('.', '_')}")
-    out += ["```", "", "*An arrow is an import from one subpackage into another that no "
-            "chain of other arrows already implies; the order of the rows is import-linter's "
-            "layers contract, top to bottom. Drawn from the code as this site builds.*", "",
-            "The contracts, kept by `lint-imports` in CI:", ""]
+    boxes = [[("plugins/", "the built-ins")], [("sitframe", "the public face")],
+             *[[label(m) for m in row] for row in rows], [label(m) for m in ground]]
+    svg = _layers_svg(boxes, [("plugins/", "sitframe")] + [
+        (a.removeprefix("sitframe."), b.removeprefix("sitframe.")) for a, b in sorted(edges)])
+    out = [svg, "", "*The rows are import-linter's layers contract, top to bottom, above the "
+           "ground floor; a plugin imports only the public face. An arrow is an import from "
+           "one subpackage into another that no chain of other arrows already implies. Drawn "
+           "from the code as this site builds.*", "",
+           "The contracts, kept by `lint-imports` in CI:", ""]
     out += [f"- **{cell(c['name'])}** ({c['type']})" for c in contracts]
     return "\n".join(out)
+
+
+def _layers_svg(rows: list[list[tuple[str, str]]], arrows: list[tuple[str, str]]) -> str:
+    """An SVG of ``rows`` of boxes ``(name, what)``, top to bottom, and ``arrows`` (importer,
+    imported) between them; an arrow that passes rows goes round them, on its side. One
+    line, no blank line: Markdown keeps it as HTML. Colours follow the site's theme."""
+    width, row_h, box_h, gap = 640, 78, 42, 22
+    at: dict[str, tuple[float, float, float]] = {}  # name -> (left, top, width)
+    left, right = [0.0] * len(rows), [0.0] * len(rows)  # each row's edges
+    for r, row in enumerate(rows):
+        ws = [8.0 * max(len(n), len(w)) + 28 for n, w in row]
+        x = left[r] = (width - sum(ws) - gap * (len(ws) - 1)) / 2
+        for (name, _w), w in zip(row, ws, strict=True):
+            at[name] = (x, 16 + r * row_h, w)
+            x += w + gap
+        right[r] = x - gap
+    parts, rounds = [], 0
+    for a, b in arrows:
+        (xa, ya, wa), (xb, yb, wb) = at[a], at[b]
+        mid_a, mid_b = ya + box_h / 2, yb + box_h / 2
+        ra, rb = round((ya - 16) / row_h), round((yb - 16) / row_h)
+        if rb == ra:  # side by side (the ground floor)
+            x1, x2 = (xa, xb + wb + 3) if xb < xa else (xa + wa, xb - 3)
+            d = f"M{x1:.0f},{mid_a:.0f} L{x2:.0f},{mid_b:.0f}"
+        elif rb - ra > 1:  # round the rows between, on the importer's side of the picture
+            if xa + wa / 2 < width / 2:
+                side, x1, x2 = min(left[ra + 1:rb]) - 28 - 14 * rounds, xa, xb - 3
+            else:
+                side, x1, x2 = max(right[ra + 1:rb]) + 28 + 14 * rounds, xa + wa, xb + wb + 3
+            rounds += 1
+            d = f"M{x1:.0f},{mid_a:.0f} C{side:.0f},{mid_a:.0f} {side:.0f},{mid_b:.0f} " \
+                f"{x2:.0f},{mid_b:.0f}"
+        else:
+            d = f"M{xa + wa / 2:.0f},{ya + box_h:.0f} L{xb + wb / 2:.0f},{yb - 3:.0f}"
+        parts.append(f'<path d="{d}" fill="none" stroke="currentColor" stroke-opacity="0.55" '
+                     'stroke-width="1.4" marker-end="url(#layers-arrow)"/>')
+    for name, what in (b for row in rows for b in row):
+        x, y, w = at[name]
+        parts.append(f'<rect x="{x:.0f}" y="{y:.0f}" width="{w:.0f}" height="{box_h}" rx="6" '
+                     'style="fill:var(--md-code-bg-color,#f5f5f5);'
+                     'stroke:var(--md-primary-fg-color,#009485)" stroke-width="1.5"/>'
+                     f'<text x="{x + w / 2:.0f}" y="{y + 17:.0f}" text-anchor="middle" '
+                     f'font-weight="bold" font-size="13" fill="currentColor">{name}</text>'
+                     f'<text x="{x + w / 2:.0f}" y="{y + 33:.0f}" text-anchor="middle" '
+                     f'font-size="11" fill="currentColor" fill-opacity="0.7">{what}</text>')
+    height = 16 + len(rows) * row_h - (row_h - box_h) + 16
+    return (f'<svg class="layers" viewBox="0 0 {width} {height}" width="{width}" '
+            f'role="img" aria-label="The layers of sitframe, top to bottom" '
+            'style="max-width:100%;height:auto" xmlns="http://www.w3.org/2000/svg">'
+            '<defs><marker id="layers-arrow" viewBox="0 0 10 10" refX="9" refY="5" '
+            'markerWidth="7" markerHeight="7" orient="auto-start-reverse">'
+            '<path d="M0,0 L10,5 L0,10 z" fill="currentColor" fill-opacity="0.7"/></marker>'
+            f'</defs>{"".join(parts)}</svg>')
 
 
 def subpackages_table(_arg: str | None = None) -> str:
