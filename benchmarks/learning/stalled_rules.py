@@ -72,7 +72,7 @@ def main() -> None:
                     help="which rules get --action: the stalled contexts' or every one")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--plugins-dir", action="append", default=[],
-                    help="plugin folder the log's run loaded (e.g. benchmarks/plugins)")
+                    help="a plugin folder the log's run loaded (as its --plugins-dir)")
     args = ap.parse_args()
     from sitframe.logs.reader import open_log
 
