@@ -49,7 +49,6 @@ if TYPE_CHECKING:
     from sitframe.situations.events import SituationEvent
 
 
-
 @dataclass(frozen=True)
 class QLearningParams:
     """Parameters of fuzzy Q-learning; defaults are thesis Table A.1.

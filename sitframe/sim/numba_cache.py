@@ -82,7 +82,8 @@ def configure() -> bool:
         else:
             config.CACHE_DIR = ""  # (numba's own NUMBA_CACHE_DIR, if that was the one)
             _CONFIGURED.append(None)
-            print(f"sitframe: warning: kernel cache folder {folder}: cannot write there "
+            shown = str(folder) if str(folder).isprintable() else repr(str(folder))  # one line
+            print(f"sitframe: warning: kernel cache folder {shown}: cannot write there "
                   f"({problem}); the kernels are compiled in every process instead (set "
                   "SITFRAME_CACHE_DIR to a writable folder to cache them)", file=sys.stderr)
     return _CONFIGURED[0] is not None
