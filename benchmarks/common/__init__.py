@@ -12,6 +12,7 @@ and imports ``common``; :mod:`common.publish` writes the results tables of the d
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -19,9 +20,10 @@ import sys
 import tarfile
 import tempfile
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 #: The repository (benchmarks/ is in it).
 ROOT = Path(__file__).resolve().parents[2]
@@ -162,3 +164,24 @@ def against(rev: str, script: Path, call: Callable[[Path, Path], str], repeats: 
                     sys.exit(f"{name}: {res.stderr.strip().splitlines()[-1]}")
                 values[name] += json.loads(res.stdout)
     return values
+
+
+def per_seed(seeds: Iterable[int], cache: Callable[[int], Path],
+             fresh: Callable[[dict[str, Any]], bool], run: Callable[[int], dict[str, Any]],
+             say: Callable[[int, dict[str, Any]], str]) -> list[dict[str, Any]]:
+    """Each seed's results: read from its JSON file ``cache(seed)`` when ``fresh`` accepts what
+    is there (the same config and rooms), else ``run(seed)``, written there and said in one
+    line on stderr (``say``). A long measurement so resumes where it stopped."""
+    out = []
+    for seed in seeds:
+        path = cache(seed)
+        old = json.loads(path.read_text()) if path.is_file() else {}
+        if old and fresh(old):
+            out.append(old)
+            continue
+        result = run(seed)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(result, indent=1))
+        print(say(seed, result), file=sys.stderr)
+        out.append(result)
+    return out

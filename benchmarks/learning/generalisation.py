@@ -45,6 +45,10 @@ from typing import Any
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
+from common import per_seed  # noqa: E402
+from common.publish import publish  # noqa: E402
+
 TRAIN_ROOMS = [f"gen:{1_000_000 + i}" for i in range(10)]
 #: The ``obstacle-avoidance`` preset before issue 39, which every recipe but ``shipped``
 #: changes.
@@ -388,29 +392,23 @@ def main(argv: list[str] | None = None) -> int:
         for name in a.recipes:
             print(write_config(name, a.write_configs, a.train_rooms))
         return 0
+    def say(name: str, seed: int, r: dict[str, Any]) -> str:
+        c, v, _p = seed_figures(r)
+        return (f"{name} seed {seed}: {c:.2f} coll/1000, coverage {v:.3f} "
+                f"({r['learn_seconds']:.0f} + {r['judge_seconds']:.0f} s)")
+
     rows = []
     for name in a.recipes:
-        results = []
-        for seed in range(a.seeds):
-            cache = a.out / name / f"seed-{seed}.json"
-            cached = json.loads(cache.read_text()) if cache.is_file() else {}
-            if (cached.get("config") == config_key(name, a.train_rooms)
-                    and cached["rooms"].keys() == set(a.rooms)):
-                results.append(cached)
-                continue
-            r = run_seed(name, seed, a.out, a.rooms, a.train_rooms)
-            cache.write_text(json.dumps(r, indent=1))
-            c, v, _p = seed_figures(r)
-            print(f"{name} seed {seed}: {c:.2f} coll/1000, coverage {v:.3f} "
-                  f"({r['learn_seconds']:.0f} + {r['judge_seconds']:.0f} s)", file=sys.stderr)
-            results.append(r)
+        key = config_key(name, a.train_rooms)
+        results = per_seed(
+            range(a.seeds), lambda seed, name=name: a.out / name / f"seed-{seed}.json",
+            lambda old, key=key: old.get("config") == key and old["rooms"].keys() == set(a.rooms),
+            lambda seed, name=name: run_seed(name, seed, a.out, a.rooms, a.train_rooms),
+            lambda seed, r, name=name: say(name, seed, r))
         rows.append(row(name, results))
     table = "\n".join([HEADER, *rows])
     print(table)
     if a.publish:
-        sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-        from common.publish import publish
-
         publish("generalisation", table)
     return 0
 

@@ -34,7 +34,6 @@ import argparse
 import contextlib
 import hashlib
 import io
-import json
 import os
 import sys
 import time
@@ -42,6 +41,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
+from common import per_seed  # noqa: E402
+from common.publish import publish  # noqa: E402
 
 DEV_ROOMS = [f"gen:{2_000_000 + i}" for i in range(20)]
 #: The presets whose frozen policies drive alone (the goal presets fuse behaviours and are
@@ -227,29 +230,23 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     a.presets = [str(Path(p).resolve()) if p.endswith(".toml") else p for p in a.presets]
     a.out.mkdir(parents=True, exist_ok=True)
+    def say(preset: str, seed: int, r: dict[str, Any]) -> str:
+        bad = np.mean([e["collisions_per_1000"] > BAD for e in r["evaluations"].values()])
+        return f"{label(preset)} seed {seed}: {bad:.1%} above {BAD:g} ({r['seconds']:.0f} s)"
+
     rows = []
     for preset in a.presets:
-        results = []
-        for seed in range(a.first_seed, a.first_seed + a.seeds):
-            cache = a.out / label(preset) / f"seed-{seed}.json"
-            old = json.loads(cache.read_text()) if cache.is_file() else {}
-            if (old.get("rooms") == a.rooms and old.get("trials") == a.trials
-                    and old.get("config") == preset_key(preset)):
-                results.append(old)
-                continue
-            r = run_seed(preset, seed, a.out, a.rooms, a.trials)
-            cache.write_text(json.dumps(r, indent=1))
-            bad = np.mean([e["collisions_per_1000"] > BAD for e in r["evaluations"].values()])
-            print(f"{label(preset)} seed {seed}: {bad:.1%} above {BAD:g} ({r['seconds']:.0f} s)",
-                  file=sys.stderr)
-            results.append(r)
+        want = {"rooms": a.rooms, "trials": a.trials, "config": preset_key(preset)}
+        results = per_seed(
+            range(a.first_seed, a.first_seed + a.seeds),
+            lambda seed, preset=preset: a.out / label(preset) / f"seed-{seed}.json",
+            lambda old, want=want: all(old.get(k) == v for k, v in want.items()),
+            lambda seed, preset=preset: run_seed(preset, seed, a.out, a.rooms, a.trials),
+            lambda seed, r, preset=preset: say(preset, seed, r))
         rows.append(row(preset, results))
     table = "\n".join([HEADER, *rows])
     print(table)
     if a.publish:
-        sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
-        from common.publish import publish
-
         publish(a.publish, table)
     return 0
 
