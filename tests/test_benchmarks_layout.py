@@ -55,11 +55,10 @@ def test_a_long_measurement_resumes_from_the_seeds_it_cached(tmp_path, monkeypat
         ran.append(seed)
         return {"config": "a", "x": seed}
 
-    got = per_seed(range(3), lambda s: tmp_path / f"seed-{s}.json",
-                   lambda old: old["config"] == "a", run, lambda s, r: f"seed {s}: {r['x']}")
+    got = per_seed(range(3), tmp_path, lambda old: old["config"] == "a", run,
+                   lambda s, r: f"seed {s}: {r['x']}")
     assert [r["x"] for r in got] == [0, 1, 2] and ran == [1, 2]
     assert json.loads((tmp_path / "seed-1.json").read_text())["x"] == 1
     assert capsys.readouterr().err.splitlines() == ["seed 1: 1", "seed 2: 2"]
-    assert [r["x"] for r in per_seed(range(3), lambda s: tmp_path / f"seed-{s}.json",
-                                     lambda old: True, run, str)] == [0, 1, 2]
+    assert [r["x"] for r in per_seed(range(3), tmp_path, lambda old: True, run, str)] == [0, 1, 2]
     assert ran == [1, 2]  # (all cached now)

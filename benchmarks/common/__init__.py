@@ -166,15 +166,15 @@ def against(rev: str, script: Path, call: Callable[[Path, Path], str], repeats: 
     return values
 
 
-def per_seed(seeds: Iterable[int], cache: Callable[[int], Path],
-             fresh: Callable[[dict[str, Any]], bool], run: Callable[[int], dict[str, Any]],
+def per_seed(seeds: Iterable[int], folder: Path, fresh: Callable[[dict[str, Any]], bool],
+             run: Callable[[int], dict[str, Any]],
              say: Callable[[int, dict[str, Any]], str]) -> list[dict[str, Any]]:
-    """Each seed's results: read from its JSON file ``cache(seed)`` when ``fresh`` accepts what
+    """Each seed's results: read from ``folder/seed-<seed>.json`` when ``fresh`` accepts what
     is there (the same config and rooms), else ``run(seed)``, written there and said in one
     line on stderr (``say``). A long measurement so resumes where it stopped."""
     out = []
     for seed in seeds:
-        path = cache(seed)
+        path = folder / f"seed-{seed}.json"
         old = json.loads(path.read_text()) if path.is_file() else {}
         if old and fresh(old):
             out.append(old)

@@ -392,20 +392,20 @@ def main(argv: list[str] | None = None) -> int:
         for name in a.recipes:
             print(write_config(name, a.write_configs, a.train_rooms))
         return 0
-    def say(name: str, seed: int, r: dict[str, Any]) -> str:
-        c, v, _p = seed_figures(r)
-        return (f"{name} seed {seed}: {c:.2f} coll/1000, coverage {v:.3f} "
-                f"({r['learn_seconds']:.0f} + {r['judge_seconds']:.0f} s)")
 
-    rows = []
-    for name in a.recipes:
-        key = config_key(name, a.train_rooms)
-        results = per_seed(
-            range(a.seeds), lambda seed, name=name: a.out / name / f"seed-{seed}.json",
-            lambda old, key=key: old.get("config") == key and old["rooms"].keys() == set(a.rooms),
-            lambda seed, name=name: run_seed(name, seed, a.out, a.rooms, a.train_rooms),
-            lambda seed, r, name=name: say(name, seed, r))
-        rows.append(row(name, results))
+    def results(name: str) -> list[dict[str, Any]]:
+        key, rooms = config_key(name, a.train_rooms), set(a.rooms)
+
+        def say(seed: int, r: dict[str, Any]) -> str:
+            c, v, _p = seed_figures(r)
+            return (f"{name} seed {seed}: {c:.2f} coll/1000, coverage {v:.3f} "
+                    f"({r['learn_seconds']:.0f} + {r['judge_seconds']:.0f} s)")
+
+        return per_seed(range(a.seeds), a.out / name,
+                        lambda old: old.get("config") == key and old["rooms"].keys() == rooms,
+                        lambda seed: run_seed(name, seed, a.out, a.rooms, a.train_rooms), say)
+
+    rows = [row(name, results(name)) for name in a.recipes]
     table = "\n".join([HEADER, *rows])
     print(table)
     if a.publish:

@@ -230,20 +230,19 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     a.presets = [str(Path(p).resolve()) if p.endswith(".toml") else p for p in a.presets]
     a.out.mkdir(parents=True, exist_ok=True)
-    def say(preset: str, seed: int, r: dict[str, Any]) -> str:
-        bad = np.mean([e["collisions_per_1000"] > BAD for e in r["evaluations"].values()])
-        return f"{label(preset)} seed {seed}: {bad:.1%} above {BAD:g} ({r['seconds']:.0f} s)"
 
-    rows = []
-    for preset in a.presets:
+    def results(preset: str) -> list[dict[str, Any]]:
         want = {"rooms": a.rooms, "trials": a.trials, "config": preset_key(preset)}
-        results = per_seed(
-            range(a.first_seed, a.first_seed + a.seeds),
-            lambda seed, preset=preset: a.out / label(preset) / f"seed-{seed}.json",
-            lambda old, want=want: all(old.get(k) == v for k, v in want.items()),
-            lambda seed, preset=preset: run_seed(preset, seed, a.out, a.rooms, a.trials),
-            lambda seed, r, preset=preset: say(preset, seed, r))
-        rows.append(row(preset, results))
+
+        def say(seed: int, r: dict[str, Any]) -> str:
+            bad = np.mean([e["collisions_per_1000"] > BAD for e in r["evaluations"].values()])
+            return f"{label(preset)} seed {seed}: {bad:.1%} above {BAD:g} ({r['seconds']:.0f} s)"
+
+        return per_seed(range(a.first_seed, a.first_seed + a.seeds), a.out / label(preset),
+                        lambda old: all(old.get(k) == v for k, v in want.items()),
+                        lambda seed: run_seed(preset, seed, a.out, a.rooms, a.trials), say)
+
+    rows = [row(preset, results(preset)) for preset in a.presets]
     table = "\n".join([HEADER, *rows])
     print(table)
     if a.publish:

@@ -153,6 +153,14 @@ def _norms_many(X, out, calls):  # type: ignore[no-untyped-def]
         row_norms(X, out)
 
 
+def _differ(sizes: tuple[int, ...], tries: int,
+            one: Callable[[int], tuple[object, object]]) -> tuple[int, int]:
+    """How many of ``tries`` draws per size give ours != numpy's (``one(size)`` draws once
+    and returns both), and how many were tried."""
+    bad = sum(not np.array_equal(*one(n)) for n in sizes for _ in range(tries))
+    return bad, tries * len(sizes)
+
+
 def _ns(f: Callable[[], object], calls: int) -> float:
     t = time.perf_counter()
     f()
@@ -172,40 +180,38 @@ def main() -> None:
     ap.add_argument("--calls", type=int, default=200_000, help="calls timed per operation")
     a = ap.parse_args()
     rng = np.random.default_rng(0)
+    sizes = (8, 40, 48)  # a sonar reading (8 or 40 ranges), the memberships of 48 rules
+
+    def log_once(n: int) -> tuple[np.ndarray, np.ndarray]:
+        x, out = rng.uniform(1e-3, 5.0, n), np.empty(n)
+        _call1(LOG, LOG_CTX, LOG_AUX, x, out)
+        return out, np.log(x)
+
+    def pow_once(n: int) -> tuple[np.ndarray, np.ndarray]:
+        x, y, out = rng.uniform(1e-6, 50.0, n), np.full(n, -1.0 / rng.uniform(0.1, 2)), \
+            np.empty(n)
+        _call2(POW, POW_CTX, POW_AUX, x, y, out)
+        return out, np.power(x, y)
+
     rows = []
-    # log of a sonar reading (8 or 40 ranges), power of memberships' distances (48 rules)
-    bad, sizes = 0, (8, 40, 48)
-    for n in sizes:
-        for _ in range(a.tries):
-            x, out = rng.uniform(1e-3, 5.0, n), np.empty(n)
-            _call1(LOG, LOG_CTX, LOG_AUX, x, out)
-            bad += not np.array_equal(out, np.log(x))
     x, out = rng.uniform(1e-3, 5.0, 40), np.empty(40)
     _log_many(LOG, LOG_CTX, LOG_AUX, x, out, 1)
-    rows.append(("np.log", sizes, bad, a.tries * len(sizes),
+    rows.append(("np.log", sizes, *_differ(sizes, a.tries, log_once),
                  _ns(lambda: _log_many(LOG, LOG_CTX, LOG_AUX, x, out, a.calls), a.calls),
                  _python_ns(lambda: np.log(x, out=out), a.calls)))
-    bad = 0
-    for n in sizes:
-        for _ in range(a.tries):
-            x, y, out = rng.uniform(1e-6, 50.0, n), np.full(n, -1.0 / rng.uniform(0.1, 2)), \
-                np.empty(n)
-            _call2(POW, POW_CTX, POW_AUX, x, y, out)
-            bad += not np.array_equal(out, np.power(x, y))
     x, y, out = rng.uniform(1e-6, 50.0, 48), np.full(48, -2.5), np.empty(48)
     _pow_many(POW, POW_CTX, POW_AUX, x, y, out, 1)
-    rows.append(("np.power", sizes, bad, a.tries * len(sizes),
+    rows.append(("np.power", sizes, *_differ(sizes, a.tries, pow_once),
                  _ns(lambda: _pow_many(POW, POW_CTX, POW_AUX, x, y, out, a.calls), a.calls),
                  _python_ns(lambda: np.power(x, y, out=out), a.calls)))
     if DDOT is not None:
-        bad = 0
-        for n in (7, 48, 300):
-            for _ in range(a.tries):
-                u, v = rng.normal(size=n), rng.normal(size=n)
-                bad += DDOT(n, u.ctypes.data, 1, v.ctypes.data, 1) != float(u @ v)
+        def ddot_once(n: int) -> tuple[float, float]:
+            u, v = rng.normal(size=n), rng.normal(size=n)
+            return DDOT(n, u.ctypes.data, 1, v.ctypes.data, 1), float(u @ v)
+
         u, v = rng.normal(size=48), rng.normal(size=48)
         _ddot_many(DDOT, u, v, 1)
-        rows.append(("a @ b (vectors)", (7, 48, 300), bad, a.tries * 3,
+        rows.append(("a @ b (vectors)", (7, 48, 300), *_differ((7, 48, 300), a.tries, ddot_once),
                      _ns(lambda: _ddot_many(DDOT, u, v, a.calls), a.calls),
                      _python_ns(lambda: u @ v, a.calls)))
     bad, total = 0, 0

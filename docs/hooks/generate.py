@@ -383,20 +383,20 @@ def _layers_svg(rows: list[list[tuple[str, str]]], arrows: list[tuple[str, str]]
     imported) between them; an arrow that passes rows goes round them, on its side. One
     line, no blank line: Markdown keeps it as HTML. Colours follow the site's theme."""
     width, row_h, box_h, gap = 640, 78, 42, 22
-    at: dict[str, tuple[float, float, float]] = {}  # name -> (left, top, width)
+    at: dict[str, tuple[float, int, float]] = {}  # name -> (left, row, width)
     left, right = [0.0] * len(rows), [0.0] * len(rows)  # each row's edges
     for r, row in enumerate(rows):
         ws = [8.0 * max(len(n), len(w)) + 28 for n, w in row]
         x = left[r] = (width - sum(ws) - gap * (len(ws) - 1)) / 2
         for (name, _w), w in zip(row, ws, strict=True):
-            at[name] = (x, 16 + r * row_h, w)
+            at[name] = (x, r, w)
             x += w + gap
         right[r] = x - gap
     parts, rounds = [], 0
     for a, b in arrows:
-        (xa, ya, wa), (xb, yb, wb) = at[a], at[b]
+        (xa, ra, wa), (xb, rb, wb) = at[a], at[b]
+        ya, yb = 16 + ra * row_h, 16 + rb * row_h
         mid_a, mid_b = ya + box_h / 2, yb + box_h / 2
-        ra, rb = round((ya - 16) / row_h), round((yb - 16) / row_h)
         if rb == ra:  # side by side (the ground floor)
             x1, x2 = (xa, xb + wb + 3) if xb < xa else (xa + wa, xb - 3)
             d = f"M{x1:.0f},{mid_a:.0f} L{x2:.0f},{mid_b:.0f}"
@@ -413,7 +413,8 @@ def _layers_svg(rows: list[list[tuple[str, str]]], arrows: list[tuple[str, str]]
         parts.append(f'<path d="{d}" fill="none" stroke="currentColor" stroke-opacity="0.55" '
                      'stroke-width="1.4" marker-end="url(#layers-arrow)"/>')
     for name, what in (b for row in rows for b in row):
-        x, y, w = at[name]
+        x, r, w = at[name]
+        y = 16 + r * row_h
         parts.append(f'<rect x="{x:.0f}" y="{y:.0f}" width="{w:.0f}" height="{box_h}" rx="6" '
                      'style="fill:var(--md-code-bg-color,#f5f5f5);'
                      'stroke:var(--md-primary-fg-color,#009485)" stroke-width="1.5"/>'
