@@ -46,6 +46,10 @@ class SingleArbiter:
         (prop,) = proposals.values()
         return prop, self._ONE
 
+    def _fused(self) -> dict[str, Any] | None:
+        """The compiled trial passes the one proposal on (``sitframe.runs.fused``)."""
+        return {} if type(self).combine is SingleArbiter.combine else None
+
 
 # ---------------------------------------------------------------------------
 # helpers

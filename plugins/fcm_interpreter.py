@@ -231,6 +231,17 @@ class FCMInterpreter:
             return self._u(reading)
         return self._u(self.features(reading))
 
+    def _fused(self) -> dict[str, Any] | None:
+        """What the compiled trial needs of these situations (``sitframe.runs.fused``), or
+        ``None`` (not fitted, or a subclass's own ``memberships`` or ``features``)."""
+        cls = type(self)
+        if self.centers is None or cls.memberships is not FCMInterpreter.memberships or \
+                cls.features is not FCMInterpreter.features or \
+                type(self._u) is not MembershipFunction:
+            return None
+        return {"centers": self._u.centers, "p": self._u.p, "floor": self._u.floor,
+                "transform": TRANSFORMS.index(self.transform), "offset": self.offset}
+
     def state(self) -> dict[str, Any]:
         if self.centers is None:
             raise ValueError("the fcm interpreter has not been fitted (no centres)")

@@ -1,15 +1,16 @@
 """Observer plugin: a progress bar over trials and iterations (rich).
 
 Shown only when the run asks for it (``RunInfo.extra["progress"]``; the CLI
-sets it when stderr is a terminal and ``--json`` is not given). Iteration
-updates are throttled to every 100 iterations to keep the loop fast.
+sets it when stderr is a terminal and ``--json`` is not given). Iterations
+are counted from ``sitframe_progress`` (every 100 iterations), which keeps trials on their
+compiled path.
 
 Runs that share a ``RunInfo.extra["progress_group"]`` (the points of a sweep)
 share one pair of bars, whose totals grow as each run starts; several runs
 in one process show on one rich display, closed when the last run ends.
 
 When trials run in worker processes (``--workers K > 1``, ``--scheduler``),
-``sitframe_step`` fires in the workers, where this plugin has no bar
+``sitframe_progress`` fires in the workers, where this plugin has no bar
 (``RunInfo.extra["step_hooks"]`` is false in the main process): only the
 trials bar is shown, and it advances as each trial is logged.
 """
@@ -18,7 +19,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from sitframe import RunInfo, StepRecord, TrialResult, hookimpl
+from sitframe import RunInfo, TrialResult, hookimpl
 
 #: The shared display, its bars per group (``{"trials": id, "iterations": id}``) and
 #: the group of each run still running (by run name).
@@ -63,11 +64,10 @@ def _bar(kind: str) -> tuple[Any, Any] | tuple[None, None]:
 
 
 @hookimpl
-def sitframe_step(record: StepRecord) -> None:
-    if record.transition.before.iteration % 100 == 99:
-        progress, bar = _bar("iterations")
-        if progress is not None:
-            progress.advance(bar, 100)
+def sitframe_progress(trial: int, iterations: int) -> None:
+    progress, bar = _bar("iterations")
+    if progress is not None:
+        progress.advance(bar, iterations)
 
 
 @hookimpl

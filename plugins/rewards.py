@@ -73,6 +73,14 @@ class ObstacleAvoidanceReward:
             return self.collision
         return self.base - self.heading_cost * abs(tr.command.heading_change_deg) + bonus
 
+    def _fused(self) -> dict[str, Any] | None:
+        """The compiled trial's reward (``sitframe.runs.fused``): without ``progress`` (it
+        keeps poses), and not a subclass's own ``__call__``."""
+        if self.progress or type(self).__call__ is not ObstacleAvoidanceReward.__call__:
+            return None
+        return {"collision": float(self.collision), "base": float(self.base),
+                "heading_cost": float(self.heading_cost)}
+
     def _away(self, tr: Transition) -> float:
         """How much farther [m] the transition's end is than its start from the position
         ``progress_window`` iterations before its start (or the episode's first)."""

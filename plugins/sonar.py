@@ -56,7 +56,7 @@ noise ``noise_std`` [m] and a ``dropout`` probability (a dropped beam reads
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -129,6 +129,14 @@ class RimRangeSensor:
         if self.dropout > 0.0:
             reading = np.where(rng.random(self._n) < self.dropout, self.max_range, reading)
         return np.clip(reading, 0.0, self.max_range)
+
+    def _fused(self) -> dict[str, Any] | None:
+        """What the compiled trial needs of this sensor (``sitframe.runs.fused``), or ``None``
+        when it cannot read for it: noise or dropout (draws), or a subclass's own ``read``."""
+        if type(self).read is not RimRangeSensor.read or self.noise_std or self.dropout:
+            return None
+        return {"rays": self._ray_rel, "max_range": float(self.max_range),
+                "radius": float(self.robot_radius), "rays_per_beam": int(self.rays_per_beam)}
 
     def read_many(self, world: World, poses: np.ndarray,
                   rngs: Sequence[np.random.Generator]) -> np.ndarray:

@@ -67,6 +67,7 @@ from __future__ import annotations
 import argparse
 import io
 import json
+import os
 import sys
 import time
 import zlib
@@ -406,7 +407,11 @@ def simulator_tally() -> Iterator[dict[str, Tally]]:
     """Count what a ``sitframe run`` in this process executes: the collect stage's sensor
     readings (``collect_readings``) and robot moves (``collect_moves``, the wander's, with
     their collisions, which the log does not keep), and the loop's robot moves
-    (``loop_moves``: learning iterations and evaluation runs, with collisions)."""
+    (``loop_moves``: learning iterations and evaluation runs, with collisions).
+
+    The compiled trial (``sitframe.runs.fused``) moves the robot without calling
+    ``step_robot`` for each move, so trials run the Python loop while counted
+    (``SITFRAME_FUSED=0``; the same results)."""
     import sitframe.runs.collect as collect
     import sitframe.runs.experiment as experiment
     import sitframe.runs.loop as loop
@@ -442,13 +447,19 @@ def simulator_tally() -> Iterator[dict[str, Tally]]:
                (experiment, "collect_trajectories", reads(experiment.collect_trajectories)),
                (experiment, "collect_wander", reads(experiment.collect_wander))]
     saved = [(m, name, getattr(m, name)) for m, name, _f in patches]
+    fused = os.environ.get("SITFRAME_FUSED")
     try:
+        os.environ["SITFRAME_FUSED"] = "0"
         for m, name, f in patches:
             setattr(m, name, f)
         yield t
     finally:
         for m, name, f in saved:
             setattr(m, name, f)
+        if fused is None:
+            os.environ.pop("SITFRAME_FUSED", None)
+        else:
+            os.environ["SITFRAME_FUSED"] = fused
 
 
 def run_fuzzy(seed: int, d: Path, rooms: dict[str, tuple[str, ...]], config: str = PRESET

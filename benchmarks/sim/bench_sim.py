@@ -26,7 +26,8 @@ each, and prints both medians and their ratio (issue 17: >= 40,000 control
 iterations per second, twice the rate before the compiled kernels).
 ``--first-call`` measures what the compiled kernels cost a fresh process:
 importing numba and loading them from numba's cache, and compiling them with
-an empty cache (the first run after an install)::
+an empty cache (the first run after an install); the simulator's kernels and the
+compiled learning trial's apart, and both::
 
     python benchmarks/sim/bench_sim.py --against ef46ff4 --repeats 11
     python benchmarks/sim/bench_sim.py --first-call
@@ -141,17 +142,20 @@ t1 = time.perf_counter()
 from sitframe.sim.kernels import load
 assert load() is not None
 t2 = time.perf_counter()
-print(t1 - t0, t2 - t1)
+from sitframe.runs import fused
+assert not isinstance(fused._compiled(), str)
+t3 = time.perf_counter()
+print(t1 - t0, t2 - t1, t3 - t2)
 """
 
 
 def _first_call(repeats: int) -> None:
     """Seconds a fresh process spends importing numba and loading (or compiling) the kernels."""
-    def once(env: dict[str, str]) -> tuple[float, float]:
+    def once(env: dict[str, str]) -> tuple[float, float, float]:
         res = subprocess.run([sys.executable, "-c", _FIRST_CALL], capture_output=True, text=True,
                              env=env, check=True, cwd=ROOT)
-        base, load = (float(v) for v in res.stdout.split())
-        return base, load
+        base, load, trial = (float(v) for v in res.stdout.split())
+        return base, load, trial
 
     env = dict(os.environ)
     once(env)  # make sure numba's cache is filled
@@ -160,11 +164,16 @@ def _first_call(repeats: int) -> None:
         cold = [once(dict(env, NUMBA_CACHE_DIR=str(Path(cache) / str(k))))
                 for k in range(max(1, repeats // 3))]
     print(f"importing numpy, scipy and the simulator: median "
-          f"{statistics.median(b for b, _ in warm):.3f} s (for scale)")
-    print(f"importing numba and loading every kernel from its cache: median "
-          f"{statistics.median(w for _, w in warm):.3f} s per process ({repeats} processes)")
-    print(f"... with an empty cache (compiling them, once after an install): median "
-          f"{statistics.median(c for _, c in cold):.3f} s ({len(cold)} processes)")
+          f"{statistics.median(b for b, _, _ in warm):.3f} s (for scale)")
+    for name, cached, compiled in (
+            ("importing numba and loading every simulator kernel",
+             [w for _, w, _ in warm], [c for _, c, _ in cold]),
+            ("then loading the compiled learning trial (sitframe.runs.fused_kernels)",
+             [w for _, _, w in warm], [c for _, _, c in cold]),
+            ("both", [w + x for _, w, x in warm], [c + x for _, c, x in cold])):
+        print(f"{name}: from the cache, median {statistics.median(cached):.3f} s per process "
+              f"({repeats} processes); with an empty cache (compiling, once after an "
+              f"install): median {statistics.median(compiled):.3f} s ({len(cold)} processes)")
 
 
 def main() -> None:

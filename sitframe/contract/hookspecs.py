@@ -229,6 +229,28 @@ def sitframe_step(record: StepRecord) -> None:
         references (not copies) to this iteration's arrays. Do not keep it
         beyond the call unless you copy what you need.
 
+    A plugin implementing this hook sees every iteration from Python, so the trials of its
+    runs take the Python loop instead of the compiled one (:mod:`sitframe.runs.fused`; the
+    results are the same, some 4 times slower). To follow a run's progress, implement
+    :func:`sitframe_progress`; to analyse iterations, read the log.
+
+    All implementations are called; the return value is ignored.
+    """
+
+
+@hookspec
+def sitframe_progress(trial: int, iterations: int) -> None:
+    """Iterations of a trial finished: the hook for a progress display.
+
+    Called in the process that runs the trial (a worker process when trials run in
+    parallel) after every 100 iterations of the trial and after its last, in the trials in
+    which :func:`sitframe_step` would be called (not in the evaluations of a learning trial).
+    Unlike :func:`sitframe_step` it leaves a trial on its compiled path.
+
+    :param trial: The trial's index.
+    :param iterations: The iterations finished since the previous call for this trial
+        (100, or the rest at the trial's end).
+
     All implementations are called; the return value is ignored.
     """
 

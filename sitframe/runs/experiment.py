@@ -53,6 +53,7 @@ from sitframe.runs.loop import (
     STAGE_TRIALS,
     TRIAL_WORK,
     TrialSpec,
+    progress_hook_of,
     simulate,
     stage_seed,
     step_hook_of,
@@ -659,7 +660,8 @@ def _experiment(handle: Experiment | Setup) -> Experiment:
 def run_trial(handle: Experiment | Setup, spec: TrialSpec) -> TrialResult:
     """Task: run one trial and return its data (``sitframe_step`` fires where it runs)."""
     exp = _experiment(handle)
-    return simulate(exp.res, spec, step_hook=step_hook_of(exp.pm))
+    return simulate(exp.res, spec, step_hook=step_hook_of(exp.pm),
+                    progress=progress_hook_of(exp.pm))
 
 
 def run_clusters(handle: Experiment | Setup

@@ -71,6 +71,7 @@ from sitframe.contract.records import (
 )
 from sitframe.contract.tables import protocol_key
 from sitframe.errors import PLUGIN_ERRORS, InputError, PluginFault, TaskCancelled
+from sitframe.runs import fused
 from sitframe.runs.tracker import SituationTracker
 from sitframe.sim.metrics import collisions_per_1000, coverage, path_length
 from sitframe.sim.robot import Command, RobotParams, StepOutcome, step_robot
@@ -170,31 +171,49 @@ def _in_trial(trial: int) -> Iterator[None]:
                           trial=trial) from exc
 
 
-def step_hook_of(pm: pluggy.PluginManager) -> Callable[[StepRecord], Any] | None:
-    """A function firing ``sitframe_step`` observers, or ``None`` when no plugin implements it.
+def _observer(pm: pluggy.PluginManager, name: str) -> Callable[..., None] | None:
+    """A function firing hook ``name`` with its keyword arguments and, for a fault, the trial
+    and iteration; ``None`` when no plugin implements the hook.
 
-    An observer that raises is a :class:`PluginFault` naming its plugin (the
-    one whose ``sitframe_step`` is on the traceback), the trial and the iteration.
+    An observer that raises is a :class:`PluginFault` naming its plugin (the one whose hook
+    is on the traceback), the trial and the iteration.
     """
-    hook = pm.hook
-    impls = hook.sitframe_step.get_hookimpls()
+    hook = getattr(pm.hook, name)
+    impls = hook.get_hookimpls()
     if not impls:
         return None
     info = getattr(pm, "sitframe_info", {})
 
-    def step_hook(rec: StepRecord) -> None:
+    def fire(trial: int, iteration: int | None, /, **kwargs: Any) -> None:
         try:
-            hook.sitframe_step(record=rec)
+            hook(**kwargs)
         except (KeyboardInterrupt, TaskCancelled, PluginFault):
             raise
         except PLUGIN_ERRORS as exc:  # an observer's fault is reported, not raw
-            name = blame(exc, impls)
-            where = (f"plugin {info[name].describe() if name in info else name}"
-                     if name else "an observer")
-            raise fault(exc, where, "sitframe_step", rec.trial,
-                        rec.transition.before.iteration) from exc
+            who = blame(exc, impls)
+            where = (f"plugin {info[who].describe() if who in info else who}"
+                     if who else "an observer")
+            raise fault(exc, where, name, trial, iteration) from exc
 
-    return step_hook
+    return fire
+
+
+def step_hook_of(pm: pluggy.PluginManager) -> Callable[[StepRecord], Any] | None:
+    """A function firing ``sitframe_step`` observers, or ``None`` when no plugin implements it
+    (faults as :func:`_observer`'s)."""
+    fire = _observer(pm, "sitframe_step")
+    if fire is None:
+        return None
+    return lambda rec: fire(rec.trial, rec.transition.before.iteration, record=rec)
+
+
+def progress_hook_of(pm: pluggy.PluginManager) -> Callable[[int, int], None] | None:
+    """A function ``(trial, iterations)`` firing ``sitframe_progress``, or ``None`` when no
+    plugin implements it."""
+    fire = _observer(pm, "sitframe_progress")
+    if fire is None:
+        return None
+    return lambda trial, n: fire(trial, None, trial=trial, iterations=n)
 
 
 def simulate(
@@ -202,6 +221,7 @@ def simulate(
     spec: TrialSpec,
     *,
     step_hook: Callable[[StepRecord], Any] | None = None,
+    progress: Callable[[int, int], None] | None = None,
     protocol: Any = None,
 ) -> TrialResult:
     """Run one trial (learning, a batch of evaluation episodes, or one episode); return it.
@@ -213,6 +233,11 @@ def simulate(
     batches of their own, never for the evaluations of a learning trial
     (``observed=False``), whichever executor runs them: the serial one runs
     them here, a pool as separate tasks, and the logs must not differ.
+    ``progress(trial, iterations)`` (``sitframe_progress``) fires where ``step_hook`` does,
+    every :data:`~sitframe.runs.fused.EVERY` iterations.
+
+    A trial whose loop has nothing to do but its step runs compiled when its components
+    have a compiled form (:mod:`sitframe.runs.fused`), with the same results.
 
     Raises
     ------
@@ -222,9 +247,9 @@ def simulate(
         trial and iteration.
     """
     if not spec.observed:
-        step_hook = None  # an evaluation of a learning trial (sitframe_step: "not called")
+        step_hook = progress = None  # an evaluation of a learning trial ("not called")
     if spec.protocol is not None and not spec.learn:
-        return run_batch(res, spec, step_hook=step_hook)
+        return run_batch(res, spec, step_hook=step_hook, progress=progress)
     rng = np.random.default_rng(spec.seed)
     world = res.world(spec.world)
     goal = world.goal if spec.goal is None else Goal(np.asarray(spec.goal[:2], float),
@@ -246,7 +271,14 @@ def simulate(
         raise InputError("expected an interpreter whose situations do not evolve: the "
                          "candidates are judged with the situations the trial started from",
                          key="experiment.candidates")
-    n = _run_loop(res, spec, parts, rec, env, step_hook, protocol)
+    fz = "observed, ended by a protocol, evolving, candidates, spaces or protocol episodes" \
+        if step_hook is not None or protocol is not None or env.track is not None or \
+        env.cands is not None or parts.spaces or isinstance(env.chain, _TrainingEpisodes) \
+        else fused.prepare(res, spec, parts)
+    n = _run_loop(res, spec, parts, rec, env, step_hook, progress, protocol) \
+        if isinstance(fz, str) else fused.run(fz, res, spec, rec, env, env.chain, progress)
+    if progress is not None and n % fused.EVERY:
+        progress(spec.index, n % fused.EVERY)  # (the rest; every EVERY iterations: the loop)
     arrays = rec.arrays(n, res.origins, spec.index, res.run.sensor.max_range)
     result = _trial_result(res, spec, world, parts, arrays, env)
     for ev_spec in evaluation_specs(spec, result.policies, result.situations.get("state")):
@@ -401,14 +433,13 @@ class Recorder:
         self.memberships = np.empty((L, c))
         self.spaces = {name: np.empty((L, cs)) for name, cs in (spaces or {}).items()}
         self.weights = np.empty((L, len(labels)))
-        # Scalars go to lists (an append is cheaper than writing into an array).
-        self._command: list[tuple[float, float]] = []
-        self._nearest: list[float] = []
-        self._contacts: list[tuple[int, np.ndarray]] = []
-        self._proposals: list[tuple[float, ...]] = []
-        self._rewards: list[tuple[float, ...]] = []
+        self.command = np.empty((L, 2))
+        self.nearest = np.empty(L)
+        self.collision = np.zeros(L, dtype=bool)
+        self.contact = np.full((L, 2), np.nan)
+        self.proposals = np.empty((L, 2 * len(labels)))
+        self.rewards = np.empty((L, len(rewarded)))
         self.rewarded = rewarded
-        self._nan = float("nan")
 
     def record(self, t: int, ctx: Context, cmd: Command, out: StepOutcome, weights: np.ndarray,
                proposals: dict[str, Proposal], rewards: dict[str, float]) -> None:
@@ -417,17 +448,17 @@ class Recorder:
         self.reading[t] = ctx.reading
         self.memberships[t] = ctx.memberships
         self.weights[t] = weights
-        self._command.append((cmd.heading_change_deg, cmd.speed_m_s))
-        self._nearest.append(ctx.nearest)
+        self.command[t] = cmd.heading_change_deg, cmd.speed_m_s
+        self.nearest[t] = ctx.nearest
         if out.collided:
-            self._contacts.append((t, out.contact_xy))
-        nan = self._nan
-        row: list[float] = []
-        for p in proposals.values():
-            row += (p.heading_deg, nan if p.speed_m_s is None else p.speed_m_s)
-        self._proposals.append(tuple(row))
+            self.collision[t] = True
+            self.contact[t] = out.contact_xy
+        row = self.proposals[t]
+        for i, p in enumerate(proposals.values()):
+            row[2 * i] = p.heading_deg
+            row[2 * i + 1] = np.nan if p.speed_m_s is None else p.speed_m_s
         if rewards:
-            self._rewards.append(tuple(rewards.values()))
+            self.rewards[t] = tuple(rewards.values())
 
     def record_spaces(self, t: int, ctxs: list[Context]) -> None:
         """Record iteration ``t``'s memberships of each space of its own (``ctxs[1:]``)."""
@@ -445,24 +476,16 @@ class Recorder:
                             trial, max_range)
         for name, u in self.spaces.items():
             _check_memberships_rows(u[:n], origins[f"spaces.{name}"], trial)
-        coll = np.zeros(n, dtype=bool)
-        contact = np.full((n, 2), np.nan)
-        for t, xy in self._contacts:
-            coll[t] = True
-            contact[t] = xy
         out = {"pose": self.pose[: n + 1], READING: self.reading[:n],
-               "memberships": self.memberships[:n],
-               "command": np.array(self._command, dtype=float).reshape(n, 2),
-               "collision": coll, "contact": contact,
-               "nearest": np.array(self._nearest, dtype=float), "weights": self.weights[:n]}
-        props = np.array(self._proposals, dtype=float).reshape(n, 2 * len(self.labels))
+               "memberships": self.memberships[:n], "command": self.command[:n],
+               "collision": self.collision[:n], "contact": self.contact[:n],
+               "nearest": self.nearest[:n], "weights": self.weights[:n]}
         for i, lb in enumerate(self.labels):
-            out[f"proposals/{lb}"] = props[:, 2 * i: 2 * i + 2].copy()
+            out[f"proposals/{lb}"] = self.proposals[:n, 2 * i: 2 * i + 2].copy()
         for name, u in self.spaces.items():
             out[f"spaces/{name}/memberships"] = u[:n]
-        rewards = np.array(self._rewards, dtype=float).reshape(n, len(self.rewarded))
         for i, lb in enumerate(self.rewarded):
-            out[f"reward/{lb}"] = rewards[:, i].copy()
+            out[f"reward/{lb}"] = self.rewards[:n, i].copy()
         return out
 
 
@@ -481,7 +504,8 @@ class _Env:
 
 
 def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder, env: _Env,
-              step_hook: Callable[[StepRecord], Any] | None, protocol: Any) -> int:
+              step_hook: Callable[[StepRecord], Any] | None,
+              progress: Callable[[int, int], None] | None, protocol: Any) -> int:
     """The control loop (module docstring); returns the number of iterations run.
 
     Every plugin call is preceded by setting ``step_at`` to where it is, so a
@@ -561,6 +585,8 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
             if step_hook is not None:
                 step_at = at_step
                 step_hook(StepRecord(k, trs[0], proposals, weights, rewards))
+            if progress is not None and (t + 1) % fused.EVERY == 0:
+                progress(k, fused.EVERY)
             ctx, ctxs = ctxs2[0], ctxs2
             if at_end is not None and (step_at := at_end) and \
                     check_flag(protocol.terminated(ctx)):
@@ -919,7 +945,8 @@ def _training_episodes(res: Resolved, spec: TrialSpec, world: World) -> _Trainin
 
 
 def run_batch(res: Resolved, spec: TrialSpec, *,
-              step_hook: Callable[[StepRecord], Any] | None = None) -> TrialResult:
+              step_hook: Callable[[StepRecord], Any] | None = None,
+              progress: Callable[[int, int], None] | None = None) -> TrialResult:
     """Run a batch of ``spec.protocol``'s episodes in ``spec.world``; return it as one trial.
 
     Start poses (and goals) come from the protocol, given a Generator seeded
@@ -956,7 +983,8 @@ def run_batch(res: Resolved, spec: TrialSpec, *,
         ep = dataclasses.replace(spec, seed=int(seeds[e]), iterations=int(proto.iterations),
                                  evaluate=(), start=tuple(float(v) for v in starts[e]),
                                  goal=goal, protocol=None)
-        parts.append(r := simulate(res, ep, step_hook=step_hook, protocol=proto))
+        parts.append(r := simulate(res, ep, step_hook=step_hook, progress=progress,
+                                   protocol=proto))
         figures.append({} if score is None else _checked(
             o, "score_episode", check_data, lambda r=r, e=e: score(
                 r.arrays, starts[e], None if goals is None else goals[e], res.robot), k,

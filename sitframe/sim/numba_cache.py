@@ -31,7 +31,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-__all__ = ["announce_compilation", "cache_dir", "compile_pending", "configure"]
+__all__ = ["announce_compilation", "cache_dir", "compile_pending", "configure", "drop_stale"]
 
 #: Set once by :func:`configure`: the folder numba caches in, or ``None`` (no cache).
 _CONFIGURED: list[Path | None] = []
@@ -103,6 +103,30 @@ def compile_pending(source: Path, folder: Path | None = None) -> bool:
     sub = folder / UserProvidedCacheLocator.get_suitable_cache_subpath(str(source))
     newest = source.stat().st_mtime
     return not any(p.stat().st_mtime >= newest for p in sub.glob(f"{source.stem}.*.nbi"))
+
+
+def drop_stale(source: Path, *depends: Path, folder: Path | None = None) -> int:
+    """Remove the cache index of every kernel of ``source`` older than one of ``depends``;
+    returns how many were removed.
+
+    numba compiles a cached kernel again only when its *own* source file changed; a kernel
+    that calls kernels of another module (``depends``) would keep their old compiled code.
+    Without its index, numba compiles it anew. Only the user's cache folder is touched.
+    """
+    from numba.core.caching import UserProvidedCacheLocator
+
+    folder = cache_dir() if folder is None else folder
+    sub = folder / UserProvidedCacheLocator.get_suitable_cache_subpath(str(source))
+    newest = max(p.stat().st_mtime for p in depends)
+    gone = 0
+    for p in sub.glob(f"{source.stem}.*.nbi"):
+        try:
+            if p.stat().st_mtime < newest:
+                p.unlink()
+                gone += 1
+        except OSError:  # (another process removed it first)
+            continue
+    return gone
 
 
 def announce_compilation(source: Path | None = None) -> None:

@@ -1,0 +1,452 @@
+"""The compiled learning trial: one call runs many control iterations (:mod:`sitframe.runs.fused`).
+
+:func:`run` is the control loop of :mod:`sitframe.runs.loop` for one configuration of
+built-in components -- a range-finder ring without noise, fixed fuzzy c-means situations, one
+``fuzzy-q`` heading behaviour, the ``single`` arbiter and the ``obstacle-avoidance`` reward
+-- with every operation in the order the Python components perform it, so the log is the
+same to the bit. Sines and cosines are the C library's (used only where they are numpy's,
+:func:`sitframe.sim.kernels.fused`); logarithms, powers, exponentials and dot products are
+numpy's own loops and OpenBLAS's ``ddot``, reached through pointers
+(:mod:`sitframe.sim.numpy_loops`); sums follow numpy's pairwise order.
+
+A step that touches a wall is left to Python: :func:`run` returns :data:`NEED_STEP` with the
+command in ``carry``, the caller runs ``robot.step_robot`` (contact, refinement, back-off and
+turn, with the trial's Generator) and calls again with its outcome. Touching is rare (a few
+per hundred iterations while learning), and the contact's arithmetic then stays in one place.
+
+Arrays (``c`` situations, ``A`` headings, ``d`` readings, ``L`` iterations):
+
+``fp`` (float64)
+    see :data:`FP`; ``ip`` (int64): see :data:`IP`.
+``state`` (int64)
+    ``converged_at`` (-1: not), stable changes, iterations since the last change, changes,
+    whether the next iteration reads first (a trial's or an episode's start), the next
+    iteration, snapshots written.
+``carry``
+    (3 + 2,) the pose and the command of a step left to Python; ``reading`` (d,), ``u`` (c,)
+    the current reading and memberships.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from sitframe.sim import numpy_loops
+from sitframe.sim.kernels_numba import (
+    _JIT,
+    _pairwise_sum,
+    fcm_ratios,
+    label_strengths,
+    normalize,
+    ranges_at,
+    step_free,
+)
+
+#: Names of the float parameters ``fp``, in order.
+FP = ("max_range", "sensor_radius", "offset", "p", "floor", "alpha", "gamma", "activation",
+      "temperature", "temperature_decay", "temperature_min", "alpha_visits", "r_collision",
+      "r_base", "r_heading_cost", "radius", "max_turn_rate_deg_s", "control_period_s",
+      "min_speed", "max_speed", "max_heading_change_deg", "recovery_backoff_m",
+      "default_speed")
+#: Names of the integer parameters ``ip``, in order.
+IP = ("rays_per_beam", "transform", "power", "has_learner", "learning", "b", "p_changes",
+      "min_updates", "thesis", "terminal", "tie_centre", "relative", "decay", "stop")
+#: :func:`run`'s answers: the chunk is done; a step touches a wall (Python steps it).
+DONE, NEED_STEP = 0, 1
+#: How ``w ** p`` is computed, as numpy's in-place power chooses for a scalar exponent.
+POW_LOOP, POW_ONE, POW_RECIPROCAL, POW_ZERO, POW_SQRT, POW_SQUARE = range(6)
+
+
+@njit(**_JIT)
+def _loop1(f, ctx, aux, x, out, n, ptrs, dims, strides):  # pragma: no cover - compiled
+    """numpy's unary loop ``f`` over ``x[:n]`` into ``out[:n]``."""
+    ptrs[0], ptrs[1] = x.ctypes.data, out.ctypes.data
+    dims[0] = n
+    strides[0], strides[1] = 8, 8
+    f(ctx, ptrs.ctypes.data, dims.ctypes.data, strides.ctypes.data, aux)
+
+
+@njit(**_JIT)
+def _power(w, p, mode, f, ctx, aux, ptrs, dims, strides, scalar):  # pragma: no cover
+    """``w **= p`` in place, as numpy computes it for a Python float ``p``."""
+    if mode == POW_LOOP:
+        scalar[0] = p
+        ptrs[0], ptrs[1], ptrs[2] = w.ctypes.data, scalar.ctypes.data, w.ctypes.data
+        dims[0] = w.size
+        strides[0], strides[1], strides[2] = 8, 0, 8
+        f(ctx, ptrs.ctypes.data, dims.ctypes.data, strides.ctypes.data, aux)
+        return
+    for i in range(w.size):
+        x = w[i]
+        if mode == POW_RECIPROCAL:
+            w[i] = 1.0 / x
+        elif mode == POW_ZERO:
+            w[i] = 1.0
+        elif mode == POW_SQRT:
+            w[i] = math.sqrt(x)
+        elif mode == POW_SQUARE:
+            w[i] = x * x
+
+
+@njit(**_JIT)
+def row_norms(X, out):  # pragma: no cover - compiled
+    """``np.einsum("ij,ij->i", X, X)`` in einsum's own order (x86-64 baseline: two lanes,
+    blocks of eight summed from the last pair to the first, the tail in pairs)."""
+    n, d = X.shape
+    for i in range(n):
+        lane0 = 0.0
+        lane1 = 0.0
+        k = 0
+        while d - k >= 8:
+            for j in (6, 4, 2, 0):
+                lane0 = X[i, k + j] * X[i, k + j] + lane0
+                lane1 = X[i, k + j + 1] * X[i, k + j + 1] + lane1
+            k += 8
+        while k < d:
+            lane0 = X[i, k] * X[i, k] + lane0
+            second = X[i, k + 1] if k + 1 < d else 0.0
+            lane1 = second * second + lane1
+            k += 2
+        out[i] = 0.0 + (lane0 + lane1)
+
+
+@njit(**_JIT)
+def memberships(reading, fc, fp, ip, feat, diff, d2, u, lg, pw, ptrs, dims, strides,
+                scalar):  # pragma: no cover - compiled
+    """The ``fcm`` interpreter's memberships of ``reading`` into ``u`` (``FCMInterpreter.
+    memberships`` and ``MembershipFunction``, operation by operation)."""
+    transform, offset = ip[1], fp[2]
+    for j in range(reading.size):
+        if transform == 0:
+            feat[j] = reading[j]
+        elif transform == 1:
+            feat[j] = reading[j] + offset
+        else:
+            feat[j] = 1.0 / (reading[j] + offset)
+    if transform == 1:
+        _loop1(lg[0], lg[1], lg[2], feat, feat, feat.size, ptrs, dims, strides)
+    for i in range(fc.shape[0]):
+        for j in range(fc.shape[1]):
+            diff[i, j] = fc[i, j] - feat[j]
+    row_norms(diff, d2)
+    if fcm_ratios(d2, fp[4], u) <= 0.0:  # on a centre: shared equally among those it is on
+        on = 0
+        for i in range(d2.size):
+            on += d2[i] <= 0.0
+        for i in range(d2.size):
+            u[i] = (1.0 if d2[i] <= 0.0 else 0.0) / on
+        return
+    _power(u, fp[3], ip[2], pw[0], pw[1], pw[2], ptrs, dims, strides, scalar)
+    normalize(u)
+
+
+@njit(**_JIT)
+def _read(x, y, th, rel, seg, fp, ip, out):  # pragma: no cover - compiled
+    """The sensor's reading at a pose; returns its nearest range."""
+    ranges_at(x, y, th, rel, seg, fp[0], fp[1], ip[0], True, out)
+
+
+@njit(**_JIT)
+def _plan(x0, y0, th0, heading, speed, fp):  # pragma: no cover - compiled
+    """``robot._plan``: ``v``, ``omega`` [rad/s] and the turn's duration [s]."""
+    lo, hi, h = -fp[20], fp[20], heading
+    h = lo if lo > h else h
+    dh = math.radians(hi if hi < h else h)
+    lo, hi, v = fp[18], fp[19], speed
+    v = lo if lo > v else v
+    v = hi if hi < v else v
+    w = math.radians(fp[16])
+    t_turn, period = abs(dh) / w, fp[17]
+    t_turn = period if period < t_turn else t_turn
+    omega = math.copysign(w, dh) if dh != 0.0 else 0.0
+    return v, omega, t_turn
+
+
+@njit(**_JIT)
+def _greedy(q, centre, out):  # pragma: no cover - compiled
+    """``fuzzy_q.greedy_actions`` into ``out``."""
+    c, a = q.shape
+    for i in range(c):
+        best = 0
+        for k in range(1, a):  # (argmax: the first of the greatest; a NaN wins at once)
+            if q[i, best] != q[i, best]:
+                break
+            if q[i, k] > q[i, best] or q[i, k] != q[i, k]:
+                best = k
+        if centre:  # (the one nearest the middle of the greatest; none if a NaN: the first)
+            top, score, pick = q[i, best], -np.inf, 0
+            for k in range(a):
+                s = -abs(k - (a - 1) / 2.0) if q[i, k] == top else -np.inf
+                if s > score:
+                    score, pick = s, k
+            best = pick
+        out[i] = best
+
+
+@njit(**_JIT)
+def _softmax(q, tau, relative, rng, ex, logits, out):  # pragma: no cover - compiled
+    """``fuzzy_q.softmax_choice``: one soft-max draw per situation into ``out``."""
+    c, a = q.shape
+    for i in range(c):
+        top, low = q[i, 0], q[i, 0]
+        for k in range(1, a):
+            v = q[i, k]
+            if (v > top or v != v) and top == top:
+                top = v
+            if (v < low or v != v) and low == low:
+                low = v
+        den = tau
+        if relative:
+            spread = top - low
+            den = tau * (spread if spread > 0 else 1.0)
+        for k in range(a):
+            logits[i * a + k] = (q[i, k] - top) / den
+    ptrs, dims, strides = np.empty(3, np.intp), np.empty(1, np.intp), np.empty(3, np.intp)
+    _loop1(ex[0], ex[1], ex[2], logits, logits, c * a, ptrs, dims, strides)
+    for i in range(c):
+        total = logits[i * a]
+        for k in range(1, a):
+            total = total + logits[i * a + k]
+            logits[i * a + k] = total
+        draw = rng.random() * total
+        n = 0
+        for k in range(a):
+            n += logits[i * a + k] < draw
+        out[i] = n if n < a - 1 else a - 1
+
+
+@njit(**_JIT)
+def _change(t, q, updates, rule_base, greedy, new, state, fp, ip, rng, ex, logits, onehot,
+            snap_it, snap_rules, snap_greedy, snap_q):  # pragma: no cover - compiled
+    """``FuzzyQLearner._change`` at iteration ``t``, its snapshot, and the controller's new
+    one-hot rule table."""
+    state[2] = 0
+    _greedy(q, ip[10] != 0, new)
+    same = True
+    for i in range(new.size):
+        same = same and new[i] == greedy[i]
+    if same:
+        state[1] += 1
+    else:
+        state[1] = 0
+        greedy[:] = new
+    state[3] += 1
+    low = updates[0]
+    for i in range(1, updates.size):
+        low = updates[i] if updates[i] < low else low
+    if state[1] >= ip[6] and (ip[7] == 0 or low >= ip[7]):
+        state[0] = t + 1
+        rule_base[:] = new
+    else:
+        tau = fp[8]
+        if ip[12]:  # annealed: max(temperature_min, temperature * decay ** changes)
+            tau = fp[8] * math.pow(fp[9], float(state[3]))
+            tau = tau if tau > fp[10] else fp[10]
+        _softmax(q, tau, ip[11] != 0, rng, ex, logits, rule_base)
+    k = state[6]
+    snap_it[k] = t + 1
+    snap_rules[k] = rule_base
+    snap_greedy[k] = new
+    snap_q[k] = q
+    state[6] = k + 1
+    onehot[:] = 0.0
+    for i in range(rule_base.size):
+        onehot[i, rule_base[i]] = 1.0
+
+
+@njit(**_JIT)
+def _learn(t, u0, u1, reward, collided, q, updates, visits, rule_base, fp, ip, state,
+           dd, vmax):  # pragma: no cover - compiled
+    """``FuzzyQLearner.update`` up to the rule-base change; whether it is time to change."""
+    act, c = fp[7], u0.size
+    any_active = False
+    for i in range(c):
+        any_active = any_active or act <= 0 or u0[i] >= act
+    if any_active:
+        v_next = 0.0
+        if not (collided and ip[9]):
+            for i in range(c):
+                top = q[i, 0]
+                for k in range(1, q.shape[1]):
+                    v = q[i, k]
+                    if (v > top or v != v) and top == top:
+                        top = v
+                vmax[i] = top
+            v_next = dd(c, u1.ctypes.data, 1, vmax.ctypes.data, 1)
+        alpha, gamma, kappa = fp[5], fp[6], fp[11]
+        target = reward + gamma * v_next
+        for i in range(c):
+            if not (act <= 0 or u0[i] >= act):
+                continue
+            w, a = u0[i], rule_base[i]
+            cur = q[i, a]
+            if kappa:
+                n = visits[i, a]
+                visits[i, a] = n + 1
+                alpha = fp[5] * kappa / (kappa + n)
+            if ip[8]:
+                q[i, a] = cur + alpha * (w * reward + gamma * w * v_next - cur)
+            else:
+                q[i, a] = cur + alpha * w * (target - cur)
+            updates[i] += 1
+    state[2] += 1
+    return collided or state[2] >= ip[5]
+
+
+@njit(**_JIT)
+def run(t1, resume, after, collided_after, contact_after, seg, times, rel, fc, singletons,
+        onehot, q, updates, visits, rule_base, greedy, rules_it, fp, ip, state, carry, reading,
+        u, rng, lg, pw, ex, dd, rem, pose_out, reading_out, u_out, command_out, nearest_out,
+        collision_out, contact_out, reward_out, snap_it, snap_rules, snap_greedy,
+        snap_q):  # pragma: no cover - compiled
+    """Run iterations ``state[5]`` up to ``t1`` (exclusive); :data:`DONE`, or
+    :data:`NEED_STEP` with the command in ``carry[3:]`` when a step touches a wall (call
+    again with ``resume`` and its outcome: ``after`` (3,) pose, ``collided_after``,
+    ``contact_after`` (2,)). Writes every iteration's row of the trial's arrays."""
+    c, a = q.shape
+    feat, diff, d2 = np.empty(reading.size), np.empty(fc.shape), np.empty(c)
+    u1, r1, new, vmax = np.empty(c), np.empty(reading.size), np.empty(c, np.int64), np.empty(c)
+    logits, strength = np.empty(c * a), np.empty(a)
+    ptrs, dims, strides, scalar = np.empty(3, np.intp), np.empty(1, np.intp), \
+        np.empty(3, np.intp), np.empty(1)
+    end = np.empty(3)
+    t = state[5]
+    while t < t1:
+        x, y, th = carry[0], carry[1], carry[2]
+        if state[4]:  # the trial's or an episode's first reading
+            _read(x, y, th, rel, seg, fp, ip, reading)
+            memberships(reading, fc, fp, ip, feat, diff, d2, u, lg, pw, ptrs, dims, strides,
+                        scalar)
+            state[4] = 0
+        if resume:
+            heading, speed = carry[3], carry[4]
+            nx, ny, nth = after[0], after[1], after[2]
+            hit = collided_after
+            resume = False
+        else:
+            if ip[3]:
+                rules_it[t] = rule_base
+            heading = controller(onehot, u, singletons, dd, strength)
+            speed = fp[22]
+            v, omega, t_turn = _plan(x, y, th, heading, speed, fp)
+            reach = v * fp[17] + fp[15] + fp[21] + 1e-9
+            if step_free(x, y, th, v, omega, t_turn, times, seg, reach * reach, fp[15] * fp[15],
+                         end):
+                carry[3], carry[4] = heading, speed
+                state[5] = t
+                return NEED_STEP
+            nx, ny, nth = end[0], end[1], rem(end[2], 2.0 * math.pi)
+            hit = False
+        _read(nx, ny, nth, rel, seg, fp, ip, r1)
+        memberships(r1, fc, fp, ip, feat, diff, d2, u1, lg, pw, ptrs, dims, strides, scalar)
+        pose_out[t, 0], pose_out[t, 1], pose_out[t, 2] = x, y, th
+        reading_out[t] = reading
+        u_out[t] = u
+        command_out[t, 0], command_out[t, 1] = heading, speed
+        nearest_out[t] = _nearest(reading)
+        collision_out[t] = hit
+        if hit:
+            contact_out[t, 0], contact_out[t, 1] = contact_after[0], contact_after[1]
+        if ip[4]:
+            r = fp[12] if hit else (fp[13] - fp[14] * abs(heading)) + 0.0
+            reward_out[t] = r
+            if ip[3] and state[0] < 0 and _learn(t, u, u1, r, hit, q, updates, visits,
+                                                 rule_base, fp, ip, state, dd, vmax):
+                _change(t, q, updates, rule_base, greedy, new, state, fp, ip, rng, ex, logits,
+                        onehot, snap_it, snap_rules, snap_greedy, snap_q)
+        carry[0], carry[1], carry[2] = nx, ny, nth
+        reading[:] = r1
+        u[:] = u1
+        t += 1
+        state[5] = t
+    return DONE
+
+
+@njit(**_JIT)
+def _nearest(reading):  # pragma: no cover - compiled
+    """``np.minimum.reduce(reading)`` (NaN propagates)."""
+    best = reading[0]
+    for i in range(1, reading.size):
+        v = reading[i]
+        if (v < best or v != v) and best == best:
+            best = v
+    return best
+
+
+@njit(**_JIT)
+def controller(onehot, u, singletons, dd, strength):  # pragma: no cover - compiled
+    """``SituationFCS.output(u)``: the centre of gravity of the rules' headings."""
+    a = singletons.size
+    total = label_strengths(onehot, u, strength)
+    if total <= 0.0:
+        return _pairwise_sum(singletons, a) / a
+    return dd(a, strength.ctypes.data, 1, singletons.ctypes.data, 1) / total
+
+
+@njit(**_JIT)
+def probe_memberships(readings, fc, fp, ip, lg, pw, onehot, singletons, dd, out,
+                      heads):  # pragma: no cover - compiled
+    """:func:`memberships` and :func:`controller` of each reading (``sitframe.runs.fused``
+    compares them with the components' own before a trial runs compiled)."""
+    c, d = fc.shape
+    feat, diff, d2, strength = np.empty(d), np.empty(fc.shape), np.empty(c), \
+        np.empty(singletons.size)
+    ptrs, dims, strides, scalar = np.empty(3, np.intp), np.empty(1, np.intp), \
+        np.empty(3, np.intp), np.empty(1)
+    for k in range(readings.shape[0]):
+        memberships(readings[k], fc, fp, ip, feat, diff, d2, out[k], lg, pw, ptrs, dims,
+                    strides, scalar)
+        heads[k] = controller(onehot, out[k], singletons, dd, strength)
+
+
+@njit(**_JIT)
+def probe_softmax(q, tau, relative, rng, ex, dd, u, out):  # pragma: no cover - compiled
+    """:func:`_softmax` of ``q`` into ``out``; returns ``u @ q.max(axis=1)`` as the learner
+    computes the value of the next situation."""
+    c, a = q.shape
+    _softmax(q, tau, relative, rng, ex, np.empty(c * a), out)
+    vmax = np.empty(c)
+    for i in range(c):
+        top = q[i, 0]
+        for k in range(1, a):
+            v = q[i, k]
+            if (v > top or v != v) and top == top:
+                top = v
+        vmax[i] = top
+    return dd(c, u.ctypes.data, 1, vmax.ctypes.data, 1)
+
+
+def _warm() -> None:
+    """Load (or, the first time, compile) the kernels now, with the types a trial passes
+    (``sitframe.runs.fused`` hands every array over C-contiguous and writable): run at
+    import, as :mod:`sitframe.sim.kernels_numba` does."""
+    lp = numpy_loops.loops()
+    if isinstance(lp, str):
+        return
+    c, a, d, L = 2, 3, 2, 1
+    seg = np.array([[0.0], [1.0], [1.0], [0.0], [1.0]])
+    fp = np.array([3.0, 0.15, 0.1, 5.0, 1e-60, 0.3, 0.9, 0.3, 1.0, 1.0, 0.0, 0.0, -30.0, 30.0,
+                   0.1, 0.15, 100.0, 1.5, 0.1, 0.3, 90.0, 0.05, 0.15])
+    ip = np.array([1, 1, 0, 1, 1, 5, 50, 0, 1, 0, 0, 0, 0, 0])
+    ints = [np.zeros(c, np.int64) for _ in range(3)]
+    rng = np.random.default_rng(0)
+    state = np.array([-1, 0, 0, 0, 1, 0, 0])
+    f2 = [np.zeros((L, k)) for k in (3, d, c, 2)]
+    run(L, False, np.zeros(3), False, np.zeros(2), seg, np.linspace(0.0, 1.5, 31),
+        np.zeros(d), np.ones((c, d)), np.ones(a), np.zeros((c, a)), np.zeros((c, a)), ints[0],
+        np.zeros((c, a), np.int64), ints[1], ints[2], np.zeros((L, c), np.int8), fp, ip, state,
+        np.array([0.5, 0.5, 0.0, 0.0, 0.0]), np.zeros(d), np.zeros(c), rng, lp.log, lp.power,
+        lp.exp, lp.ddot, lp.remainder, np.zeros((L + 1, 3)), f2[1], f2[2], f2[3],
+        np.zeros(L), np.zeros(L, np.bool_), np.zeros((L, 2)), np.zeros(L),
+        np.zeros(L, np.int64), np.zeros((L, c), np.int64), np.zeros((L, c), np.int64),
+        np.zeros((L, c, a)))
+    probe_memberships(np.ones((1, d)), np.ones((c, d)), fp, ip, lp.log, lp.power,
+                      np.zeros((c, a)), np.ones(a), lp.ddot, np.zeros((1, c)), np.zeros(1))
+    probe_softmax(np.ones((c, a)), 1.0, True, rng, lp.exp, lp.ddot, np.ones(c),
+                  np.zeros(c, np.int64))
+
+
+_warm()

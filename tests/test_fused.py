@@ -1,0 +1,174 @@
+"""The compiled learning trial (sitframe.runs.fused) writes the log the Python loop writes.
+
+Each configuration below runs twice, compiled and with ``SITFRAME_FUSED=0``, and the two
+logs must hold the same bits; the compiled run must really have been compiled (the kernel's
+driver is counted), and a trial that cannot be compiled must say why and take the loop.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from sitframe.cli import main as cli_main
+from sitframe.contract.config import to_toml
+from sitframe.logs.compare import log_contents
+from sitframe.runs import fused
+
+pytest.importorskip("numba", reason="the compiled trial needs numba")
+
+BASE: dict[str, Any] = {
+    "experiment": {"name": "fused", "seed": 3, "trials": 1, "iterations": 700,
+                   "world": "training", "default_speed": 0.15,
+                   "stages": ["collect", "cluster", "learn", "evaluate"]},
+    "sensor": {"component": "pioneer-sonar"},
+    "collect": {"mode": "wander", "wander_samples": 60, "worlds": ["collect-1", "collect-2"]},
+    "interpreter": {"component": "fcm", "c": 6, "trials": 2},
+    "behaviours": {"avoid": {"component": "fuzzy-q", "reward": "obstacle-avoidance",
+                             "headings": [90, 60, 30, 0, -30, -60, -90], "b": 3, "p": 30}},
+    "arbiter": {"component": "single"},
+    "evaluate": {"worlds": ["training", "novel-1"], "iterations": 150},
+}
+
+#: Variations of BASE, each a dotted key -> value; together they take every branch of the
+#: kernel: transforms and exact powers, both update rules, soft-max modes and annealing,
+#: learning-rate schedule, collision as terminal, convergence guards, tie-breaks, every rule
+#: updated, cones of rays, a chain of rooms, the thesis's reward settings.
+CASES: dict[str, dict[str, Any]] = {
+    "thesis": {},
+    "log-cones-standard": {"interpreter.transform": "log", "interpreter.m": 1.2,
+                           "sensor.beam_width_deg": 25, "sensor.rays_per_beam": 5,
+                           "behaviours.avoid.update": "standard",
+                           "behaviours.avoid.terminal_on_collision": True,
+                           "behaviours.avoid.q_init_value": 250.0,
+                           "behaviours.avoid.temperature_mode": "absolute",
+                           "behaviours.avoid.temperature": 2.0,
+                           "behaviours.avoid.min_updates": 5,
+                           "behaviours.avoid.reward_params": {"heading_cost": 0.3}},
+    "inverse-square-annealed": {"interpreter.transform": "inverse", "interpreter.m": 1.5,
+                                "behaviours.avoid.temperature_decay": 0.99,
+                                "behaviours.avoid.temperature_min": 0.05,
+                                "behaviours.avoid.alpha_visits": 20,
+                                "behaviours.avoid.tie_break": "centre",
+                                "behaviours.avoid.activation": 0.0},
+    "m2-random-q": {"interpreter.m": 2.0, "behaviours.avoid.q_init": "random",
+                    "behaviours.avoid.q_init_spread": 5.0, "behaviours.avoid.p": 3,
+                    "behaviours.avoid.b": 1},
+    "rooms": {"experiment.rooms": ["gen:1000000", "gen:1000001", "gen:1000002"],
+              "experiment.episode_iterations": 130, "collect.worlds": ["gen:1000000"],
+              "interpreter.transform": "log"},
+}
+
+
+def _config(changes: dict[str, Any]) -> dict[str, Any]:
+    cfg = {k: dict(v) if isinstance(v, dict) else v for k, v in BASE.items()}
+    cfg["behaviours"] = {"avoid": dict(BASE["behaviours"]["avoid"])}
+    for key, value in changes.items():
+        *path, last = key.split(".")
+        box = cfg
+        for p in path:
+            box = box[p]
+        box[last] = value
+    return cfg
+
+
+def _run(tmp: Path, name: str, cfg: dict[str, Any], monkeypatch: pytest.MonkeyPatch,
+         compiled: bool) -> tuple[dict[str, Any], int]:
+    """Run ``cfg``; its log's contents and how many trials ran compiled."""
+    monkeypatch.setenv("SITFRAME_FUSED", "1" if compiled else "0")
+    calls = []
+    real = fused.run
+    monkeypatch.setattr(fused, "run", lambda *a, **k: calls.append(1) or real(*a, **k))
+    path = tmp / f"{name}-{int(compiled)}.toml"
+    path.write_text(to_toml(cfg))
+    out = tmp / f"{name}-{int(compiled)}.h5"
+    assert cli_main(["run", str(path), "--out", str(out)]) == 0
+    contents = {k: v for k, v in log_contents(out).items()
+                if not k.startswith(("code_hash", "created", "config", "run_", "elapsed"))}
+    return contents, len(calls)
+
+
+def _bits(v: Any) -> tuple[str, tuple[int, ...], bytes]:
+    a = np.asarray(v)
+    return a.dtype.str, a.shape, repr(a.tolist()).encode() if a.dtype.kind == "O" else \
+        a.tobytes()
+
+
+def _differ(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
+    """The keys whose values are not the same bits in both logs."""
+    return [k for k in sorted(set(a) | set(b)) if k not in a or k not in b or
+            _bits(a[k]) != _bits(b[k])]
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_compiled_trial_writes_the_python_loops_log(case: str, tmp_path: Path,
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    cfg = _config(CASES[case])
+    compiled, n_compiled = _run(tmp_path, case, cfg, monkeypatch, True)
+    python, n_python = _run(tmp_path, case, cfg, monkeypatch, False)
+    assert n_compiled >= 1 and n_python == 0  # (the learning trial, and plain evaluations)
+    assert not _differ(compiled, python)
+    assert any(k.endswith("heading/q_snapshots") for k in compiled)  # (it learned)
+
+
+def test_a_trial_with_a_step_observer_or_a_noisy_sensor_runs_the_python_loop(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    noisy = _config({"sensor.noise_std": 0.01, "experiment.iterations": 500})
+    _contents, n = _run(tmp_path, "noisy", noisy, monkeypatch, True)
+    assert n == 0
+    plugin = tmp_path / "plugins"
+    plugin.mkdir()
+    (plugin / "watch.py").write_text(
+        "from sitframe import hookimpl\nSEEN = []\n\n@hookimpl\n"
+        "def sitframe_step(record):\n    SEEN.append(record.transition.before.iteration)\n")
+    path = tmp_path / "watched.toml"
+    path.write_text(to_toml(_config({"experiment.iterations": 500})))
+    calls: list[int] = []
+    real = fused.run
+    monkeypatch.setenv("SITFRAME_FUSED", "1")
+    monkeypatch.setattr(fused, "run", lambda *a, **k: calls.append(1) or real(*a, **k))
+    assert cli_main(["--plugins-dir", str(plugin), "run", str(path), "--out",
+                     str(tmp_path / "w.h5")]) == 0
+    assert calls == []
+
+
+def test_a_subclass_that_changes_a_step_is_not_compiled() -> None:
+    from sitframe.plugins.sonar import SonarRing
+
+    class Shifted(SonarRing):
+        name = "shifted-sonar"
+
+        def read(self, world: Any, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+            return super().read(world, pose, rng) * 0.5
+
+    assert SonarRing(rays_per_beam=3, beam_width_deg=20)._fused() is not None
+    assert Shifted()._fused() is None
+    assert SonarRing(dropout=0.1)._fused() is None
+
+
+def test_progress_counts_every_iteration_on_both_paths(tmp_path: Path,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """``sitframe_progress`` adds up to each learning trial's iterations, compiled or not,
+    wherever the trials run."""
+    plugin, seen = tmp_path / "plugins", tmp_path / "seen.txt"
+    plugin.mkdir()
+    (plugin / "count.py").write_text(
+        "from sitframe import hookimpl\n\n@hookimpl\n"
+        "def sitframe_progress(trial, iterations):\n"
+        f"    with open({str(seen)!r}, 'a') as f:\n"
+        "        f.write(f'{trial} {iterations}\\n')\n")
+    path = tmp_path / "p.toml"
+    path.write_text(to_toml(_config({"experiment.iterations": 750, "experiment.trials": 2})))
+    for mode in ("1", "0"):
+        monkeypatch.setenv("SITFRAME_FUSED", mode)
+        seen.unlink(missing_ok=True)
+        assert cli_main(["--plugins-dir", str(plugin), "run", str(path), "--out",
+                         str(tmp_path / f"p{mode}.h5")]) == 0
+        counts: dict[int, list[int]] = {}
+        for line in seen.read_text().splitlines():
+            trial, n = map(int, line.split())
+            counts.setdefault(trial, []).append(n)
+        assert counts == {0: [100] * 7 + [50], 1: [100] * 7 + [50]}
