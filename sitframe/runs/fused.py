@@ -171,26 +171,23 @@ def _agrees(fz: Fused, parts: Any) -> str:
                           probe.uniform(0.0, 0.3, (3, d))])
     onehot = np.zeros((c, a))
     onehot[np.arange(c), fz.rules] = 1.0
-    lg, pw, ex, dd, _rem = fz.call_args()
-    got = np.empty((readings.shape[0], c))
-    heads = np.empty(readings.shape[0])
-    fk.probe_memberships(readings, fz.centers, fz.fp, fz.ip, lg, pw, onehot, fz.singletons, dd,
-                         got, heads)
+    lr = fz.learner
+    prm = lr.params if lr is not None else None
+    q = probe.normal(250.0, 30.0, (c, a))
+    tau = prm.temperature if prm is not None else 1.0
+    relative = prm is None or prm.temperature_mode == "relative"
+    got, heads, mine, v = fk.probe(readings, fz.centers, fz.fp, fz.ip, fz.loops, onehot,
+                                   fz.singletons, q, float(tau), relative,
+                                   np.random.default_rng(7))
     for r, u, h in zip(readings, got, heads, strict=True):
         ref = parts.interp.memberships(r)
         if not np.array_equal(ref, u):
             return "the compiled memberships differ from the interpreter's"
         if fz.fcs.output(ref) != h:
             return "the compiled controller output differs from the behaviour's"
-    if fz.learner is None:
-        return ""
-    prm, q = fz.learner.params, probe.normal(250.0, 30.0, (c, a))
-    g1, g2 = np.random.default_rng(7), np.random.default_rng(7)
-    mine = np.empty(c, dtype=np.int64)
-    v = fk.probe_softmax(q, float(prm.temperature), prm.temperature_mode == "relative", g2, ex,
-                         dd, got[0], mine)
-    if not np.array_equal(softmax_choice(q, prm, g1, prm.temperature), mine) or \
-            v != float(got[0] @ np.maximum.reduce(q, axis=1)):
+    if prm is not None and (
+            not np.array_equal(softmax_choice(q, prm, np.random.default_rng(7), tau), mine)
+            or v != float(got[0] @ np.maximum.reduce(q, axis=1))):
         return "the compiled soft-max or value of the next situation differs from numpy's"
     return ""
 

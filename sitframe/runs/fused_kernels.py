@@ -30,6 +30,7 @@ Arrays (``c`` situations, ``A`` headings, ``d`` readings, ``L`` iterations):
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -44,6 +45,10 @@ from sitframe.sim.kernels_numba import (
     ranges_at,
     step_free,
 )
+
+#: Small helpers are inlined into their callers when typed (numba compiles no function of
+#: their own for them, which saves seconds of the first compile).
+_INLINE = {**_JIT, "inline": "always"}
 
 #: Names of the float parameters ``fp``, in order.
 FP = ("max_range", "sensor_radius", "offset", "p", "floor", "alpha", "gamma", "activation",
@@ -60,7 +65,7 @@ DONE, NEED_STEP = 0, 1
 POW_LOOP, POW_ONE, POW_RECIPROCAL, POW_ZERO, POW_SQRT, POW_SQUARE = range(6)
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def _loop1(f, ctx, aux, x, out, n, ptrs, dims, strides):  # pragma: no cover - compiled
     """numpy's unary loop ``f`` over ``x[:n]`` into ``out[:n]``."""
     ptrs[0], ptrs[1] = x.ctypes.data, out.ctypes.data
@@ -69,7 +74,7 @@ def _loop1(f, ctx, aux, x, out, n, ptrs, dims, strides):  # pragma: no cover - c
     f(ctx, ptrs.ctypes.data, dims.ctypes.data, strides.ctypes.data, aux)
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def _power(w, p, mode, f, ctx, aux, ptrs, dims, strides, scalar):  # pragma: no cover
     """``w **= p`` in place, as numpy computes it for a Python float ``p``."""
     if mode == POW_LOOP:
@@ -91,7 +96,14 @@ def _power(w, p, mode, f, ctx, aux, ptrs, dims, strides, scalar):  # pragma: no 
             w[i] = x * x
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
+def _copy(src, dst):  # pragma: no cover - compiled
+    """``dst[:] = src`` (1-D; a slice assignment costs numba seconds of compiling)."""
+    for i in range(src.size):
+        dst[i] = src[i]
+
+
+@njit(**_INLINE)
 def row_norms(X, out):  # pragma: no cover - compiled
     """``np.einsum("ij,ij->i", X, X)`` in einsum's own order (x86-64 baseline: two lanes,
     blocks of eight summed from the last pair to the first, the tail in pairs)."""
@@ -143,13 +155,7 @@ def memberships(reading, fc, fp, ip, feat, diff, d2, u, lg, pw, ptrs, dims, stri
     normalize(u)
 
 
-@njit(**_JIT)
-def _read(x, y, th, rel, seg, fp, ip, out):  # pragma: no cover - compiled
-    """The sensor's reading at a pose; returns its nearest range."""
-    ranges_at(x, y, th, rel, seg, fp[0], fp[1], ip[0], True, out)
-
-
-@njit(**_JIT)
+@njit(**_INLINE)
 def _plan(x0, y0, th0, heading, speed, fp):  # pragma: no cover - compiled
     """``robot._plan``: ``v``, ``omega`` [rad/s] and the turn's duration [s]."""
     lo, hi, h = -fp[20], fp[20], heading
@@ -165,7 +171,7 @@ def _plan(x0, y0, th0, heading, speed, fp):  # pragma: no cover - compiled
     return v, omega, t_turn
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def _greedy(q, centre, out):  # pragma: no cover - compiled
     """``fuzzy_q.greedy_actions`` into ``out``."""
     c, a = q.shape
@@ -222,7 +228,9 @@ def _softmax(q, tau, relative, rng, ex, logits, out):  # pragma: no cover - comp
 def _change(t, q, updates, rule_base, greedy, new, state, fp, ip, rng, ex, logits, onehot,
             snap_it, snap_rules, snap_greedy, snap_q):  # pragma: no cover - compiled
     """``FuzzyQLearner._change`` at iteration ``t``, its snapshot, and the controller's new
-    one-hot rule table."""
+    one-hot rule table. (Explicit loops instead of slice assignments: numba compiles those
+    for seconds.)"""
+    c, a = q.shape
     state[2] = 0
     _greedy(q, ip[10] != 0, new)
     same = True
@@ -232,14 +240,14 @@ def _change(t, q, updates, rule_base, greedy, new, state, fp, ip, rng, ex, logit
         state[1] += 1
     else:
         state[1] = 0
-        greedy[:] = new
+        _copy(new, greedy)
     state[3] += 1
     low = updates[0]
     for i in range(1, updates.size):
         low = updates[i] if updates[i] < low else low
     if state[1] >= ip[6] and (ip[7] == 0 or low >= ip[7]):
         state[0] = t + 1
-        rule_base[:] = new
+        _copy(new, rule_base)
     else:
         tau = fp[8]
         if ip[12]:  # annealed: max(temperature_min, temperature * decay ** changes)
@@ -248,16 +256,16 @@ def _change(t, q, updates, rule_base, greedy, new, state, fp, ip, rng, ex, logit
         _softmax(q, tau, ip[11] != 0, rng, ex, logits, rule_base)
     k = state[6]
     snap_it[k] = t + 1
-    snap_rules[k] = rule_base
-    snap_greedy[k] = new
-    snap_q[k] = q
+    for i in range(c):
+        snap_rules[k, i] = rule_base[i]
+        snap_greedy[k, i] = new[i]
+        for j in range(a):
+            snap_q[k, i, j] = q[i, j]
+            onehot[i, j] = 1.0 if rule_base[i] == j else 0.0
     state[6] = k + 1
-    onehot[:] = 0.0
-    for i in range(rule_base.size):
-        onehot[i, rule_base[i]] = 1.0
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def _learn(t, u0, u1, reward, collided, q, updates, visits, rule_base, fp, ip, state,
            dd, vmax):  # pragma: no cover - compiled
     """``FuzzyQLearner.update`` up to the rule-base change; whether it is time to change."""
@@ -317,7 +325,7 @@ def run(t1, resume, after, collided_after, contact_after, seg, times, rel, fc, s
     while t < t1:
         x, y, th = carry[0], carry[1], carry[2]
         if state[4]:  # the trial's or an episode's first reading
-            _read(x, y, th, rel, seg, fp, ip, reading)
+            ranges_at(x, y, th, rel, seg, fp[0], fp[1], ip[0], True, reading)
             memberships(reading, fc, fp, ip, feat, diff, d2, u, lg, pw, ptrs, dims, strides,
                         scalar)
             state[4] = 0
@@ -328,7 +336,7 @@ def run(t1, resume, after, collided_after, contact_after, seg, times, rel, fc, s
             resume = False
         else:
             if ip[3]:
-                rules_it[t] = rule_base
+                _copy(rule_base, rules_it[t])
             heading = controller(onehot, u, singletons, dd, strength)
             speed = fp[22]
             v, omega, t_turn = _plan(x, y, th, heading, speed, fp)
@@ -340,11 +348,11 @@ def run(t1, resume, after, collided_after, contact_after, seg, times, rel, fc, s
                 return NEED_STEP
             nx, ny, nth = end[0], end[1], rem(end[2], 2.0 * math.pi)
             hit = False
-        _read(nx, ny, nth, rel, seg, fp, ip, r1)
+        ranges_at(nx, ny, nth, rel, seg, fp[0], fp[1], ip[0], True, r1)
         memberships(r1, fc, fp, ip, feat, diff, d2, u1, lg, pw, ptrs, dims, strides, scalar)
         pose_out[t, 0], pose_out[t, 1], pose_out[t, 2] = x, y, th
-        reading_out[t] = reading
-        u_out[t] = u
+        _copy(reading, reading_out[t])
+        _copy(u, u_out[t])
         command_out[t, 0], command_out[t, 1] = heading, speed
         nearest_out[t] = _nearest(reading)
         collision_out[t] = hit
@@ -358,14 +366,14 @@ def run(t1, resume, after, collided_after, contact_after, seg, times, rel, fc, s
                 _change(t, q, updates, rule_base, greedy, new, state, fp, ip, rng, ex, logits,
                         onehot, snap_it, snap_rules, snap_greedy, snap_q)
         carry[0], carry[1], carry[2] = nx, ny, nth
-        reading[:] = r1
-        u[:] = u1
+        _copy(r1, reading)
+        _copy(u1, u)
         t += 1
         state[5] = t
     return DONE
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def _nearest(reading):  # pragma: no cover - compiled
     """``np.minimum.reduce(reading)`` (NaN propagates)."""
     best = reading[0]
@@ -376,7 +384,7 @@ def _nearest(reading):  # pragma: no cover - compiled
     return best
 
 
-@njit(**_JIT)
+@njit(**_INLINE)
 def controller(onehot, u, singletons, dd, strength):  # pragma: no cover - compiled
     """``SituationFCS.output(u)``: the centre of gravity of the rules' headings."""
     a = singletons.size
@@ -386,37 +394,31 @@ def controller(onehot, u, singletons, dd, strength):  # pragma: no cover - compi
     return dd(a, strength.ctypes.data, 1, singletons.ctypes.data, 1) / total
 
 
-@njit(**_JIT)
-def probe_memberships(readings, fc, fp, ip, lg, pw, onehot, singletons, dd, out,
-                      heads):  # pragma: no cover - compiled
-    """:func:`memberships` and :func:`controller` of each reading (``sitframe.runs.fused``
-    compares them with the components' own before a trial runs compiled)."""
+def probe(readings: np.ndarray, fc: np.ndarray, fp: np.ndarray, ip: np.ndarray, lp: Any,
+          onehot: np.ndarray, singletons: np.ndarray, q: np.ndarray, tau: float,
+          relative: bool, rng: np.random.Generator
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """What ``sitframe.runs.fused`` compares with the components' own before a trial runs
+    compiled: the (n, c) :func:`memberships` and (n,) :func:`controller` outputs of the (n, d)
+    ``readings``, the (c,) :func:`_softmax` draws of ``q`` and ``memberships[0] @
+    q.max(axis=1)`` (the value of the next situation), each from the compiled kernels a
+    trial runs (called from Python: their types are the trial's)."""
     c, d = fc.shape
-    feat, diff, d2, strength = np.empty(d), np.empty(fc.shape), np.empty(c), \
-        np.empty(singletons.size)
+    a = singletons.size
+    u, heads = np.empty((readings.shape[0], c)), np.empty(readings.shape[0])
+    feat, diff, d2, strength = np.empty(d), np.empty(fc.shape), np.empty(c), np.empty(a)
     ptrs, dims, strides, scalar = np.empty(3, np.intp), np.empty(1, np.intp), \
         np.empty(3, np.intp), np.empty(1)
     for k in range(readings.shape[0]):
-        memberships(readings[k], fc, fp, ip, feat, diff, d2, out[k], lg, pw, ptrs, dims,
-                    strides, scalar)
-        heads[k] = controller(onehot, out[k], singletons, dd, strength)
-
-
-@njit(**_JIT)
-def probe_softmax(q, tau, relative, rng, ex, dd, u, out):  # pragma: no cover - compiled
-    """:func:`_softmax` of ``q`` into ``out``; returns ``u @ q.max(axis=1)`` as the learner
-    computes the value of the next situation."""
-    c, a = q.shape
-    _softmax(q, tau, relative, rng, ex, np.empty(c * a), out)
-    vmax = np.empty(c)
-    for i in range(c):
-        top = q[i, 0]
-        for k in range(1, a):
-            v = q[i, k]
-            if (v > top or v != v) and top == top:
-                top = v
-        vmax[i] = top
-    return dd(c, u.ctypes.data, 1, vmax.ctypes.data, 1)
+        row = np.empty(c)
+        memberships(np.array(readings[k]), fc, fp, ip, feat, diff, d2, row, lp.log, lp.power,
+                    ptrs, dims, strides, scalar)
+        u[k] = row
+        heads[k] = controller(onehot, row, singletons, lp.ddot, strength)
+    choice = np.empty(c, dtype=np.int64)
+    _softmax(q, tau, relative, rng, lp.exp, np.empty(c * a), choice)
+    vmax = np.ascontiguousarray(np.maximum.reduce(q, axis=1))
+    return u, heads, choice, float(lp.ddot(c, u[0].ctypes.data, 1, vmax.ctypes.data, 1))
 
 
 def _warm() -> None:
@@ -443,10 +445,8 @@ def _warm() -> None:
         np.zeros(L), np.zeros(L, np.bool_), np.zeros((L, 2)), np.zeros(L),
         np.zeros(L, np.int64), np.zeros((L, c), np.int64), np.zeros((L, c), np.int64),
         np.zeros((L, c, a)))
-    probe_memberships(np.ones((1, d)), np.ones((c, d)), fp, ip, lp.log, lp.power,
-                      np.zeros((c, a)), np.ones(a), lp.ddot, np.zeros((1, c)), np.zeros(1))
-    probe_softmax(np.ones((c, a)), 1.0, True, rng, lp.exp, lp.ddot, np.ones(c),
-                  np.zeros(c, np.int64))
+    probe(np.ones((1, d)), np.ones((c, d)), fp, ip, lp, np.zeros((c, a)), np.ones(a),
+          np.ones((c, a)), 1.0, True, rng)
 
 
 _warm()

@@ -752,29 +752,23 @@ def frozen_td(u: np.ndarray, activation: float, thesis: bool, reward: float, gam
 
 
 def _warm() -> None:
-    """Load (or, the first time, compile) every kernel now, with the types the loop uses.
+    """Load (or, the first time, compile) the kernels of a trial now, with the types the loop
+    uses.
 
-    Run at import, so a process importing this module -- a worker pool's
-    forkserver preloads it -- has them all, and its forked workers inherit them.
+    Run at import, so a process importing this module -- a worker pool's forkserver
+    preloads it -- has them all, and its forked workers inherit them. The vector env's
+    (:mod:`sitframe.sim.fleet`: ``ranges_many``, ``sweep_*``, ``refine``, ``contact_points``,
+    ``backoffs``), the route planner's (``clear_moves``, ``clear_from``), and ``cast`` and
+    ``cast_each`` (rays without a heading: ``cast_rays``; sensors read through
+    :func:`ranges_at`) are compiled (or loaded) on their first call instead: most runs never
+    call them, and compiling them would add some 3 s to the first run after an install.
     """
     seg = np.array([[0.0], [1.0], [1.0], [0.0], [1.0]])  # one segment (0, 1)-(1, 1)
     one = np.ones(2)
     out, idx = np.empty(2), np.empty(1, dtype=np.intp)
-    cast(0.0, 0.0, one, one, seg, 3.0, out)
-    cast_each(one, one, one, one, seg, 3.0, out)
     ranges(0.0, 0.0, one, one, seg, 3.0, 0.1, 1, True, out)
     two = np.ones((2, 2))
-    ranges_many(np.ones((2, 3))[:, :2], two, two, seg, 3.0, 0.1, 1, True, np.empty((2, 2)))
-    ints = [np.zeros(2, dtype=np.intp) for _ in range(4)]
-    idx2, act = np.zeros((2, 1), dtype=np.intp), np.zeros(2, dtype=np.bool_)
-    state, p3 = np.zeros((2, 5)), np.empty((2, 3, 2))
-    sweep_begin(np.ones((2, 8)), one, 1.5, np.ones(3), seg, idx2, ints[0], ints[1], two, two)
-    sweep_end(one, np.ones((2, 8)), ints[1], two, two, two, two, seg, idx2, ints[0], 0.01, p3,
-              ints[2], ints[3], state, act, two, two, two)
-    refine(np.ones((2, 8)), ints[3], 0, two, two, two, two, two, two, seg, idx2, ints[0], 0.01,
-           state, act, p3, True)
-    contact_points(ints[3], 0, state, seg, idx2, ints[0], two)
-    backoffs(ints[3], 0, state, two, 0.05, seg, idx2, ints[0], 0.01, ints[2], out, p3[0])
+    act = np.zeros(2, dtype=np.bool_)
     near_segments(0.0, 0.0, seg, 1.0, idx)
     first_contact(one, one, seg, 0.01)
     nearest_point(0.0, 0.0, seg)
@@ -797,7 +791,6 @@ def _warm() -> None:
     observe(one, 3.0, np.ones(2, dtype=np.float32), np.ones(2, dtype=np.float32),
             np.empty(2, dtype=np.float32))
     point_in_polygon(two, two, act)
-    clear_moves(two, two, np.ones((1, 4)), seg, 0.1, act)
 
 
 @njit(**_JIT)
