@@ -490,3 +490,75 @@ def test_the_fused_steps_run_only_where_compiled_sines_are_numpys(
     monkeypatch.setattr(K, "step_free", lambda *a: calls.append(a))
     assert _wander(room, RobotParams(), poses) == fused_run
     assert not calls
+
+
+def _contact_step(k, world: World, pose: np.ndarray, cmd: Command, params: RobotParams,
+                  rng: np.random.Generator) -> tuple:
+    """``step_contact``'s outcome as :func:`_fields` of a ``StepOutcome`` reads one."""
+    from sitframe.sim.numpy_loops import loops
+    from sitframe.sim.robot import _times, packed_params
+
+    rp = packed_params(params)
+    v, omega, t_turn = k.plan(*(float(p) for p in pose), cmd.heading_change_deg,
+                              cmd.speed_m_s, rp)
+    out = np.empty(12)
+    hit = k.step_contact(*(float(p) for p in pose), v, omega, t_turn,
+                         np.array(_times(params.control_period_s, params.substep_s)),
+                         np.array(world.segment_set.packed), rp, rng, loops().remainder, out)
+    return (hit, *out[:3], *out[3:5], *out[5:8], *out[8:])
+
+
+@pytest.mark.parametrize("params", [RobotParams(), RobotParams(recovery="none"),
+                                    RobotParams(recovery_backoff_m=0.0),
+                                    RobotParams(recovery_turn_deg=180.0, max_speed=0.3)],
+                         ids=["default", "no-recovery", "no-backoff", "half-turn"])
+def test_compiled_contact_step_is_step_robots(params: RobotParams) -> None:
+    """The whole step compiled (contact, refinement, back-off, turn; the trial's and the Gym
+    envs' steps when ``kernels.contact()`` holds) equals ``step_robot`` to the bit, in rooms,
+    from poses grazing, facing and inside walls, dead-ahead ties drawn from the generator."""
+    k = kernels.contact()
+    if k is None:
+        pytest.skip("the compiled contact step does not agree with Python's here")
+    from sitframe.sim.world import load_world
+
+    rng = np.random.default_rng(11)
+    hits = 0
+    for name in ("training", "novel-1", "gen:1000003"):
+        world = load_world(name)
+        segs = world.segment_set.segments
+        for i in range(700):
+            if i % 7 == 0:  # on a wall, or facing one square on (a dead-ahead contact)
+                s = segs[rng.integers(len(segs))]
+                f = rng.uniform()
+                pose = np.array([s[0] + f * (s[2] - s[0]), s[1] + f * (s[3] - s[1]),
+                                 rng.choice([0.0, math.pi / 2, math.pi, -math.pi / 2])])
+                if i % 14 == 0:
+                    pose[:2] += rng.normal(0.0, 0.2, 2)
+            else:
+                pose = world.random_free_pose(rng, params.radius, margin=0.0)
+                pose[2] = rng.uniform(-math.pi, math.pi)
+            cmd = Command(float(rng.choice([0.0, rng.uniform(-120, 120)])),
+                          float(rng.uniform(0.05, 0.35)))
+            seed = int(rng.integers(2**32))
+            ref = step_robot(world, pose, cmd, params, np.random.default_rng(seed))
+            got = _contact_step(k, world, pose, cmd, params, np.random.default_rng(seed))
+            want = (ref.collided, *ref.pose, *ref.contact_xy, *ref.contact_pose,
+                    ref.distance_m, ref.heading_change_deg, ref.backoff_m,
+                    ref.recovery_turn_deg)
+            assert np.array_equal(np.array(got, float), np.array(want, float), equal_nan=True), \
+                (name, i, pose, cmd)
+            hits += bool(ref.collided)
+    assert hits > 300  # (most of these steps touch a wall)
+
+
+def test_compiled_hypot_is_pythons() -> None:
+    k = kernels.contact()
+    if k is None:
+        pytest.skip("the compiled contact step does not agree with Python's here")
+    rng = np.random.default_rng(3)
+    ab = rng.normal(size=(2, 20000)) * 10.0 ** rng.uniform(-320, 300, (2, 20000))
+    ab[:, :5000] = rng.normal(size=(2, 5000))
+    ab[0, 5000:5010], ab[1, 5005:5015] = np.inf, np.nan
+    got = np.array([k.hypot(a, b) for a, b in ab.T])
+    want = np.array([math.hypot(a, b) for a, b in ab.T])
+    assert np.array_equal(got, want, equal_nan=True)

@@ -42,9 +42,9 @@ import numpy as np
 
 from sitframe.learning.fuzzy_q import FuzzyQLearner, softmax_choice
 from sitframe.sim import numba_cache, numpy_loops
+from sitframe.sim.kernels import contact, kernels, load
 from sitframe.sim.kernels import fused as fused_trig
-from sitframe.sim.kernels import kernels, load
-from sitframe.sim.robot import Command, _times, step_robot
+from sitframe.sim.robot import Command, _times, packed_params, step_robot
 
 __all__ = ["EVERY", "MIN_ITERATIONS", "Fused", "prepare", "run", "wanted"]
 
@@ -75,6 +75,8 @@ class Fused:
     fp: np.ndarray
     ip: np.ndarray
     times: np.ndarray
+
+    rp: np.ndarray
 
     def call_args(self) -> tuple[Any, ...]:
         """The loops' pointers, in :func:`sitframe.runs.fused_kernels.run`'s order."""
@@ -148,14 +150,14 @@ def prepare(res: Any, spec: Any, parts: Any) -> Fused | str:
                    robot.max_speed, robot.max_heading_change_deg, robot.recovery_backoff_m,
                    res.config.experiment.default_speed], dtype=np.float64)
     ip = np.array([sen["rays_per_beam"], itp["transform"], _POWER.get(itp["p"], 0),
-                   lr is not None, learning, *rules, 0],
+                   lr is not None, learning, *rules, contact() is not None],
                   dtype=np.int64)
     # (every array C-contiguous and writable: the types fused_kernels._warm compiles for)
     fz = Fused(fk, lp, np.array(sen["rays"], dtype=np.float64),
                np.array(itp["centers"], dtype=np.float64),
                np.array(beh["singletons"], dtype=np.float64),
                np.array(beh["rules"], dtype=np.int64), lr, beh["fcs"], fp, ip,
-               np.array(_times(robot.control_period_s, robot.substep_s)))
+               np.array(_times(robot.control_period_s, robot.substep_s)), packed_params(robot))
     why = _agrees(fz, parts)
     return why if why else fz
 
@@ -208,7 +210,7 @@ def run(fz: Fused, res: Any, spec: Any, rec: Any, env: Any, chain: Any,
     carry = np.zeros(5)
     carry[:3] = env.start
     reading, u, world = np.empty(rec.reading.shape[1]), np.empty(c), env.world
-    none2 = np.full(2, np.nan)
+    none2, rp = np.full(2, np.nan), fz.rp
     t = 0
     while t < L:
         t1 = min(L, (t // EVERY + 1) * EVERY)
@@ -219,7 +221,7 @@ def run(fz: Fused, res: Any, spec: Any, rec: Any, env: Any, chain: Any,
         state[6] = 0
         after, hit, contact, resume = carry[:3], False, none2, False
         seg = np.array(world.segment_set.packed)
-        while fk.run(t1, resume, after, hit, contact, seg, fz.times,
+        while fk.run(t1, resume, after, hit, contact, seg, fz.times, rp,
                      fz.rays, fz.centers, fz.singletons, learn.onehot, learn.q, learn.updates,
                      learn.visits, learn.rule_base, learn.greedy, learn.rules_it, fz.fp, fz.ip,
                      state, carry, reading, u, env.rng, *fz.call_args(), rec.pose,

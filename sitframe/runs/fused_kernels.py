@@ -17,7 +17,8 @@ per hundred iterations while learning), and the contact's arithmetic then stays 
 Arrays (``c`` situations, ``A`` headings, ``d`` readings, ``L`` iterations):
 
 ``fp`` (float64)
-    see :data:`FP`; ``ip`` (int64): see :data:`IP`.
+    see :data:`FP`; ``ip`` (int64): see :data:`IP`; ``rp``: the robot's parameters
+    (:data:`sitframe.sim.kernels_numba.ROBOT`).
 ``state`` (int64)
     ``converged_at`` (-1: not), stable changes, iterations since the last change, changes,
     whether the next iteration reads first (a trial's or an episode's start), the next
@@ -42,7 +43,9 @@ from sitframe.sim.kernels_numba import (
     fcm_ratios,
     label_strengths,
     normalize,
+    plan,
     ranges_at,
+    step_contact,
     step_free,
 )
 
@@ -53,12 +56,10 @@ _INLINE = {**_JIT, "inline": "always"}
 #: Names of the float parameters ``fp``, in order.
 FP = ("max_range", "sensor_radius", "offset", "p", "floor", "alpha", "gamma", "activation",
       "temperature", "temperature_decay", "temperature_min", "alpha_visits", "r_collision",
-      "r_base", "r_heading_cost", "radius", "max_turn_rate_deg_s", "control_period_s",
-      "min_speed", "max_speed", "max_heading_change_deg", "recovery_backoff_m",
-      "default_speed")
+      "r_base", "r_heading_cost", "default_speed")
 #: Names of the integer parameters ``ip``, in order.
 IP = ("rays_per_beam", "transform", "power", "has_learner", "learning", "b", "p_changes",
-      "min_updates", "thesis", "terminal", "tie_centre", "relative", "decay", "stop")
+      "min_updates", "thesis", "terminal", "tie_centre", "relative", "decay", "contact")
 #: :func:`run`'s answers: the chunk is done; a step touches a wall (Python steps it).
 DONE, NEED_STEP = 0, 1
 #: How ``w ** p`` is computed, as numpy's in-place power chooses for a scalar exponent.
@@ -153,22 +154,6 @@ def memberships(reading, fc, fp, ip, feat, diff, d2, u, lg, pw, ptrs, dims, stri
         return
     _power(u, fp[3], ip[2], pw[0], pw[1], pw[2], ptrs, dims, strides, scalar)
     normalize(u)
-
-
-@njit(**_INLINE)
-def _plan(x0, y0, th0, heading, speed, fp):  # pragma: no cover - compiled
-    """``robot._plan``: ``v``, ``omega`` [rad/s] and the turn's duration [s]."""
-    lo, hi, h = -fp[20], fp[20], heading
-    h = lo if lo > h else h
-    dh = math.radians(hi if hi < h else h)
-    lo, hi, v = fp[18], fp[19], speed
-    v = lo if lo > v else v
-    v = hi if hi < v else v
-    w = math.radians(fp[16])
-    t_turn, period = abs(dh) / w, fp[17]
-    t_turn = period if period < t_turn else t_turn
-    omega = math.copysign(w, dh) if dh != 0.0 else 0.0
-    return v, omega, t_turn
 
 
 @njit(**_INLINE)
@@ -305,7 +290,7 @@ def _learn(t, u0, u1, reward, collided, q, updates, visits, rule_base, fp, ip, s
 
 
 @njit(**_JIT)
-def run(t1, resume, after, collided_after, contact_after, seg, times, rel, fc, singletons,
+def run(t1, resume, after, collided_after, contact_after, seg, times, rp, rel, fc, singletons,
         onehot, q, updates, visits, rule_base, greedy, rules_it, fp, ip, state, carry, reading,
         u, rng, lg, pw, ex, dd, rem, pose_out, reading_out, u_out, command_out, nearest_out,
         collision_out, contact_out, reward_out, snap_it, snap_rules, snap_greedy,
@@ -320,7 +305,7 @@ def run(t1, resume, after, collided_after, contact_after, seg, times, rel, fc, s
     logits, strength = np.empty(c * a), np.empty(a)
     ptrs, dims, strides, scalar = np.empty(3, np.intp), np.empty(1, np.intp), \
         np.empty(3, np.intp), np.empty(1)
-    end = np.empty(3)
+    end, touch = np.empty(3), np.empty(12)
     t = state[5]
     while t < t1:
         x, y, th = carry[0], carry[1], carry[2]
@@ -332,22 +317,26 @@ def run(t1, resume, after, collided_after, contact_after, seg, times, rel, fc, s
         if resume:
             heading, speed = carry[3], carry[4]
             nx, ny, nth = after[0], after[1], after[2]
-            hit = collided_after
+            hit, hx, hy = collided_after, contact_after[0], contact_after[1]
             resume = False
         else:
             if ip[3]:
                 _copy(rule_base, rules_it[t])
             heading = controller(onehot, u, singletons, dd, strength)
-            speed = fp[22]
-            v, omega, t_turn = _plan(x, y, th, heading, speed, fp)
-            reach = v * fp[17] + fp[15] + fp[21] + 1e-9
-            if step_free(x, y, th, v, omega, t_turn, times, seg, reach * reach, fp[15] * fp[15],
-                         end):
+            speed = fp[15]
+            v, omega, t_turn = plan(x, y, th, heading, speed, rp)
+            reach = v * rp[2] + rp[0] + rp[6] + 1e-9  # (robot.step_robot's reach)
+            if not step_free(x, y, th, v, omega, t_turn, times, seg, reach * reach,
+                             rp[0] * rp[0], end):
+                nx, ny, nth = end[0], end[1], rem(end[2], 2.0 * math.pi)
+                hit, hx, hy = False, np.nan, np.nan
+            elif ip[13]:  # (the contact compiled too: step_robot's own steps)
+                hit = step_contact(x, y, th, v, omega, t_turn, times, seg, rp, rng, rem, touch)
+                nx, ny, nth, hx, hy = touch[0], touch[1], touch[2], touch[3], touch[4]
+            else:
                 carry[3], carry[4] = heading, speed
                 state[5] = t
                 return NEED_STEP
-            nx, ny, nth = end[0], end[1], rem(end[2], 2.0 * math.pi)
-            hit = False
         ranges_at(nx, ny, nth, rel, seg, fp[0], fp[1], ip[0], True, r1)
         memberships(r1, fc, fp, ip, feat, diff, d2, u1, lg, pw, ptrs, dims, strides, scalar)
         pose_out[t, 0], pose_out[t, 1], pose_out[t, 2] = x, y, th
@@ -357,7 +346,7 @@ def run(t1, resume, after, collided_after, contact_after, seg, times, rel, fc, s
         nearest_out[t] = _nearest(reading)
         collision_out[t] = hit
         if hit:
-            contact_out[t, 0], contact_out[t, 1] = contact_after[0], contact_after[1]
+            contact_out[t, 0], contact_out[t, 1] = hx, hy
         if ip[4]:
             r = fp[12] if hit else (fp[13] - fp[14] * abs(heading)) + 0.0
             reward_out[t] = r
@@ -431,14 +420,16 @@ def _warm() -> None:
     c, a, d, L = 2, 3, 2, 1
     seg = np.array([[0.0], [1.0], [1.0], [0.0], [1.0]])
     fp = np.array([3.0, 0.15, 0.1, 5.0, 1e-60, 0.3, 0.9, 0.3, 1.0, 1.0, 0.0, 0.0, -30.0, 30.0,
-                   0.1, 0.15, 100.0, 1.5, 0.1, 0.3, 90.0, 0.05, 0.15])
-    ip = np.array([1, 1, 0, 1, 1, 5, 50, 0, 1, 0, 0, 0, 0, 0])
+                   0.1, 0.15])
+    rp = np.array([0.15, 100.0, 1.5, 0.1, 0.3, 90.0, 0.05, 45.0, 1.0])
+    ip = np.array([1, 1, 0, 1, 1, 5, 50, 0, 1, 0, 0, 0, 0, 1])
     ints = [np.zeros(c, np.int64) for _ in range(3)]
     rng = np.random.default_rng(0)
     state = np.array([-1, 0, 0, 0, 1, 0, 0])
     f2 = [np.zeros((L, k)) for k in (3, d, c, 2)]
-    run(L, False, np.zeros(3), False, np.zeros(2), seg, np.linspace(0.0, 1.5, 31),
-        np.zeros(d), np.ones((c, d)), np.ones(a), np.zeros((c, a)), np.zeros((c, a)), ints[0],
+    run(L, False, np.zeros(3), False, np.zeros(2), seg, np.linspace(0.0, 1.5, 31), rp,
+        np.zeros(d), np.ones((c, d)), np.ones(a), np.zeros((c, a)),
+        np.zeros((c, a)), ints[0],
         np.zeros((c, a), np.int64), ints[1], ints[2], np.zeros((L, c), np.int8), fp, ip, state,
         np.array([0.5, 0.5, 0.0, 0.0, 0.0]), np.zeros(d), np.zeros(c), rng, lp.log, lp.power,
         lp.exp, lp.ddot, lp.remainder, np.zeros((L + 1, 3)), f2[1], f2[2], f2[3],

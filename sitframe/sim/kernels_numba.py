@@ -383,6 +383,242 @@ def step_free(x0: float, y0: float, th0: float, v: float, omega: float, t_turn: 
 
 
 @njit(**_JIT)
+def plan(x0: float, y0: float, th0: float, heading: float, speed: float,
+         rp: np.ndarray) -> tuple[float, float, float]:  # pragma: no cover - compiled
+    """``robot._plan``'s ``v``, ``omega`` [rad/s] and turn duration [s] of a command.
+
+    ``rp`` is :data:`ROBOT`.
+    """
+    lo, hi, h = -rp[5], rp[5], heading
+    h = lo if lo > h else h
+    dh = math.radians(hi if hi < h else h)
+    lo, hi, v = rp[3], rp[4], speed
+    v = lo if lo > v else v
+    v = hi if hi < v else v
+    w = math.radians(rp[1])
+    t_turn, period = abs(dh) / w, rp[2]
+    t_turn = period if period < t_turn else t_turn
+    omega = math.copysign(w, dh) if dh != 0.0 else 0.0
+    return v, omega, t_turn
+
+
+#: The robot parameters :func:`plan`, :func:`step_contact` and :func:`env_step` read, in
+#: order (``sitframe.sim.robot.packed_params``; ``backoff_turn`` 1.0 for the recovery
+#: ``"backoff-turn"``, 0.0 for ``"none"``).
+ROBOT = ("radius", "max_turn_rate_deg_s", "control_period_s", "min_speed", "max_speed",
+         "max_heading_change_deg", "recovery_backoff_m", "recovery_turn_deg", "backoff_turn")
+
+
+@njit(**_JIT)
+def env_step(pose: np.ndarray, heading: float, speed: float, rp: np.ndarray,
+             times: np.ndarray, seg: np.ndarray, rel: np.ndarray, max_range: float,
+             sensor_radius: float, group: int, scale: float, lo: np.ndarray, hi: np.ndarray,
+             rem, out: np.ndarray, reading: np.ndarray,
+             obs: np.ndarray) -> bool:  # pragma: no cover - compiled
+    """One Gym step that touches nothing, in one call: ``step_robot``'s free step (its
+    ``_plan`` and :func:`step_free`), the sensor's read at the end pose (:func:`ranges_at`,
+    clipped: a range finder without noise) and its observation (:func:`observe`).
+
+    ``out`` gets the end pose (x, y, theta wrapped by ``rem``, the C library's
+    ``remainder``), the unwrapped theta, the distance [m] and the nearest range; returns
+    ``True`` (nothing else written) when the disc touches a wall on the way, which
+    ``step_robot`` then handles.
+    """
+    x0, y0, th0 = pose[0], pose[1], pose[2]
+    v, omega, t_turn = plan(x0, y0, th0, heading, speed, rp)
+    reach = v * rp[2] + rp[0] + rp[6] + 1e-9
+    end = np.empty(3)
+    if step_free(x0, y0, th0, v, omega, t_turn, times, seg, reach * reach, rp[0] * rp[0], end):
+        return True
+    out[0], out[1], out[2], out[3], out[4] = end[0], end[1], rem(end[2], 2.0 * math.pi), \
+        end[2], v * rp[2]
+    ranges_at(out[0], out[1], out[2], rel, seg, max_range, sensor_radius, group, True, reading)
+    out[5] = observe(reading, scale, lo, hi, obs)
+    return False
+
+
+_T27 = 134217729.0  # Veltkamp's splitting constant, 2 ** 27 + 1
+
+
+@njit(**_JIT)
+def _add_square(x: float, sign: float, s: np.ndarray) -> None:  # pragma: no cover - compiled
+    """Add ``sign * x**2`` to the compensated sum ``s`` (``vector_norm``'s steps: ``x``
+    split in halves, ``hi**2``, ``2 hi lo`` and ``lo**2`` added with their errors)."""
+    t = x * _T27
+    hi = t - (t - x)
+    lo = x - hi
+    term = sign * hi * hi
+    old = s[0]
+    s[0] += term
+    s[1] += (old - s[0]) + term
+    term = sign * 2.0 * hi * lo
+    old = s[0]
+    s[0] += term
+    s[2] += (old - s[0]) + term
+    if sign > 0.0:
+        s[3] += lo * lo
+        return
+    term = -lo * lo
+    old = s[0]
+    s[0] += term
+    s[3] += (old - s[0]) + term
+
+
+@njit(**_JIT)
+def hypot(a: float, b: float) -> float:  # pragma: no cover - compiled
+    """Python 3.11's ``math.hypot(a, b)`` (its own ``vector_norm``: Veltkamp-split squares,
+    compensated sums, one corrected square root), which the C library's ``hypot`` is not;
+    checked against ``math.hypot`` where used (:func:`sitframe.sim.kernels.contact`)."""
+    x0, x1 = abs(a), abs(b)
+    mx = 0.0
+    for x in (x0, x1):  # (as math_hypot finds the largest: a NaN is never it)
+        if x > mx:
+            mx = x
+    if mx == np.inf:
+        return mx
+    if x0 != x0 or x1 != x1:
+        return np.nan
+    if mx == 0.0:
+        return mx
+    if math.frexp(mx)[1] < -1023:  # (subnormals: divided by the largest, summed plainly)
+        csum, frac = 1.0, 0.0
+        for x in (x0 / mx, x1 / mx):
+            old = csum
+            csum += x * x
+            frac += (old - csum) + x * x
+        return mx * math.sqrt(csum - 1.0 + frac)
+    scale = math.ldexp(1.0, -math.frexp(mx)[1])
+    sums = np.zeros(4)  # csum - 1, and the three compensations
+    sums[0] = 1.0
+    _add_square(x0 * scale, 1.0, sums)
+    _add_square(x1 * scale, 1.0, sums)
+    h = math.sqrt(sums[0] - 1.0 + (sums[1] + sums[2] + sums[3]))
+    _add_square(h, -1.0, sums)
+    x = sums[0] - 1.0 + (sums[1] + sums[2] + sums[3])
+    return (h + x / (2.0 * h)) / scale
+
+
+@njit(**_JIT)
+def _poses(ts: np.ndarray, x0: float, y0: float, th0: float, v: float, omega: float,
+           t_turn: float, out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """``robot._poses_at``: the (3, n) poses at times ``ts`` (sines and cosines the C
+    library's, as :func:`step_free`'s)."""
+    th_end = th0 + omega * t_turn
+    cos_end, sin_end = math.cos(th_end), math.sin(th_end)
+    for i in range(ts.size):
+        t = ts[i]
+        tt = t if t < t_turn else t_turn
+        half = (0.5 * omega) * tt
+        y = math.pi * (half * _INV_PI)
+        sarg = _SINC_EPS if y == 0.0 else y
+        ang = th0 + half
+        chord = (v * tt) * (math.sin(sarg) / sarg)
+        ts_ = v * (t - tt)
+        out[0, i] = x0 + chord * math.cos(ang) + ts_ * cos_end
+        out[1, i] = y0 + chord * math.sin(ang) + ts_ * sin_end
+        out[2, i] = th0 + omega * tt
+
+
+@njit(**_JIT)
+def _touch(x0: float, y0: float, th0: float, v: float, omega: float, t_turn: float,
+           times: np.ndarray, near: np.ndarray, r2: float,
+           c: np.ndarray) -> int:  # pragma: no cover - compiled
+    """Steps 2 and 3 of ``robot.step_robot``: the first substep that touches (returned; -1:
+    none, ``c`` the last substep's pose) and the refined contact ``c`` = ``t_c, x, y, theta``
+    (the last free pose of two rounds of :data:`_REFINE_N`-fold subdivision)."""
+    p = np.empty((3, times.size))
+    _poses(times, x0, y0, th0, v, omega, t_turn, p)
+    k = first_contact(p[0], p[1], near, r2)
+    if k < 0:
+        c[0], c[1], c[2], c[3] = times[times.size - 1], p[0, -1], p[1, -1], p[2, -1]
+        return k
+    if k == 0:  # started inside: no forward motion
+        c[0], c[1], c[2], c[3] = 0.0, x0, y0, th0
+        return k
+    j = k - 1
+    c[0], c[1], c[2], c[3] = times[j], p[0, j], p[1, j], p[2, j]
+    hi = times[k]
+    ts, f = np.empty(_REFINE_N + 1), np.empty((3, _REFINE_N + 1))
+    for _ in range(2):
+        linspace(c[0], hi, ts)
+        _poses(ts, x0, y0, th0, v, omega, t_turn, f)
+        j = first_contact(f[0], f[1], near, r2)
+        if j < 0:
+            j = _REFINE_N
+        if j == 0:
+            break
+        hi = ts[j]
+        j -= 1
+        c[0], c[1], c[2], c[3] = ts[j], f[0, j], f[1, j], f[2, j]
+    return k
+
+
+@njit(**_JIT)
+def step_contact(x0: float, y0: float, th0: float, v: float, omega: float, t_turn: float,
+                 times: np.ndarray, seg: np.ndarray, rp: np.ndarray, rng, rem,
+                 out: np.ndarray) -> bool:  # pragma: no cover - compiled
+    """``robot.step_robot`` for a step that may touch a wall, operation by operation: the
+    substeps against the edges in reach, the refined contact, the contact point, the
+    back-off along the normal and the turn away (a dead-ahead contact draws its side from
+    ``rng``). ``rp`` is :data:`ROBOT`; ``rem`` the C library's ``remainder``.
+
+    ``out`` (12,): the end pose (x, y, wrapped theta), the contact point (x, y; NaN without
+    one), the contact pose (x, y, wrapped theta), the distance [m], the heading change
+    [deg], the distance backed off [m] and the recovery turn [deg]. Returns whether the disc
+    touched a wall.
+    """
+    r, back, recovery = rp[0], rp[6], rp[8] != 0.0
+    reach = v * rp[2] + r + back + 1e-9
+    idx = np.empty(seg.shape[1], dtype=np.intp)
+    near = _gather(seg, idx, near_segments(x0, y0, seg, reach * reach, idx))
+    c = np.empty(4)
+    k = -1 if near.shape[1] == 0 else _touch(x0, y0, th0, v, omega, t_turn, times, near,
+                                             r * r, c)
+    if k < 0:  # (nothing touched: the closed form at the end, as step_robot's open space)
+        if near.shape[1] == 0:
+            e = np.empty(3)
+            step_free(x0, y0, th0, v, omega, t_turn, times, seg, 0.0, r * r, e)
+            c[1], c[2], c[3] = e[0], e[1], e[2]
+        w = rem(c[3], 2.0 * math.pi)
+        out[0], out[1], out[2], out[3], out[4] = c[1], c[2], w, np.nan, np.nan
+        out[5], out[6], out[7], out[8] = c[1], c[2], w, v * rp[2]
+        out[9], out[10], out[11] = math.degrees(c[3] - th0), 0.0, 0.0
+        return False
+    t_c, cx, cy, cth = c[0], c[1], c[2], c[3]
+    px, py = nearest_point(cx, cy, near)
+    backed, bx, by = 0.0, cx, cy
+    if recovery and back > 0.0:
+        nx, ny = cx - px, cy - py
+        norm = hypot(nx, ny)
+        if norm > 0.0:
+            nx, ny = nx / norm, ny / norm
+        else:  # centre on the wall (only if it started there): back straight up
+            nx, ny = -math.cos(cth), -math.sin(cth)
+        s = np.empty(_BACKOFF_N)
+        m, xx, yy = backoff(cx, cy, nx, ny, back, near, r * r, k == 0, s)
+        if m > 0:
+            backed, bx, by = s[m], xx, yy
+    w = rem(cth, 2.0 * math.pi)
+    out[3], out[4], out[5], out[6], out[7] = px, py, cx, cy, w
+    out[8], out[9], out[10], out[11] = v * t_c, math.degrees(cth - th0), backed, 0.0
+    if not recovery:
+        out[0], out[1], out[2] = cx, cy, w
+        return True
+    bearing = rem(math.atan2(py - by, px - bx) - cth, 2.0 * math.pi)
+    turn_max, room = math.radians(rp[7]), math.pi - abs(bearing)
+    turn = room if room < turn_max else turn_max  # (Python's min(turn_max, room))
+    if bearing > 0.0 or (bearing == 0.0 and rng.random() < 0.5):
+        turn = -turn
+    out[0], out[1], out[2], out[11] = bx, by, rem(cth + turn, 2.0 * math.pi), \
+        math.degrees(turn)
+    return True
+
+
+#: ``robot._REFINE`` and ``robot._BACKOFF_SAMPLES`` (the simulator cannot be imported here).
+_REFINE_N, _BACKOFF_N = 16, 11
+
+
+@njit(**_JIT)
 def trig(x: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - compiled
     """``out[0] = sin(x)``, ``out[1] = cos(x)`` as compiled code computes them (the C
     library's), for :func:`sitframe.sim.kernels.fused` to compare with numpy's."""

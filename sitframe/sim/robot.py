@@ -64,7 +64,8 @@ from sitframe.sim.kernels import fused, kernels
 if TYPE_CHECKING:  # (a world is read through its segments and start pose only)
     from sitframe.sim.world import World
 
-__all__ = ["Command", "RobotParams", "Simulator", "StepOutcome", "step_robot", "trajectory"]
+__all__ = ["Command", "RobotParams", "Simulator", "StepOutcome", "packed_params", "step_robot",
+           "trajectory"]
 
 _REFINE = 16  # subdivisions per refinement round
 _BACKOFF_SAMPLES = 11
@@ -301,6 +302,15 @@ def trajectory(pose: np.ndarray, command: Command, params: RobotParams,
     x0, y0, th0, v, omega, t_turn = _plan(np.asarray(pose, dtype=float), command, params)
     x, y, th = _poses_at(np.asarray(times, dtype=float), x0, y0, th0, v, omega, t_turn)
     return np.stack([x, y, th], axis=1)
+
+
+def packed_params(params: RobotParams) -> np.ndarray:
+    """``params`` as the compiled kernels read them (``sitframe.sim.kernels_numba.ROBOT``):
+    a (9,) float array, the recovery as 1.0 (``"backoff-turn"``) or 0.0 (``"none"``)."""
+    return np.array([params.radius, params.max_turn_rate_deg_s, params.control_period_s,
+                     params.min_speed, params.max_speed, params.max_heading_change_deg,
+                     params.recovery_backoff_m, params.recovery_turn_deg,
+                     params.recovery == "backoff-turn"], dtype=np.float64)
 
 
 def _wrap(theta: float) -> float:
