@@ -223,3 +223,33 @@ def test_evaluate_rescores_an_sb3_run_with_its_own_model(sb3_model, tmp_path, ca
         err = capsys.readouterr().err
         assert broken in err and "sb3.h5" in err and err.count("\n") == 1
         model.unlink(missing_ok=True)  # then: no model at all
+
+
+@pytest.mark.parametrize("worlds", [None, ["gen:1000000", "gen:1000001", "novel-1"]])
+def test_compiled_step_equals_the_python_step(worlds: list[str] | None,
+                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    """``SitframeEnv.step`` in one compiled call (``CompiledStep``) gives what ``step_robot``,
+    the sonar and the observation give, collisions and resets included."""
+    from sitframe.gym import env as genv
+    from sitframe.sim import kernels
+
+    if kernels.load() is None or kernels.contact() is None:
+        pytest.skip("the compiled step is not used here")
+    kw = {} if worlds is None else {"worlds": worlds}
+    fast = sg.SitframeEnv("obstacle-avoidance", max_steps=60, **kw)
+    slow = sg.SitframeEnv(task=fast.task)
+    monkeypatch.setattr(slow, "_compile", lambda: None)
+    acts = np.random.default_rng(4).integers(0, fast.action_space.n, 400)
+    for e in (fast, slow):
+        e.reset(seed=9)
+    hits = 0
+    for a in acts:
+        got, want = fast.step(int(a)), slow.step(int(a))
+        np.testing.assert_array_equal(got[0], want[0])
+        assert got[1:4] == want[1:4]
+        assert got[4].keys() == want[4].keys() and all(
+            np.array_equal(got[4][k], want[4][k]) for k in got[4])
+        hits += got[4]["collided"]
+        if got[2] or got[3]:
+            np.testing.assert_array_equal(fast.reset()[0], slow.reset()[0])
+    assert isinstance(fast._compiled, genv.CompiledStep) and hits > 10

@@ -494,18 +494,20 @@ def test_the_fused_steps_run_only_where_compiled_sines_are_numpys(
 
 def _contact_step(k, world: World, pose: np.ndarray, cmd: Command, params: RobotParams,
                   rng: np.random.Generator) -> tuple:
-    """``step_contact``'s outcome as :func:`_fields` of a ``StepOutcome`` reads one."""
-    from sitframe.sim.numpy_loops import loops
+    """``step_contact``'s outcome as ``step_robot``'s ``StepOutcome`` has it (a dead-ahead
+    contact's side drawn from ``rng``, as there)."""
     from sitframe.sim.robot import _times, packed_params
 
     rp = packed_params(params)
     v, omega, t_turn = k.plan(*(float(p) for p in pose), cmd.heading_change_deg,
                               cmd.speed_m_s, rp)
-    out = np.empty(12)
-    hit = k.step_contact(*(float(p) for p in pose), v, omega, t_turn,
-                         np.array(_times(params.control_period_s, params.substep_s)),
-                         np.array(world.segment_set.packed), rp, rng, loops().remainder, out)
-    return (hit, *out[:3], *out[3:5], *out[5:8], *out[8:])
+    out = np.empty(14)
+    code = k.step_contact(*(float(p) for p in pose), v, omega, t_turn,
+                          np.array(_times(params.control_period_s, params.substep_s)),
+                          np.array(world.segment_set.packed), rp, out)
+    if code == k.TIE:
+        k.finish_turn(out, rng.random() < 0.5)
+    return (code != k.FREE, *out[:12])
 
 
 @pytest.mark.parametrize("params", [RobotParams(), RobotParams(recovery="none"),
@@ -551,7 +553,7 @@ def test_compiled_contact_step_is_step_robots(params: RobotParams) -> None:
     assert hits > 300  # (most of these steps touch a wall)
 
 
-def test_compiled_hypot_is_pythons() -> None:
+def test_compiled_hypot_and_wrap_are_pythons() -> None:
     k = kernels.contact()
     if k is None:
         pytest.skip("the compiled contact step does not agree with Python's here")
@@ -562,3 +564,8 @@ def test_compiled_hypot_is_pythons() -> None:
     got = np.array([k.hypot(a, b) for a, b in ab.T])
     want = np.array([math.hypot(a, b) for a, b in ab.T])
     assert np.array_equal(got, want, equal_nan=True)
+    th = np.concatenate([rng.uniform(-100, 100, 20000), ab[0, :5000], math.pi * np.arange(-40, 41),
+                         math.pi / 2 * np.arange(-40, 41), [0.0, -0.0, 5e-324, -5e-324, 1e300]])
+    wrapped = np.array([k.wrap(x) for x in th])
+    exact = np.array([math.remainder(x, 2 * math.pi) for x in th])
+    assert wrapped.tobytes() == exact.tobytes()  # (the sign of a zero too)

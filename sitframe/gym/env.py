@@ -39,10 +39,11 @@ import numpy as np
 
 from sitframe.contract.records import Context, Transition
 from sitframe.gym.task import _NO_U, Task
-from sitframe.sim.robot import step_robot
+from sitframe.sim.kernels import contact, kernels
+from sitframe.sim.robot import _NAN2, StepOutcome, _times, packed_params, step_robot
 from sitframe.sim.world import Goal
 
-__all__ = ["SitframeEnv", "render_frame"]
+__all__ = ["CompiledStep", "SitframeEnv", "render_frame"]
 
 
 class SitframeEnv(gym.Env):
@@ -88,6 +89,7 @@ class SitframeEnv(gym.Env):
         self.t = 0
         self._reading: np.ndarray | None = None
         self._ctx: Any = None  # the last step's context: the next step's ``before``
+        self._compiled: CompiledStep | None | bool = False  # (False: not decided yet)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
               ) -> tuple[np.ndarray, dict[str, Any]]:
@@ -118,11 +120,17 @@ class SitframeEnv(gym.Env):
         cmd = task.command(action, self.continuous)
         before = self._ctx or task.context(self.t, self.pose, self._reading, self.goal,
                                            world=self.world)
-        out = step_robot(self.world, self.pose, cmd, task.res.robot, rng)
-        self.pose = out.pose
-        self._reading = self.sensor.read(self.world, self.pose, rng)
+        fast = self._compiled if self._compiled is not False else self._compile()
+        got = None if fast is None else fast.step(self.world, self.pose, cmd)
+        if got is not None:
+            out, self._reading, obs, nearest = got
+            self.pose = out.pose
+        else:
+            out = step_robot(self.world, self.pose, cmd, task.res.robot, rng)
+            self.pose = out.pose
+            self._reading = self.sensor.read(self.world, self.pose, rng)
+            obs, nearest = task.observe_nearest(self._reading, self.pose, self.goal)
         self.t += 1
-        obs, nearest = task.observe_nearest(self._reading, self.pose, self.goal)
         # (Task.context, without its defaults' look-ups: this runs every step)
         after = self._ctx = Context(self.t, self.pose, self._reading, _NO_U, nearest, self.world,
                                     self.goal)
@@ -130,6 +138,14 @@ class SitframeEnv(gym.Env):
         terminated = task.terminated(after, out.collided)
         truncated = not terminated and self.t >= task.max_steps
         return obs, reward, terminated, truncated, self._info(out)
+
+    def _compile(self) -> CompiledStep | None:
+        """The compiled step of this env (:class:`CompiledStep`), once the kernels are loaded
+        (decided then, for good), or ``None``."""
+        if kernels() is None:
+            return None  # (a process's first steps: numpy's path; asked again later)
+        self._compiled = CompiledStep.create(self.task, self.sensor)
+        return self._compiled
 
     def _info(self, out: Any) -> dict[str, Any]:
         if out is None:
@@ -143,6 +159,85 @@ class SitframeEnv(gym.Env):
             return None
         return render_frame(self.world, self.pose, self._reading, self.sensor, self.goal,
                             self.task.res.robot.radius)
+
+
+class CompiledStep:
+    """A Gym step in one compiled call (:func:`sitframe.sim.kernels_numba.env_step`): the
+    robot's step, contact included, the range finder's read and the observation, bit for
+    bit what ``step_robot``, the sensor's ``read`` and :meth:`Task.observe_nearest` give.
+
+    Made (:meth:`create`) for a sensor that answers ``_fused()`` (the built-in range finders
+    without noise or dropout), a task without goals (its observation is the reading alone)
+    and where the whole step compiled agrees with Python's (:func:`sitframe.sim.kernels.
+    contact`); the env steps through Python otherwise.
+    """
+
+    def __init__(self, k: Any, task: Task, spec: dict[str, Any]) -> None:
+        rp = task.res.robot
+        self.k, self.rp = k, packed_params(rp)
+        self.times = np.array(_times(rp.control_period_s, rp.substep_s))
+        self.rays = np.array(spec["rays"], dtype=np.float64)
+        self.sensor = (float(spec["max_range"]), float(spec["radius"]),
+                       int(spec["rays_per_beam"]))
+        self.scale = float(task.max_range if task.normalize else 1.0)
+        self.lo, self.hi = (np.array(b) for b in task.observation_bounds())
+        self.d = self.rays.size // self.sensor[2]
+        self._segs: dict[int, tuple[Any, np.ndarray]] = {}
+
+    @classmethod
+    def create(cls, task: Task, sensor: Any) -> CompiledStep | None:
+        """The compiled step of ``task`` with ``sensor``, or ``None`` (class docstring)."""
+        k = contact()
+        f = getattr(sensor, "_fused", None)
+        spec = f() if callable(f) else None
+        if k is None or spec is None or task.protocol is not None:
+            return None
+        return cls(k, task, spec)
+
+    def seg(self, world: Any) -> np.ndarray:
+        """``world``'s packed segments as the kernel takes them (copied once per world)."""
+        got = self._segs.get(id(world))
+        if got is None or got[0] is not world:
+            got = self._segs[id(world)] = (world, np.array(world.segment_set.packed))
+        return got[1]
+
+    def steps(self, world: Any, poses: np.ndarray, headings: np.ndarray, speeds: np.ndarray,
+              reward: np.ndarray) -> tuple[np.ndarray, ...]:
+        """N robots' steps in ``world`` in one call (the vector env's):
+        :func:`~sitframe.sim.kernels_numba.env_steps`' ``codes`` (N,), ``out`` (N, 15),
+        ``readings`` (N, d), ``obs`` (N, d) and ``rewards`` (N,) (``reward``: the
+        ``obstacle-avoidance`` reward's collision, base and heading cost)."""
+        n = poses.shape[0]
+        codes, out, rewards = np.empty(n, np.int64), np.empty((n, 15)), np.empty(n)
+        readings = np.empty((n, self.d))
+        obs = np.empty((n, *self.lo.shape), dtype=np.float32)
+        max_range, radius, group = self.sensor
+        self.k.env_steps(poses, headings, speeds, self.rp, self.times, self.seg(world), self.rays,
+                         max_range, radius, group, self.scale, self.lo, self.hi, reward, out,
+                         readings, obs, codes, rewards)
+        return codes, out, readings, obs, rewards
+
+    def step(self, world: Any, pose: np.ndarray, cmd: Any
+             ) -> tuple[StepOutcome, np.ndarray, np.ndarray, float] | None:
+        """The outcome of ``cmd`` from ``pose``, the reading there, its observation and its
+        nearest range; ``None`` for a dead-ahead contact (its turn is a draw from the robot's
+        generator: ``step_robot`` steps it)."""
+        out, reading = np.empty(15), np.empty(self.d)
+        obs = np.empty(self.lo.shape, dtype=np.float32)
+        max_range, radius, group = self.sensor
+        code = self.k.env_step(float(pose[0]), float(pose[1]), float(pose[2]),
+                               float(cmd.heading_change_deg), float(cmd.speed_m_s), self.rp,
+                               self.times, self.seg(world), self.rays, max_range, radius,
+                               group, self.scale, self.lo, self.hi, out, reading, obs)
+        if code == self.k.TIE:
+            return None
+        final = out[:3].copy()
+        if code:
+            o = StepOutcome(pose, final, True, out[3:5].copy(), out[5:8].copy(), float(out[8]),
+                            float(out[9]), float(out[10]), float(out[11]))
+        else:
+            o = StepOutcome(pose, final, False, _NAN2, final, float(out[8]), float(out[9]))
+        return o, reading, obs, float(out[14])
 
 
 def _chosen_start(task: Task, world: Any, options: dict[str, Any], pose: np.ndarray,

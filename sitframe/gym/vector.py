@@ -19,6 +19,14 @@ What stays per robot is what a reward plugin needs: the contexts, the
 :class:`~sitframe.contract.records.Transition` and the reward call. Without the
 compiled kernels the robots are stepped one by one (the numpy reference).
 
+Compiled, in one call: when the single env's step is compiled
+(:class:`~sitframe.gym.env.CompiledStep`: a range finder without noise, no goals) and the
+reward is the built-in ``obstacle-avoidance`` (without ``progress``), every robot's step,
+contact included, reading, observation and reward are one call per world
+(:func:`sitframe.sim.kernels_numba.env_steps`); nothing stays per robot but its pose, its
+reading and its step count (a dead-ahead contact, whose turn is a draw from the robot's
+generator, is stepped as above).
+
 With several worlds (``worlds=[...]``) each robot draws its episode's world as
 the single env does, and the robots are moved and read world by world (each
 robot's own generator, so still bit-identical to its single env).
@@ -38,9 +46,10 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from sitframe.contract.records import Context, Transition
-from sitframe.gym.env import SitframeEnv
+from sitframe.gym.env import CompiledStep, SitframeEnv
 from sitframe.gym.task import _NO_U, Task
 from sitframe.sim.fleet import step_robots
+from sitframe.sim.kernels import kernels
 
 __all__ = ["SitframeVectorEnv"]
 
@@ -88,6 +97,7 @@ class SitframeVectorEnv(VectorEnv):
         self._table: list[Any] | None = None  # the command of each discrete action
         self._ctx: list[Any] = [None] * num_envs  # each robot's last context
         self._many = getattr(self.envs[0].sensor, "read_many", None)
+        self._fast: tuple[CompiledStep, np.ndarray] | None | bool = False  # (False: undecided)
 
     def reset(self, *, seed: int | list[int | None] | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
@@ -103,7 +113,7 @@ class SitframeVectorEnv(VectorEnv):
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
                                           dict[str, Any]]:
-        n, task, envs = self.num_envs, self.task, self.envs
+        n, envs = self.num_envs, self.envs
         acts = np.asarray(actions)
         if acts.shape[:1] != (n,):
             raise ValueError(f"actions: expected {n} actions (one per robot), got shape "
@@ -120,26 +130,10 @@ class SitframeVectorEnv(VectorEnv):
         if live:
             robots = [envs[i] for i in live]
             cmds = self._commands((acts if live is self._all else acts[live]).tolist())
-            rngs = [e.np_random for e in robots]
-            outs, at, readings = self._move(robots, cmds, rngs)
-            poses = [o.pose for o in outs]
-            nearest = readings.min(axis=1).tolist()
-            limit = task.max_steps
-            ends, ctx = task.protocol is not None or task.terminate_on_collision, self._ctx
-            for j, (i, env, out, reading) in enumerate(zip(live, robots, outs, readings,
-                                                           strict=True)):
-                # what stays per robot: the contexts and the reward (as SitframeEnv.step)
-                before = ctx[i] or task.context(env.t, env.pose, env._reading, env.goal,
-                                                world=env.world)
-                env.pose, env._reading = out.pose, reading
-                env.t += 1
-                ctx[i] = after = Context(env.t, out.pose, reading, _NO_U, nearest[j], env.world,
-                                         env.goal)
-                rew[i] = float(env.reward_fn(Transition(before, cmds[j], out, after)))
-                term[i] = ends and task.terminated(after, out.collided)
-                trunc[i] = not term[i] and env.t >= limit
-                collided[i] = out.collided
-            seen = task.observe_many(readings, poses, [e.goal for e in robots])
+            fast = self._compiled()
+            figures = (rew, term, trunc, collided)
+            seen, at = self._step_python(live, robots, cmds, figures) if fast is None else \
+                self._step_compiled(fast, live, robots, cmds, figures)
             if obs is None:  # (all robots live)
                 obs = seen
             else:
@@ -148,6 +142,89 @@ class SitframeVectorEnv(VectorEnv):
         self._done = terminated | truncated
         return obs, np.array(rew), terminated, truncated, \
             self._infos(hit, at if live is self._all else None)
+
+    def _step_python(self, live: list[int], robots: list[SitframeEnv], cmds: list[Any],
+                     figures: tuple[list[Any], ...]) -> tuple[np.ndarray, np.ndarray]:
+        """Step the ``live`` robots (batched kernels, contexts and rewards per robot); fill
+        their ``figures`` (reward, terminated, truncated, collided); their observations and
+        poses."""
+        task, rew, term, trunc, collided = self.task, *figures
+        rngs = [e.np_random for e in robots]
+        outs, at, readings = self._move(robots, cmds, rngs)
+        poses = [o.pose for o in outs]
+        nearest = readings.min(axis=1).tolist()
+        limit = task.max_steps
+        ends, ctx = task.protocol is not None or task.terminate_on_collision, self._ctx
+        for j, (i, env, out, reading) in enumerate(zip(live, robots, outs, readings,
+                                                       strict=True)):
+            # what stays per robot: the contexts and the reward (as SitframeEnv.step)
+            before = ctx[i] or task.context(env.t, env.pose, env._reading, env.goal,
+                                            world=env.world)
+            env.pose, env._reading = out.pose, reading
+            env.t += 1
+            ctx[i] = after = Context(env.t, out.pose, reading, _NO_U, nearest[j], env.world,
+                                     env.goal)
+            rew[i] = float(env.reward_fn(Transition(before, cmds[j], out, after)))
+            term[i] = ends and task.terminated(after, out.collided)
+            trunc[i] = not term[i] and env.t >= limit
+            collided[i] = out.collided
+        return task.observe_many(readings, poses, [e.goal for e in robots]), at
+
+    def _compiled(self) -> tuple[CompiledStep, np.ndarray] | None:
+        """The compiled step and the reward's figures (collision, base, heading cost) when
+        every robot's step can be one call (module docstring), else ``None``."""
+        if self._fast is False:
+            env = self.envs[0]
+            fast = env._compiled if env._compiled is not False else env._compile()
+            f = getattr(env.reward_fn, "_fused", None)
+            spec = f() if callable(f) else None
+            if fast is None or spec is None:
+                if kernels() is None:
+                    return None  # (decided once the kernels are loaded)
+                self._fast = None
+            else:
+                self._fast = (fast, np.array([spec["collision"], spec["base"],
+                                              spec["heading_cost"]]))
+        return self._fast
+
+    def _step_compiled(self, fast: tuple[CompiledStep, np.ndarray], live: list[int],
+                       robots: list[SitframeEnv], cmds: list[Any],
+                       figures: tuple[list[Any], ...]) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_step_python` in one compiled call per world (a dead-ahead contact, whose
+        turn is drawn from the robot's generator, stepped by :meth:`_step_python`)."""
+        step, reward = fast
+        task, rew, term, trunc, collided = self.task, *figures
+        poses = np.array([e.pose for e in robots])
+        heads = np.array([c.heading_change_deg for c in cmds], dtype=np.float64)
+        speeds = np.array([c.speed_m_s for c in cmds], dtype=np.float64)
+        groups: dict[int, list[int]] = {}
+        for j, e in enumerate(robots):
+            groups.setdefault(id(e.world), []).append(j)
+        obs = np.empty((len(robots), *self.single_observation_space.shape), dtype=np.float32)
+        at = np.empty((len(robots), 3))
+        limit, tc = task.max_steps, task.terminate_on_collision
+        for js in groups.values():
+            codes, out, readings, seen, rewards = step.steps(
+                robots[js[0]].world, poses[js], heads[js], speeds[js], reward)
+            tie = codes == step.k.TIE
+            hit = (codes != step.k.FREE).tolist()
+            for q, j in enumerate(js):  # (what each robot keeps: its pose, reading and time)
+                if not tie[q]:
+                    env = robots[j]
+                    env.pose, env._reading = out[q, :3].copy(), readings[q]
+                    env.t += 1
+                    i = live[j]
+                    self._ctx[i] = None  # (the reward needs none: a later one is made anew)
+                    rew[i], collided[i] = float(rewards[q]), hit[q]
+                    term[i] = tc and hit[q]
+                    trunc[i] = not term[i] and env.t >= limit
+            obs[js], at[js] = seen, out[:, :3]
+            if tie.any():
+                ties = [j for j, t in zip(js, tie.tolist(), strict=True) if t]
+                obs[ties], at[ties] = self._step_python([live[j] for j in ties],
+                                                        [robots[j] for j in ties],
+                                                        [cmds[j] for j in ties], figures)
+        return obs, at
 
     def _commands(self, acts: list[Any]) -> list[Any]:
         """The commands of the live robots' actions (discrete ones looked up, as

@@ -81,7 +81,7 @@ class Fused:
     def call_args(self) -> tuple[Any, ...]:
         """The loops' pointers, in :func:`sitframe.runs.fused_kernels.run`'s order."""
         lp = self.loops
-        return lp.log, lp.power, lp.exp, lp.ddot, lp.remainder
+        return lp.log, lp.power, lp.exp, lp.ddot
 
 
 def _specs(parts: Any, learning: bool) -> dict[str, dict[str, Any]] | str:

@@ -39,14 +39,18 @@ from numba import njit
 from sitframe.sim import numpy_loops
 from sitframe.sim.kernels_numba import (
     _JIT,
+    FREE,
+    TIE,
     _pairwise_sum,
     fcm_ratios,
+    finish_turn,
     label_strengths,
     normalize,
     plan,
     ranges_at,
     step_contact,
     step_free,
+    wrap,
 )
 
 #: Small helpers are inlined into their callers when typed (numba compiles no function of
@@ -292,7 +296,7 @@ def _learn(t, u0, u1, reward, collided, q, updates, visits, rule_base, fp, ip, s
 @njit(**_JIT)
 def run(t1, resume, after, collided_after, contact_after, seg, times, rp, rel, fc, singletons,
         onehot, q, updates, visits, rule_base, greedy, rules_it, fp, ip, state, carry, reading,
-        u, rng, lg, pw, ex, dd, rem, pose_out, reading_out, u_out, command_out, nearest_out,
+        u, rng, lg, pw, ex, dd, pose_out, reading_out, u_out, command_out, nearest_out,
         collision_out, contact_out, reward_out, snap_it, snap_rules, snap_greedy,
         snap_q):  # pragma: no cover - compiled
     """Run iterations ``state[5]`` up to ``t1`` (exclusive); :data:`DONE`, or
@@ -305,7 +309,7 @@ def run(t1, resume, after, collided_after, contact_after, seg, times, rp, rel, f
     logits, strength = np.empty(c * a), np.empty(a)
     ptrs, dims, strides, scalar = np.empty(3, np.intp), np.empty(1, np.intp), \
         np.empty(3, np.intp), np.empty(1)
-    end, touch = np.empty(3), np.empty(12)
+    end, touch = np.empty(3), np.empty(14)
     t = state[5]
     while t < t1:
         x, y, th = carry[0], carry[1], carry[2]
@@ -328,10 +332,13 @@ def run(t1, resume, after, collided_after, contact_after, seg, times, rp, rel, f
             reach = v * rp[2] + rp[0] + rp[6] + 1e-9  # (robot.step_robot's reach)
             if not step_free(x, y, th, v, omega, t_turn, times, seg, reach * reach,
                              rp[0] * rp[0], end):
-                nx, ny, nth = end[0], end[1], rem(end[2], 2.0 * math.pi)
+                nx, ny, nth = end[0], end[1], wrap(end[2])
                 hit, hx, hy = False, np.nan, np.nan
             elif ip[13]:  # (the contact compiled too: step_robot's own steps)
-                hit = step_contact(x, y, th, v, omega, t_turn, times, seg, rp, rng, rem, touch)
+                code = step_contact(x, y, th, v, omega, t_turn, times, seg, rp, touch)
+                if code == TIE:  # (dead ahead: the side of the turn away is drawn)
+                    finish_turn(touch, rng.random() < 0.5)
+                hit = code != FREE
                 nx, ny, nth, hx, hy = touch[0], touch[1], touch[2], touch[3], touch[4]
             else:
                 carry[3], carry[4] = heading, speed
@@ -432,7 +439,7 @@ def _warm() -> None:
         np.zeros((c, a)), ints[0],
         np.zeros((c, a), np.int64), ints[1], ints[2], np.zeros((L, c), np.int8), fp, ip, state,
         np.array([0.5, 0.5, 0.0, 0.0, 0.0]), np.zeros(d), np.zeros(c), rng, lp.log, lp.power,
-        lp.exp, lp.ddot, lp.remainder, np.zeros((L + 1, 3)), f2[1], f2[2], f2[3],
+        lp.exp, lp.ddot, np.zeros((L + 1, 3)), f2[1], f2[2], f2[3],
         np.zeros(L), np.zeros(L, np.bool_), np.zeros((L, 2)), np.zeros(L),
         np.zeros(L, np.int64), np.zeros((L, c), np.int64), np.zeros((L, c), np.int64),
         np.zeros((L, c, a)))

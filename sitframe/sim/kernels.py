@@ -30,8 +30,6 @@ from types import ModuleType
 
 import numpy as np
 
-from sitframe.sim import numpy_loops
-
 __all__ = ["WARMUP_CALLS", "contact", "fused", "kernels", "load", "wanted"]
 
 #: Calls of :func:`kernels` answered with the numpy path before numba is loaded:
@@ -117,8 +115,9 @@ def contact() -> ModuleType | None:
     included (:func:`~sitframe.sim.kernels_numba.step_contact`): :func:`fused`, where the
     kernel's ``hypot`` is Python's ``math.hypot`` (its own algorithm, not the C library's;
     checked once per process on 2,000 pairs of lengths from 1e-300 to 1e300, zeros among
-    them) and the C library's ``remainder`` can be called (:mod:`sitframe.sim.numpy_loops`);
-    else ``None`` and the contact is stepped in Python (the same results, slower).
+    them), and so is its ``wrap`` Python's ``math.remainder(x, 2 pi)`` (on 2,000 angles,
+    multiples of pi among them); else ``None`` and the contact is stepped in Python (the same
+    results, slower).
     """
     k = fused()
     if k is None:
@@ -130,6 +129,9 @@ def contact() -> ModuleType | None:
         ab[0, 50:60] = 0.0
         got = np.array([k.hypot(a, b) for a, b in ab.T])
         want = np.array([math.hypot(a, b) for a, b in ab.T])
+        th = np.concatenate([rng.uniform(-50.0, 50.0, 1900), np.pi * np.arange(-50, 50)])
+        wrapped = np.array([k.wrap(x) for x in th])
+        exact = np.array([math.remainder(x, 2.0 * math.pi) for x in th])
         _HYPOT_AGREES.append(bool(np.array_equal(got, want))
-                             and not isinstance(numpy_loops.loops(), str))
+                             and wrapped.tobytes() == exact.tobytes())
     return k if _HYPOT_AGREES[0] else None

@@ -410,34 +410,92 @@ ROBOT = ("radius", "max_turn_rate_deg_s", "control_period_s", "min_speed", "max_
 
 
 @njit(**_JIT)
-def env_step(pose: np.ndarray, heading: float, speed: float, rp: np.ndarray,
+def env_step(x0: float, y0: float, th0: float, heading: float, speed: float, rp: np.ndarray,
              times: np.ndarray, seg: np.ndarray, rel: np.ndarray, max_range: float,
              sensor_radius: float, group: int, scale: float, lo: np.ndarray, hi: np.ndarray,
-             rem, out: np.ndarray, reading: np.ndarray,
-             obs: np.ndarray) -> bool:  # pragma: no cover - compiled
-    """One Gym step that touches nothing, in one call: ``step_robot``'s free step (its
-    ``_plan`` and :func:`step_free`), the sensor's read at the end pose (:func:`ranges_at`,
-    clipped: a range finder without noise) and its observation (:func:`observe`).
-
-    ``out`` gets the end pose (x, y, theta wrapped by ``rem``, the C library's
-    ``remainder``), the unwrapped theta, the distance [m] and the nearest range; returns
-    ``True`` (nothing else written) when the disc touches a wall on the way, which
-    ``step_robot`` then handles.
+             out: np.ndarray, reading: np.ndarray,
+             obs: np.ndarray) -> int:  # pragma: no cover - compiled
+    """One Gym step in one call: ``step_robot`` (:func:`plan`, :func:`step_free` and, when
+    the disc touches a wall, :func:`step_contact`), the range finder's read at the end pose
+    (:func:`ranges_at`, clipped: a sensor without noise) and its observation
+    (:func:`observe`). ``out`` (15,): :func:`step_contact`'s fourteen figures and the
+    reading's nearest range. Returns :func:`step_contact`'s answer; on :data:`TIE` (a
+    dead-ahead contact, whose turn's side is a draw from the robot's generator) before
+    reading: the caller steps that one through ``step_robot``.
     """
-    x0, y0, th0 = pose[0], pose[1], pose[2]
     v, omega, t_turn = plan(x0, y0, th0, heading, speed, rp)
     reach = v * rp[2] + rp[0] + rp[6] + 1e-9
     end = np.empty(3)
+    code = FREE
     if step_free(x0, y0, th0, v, omega, t_turn, times, seg, reach * reach, rp[0] * rp[0], end):
-        return True
-    out[0], out[1], out[2], out[3], out[4] = end[0], end[1], rem(end[2], 2.0 * math.pi), \
-        end[2], v * rp[2]
+        code = step_contact(x0, y0, th0, v, omega, t_turn, times, seg, rp, out)
+        if code == TIE:
+            return code
+    else:
+        w = wrap(end[2])
+        out[0], out[1], out[2], out[3], out[4] = end[0], end[1], w, np.nan, np.nan
+        out[5], out[6], out[7], out[8] = end[0], end[1], w, v * rp[2]
+        out[9], out[10], out[11] = math.degrees(end[2] - th0), 0.0, 0.0
     ranges_at(out[0], out[1], out[2], rel, seg, max_range, sensor_radius, group, True, reading)
-    out[5] = observe(reading, scale, lo, hi, obs)
-    return False
+    out[14] = observe(reading, scale, lo, hi, obs)
+    return code
+
+
+@njit(**_JIT)
+def env_steps(poses: np.ndarray, headings: np.ndarray, speeds: np.ndarray, rp: np.ndarray,
+              times: np.ndarray, seg: np.ndarray, rel: np.ndarray, max_range: float,
+              sensor_radius: float, group: int, scale: float, lo: np.ndarray, hi: np.ndarray,
+              reward: np.ndarray, out: np.ndarray, readings: np.ndarray, obs: np.ndarray,
+              codes: np.ndarray, rewards: np.ndarray) -> None:  # pragma: no cover - compiled
+    """:func:`env_step` for N robots in one world (the vector env's step): row ``i`` of
+    ``out``, ``readings``, ``obs`` and ``codes`` is robot ``i``'s, from ``poses[i]`` (x, y,
+    theta) under ``headings[i]`` [deg] and ``speeds[i]`` [m/s]; ``rewards[i]`` its
+    ``obstacle-avoidance`` reward (``reward``: collision, base, heading cost; a
+    :data:`TIE` row gets none: the caller steps it)."""
+    for i in range(poses.shape[0]):
+        h = headings[i]
+        code = env_step(poses[i, 0], poses[i, 1], poses[i, 2], h, speeds[i], rp, times, seg,
+                        rel, max_range, sensor_radius, group, scale, lo, hi, out[i],
+                        readings[i], obs[i])
+        codes[i] = code
+        rewards[i] = reward[0] if code != FREE else (reward[1] - reward[2] * abs(h)) + 0.0
 
 
 _T27 = 134217729.0  # Veltkamp's splitting constant, 2 ** 27 + 1
+_TWO_PI = 2.0 * math.pi
+
+
+@njit(**_JIT)
+def wrap(x: float) -> float:  # pragma: no cover - compiled
+    """``math.remainder(x, 2 pi)`` (``robot._wrap``): IEEE 754's remainder, exact, from the
+    exact ``fmod`` as fdlibm's ``__ieee754_remainder`` takes it (numba has no
+    ``math.remainder``); ``tests/test_kernels.py`` compares it with Python's."""
+    p = _TWO_PI
+    if x != x or x == np.inf or x == -np.inf:
+        return np.nan
+    r = np.fmod(x, p + p)
+    a = abs(r)
+    if a == p:
+        return 0.0 * r
+    half = 0.5 * p
+    if a > half:
+        a -= p
+        if a >= half:
+            a -= p
+    return -a if r < 0.0 or (r == 0.0 and math.copysign(1.0, r) < 0.0) else a
+
+
+@njit(**_JIT)
+def finish_turn(out: np.ndarray, flip: bool) -> None:  # pragma: no cover - compiled
+    """End a :func:`step_contact` that answered :data:`TIE` (a dead-ahead contact): turn
+    right when ``flip`` (``rng.random() < 0.5``, drawn by the caller), else left."""
+    turn = -out[13] if flip else out[13]
+    out[2], out[11] = wrap(out[12] + turn), math.degrees(turn)
+
+
+#: :func:`step_contact`'s answers: the step touched nothing, touched a wall, or touched one
+#: dead ahead (the side of the turn away is the caller's draw: :func:`finish_turn`).
+FREE, HIT, TIE = 0, 1, 2
 
 
 @njit(**_JIT)
@@ -555,17 +613,18 @@ def _touch(x0: float, y0: float, th0: float, v: float, omega: float, t_turn: flo
 
 @njit(**_JIT)
 def step_contact(x0: float, y0: float, th0: float, v: float, omega: float, t_turn: float,
-                 times: np.ndarray, seg: np.ndarray, rp: np.ndarray, rng, rem,
-                 out: np.ndarray) -> bool:  # pragma: no cover - compiled
+                 times: np.ndarray, seg: np.ndarray, rp: np.ndarray,
+                 out: np.ndarray) -> int:  # pragma: no cover - compiled
     """``robot.step_robot`` for a step that may touch a wall, operation by operation: the
     substeps against the edges in reach, the refined contact, the contact point, the
-    back-off along the normal and the turn away (a dead-ahead contact draws its side from
-    ``rng``). ``rp`` is :data:`ROBOT`; ``rem`` the C library's ``remainder``.
+    back-off along the normal and the turn away. ``rp`` is :data:`ROBOT`.
 
-    ``out`` (12,): the end pose (x, y, wrapped theta), the contact point (x, y; NaN without
+    ``out`` (14,): the end pose (x, y, wrapped theta), the contact point (x, y; NaN without
     one), the contact pose (x, y, wrapped theta), the distance [m], the heading change
-    [deg], the distance backed off [m] and the recovery turn [deg]. Returns whether the disc
-    touched a wall.
+    [deg], the distance backed off [m], the recovery turn [deg], and the contact heading
+    (unwrapped) and the turn's size [rad] for :func:`finish_turn`. Returns :data:`FREE`,
+    :data:`HIT` or :data:`TIE` (a dead-ahead contact: ``step_robot`` draws the turn's side
+    from the robot's generator, which the caller does and passes to :func:`finish_turn`).
     """
     r, back, recovery = rp[0], rp[6], rp[8] != 0.0
     reach = v * rp[2] + r + back + 1e-9
@@ -579,11 +638,11 @@ def step_contact(x0: float, y0: float, th0: float, v: float, omega: float, t_tur
             e = np.empty(3)
             step_free(x0, y0, th0, v, omega, t_turn, times, seg, 0.0, r * r, e)
             c[1], c[2], c[3] = e[0], e[1], e[2]
-        w = rem(c[3], 2.0 * math.pi)
+        w = wrap(c[3])
         out[0], out[1], out[2], out[3], out[4] = c[1], c[2], w, np.nan, np.nan
         out[5], out[6], out[7], out[8] = c[1], c[2], w, v * rp[2]
         out[9], out[10], out[11] = math.degrees(c[3] - th0), 0.0, 0.0
-        return False
+        return FREE
     t_c, cx, cy, cth = c[0], c[1], c[2], c[3]
     px, py = nearest_point(cx, cy, near)
     backed, bx, by = 0.0, cx, cy
@@ -598,20 +657,18 @@ def step_contact(x0: float, y0: float, th0: float, v: float, omega: float, t_tur
         m, xx, yy = backoff(cx, cy, nx, ny, back, near, r * r, k == 0, s)
         if m > 0:
             backed, bx, by = s[m], xx, yy
-    w = rem(cth, 2.0 * math.pi)
+    w = wrap(cth)
     out[3], out[4], out[5], out[6], out[7] = px, py, cx, cy, w
     out[8], out[9], out[10], out[11] = v * t_c, math.degrees(cth - th0), backed, 0.0
     if not recovery:
         out[0], out[1], out[2] = cx, cy, w
-        return True
-    bearing = rem(math.atan2(py - by, px - bx) - cth, 2.0 * math.pi)
+        return HIT
+    bearing = wrap(math.atan2(py - by, px - bx) - cth)
     turn_max, room = math.radians(rp[7]), math.pi - abs(bearing)
     turn = room if room < turn_max else turn_max  # (Python's min(turn_max, room))
-    if bearing > 0.0 or (bearing == 0.0 and rng.random() < 0.5):
-        turn = -turn
-    out[0], out[1], out[2], out[11] = bx, by, rem(cth + turn, 2.0 * math.pi), \
-        math.degrees(turn)
-    return True
+    out[0], out[1], out[12], out[13] = bx, by, cth, turn
+    finish_turn(out, bearing > 0.0)
+    return TIE if bearing == 0.0 else HIT
 
 
 #: ``robot._REFINE`` and ``robot._BACKOFF_SAMPLES`` (the simulator cannot be imported here).

@@ -24,7 +24,6 @@ It imports nothing of sitframe (the foot of the house).
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import glob
 import os
 from dataclasses import dataclass
@@ -74,17 +73,6 @@ def openblas_ddot() -> Any | None:
     return None
 
 
-def _libm_remainder() -> Any | None:
-    """The C library's ``remainder`` (IEEE 754's exact remainder, as ``math.remainder``)."""
-    name = ctypes.util.find_library("m")
-    if name is None:
-        return None
-    f = ctypes.CDLL(name).remainder
-    f.restype = ctypes.c_double
-    f.argtypes = [ctypes.c_double, ctypes.c_double]
-    return f
-
-
 @dataclass(frozen=True)
 class Loops:
     """The functions a kernel calls (each loop with its context and auxiliary data)."""
@@ -93,7 +81,6 @@ class Loops:
     exp: tuple[Any, int, int]
     power: tuple[Any, int, int]
     ddot: Any
-    remainder: Any
 
 
 _CACHE: list[Loops | str] = []
@@ -107,10 +94,7 @@ def loops() -> Loops | str:
         except (AttributeError, TypeError, ValueError) as exc:
             _CACHE.append(f"numpy {np.__version__} hands out no strided loops ({exc})")
             return _CACHE[0]
-        ddot, rem = openblas_ddot(), _libm_remainder()
-        if ddot is None or rem is None:
-            _CACHE.append("numpy ships no OpenBLAS of its own" if ddot is None
-                          else "no C math library found")
-        else:
-            _CACHE.append(Loops(*found, ddot, rem))
+        ddot = openblas_ddot()
+        _CACHE.append("numpy ships no OpenBLAS of its own" if ddot is None
+                      else Loops(*found, ddot))
     return _CACHE[0]
