@@ -42,9 +42,13 @@ from common import BENCHMARKS, against  # noqa: E402
 #: ``f:``) whose own time (cProfile's ``tottime``; a C function's counts for its caller) is
 #: that part; anything else is "loop and other": the loop's own code in
 #: ``sitframe/runs/loop.py``, which builds the step's records (``Context``, ``Transition``,
-#: ``StepRecord``: their ``__init__`` is not seen by cProfile on Python 3.11), and the trial's
-#: set-up and summary.
+#: ``StepRecord``: their ``__init__`` is not seen by cProfile on Python 3.11), the compiled
+#: trial's driver (``sitframe/runs/fused.py``), and the trial's set-up and summary. A trial
+#: that runs compiled spends its per-iteration time in the first part (one entry: cProfile
+#: cannot see inside a kernel).
 PARTS: dict[str, tuple[str, ...]] = {  # (the first that matches: motion's subset before sensing)
+    "compiled loop (sensing to learning, one call per 100 iterations)": (
+        "runs/fused_kernels.py",),
     "motion and collisions": ("sim/robot.py", "f:subset", "k:arc_angles", "k:arc_poses",
                               "k:near_segments", "k:first_contact", "k:linspace",
                               "k:nearest_point", "k:backoff"),
