@@ -27,7 +27,9 @@ iterations per second, twice the rate before the compiled kernels).
 ``--first-call`` measures what the compiled kernels cost a fresh process:
 importing numba and loading them from numba's cache, and compiling them with
 an empty cache (the first run after an install); the simulator's kernels and the
-compiled learning trial's apart, and both::
+compiled learning trial's apart, and both; then short learning runs (``FIRST_RUNS``) with
+an empty cache and a filled one, whose difference is what the first run after an install
+spends compiling (the kernels compiled on first use included)::
 
     python benchmarks/sim/bench_sim.py --against ef46ff4 --repeats 11
     python benchmarks/sim/bench_sim.py --first-call
@@ -176,6 +178,35 @@ def _first_call(repeats: int) -> None:
               f"install): median {statistics.median(compiled):.3f} s ({len(cold)} processes)")
 
 
+#: The first runs measured by ``--first-call``: the main job (its situations evolve, so its
+#: trials run the Python loop) and the thesis's preset (its trials run compiled), short.
+FIRST_RUNS = [["run", preset, "--trials", "1", "--iterations", "1000", "--workers", "1"]
+              for preset in ("obstacle-avoidance", "obstacle-avoidance-thesis")]
+
+
+def _first_run(repeats: int, cmd: list[str]) -> None:
+    """Seconds the first ``sitframe`` run of ``cmd`` after an install spends more than a
+    later one: the same run with an empty kernel cache and with a filled one, in fresh
+    processes; the difference is what compiling costs that run (every kernel it calls, the
+    variants compiled on first use included)."""
+    def once(cache: str) -> float:
+        with tempfile.TemporaryDirectory() as out:
+            t0 = time.perf_counter()
+            subprocess.run([sys.executable, "-m", "sitframe.cli", *cmd, "--out",
+                            str(Path(out) / "r.h5")], check=True, capture_output=True,
+                           env=dict(os.environ, SITFRAME_CACHE_DIR=cache), cwd=ROOT)
+            return time.perf_counter() - t0
+
+    with tempfile.TemporaryDirectory() as root:
+        cold = [once(str(Path(root) / f"c{k}")) for k in range(max(1, repeats // 3))]
+        warm = [once(str(Path(root) / "c0")) for _ in range(repeats)]
+    print(f"`sitframe {' '.join(cmd)}`: with an empty cache median "
+          f"{statistics.median(cold):.2f} s ({len(cold)} runs), with the cache filled "
+          f"{statistics.median(warm):.2f} s ({len(warm)} runs): the first run after an "
+          f"install pays {statistics.median(cold) - statistics.median(warm):.2f} s of "
+          "compiling")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--world", default="training")
@@ -193,6 +224,8 @@ def main() -> None:
         return
     if args.first_call:
         _first_call(args.repeats)
+        for cmd in FIRST_RUNS:
+            _first_run(args.repeats, cmd)
         return
     world = load_world(args.world)
     _load_kernels()

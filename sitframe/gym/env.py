@@ -40,7 +40,7 @@ import numpy as np
 from sitframe.contract.records import Context, Transition
 from sitframe.gym.task import _NO_U, Task
 from sitframe.sim.kernels import contact, kernels
-from sitframe.sim.robot import _NAN2, StepOutcome, _times, packed_params, step_robot
+from sitframe.sim.robot import StepOutcome, _times, outcome_from, packed_params, step_robot
 from sitframe.sim.world import Goal
 
 __all__ = ["CompiledStep", "SitframeEnv", "render_frame"]
@@ -173,16 +173,15 @@ class CompiledStep:
     """
 
     def __init__(self, k: Any, task: Task, spec: dict[str, Any]) -> None:
-        rp = task.res.robot
+        rp = self.params = task.res.robot
         self.k, self.rp = k, packed_params(rp)
-        self.times = np.array(_times(rp.control_period_s, rp.substep_s))
+        self.times = _times(rp.control_period_s, rp.substep_s)
         self.rays = np.array(spec["rays"], dtype=np.float64)
         self.sensor = (float(spec["max_range"]), float(spec["radius"]),
                        int(spec["rays_per_beam"]))
         self.scale = float(task.max_range if task.normalize else 1.0)
         self.lo, self.hi = (np.array(b) for b in task.observation_bounds())
         self.d = self.rays.size // self.sensor[2]
-        self._segs: dict[int, tuple[Any, np.ndarray]] = {}
 
     @classmethod
     def create(cls, task: Task, sensor: Any) -> CompiledStep | None:
@@ -193,13 +192,6 @@ class CompiledStep:
         if k is None or spec is None or task.protocol is not None:
             return None
         return cls(k, task, spec)
-
-    def seg(self, world: Any) -> np.ndarray:
-        """``world``'s packed segments as the kernel takes them (copied once per world)."""
-        got = self._segs.get(id(world))
-        if got is None or got[0] is not world:
-            got = self._segs[id(world)] = (world, np.array(world.segment_set.packed))
-        return got[1]
 
     def steps(self, world: Any, poses: np.ndarray, headings: np.ndarray, speeds: np.ndarray,
               reward: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -212,9 +204,9 @@ class CompiledStep:
         readings = np.empty((n, self.d))
         obs = np.empty((n, *self.lo.shape), dtype=np.float32)
         max_range, radius, group = self.sensor
-        self.k.env_steps(poses, headings, speeds, self.rp, self.times, self.seg(world), self.rays,
-                         max_range, radius, group, self.scale, self.lo, self.hi, reward, out,
-                         readings, obs, codes, rewards)
+        self.k.env_steps(poses, headings, speeds, self.rp, self.times, world.segment_set.packed,
+                         self.rays, max_range, radius, group, self.scale, self.lo, self.hi,
+                         reward, out, readings, obs, codes, rewards)
         return codes, out, readings, obs, rewards
 
     def step(self, world: Any, pose: np.ndarray, cmd: Any
@@ -227,17 +219,12 @@ class CompiledStep:
         max_range, radius, group = self.sensor
         code = self.k.env_step(float(pose[0]), float(pose[1]), float(pose[2]),
                                float(cmd.heading_change_deg), float(cmd.speed_m_s), self.rp,
-                               self.times, self.seg(world), self.rays, max_range, radius,
+                               self.times, world.segment_set.packed, self.rays, max_range, radius,
                                group, self.scale, self.lo, self.hi, out, reading, obs)
         if code == self.k.TIE:
             return None
-        final = out[:3].copy()
-        if code:
-            o = StepOutcome(pose, final, True, out[3:5].copy(), out[5:8].copy(), float(out[8]),
-                            float(out[9]), float(out[10]), float(out[11]))
-        else:
-            o = StepOutcome(pose, final, False, _NAN2, final, float(out[8]), float(out[9]))
-        return o, reading, obs, float(out[14])
+        return outcome_from(pose, out, code != self.k.FREE, self.params), reading, obs, \
+            float(out[14])
 
 
 def _chosen_start(task: Task, world: Any, options: dict[str, Any], pose: np.ndarray,

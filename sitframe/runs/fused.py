@@ -152,12 +152,13 @@ def prepare(res: Any, spec: Any, parts: Any) -> Fused | str:
     ip = np.array([sen["rays_per_beam"], itp["transform"], _POWER.get(itp["p"], 0),
                    lr is not None, learning, *rules, contact() is not None],
                   dtype=np.int64)
-    # (every array C-contiguous and writable: the types fused_kernels._warm compiles for)
+    # (every array C-contiguous and writable but the world's segments and the substep times,
+    # read-only: the types fused_kernels._warm compiles for)
     fz = Fused(fk, lp, np.array(sen["rays"], dtype=np.float64),
                np.array(itp["centers"], dtype=np.float64),
                np.array(beh["singletons"], dtype=np.float64),
                np.array(beh["rules"], dtype=np.int64), lr, beh["fcs"], fp, ip,
-               np.array(_times(robot.control_period_s, robot.substep_s)), packed_params(robot))
+               _times(robot.control_period_s, robot.substep_s), packed_params(robot))
     why = _agrees(fz, parts)
     return why if why else fz
 
@@ -220,7 +221,7 @@ def run(fz: Fused, res: Any, spec: Any, rec: Any, env: Any, chain: Any,
                  np.empty((t1 - t, c), np.int64), np.empty((t1 - t, c, a)))
         state[6] = 0
         after, hit, contact, resume = carry[:3], False, none2, False
-        seg = np.array(world.segment_set.packed)
+        seg = world.segment_set.packed
         while fk.run(t1, resume, after, hit, contact, seg, fz.times, rp,
                      fz.rays, fz.centers, fz.singletons, learn.onehot, learn.q, learn.updates,
                      learn.visits, learn.rule_base, learn.greedy, learn.rules_it, fz.fp, fz.ip,

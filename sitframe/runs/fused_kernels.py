@@ -419,13 +419,16 @@ def probe(readings: np.ndarray, fc: np.ndarray, fp: np.ndarray, ip: np.ndarray, 
 
 def _warm() -> None:
     """Load (or, the first time, compile) the kernels now, with the types a trial passes
-    (``sitframe.runs.fused`` hands every array over C-contiguous and writable): run at
-    import, as :mod:`sitframe.sim.kernels_numba` does."""
+    (``sitframe.runs.fused`` hands every array over C-contiguous, writable but the world's
+    segments and the substep times): run at import, as :mod:`sitframe.sim.kernels_numba`
+    does."""
     lp = numpy_loops.loops()
     if isinstance(lp, str):
         return
     c, a, d, L = 2, 3, 2, 1
-    seg = np.array([[0.0], [1.0], [1.0], [0.0], [1.0]])
+    seg, times = np.array([[0.0], [1.0], [1.0], [0.0], [1.0]]), np.linspace(0.0, 1.5, 31)
+    seg.setflags(write=False)  # (as a world's packed segments and the substep times)
+    times.setflags(write=False)
     fp = np.array([3.0, 0.15, 0.1, 5.0, 1e-60, 0.3, 0.9, 0.3, 1.0, 1.0, 0.0, 0.0, -30.0, 30.0,
                    0.1, 0.15])
     rp = np.array([0.15, 100.0, 1.5, 0.1, 0.3, 90.0, 0.05, 45.0, 1.0])
@@ -434,7 +437,7 @@ def _warm() -> None:
     rng = np.random.default_rng(0)
     state = np.array([-1, 0, 0, 0, 1, 0, 0])
     f2 = [np.zeros((L, k)) for k in (3, d, c, 2)]
-    run(L, False, np.zeros(3), False, np.zeros(2), seg, np.linspace(0.0, 1.5, 31), rp,
+    run(L, False, np.zeros(3), False, np.zeros(2), seg, times, rp,
         np.zeros(d), np.ones((c, d)), np.ones(a), np.zeros((c, a)),
         np.zeros((c, a)), ints[0],
         np.zeros((c, a), np.int64), ints[1], ints[2], np.zeros((L, c), np.int8), fp, ip, state,

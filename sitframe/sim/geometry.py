@@ -138,7 +138,8 @@ class SegmentSet:
         """Return the segments selected by ``index`` (bool mask or integer indices), their
         derived arrays copied from this set's, not recomputed (the robot's step uses it)."""
         sub = SegmentSet.__new__(SegmentSet)
-        sub.segments, sub.packed = self.segments[index], self.packed[:, index]
+        # (C order, as the kernels are compiled for: a column selection is Fortran-ordered)
+        sub.segments, sub.packed = self.segments[index], np.ascontiguousarray(self.packed[:, index])
         sub.n = sub.segments.shape[0]
         sub.ax, sub.ay, sub.ex, sub.ey, sub.inv_len2 = sub.packed
         sub.lo, sub.hi = self.lo[index], self.hi[index]
@@ -578,7 +579,8 @@ def point_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
     k = kernels()
     if k is not None:
         out = np.empty(p.shape[0], dtype=np.bool_)
-        k.point_in_polygon(np.ascontiguousarray(p), np.ascontiguousarray(poly), out)
+        k.point_in_polygon(np.require(p, np.float64, ["C", "W"]),  # (one compiled type)
+                           np.require(poly, np.float64, ["C", "W"]), out)
         return out
     x0, y0 = poly[:, 0], poly[:, 1]
     x1, y1 = np.roll(x0, -1), np.roll(y0, -1)

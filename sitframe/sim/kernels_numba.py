@@ -1058,11 +1058,16 @@ def _warm() -> None:
     """
     seg = np.array([[0.0], [1.0], [1.0], [0.0], [1.0]])  # one segment (0, 1)-(1, 1)
     one = np.ones(2)
+    # (a world's packed segments and the substep times are read-only, and so a kernel's
+    # type differs from one compiled for writable arrays: compiled here as passed there)
+    seg_ro, one_ro = seg.copy(), one.copy()
+    seg_ro.setflags(write=False)
+    one_ro.setflags(write=False)
     out, idx = np.empty(2), np.empty(1, dtype=np.intp)
-    ranges(0.0, 0.0, one, one, seg, 3.0, 0.1, 1, True, out)
+    ranges(0.0, 0.0, one, one, seg_ro, 3.0, 0.1, 1, True, out)
     two = np.ones((2, 2))
     act = np.zeros(2, dtype=np.bool_)
-    near_segments(0.0, 0.0, seg, 1.0, idx)
+    near_segments(0.0, 0.0, seg_ro, 1.0, idx)
     first_contact(one, one, seg, 0.01)
     nearest_point(0.0, 0.0, seg)
     linspace(0.0, 1.0, out)
@@ -1078,8 +1083,12 @@ def _warm() -> None:
     ro = np.ones(2)
     ro.setflags(write=False)  # (memberships reach the learner read-only)
     frozen_td(ro, 0.3, True, -1.0, 0.9, 0.5, two, np.zeros(2, dtype=np.intp), out)
-    step_free(0.0, 0.0, 0.0, 0.1, 0.0, 0.0, one, seg, 1.0, 0.01, np.empty(3))
-    ranges_at(0.0, 0.0, 0.0, one, seg, 3.0, 0.1, 1, True, out)
+    step_free(0.0, 0.0, 0.0, 0.1, 0.0, 0.0, one_ro, seg_ro, 1.0, 0.01, np.empty(3))
+    step_contact(0.0, 0.0, 0.0, 0.1, 0.0, 0.0, one_ro, seg_ro,
+                 np.array([0.15, 100.0, 1.5, 0.1, 0.3, 90.0, 0.05, 45.0, 1.0]), np.empty(14))
+    hypot(3.0, 4.0)
+    wrap(7.0)
+    ranges_at(0.0, 0.0, 0.0, one, seg_ro, 3.0, 0.1, 1, True, out)
     trig(one, two)
     observe(one, 3.0, np.ones(2, dtype=np.float32), np.ones(2, dtype=np.float32),
             np.empty(2, dtype=np.float32))

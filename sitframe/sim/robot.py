@@ -50,6 +50,7 @@ Everything that happened is in the :class:`StepOutcome`.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
@@ -59,7 +60,7 @@ import numpy as np
 from sitframe.params import choice_field, number
 from sitframe.sim import geometry as geo
 from sitframe.sim.fastinit import record
-from sitframe.sim.kernels import fused, kernels
+from sitframe.sim.kernels import contact, fused, kernels
 
 if TYPE_CHECKING:  # (a world is read through its segments and start pose only)
     from sitframe.sim.world import World
@@ -304,13 +305,32 @@ def trajectory(pose: np.ndarray, command: Command, params: RobotParams,
     return np.stack([x, y, th], axis=1)
 
 
+@functools.lru_cache(maxsize=64)
 def packed_params(params: RobotParams) -> np.ndarray:
     """``params`` as the compiled kernels read them (``sitframe.sim.kernels_numba.ROBOT``):
-    a (9,) float array, the recovery as 1.0 (``"backoff-turn"``) or 0.0 (``"none"``)."""
+    a (9,) float array, the recovery as 1.0 (``"backoff-turn"``) or 0.0 (``"none"``).
+    Shared by every caller with equal parameters: do not change it."""
     return np.array([params.radius, params.max_turn_rate_deg_s, params.control_period_s,
                      params.min_speed, params.max_speed, params.max_heading_change_deg,
                      params.recovery_backoff_m, params.recovery_turn_deg,
                      params.recovery == "backoff-turn"], dtype=np.float64)
+
+
+def outcome_from(pose_before: np.ndarray, out: np.ndarray, collided: bool,
+                 params: RobotParams) -> StepOutcome:
+    """The :class:`StepOutcome` of a compiled step's figures ``out``
+    (:func:`sitframe.sim.kernels_numba.step_contact`'s first twelve), as :func:`step_robot`
+    builds it (the end pose *is* the contact pose of a step that touched nothing, or of one
+    that stalled: recovery ``"none"``)."""
+    final = out[:3].copy()
+    if not collided:
+        return StepOutcome(pose_before, final, False, _NAN2, final, float(out[8]),
+                           float(out[9]))
+    if params.recovery == "none":
+        return StepOutcome(pose_before, final, True, out[3:5].copy(), final, float(out[8]),
+                           float(out[9]))
+    return StepOutcome(pose_before, final, True, out[3:5].copy(), out[5:8].copy(),
+                       float(out[8]), float(out[9]), float(out[10]), float(out[11]))
 
 
 def _wrap(theta: float) -> float:
@@ -363,6 +383,13 @@ def step_robot(
             final = np.array([x, y, _wrap(th)])
             return StepOutcome(pose_before, final, False, _NAN2, final, path,
                                math.degrees(th - th0))
+        whole = contact()
+        if whole is not None:  # steps 1-4 in one call too, but for a dead-ahead contact
+            out = np.empty(14)
+            code = whole.step_contact(x0, y0, th0, v, omega, t_turn, _times(T, params.substep_s),
+                                      world.segment_set.packed, packed_params(params), out)
+            if code != whole.TIE:
+                return outcome_from(pose_before, out, code != whole.FREE, params)
     # --- 1. which segments can the swept disc (or the back-off) reach at all?
     near = _near(world.segment_set, x0, y0, reach)
     if near is None:  # open space: nothing to hit, pure-Python closed form
