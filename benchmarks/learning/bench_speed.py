@@ -5,7 +5,8 @@ simulator than at git revision REV, where does a trial's time go before and afte
 does a long trial's memory stay flat?
 Output: printed: the medians of both in alternating fresh processes and their ratios; a
 profile of one trial of each (seconds per part of the step); the peak RSS of trials of
-10k, 50k and 100k iterations; with ``--publish NAME`` the same as a Markdown table in
+10k, 50k and 100k iterations (REV's preset, as timed, and today's); with ``--publish NAME``
+the same as a Markdown table in
 ``docs/results/tables/NAME.md``.
 
 Every figure is measured in one run, the revision's code and this checkout's alternating
@@ -169,7 +170,7 @@ def _profiles(rev: str) -> dict[str, dict[str, float]]:
 
 
 def _table(rev: str, med: dict[str, dict[str, float]], prof: dict[str, dict[str, float]],
-           rss: list[tuple[int, float, float]]) -> str:
+           rss: list[tuple[str, int, float, float]]) -> str:
     """The Markdown table of the timings, the profile and the peak RSS."""
     new, old = "this checkout", rev
     lines = [f"| | {rev} | this checkout | ratio |", "|---|---:|---:|---:|",
@@ -187,9 +188,9 @@ def _table(rev: str, med: dict[str, dict[str, float]], prof: dict[str, dict[str,
         lines.append(f"| {part} | {a:.3f} | {a / prof[old]['total']:.0%} | {b:.3f} | "
                      f"{b / prof[new]['total']:.0%} |")
     lines.append(f"| **total** | {prof[old]['total']:.3f} | | {prof[new]['total']:.3f} | |")
-    lines += ["", "| iterations of one logged trial | peak RSS before the trial (MiB) | "
-              "after (MiB) |", "|---:|---:|---:|"]
-    lines += [f"| {n:,} | {b:.0f} | {a:.0f} |" for n, b, a in rss]
+    lines += ["", "| one logged trial of | iterations | peak RSS before the trial (MiB) | "
+              "after (MiB) |", "|---|---:|---:|---:|"]
+    lines += [f"| {name} | {n:,} | {b:.0f} | {a:.0f} |" for name, n, b, a in rss]
     return "\n".join(lines)
 
 
@@ -217,8 +218,16 @@ def main() -> None:
     print(f"trial: {med['trial'][rev] / med['trial']['this checkout']:.2f}x faster; simulator: "
           f"{med['sim']['this checkout'] / med['sim'][rev]:.2f}x the rate")
     prof = _profiles(rev)
-    rss = [(n, *peak_rss("obstacle-avoidance", n)) for n in
-           (int(v) for v in args.rss.split(",") if v.strip())]
+    with tempfile.TemporaryDirectory() as tmp:  # (REV's preset: the trials timed above)
+        old = Path(tmp) / "rev.toml"
+        old.write_text(subprocess.run(["git", "show", f"{rev}:sitframe/presets/"
+                                       "obstacle-avoidance.toml"], capture_output=True,
+                                      text=True, check=True, cwd=BENCHMARKS.parent).stdout)
+        rss = [(name, n, *peak_rss(cfg, n))
+               for name, cfg in ((f"{rev}'s obstacle-avoidance (compiled)", str(old)),
+                                 ("today's obstacle-avoidance (evolving: the Python loop)",
+                                  "obstacle-avoidance"))
+               for n in (int(v) for v in args.rss.split(",") if v.strip())]
     table = _table(rev, med, prof, rss)
     print(table)
     if args.publish:
