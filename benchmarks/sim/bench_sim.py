@@ -51,6 +51,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
 import numpy as np
 from common import against  # noqa: E402
+from common.publish import publish  # noqa: E402
 
 from sitframe.plugins.sonar import SonarRing
 from sitframe.sim import geometry as geo
@@ -151,8 +152,9 @@ print(t1 - t0, t2 - t1, t3 - t2)
 """
 
 
-def _first_call(repeats: int) -> None:
-    """Seconds a fresh process spends importing numba and loading (or compiling) the kernels."""
+def _first_call(repeats: int) -> list[tuple[str, float, float]]:
+    """What the compiled kernels cost a fresh process: ``(what, median s from the cache,
+    median s with an empty cache)``, printed as it goes; numpy's import first, for scale."""
     def once(env: dict[str, str]) -> tuple[float, float, float]:
         res = subprocess.run([sys.executable, "-c", _FIRST_CALL], capture_output=True, text=True,
                              env=env, check=True, cwd=ROOT)
@@ -165,17 +167,19 @@ def _first_call(repeats: int) -> None:
     with tempfile.TemporaryDirectory() as cache:
         cold = [once(dict(env, NUMBA_CACHE_DIR=str(Path(cache) / str(k))))
                 for k in range(max(1, repeats // 3))]
-    print(f"importing numpy, scipy and the simulator: median "
-          f"{statistics.median(b for b, _, _ in warm):.3f} s (for scale)")
-    for name, cached, compiled in (
-            ("importing numba and loading every simulator kernel",
-             [w for _, w, _ in warm], [c for _, c, _ in cold]),
-            ("then loading the compiled learning trial (sitframe.runs.fused_kernels)",
-             [w for _, _, w in warm], [c for _, _, c in cold]),
-            ("both", [w + x for _, w, x in warm], [c + x for _, c, x in cold])):
-        print(f"{name}: from the cache, median {statistics.median(cached):.3f} s per process "
-              f"({repeats} processes); with an empty cache (compiling, once after an "
-              f"install): median {statistics.median(compiled):.3f} s ({len(cold)} processes)")
+    rows = [("importing numpy, scipy and the simulator (for scale)",
+             statistics.median(b for b, _, _ in warm), statistics.median(b for b, _, _ in cold))]
+    for name, i in (("importing numba and loading (or compiling) the simulator's kernels", 1),
+                    ("then the compiled learning trial's (`sitframe.runs.fused_kernels`)", 2)):
+        rows.append((name, statistics.median(w[i] for w in warm),
+                     statistics.median(c[i] for c in cold)))
+    rows.append(("both", statistics.median(w[1] + w[2] for w in warm),
+                 statistics.median(c[1] + c[2] for c in cold)))
+    for name, w, c in rows:
+        print(f"{name}: from the cache, median {w:.3f} s per process ({repeats} processes); "
+              f"with an empty cache (compiling, once after an install): median {c:.3f} s "
+              f"({len(cold)} processes)")
+    return rows
 
 
 #: The first runs measured by ``--first-call``: the main job (its situations evolve, so its
@@ -184,11 +188,11 @@ FIRST_RUNS = [["run", preset, "--trials", "1", "--iterations", "1000", "--worker
               for preset in ("obstacle-avoidance", "obstacle-avoidance-thesis")]
 
 
-def _first_run(repeats: int, cmd: list[str]) -> None:
-    """Seconds the first ``sitframe`` run of ``cmd`` after an install spends more than a
-    later one: the same run with an empty kernel cache and with a filled one, in fresh
-    processes; the difference is what compiling costs that run (every kernel it calls, the
-    variants compiled on first use included)."""
+def _first_run(repeats: int, cmd: list[str]) -> tuple[str, float, float]:
+    """What the first ``sitframe`` run of ``cmd`` after an install spends more than a later
+    one: the same run with an empty kernel cache and with a filled one, in fresh processes;
+    the difference is what compiling costs that run (every kernel it calls, the variants
+    compiled on first use included). ``(what, median s with the cache, median s without)``."""
     def once(cache: str) -> float:
         with tempfile.TemporaryDirectory() as out:
             t0 = time.perf_counter()
@@ -200,11 +204,19 @@ def _first_run(repeats: int, cmd: list[str]) -> None:
     with tempfile.TemporaryDirectory() as root:
         cold = [once(str(Path(root) / f"c{k}")) for k in range(max(1, repeats // 3))]
         warm = [once(str(Path(root) / "c0")) for _ in range(repeats)]
-    print(f"`sitframe {' '.join(cmd)}`: with an empty cache median "
-          f"{statistics.median(cold):.2f} s ({len(cold)} runs), with the cache filled "
-          f"{statistics.median(warm):.2f} s ({len(warm)} runs): the first run after an "
-          f"install pays {statistics.median(cold) - statistics.median(warm):.2f} s of "
-          "compiling")
+    w, c = statistics.median(warm), statistics.median(cold)
+    print(f"`sitframe {' '.join(cmd)}`: with an empty cache median {c:.2f} s ({len(cold)} "
+          f"runs), with the cache filled {w:.2f} s ({len(warm)} runs): the first run after "
+          f"an install pays {c - w:.2f} s of compiling")
+    return f"a whole run: `sitframe {' '.join(cmd)}`", w, c
+
+
+def _first_table(rows: list[tuple[str, float, float]]) -> str:
+    """The Markdown table of :func:`_first_call`'s and :func:`_first_run`'s rows."""
+    lines = ["| what | kernels cached (median s) | cache empty: the first run after an "
+             "install (median s) | compiling costs (s) |", "|---|---:|---:|---:|"]
+    lines += [f"| {name} | {w:.2f} | {c:.2f} | {c - w:.2f} |" for name, w, c in rows]
+    return "\n".join(lines)
 
 
 def main() -> None:
@@ -218,14 +230,16 @@ def main() -> None:
                     help="compare this checkout's rate with git revision REV's")
     ap.add_argument("--first-call", action="store_true",
                     help="measure the kernels' import, load and compile costs")
+    ap.add_argument("--publish", metavar="NAME",
+                    help="with --first-call: write its table to docs/results/tables/NAME.md")
     args = ap.parse_args()
     if args.against:
         _against(args.against, args)
         return
     if args.first_call:
-        _first_call(args.repeats)
-        for cmd in FIRST_RUNS:
-            _first_run(args.repeats, cmd)
+        rows = _first_call(args.repeats) + [_first_run(args.repeats, cmd) for cmd in FIRST_RUNS]
+        if args.publish:
+            publish(args.publish, _first_table(rows))
         return
     world = load_world(args.world)
     _load_kernels()

@@ -410,32 +410,40 @@ ROBOT = ("radius", "max_turn_rate_deg_s", "control_period_s", "min_speed", "max_
 
 
 @njit(**_JIT)
+def robot_step(x0: float, y0: float, th0: float, heading: float, speed: float,
+               rp: np.ndarray, times: np.ndarray, seg: np.ndarray,
+               out: np.ndarray) -> int:  # pragma: no cover - compiled
+    """``step_robot`` in one call: the command's :func:`plan`, :func:`step_free` and, when
+    the disc touches a wall, :func:`step_contact` (into ``out``, (14,), and its answer;
+    :data:`TIE` leaves the turn's side to the caller's draw, :func:`finish_turn`)."""
+    v, omega, t_turn = plan(x0, y0, th0, heading, speed, rp)
+    reach = v * rp[2] + rp[0] + rp[6] + 1e-9
+    end = np.empty(3)
+    if step_free(x0, y0, th0, v, omega, t_turn, times, seg, reach * reach, rp[0] * rp[0], end):
+        return step_contact(x0, y0, th0, v, omega, t_turn, times, seg, rp, out)
+    w = wrap(end[2])
+    out[0], out[1], out[2], out[3], out[4] = end[0], end[1], w, np.nan, np.nan
+    out[5], out[6], out[7], out[8] = end[0], end[1], w, v * rp[2]
+    out[9], out[10], out[11] = math.degrees(end[2] - th0), 0.0, 0.0
+    return FREE
+
+
+@njit(**_JIT)
 def env_step(x0: float, y0: float, th0: float, heading: float, speed: float, rp: np.ndarray,
              times: np.ndarray, seg: np.ndarray, rel: np.ndarray, max_range: float,
              sensor_radius: float, group: int, scale: float, lo: np.ndarray, hi: np.ndarray,
              out: np.ndarray, reading: np.ndarray,
              obs: np.ndarray) -> int:  # pragma: no cover - compiled
-    """One Gym step in one call: ``step_robot`` (:func:`plan`, :func:`step_free` and, when
-    the disc touches a wall, :func:`step_contact`), the range finder's read at the end pose
+    """One Gym step in one call: :func:`robot_step`, the range finder's read at the end pose
     (:func:`ranges_at`, clipped: a sensor without noise) and its observation
-    (:func:`observe`). ``out`` (15,): :func:`step_contact`'s fourteen figures and the
-    reading's nearest range. Returns :func:`step_contact`'s answer; on :data:`TIE` (a
+    (:func:`observe`). ``out`` (15,): :func:`robot_step`'s fourteen figures and the
+    reading's nearest range. Returns :func:`robot_step`'s answer; on :data:`TIE` (a
     dead-ahead contact, whose turn's side is a draw from the robot's generator) before
     reading: the caller steps that one through ``step_robot``.
     """
-    v, omega, t_turn = plan(x0, y0, th0, heading, speed, rp)
-    reach = v * rp[2] + rp[0] + rp[6] + 1e-9
-    end = np.empty(3)
-    code = FREE
-    if step_free(x0, y0, th0, v, omega, t_turn, times, seg, reach * reach, rp[0] * rp[0], end):
-        code = step_contact(x0, y0, th0, v, omega, t_turn, times, seg, rp, out)
-        if code == TIE:
-            return code
-    else:
-        w = wrap(end[2])
-        out[0], out[1], out[2], out[3], out[4] = end[0], end[1], w, np.nan, np.nan
-        out[5], out[6], out[7], out[8] = end[0], end[1], w, v * rp[2]
-        out[9], out[10], out[11] = math.degrees(end[2] - th0), 0.0, 0.0
+    code = robot_step(x0, y0, th0, heading, speed, rp, times, seg, out)
+    if code == TIE:
+        return code
     ranges_at(out[0], out[1], out[2], rel, seg, max_range, sensor_radius, group, True, reading)
     out[14] = observe(reading, scale, lo, hi, obs)
     return code
@@ -1084,8 +1092,8 @@ def _warm() -> None:
     ro.setflags(write=False)  # (memberships reach the learner read-only)
     frozen_td(ro, 0.3, True, -1.0, 0.9, 0.5, two, np.zeros(2, dtype=np.intp), out)
     step_free(0.0, 0.0, 0.0, 0.1, 0.0, 0.0, one_ro, seg_ro, 1.0, 0.01, np.empty(3))
-    step_contact(0.0, 0.0, 0.0, 0.1, 0.0, 0.0, one_ro, seg_ro,
-                 np.array([0.15, 100.0, 1.5, 0.1, 0.3, 90.0, 0.05, 45.0, 1.0]), np.empty(14))
+    robot_step(0.0, 0.0, 0.0, 10.0, 0.1, np.array([0.15, 100.0, 1.5, 0.1, 0.3, 90.0, 0.05, 45.0,
+                                                   1.0]), one_ro, seg_ro, np.empty(14))
     hypot(3.0, 4.0)
     wrap(7.0)
     ranges_at(0.0, 0.0, 0.0, one, seg_ro, 3.0, 0.1, 1, True, out)

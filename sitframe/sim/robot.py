@@ -50,7 +50,6 @@ Everything that happened is in the :class:`StepOutcome`.
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Literal
@@ -305,15 +304,18 @@ def trajectory(pose: np.ndarray, command: Command, params: RobotParams,
     return np.stack([x, y, th], axis=1)
 
 
-@functools.lru_cache(maxsize=64)
 def packed_params(params: RobotParams) -> np.ndarray:
     """``params`` as the compiled kernels read them (``sitframe.sim.kernels_numba.ROBOT``):
     a (9,) float array, the recovery as 1.0 (``"backoff-turn"``) or 0.0 (``"none"``).
-    Shared by every caller with equal parameters: do not change it."""
-    return np.array([params.radius, params.max_turn_rate_deg_s, params.control_period_s,
-                     params.min_speed, params.max_speed, params.max_heading_change_deg,
-                     params.recovery_backoff_m, params.recovery_turn_deg,
-                     params.recovery == "backoff-turn"], dtype=np.float64)
+    Made once per parameters object and kept on it (it runs every step): do not change it."""
+    got = params.__dict__.get("_packed")
+    if got is None:
+        got = np.array([params.radius, params.max_turn_rate_deg_s, params.control_period_s,
+                        params.min_speed, params.max_speed, params.max_heading_change_deg,
+                        params.recovery_backoff_m, params.recovery_turn_deg,
+                        params.recovery == "backoff-turn"], dtype=np.float64)
+        object.__setattr__(params, "_packed", got)  # (frozen: its fields do not change)
+    return got
 
 
 def outcome_from(pose_before: np.ndarray, out: np.ndarray, collided: bool,
@@ -321,16 +323,16 @@ def outcome_from(pose_before: np.ndarray, out: np.ndarray, collided: bool,
     """The :class:`StepOutcome` of a compiled step's figures ``out``
     (:func:`sitframe.sim.kernels_numba.step_contact`'s first twelve), as :func:`step_robot`
     builds it (the end pose *is* the contact pose of a step that touched nothing, or of one
-    that stalled: recovery ``"none"``)."""
-    final = out[:3].copy()
+    that stalled: recovery ``"none"``). Its arrays are views of ``out``, which is the
+    caller's to give away."""
+    final = out[:3]
     if not collided:
-        return StepOutcome(pose_before, final, False, _NAN2, final, float(out[8]),
-                           float(out[9]))
+        return StepOutcome(pose_before, final, False, _NAN2, final, out.item(8), out.item(9))
     if params.recovery == "none":
-        return StepOutcome(pose_before, final, True, out[3:5].copy(), final, float(out[8]),
-                           float(out[9]))
-    return StepOutcome(pose_before, final, True, out[3:5].copy(), out[5:8].copy(),
-                       float(out[8]), float(out[9]), float(out[10]), float(out[11]))
+        return StepOutcome(pose_before, final, True, out[3:5], final, out.item(8),
+                           out.item(9))
+    return StepOutcome(pose_before, final, True, out[3:5], out[5:8], out.item(8), out.item(9),
+                       out.item(10), out.item(11))
 
 
 def _wrap(theta: float) -> float:
@@ -366,13 +368,24 @@ def step_robot(
     StepOutcome
         Final pose, collision flag, contact point/pose, distance and turn.
     """
+    T = params.control_period_s
+    pose_before = pose if isinstance(pose, np.ndarray) else np.asarray(pose, dtype=float)
+    whole = contact()
+    if whole is not None and pose_before.shape == (3,) and pose_before.dtype == np.float64:
+        x0, y0, th0 = pose_before.tolist()  # (the whole step in one call, but a dead-ahead
+        # contact, whose turn's side is drawn below)
+        if x0 - x0 != 0.0 or y0 - y0 != 0.0 or th0 - th0 != 0.0:
+            _plan(pose, command, params)  # (raises: not finite)
+        out = np.empty(14)
+        code = whole.robot_step(x0, y0, th0, float(command.heading_change_deg),
+                                float(command.speed_m_s), packed_params(params),
+                                _times(T, params.substep_s), world.segment_set.packed, out)
+        if code != whole.TIE:
+            return outcome_from(pose_before, out, code != whole.FREE, params)
     plan = _plan(pose, command, params)
     x0, y0, th0, v, omega, t_turn = plan
-    T = params.control_period_s
     r = params.radius
     path = v * T
-    pose_before = pose if isinstance(pose, np.ndarray) else np.asarray(pose, dtype=float)
-
     reach = path + r + params.recovery_backoff_m + 1e-9
     fast = fused()
     if fast is not None:  # steps 1 and 2 below in one call, when nothing is touched
@@ -383,13 +396,6 @@ def step_robot(
             final = np.array([x, y, _wrap(th)])
             return StepOutcome(pose_before, final, False, _NAN2, final, path,
                                math.degrees(th - th0))
-        whole = contact()
-        if whole is not None:  # steps 1-4 in one call too, but for a dead-ahead contact
-            out = np.empty(14)
-            code = whole.step_contact(x0, y0, th0, v, omega, t_turn, _times(T, params.substep_s),
-                                      world.segment_set.packed, packed_params(params), out)
-            if code != whole.TIE:
-                return outcome_from(pose_before, out, code != whole.FREE, params)
     # --- 1. which segments can the swept disc (or the back-off) reach at all?
     near = _near(world.segment_set, x0, y0, reach)
     if near is None:  # open space: nothing to hit, pure-Python closed form
