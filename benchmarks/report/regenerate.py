@@ -179,6 +179,8 @@ RECIPES: dict[str, Recipe] = {
         "--publish speed-41",), 6),
     "gym-speed": Recipe((), (
         f"{PY} benchmarks/sim/bench_gym.py --steps 3200 --repeats 5 --publish gym-speed",), 2),
+    "first-call": Recipe((), (
+        f"{PY} benchmarks/sim/bench_sim.py --first-call --repeats 6 --publish first-call",), 3),
     "goal-finding-learned": Recipe(("goal-finding-learned",), (
         f"{POOLED} --publish goal-finding-learned {S}/goal-finding-learned",), 35),
     "generalisation": Recipe((), (
