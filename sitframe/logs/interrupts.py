@@ -30,6 +30,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
@@ -44,17 +45,39 @@ def raise_terminated(_signum: int, _frame: Any) -> None:
     raise Terminated
 
 
+#: Set while :func:`redeliver` runs: a signal handled then would raise inside the hook and
+#: be lost, so the sender waits until it is clear.
+_IN_HOOK = threading.Event()
+#: How long [s] the sender waits after the hook returned (the main thread finishes the
+#: callback's bookkeeping in that time even on a loaded machine).
+REDELIVER_AFTER = 0.05
+
+
+def _send_when_clear(sig: int) -> None:
+    """Send ``sig`` to this process once :func:`redeliver` has returned, and a moment more."""
+    while _IN_HOOK.is_set():
+        time.sleep(0.001)
+    time.sleep(REDELIVER_AFTER)
+    os.kill(os.getpid(), sig)
+
+
 def redeliver(unraisable: Any, previous: Any = sys.__unraisablehook__) -> None:
     """``sys.unraisablehook``: an interrupt swallowed in a finaliser or weakref callback is
     raised again as its signal (SIGTERM for :class:`Terminated`, SIGINT for any other
     ``KeyboardInterrupt``); anything else goes to ``previous``."""
     exc = unraisable.exc_value
-    if isinstance(exc, KeyboardInterrupt):  # (sent from another thread a moment later: a
-        # handler run now would raise inside this hook, still in the callback, and be lost)
-        sig = signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT
-        threading.Timer(0.001, os.kill, (os.getpid(), sig)).start()
-    else:
+    if not isinstance(exc, KeyboardInterrupt):
         previous(unraisable)
+        return
+    # (sent from another thread after this hook returned: a handler run while the hook
+    # runs would raise inside it, still in the callback, and be lost; a fixed 1 ms delay
+    # lost it on a loaded machine)
+    sig = signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT
+    _IN_HOOK.set()
+    try:
+        threading.Thread(target=_send_when_clear, args=(sig,), daemon=True).start()
+    finally:
+        _IN_HOOK.clear()
 
 
 @contextmanager

@@ -2,6 +2,8 @@
 
 What it holds
     :mod:`~sitframe.runs.loop` (one trial: the control loop, its arrays, its scores),
+    :mod:`~sitframe.runs.fused` and :mod:`~sitframe.runs.fused_kernels` (the same loop
+    compiled, for a trial whose step is all built-ins),
     :mod:`~sitframe.runs.tracker` (the core's side of situations that change in a trial),
     :mod:`~sitframe.runs.collect` (the collect stage), :mod:`~sitframe.runs.experiment`
     (an experiment's stages in order, reported to the observers),

@@ -10,7 +10,9 @@ What it holds
     :mod:`~sitframe.sim.draw` (a world drawn with matplotlib),
     :mod:`~sitframe.sim.kernels` and :mod:`~sitframe.sim.kernels_numba` (the hot loops
     compiled by numba, bit-identical to their numpy twins; the situations and learning
-    layers use them too), :mod:`~sitframe.sim.numba_cache` (where numba caches them),
+    layers use them too), :mod:`~sitframe.sim.numpy_loops` (numpy's own float64 loops and
+    OpenBLAS's ``ddot``, for kernels that must give numpy's bits),
+    :mod:`~sitframe.sim.numba_cache` (where numba caches them),
     :mod:`~sitframe.sim.fastinit` (the cheaper ``__init__`` of the records built every
     iteration, the contract's too).
 
