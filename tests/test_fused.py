@@ -152,6 +152,26 @@ def test_a_subclass_that_changes_a_step_is_not_compiled() -> None:
     assert Shifted()._fused() is None
     assert SonarRing(dropout=0.1)._fused() is None
 
+    from sitframe.plugins.arbiters import SingleArbiter
+    from sitframe.plugins.fuzzy_q import CrispQBehaviour, FuzzyQBehaviour
+    from sitframe.plugins.rewards import ObstacleAvoidanceReward
+
+    class Louder(ObstacleAvoidanceReward):
+        def __call__(self, tr: Any) -> float:
+            return 2.0 * super().__call__(tr)
+
+    assert ObstacleAvoidanceReward()._fused() is not None
+    assert ObstacleAvoidanceReward(progress=1.0)._fused() is None  # (it keeps poses)
+    assert Louder()._fused() is None
+    rng = np.random.default_rng(0)
+    beh, crisp, fast = FuzzyQBehaviour(), CrispQBehaviour(), FuzzyQBehaviour(
+        speeds=[0.1, 0.2], learn=["heading", "speed"])
+    for b in (beh, crisp, fast):
+        b.reset(rng, 4, 10)
+    assert beh._fused() is not None
+    assert crisp._fused() is None and fast._fused() is None  # (its own propose; a speed)
+    assert SingleArbiter()._fused() == {}
+
 
 def test_progress_counts_every_iteration_on_both_paths(tmp_path: Path,
                                                       monkeypatch: pytest.MonkeyPatch) -> None:
