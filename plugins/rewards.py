@@ -78,8 +78,8 @@ class ObstacleAvoidanceReward:
         keeps poses), and not a subclass's own ``__call__``."""
         if self.progress or type(self).__call__ is not ObstacleAvoidanceReward.__call__:
             return None
-        return {"collision": float(self.collision), "base": float(self.base),
-                "heading_cost": float(self.heading_cost)}
+        return {"kind": "obstacle-avoidance",
+                "params": [self.collision, self.base, self.heading_cost]}
 
     def _away(self, tr: Transition) -> float:
         """How much farther [m] the transition's end is than its start from the position

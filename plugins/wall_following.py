@@ -192,6 +192,20 @@ class WallFollowingReward:
             r -= self.heading_cost * abs(tr.command.heading_change_deg)
         return r
 
+    def _fused(self) -> dict[str, Any] | None:
+        """The compiled trial's reward (``sitframe.runs.fused``): its parameters, side beams
+        and their sines; ``None`` before :meth:`bind` or for a subclass's own ``__call__``
+        or ``wall_distances``."""
+        cls = type(self)
+        if self.angles_deg is None or cls.__call__ is not WallFollowingReward.__call__ or \
+                cls.wall_distances is not WallFollowingReward.wall_distances:
+            return None
+        return {"kind": "wall-following",
+                "params": [self.near, self.far, self.collision, self.too_close, self.lost,
+                           self.inside, self.approach, self.explore, self.heading_cost,
+                           self.robot_radius, self.max_range, self.approach_min],
+                "side": self._side, "sines": self._sin}
+
     # -- evaluation --------------------------------------------------------
     def metrics(self, arrays: dict[str, np.ndarray]) -> dict[str, float]:
         """Wall-following quality of a trial's per-iteration arrays (``reading (L, d)``).

@@ -33,10 +33,11 @@ BASE: dict[str, Any] = {
     "evaluate": {"worlds": ["training", "novel-1"], "iterations": 150},
 }
 
-#: Variations of BASE, each a dotted key -> value; together they take every branch of the
-#: kernel: transforms and exact powers, both update rules, soft-max modes and annealing,
-#: learning-rate schedule, collision as terminal, convergence guards, tie-breaks, every rule
-#: updated, cones of rays, a chain of rooms, the thesis's reward settings.
+#: Variations of BASE, each a dotted key (or a table) -> value; together they take every
+#: branch of the kernel: transforms and exact powers, both update rules, soft-max modes and
+#: annealing, learning-rate schedule, collision as terminal, convergence guards, tie-breaks,
+#: every rule updated, cones of rays, a chain of rooms, a robot and a speed of their own, the
+#: thesis's reward settings and the wall-following reward.
 CASES: dict[str, dict[str, Any]] = {
     "thesis": {},
     "log-cones-standard": {"interpreter.transform": "log", "interpreter.m": 1.2,
@@ -60,6 +61,14 @@ CASES: dict[str, dict[str, Any]] = {
     "rooms": {"experiment.rooms": ["gen:1000000", "gen:1000001", "gen:1000002"],
               "experiment.episode_iterations": 130, "collect.worlds": ["gen:1000000"],
               "interpreter.transform": "log"},
+    "speed-and-robot": {"experiment.default_speed": 0.22,
+                        "robot": {"radius": 0.17, "recovery_turn_deg": 60.0,
+                                  "recovery_backoff_m": 0.04, "max_turn_rate_deg_s": 80.0}},
+    "wall-following": {"experiment.world": "wall-following", "interpreter.transform": "inverse",
+                       "behaviours.avoid.reward": "wall-following",
+                       "behaviours.avoid.reward_params": {"near": 0.15, "far": 0.35},
+                       "behaviours.avoid.headings": [90, 60, 40, 20, 0, -20, -40, -60, -90],
+                       "evaluate.worlds": ["wall-following"]},
 }
 
 
@@ -67,6 +76,9 @@ def _config(changes: dict[str, Any]) -> dict[str, Any]:
     cfg = {k: dict(v) if isinstance(v, dict) else v for k, v in BASE.items()}
     cfg["behaviours"] = {"avoid": dict(BASE["behaviours"]["avoid"])}
     for key, value in changes.items():
+        if "." not in key:
+            cfg[key] = value
+            continue
         *path, last = key.split(".")
         box = cfg
         for p in path:

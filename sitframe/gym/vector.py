@@ -178,13 +178,12 @@ class SitframeVectorEnv(VectorEnv):
             fast = env._compiled if env._compiled is not False else env._compile()
             f = getattr(env.reward_fn, "_fused", None)
             spec = f() if callable(f) else None
-            if fast is None or spec is None:
+            if fast is None or spec is None or spec["kind"] != "obstacle-avoidance":
                 if kernels() is None:
                     return None  # (decided once the kernels are loaded)
                 self._fast = None
             else:
-                self._fast = (fast, np.array([spec["collision"], spec["base"],
-                                              spec["heading_cost"]]))
+                self._fast = (fast, np.array(spec["params"], dtype=np.float64))
         return self._fast
 
     def _step_compiled(self, fast: tuple[CompiledStep, np.ndarray], live: list[int],

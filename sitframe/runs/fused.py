@@ -7,9 +7,9 @@ has to see each iteration from Python:
 * its sensor, interpreter, behaviour, arbiter and reward answer ``_fused()``: the built-in
   ``pioneer-sonar`` (or laser) without noise or dropout, ``fcm`` situations, one ``fuzzy-q``
   behaviour with a heading output alone and neither replay nor per-group convergence, the
-  ``single`` arbiter and the ``obstacle-avoidance`` reward without ``progress``. A plugin of
-  one's own answers nothing, and nor does a subclass of a built-in that overrides a method
-  of the step;
+  ``single`` arbiter, and the ``obstacle-avoidance`` reward without ``progress`` or the
+  ``wall-following`` one. A plugin of one's own answers nothing, and nor does a subclass
+  of a built-in that overrides a method of the step;
 * the loop has nothing else to do between iterations (:func:`sitframe.runs.loop.simulate`
   decides): no plugin implements ``sitframe_step`` (``sitframe_progress`` follows a trial
   without it), no evaluation protocol may end it early, its situations do not evolve, it has
@@ -77,6 +77,9 @@ class Fused:
     times: np.ndarray
 
     rp: np.ndarray
+    rw: np.ndarray
+    side: np.ndarray
+    sines: np.ndarray
 
     def call_args(self) -> tuple[Any, ...]:
         """The loops' pointers, in :func:`sitframe.runs.fused_kernels.run`'s order."""
@@ -136,7 +139,10 @@ def prepare(res: Any, spec: Any, parts: Any) -> Fused | str:
     sen, itp, beh = specs["sensor"], specs["interpreter"], specs["behaviours"]
     lr, robot = beh["learner"], res.robot
     prm = lr.params if lr is not None else None
-    rw = specs.get("reward", {"collision": 0.0, "base": 0.0, "heading_cost": 0.0})
+    rw = specs.get("reward", {"kind": "obstacle-avoidance", "params": [0.0, 0.0, 0.0]})
+    kinds = list(fk.REWARDS)
+    if rw["kind"] not in kinds or len(rw["params"]) != len(fk.REWARDS[rw["kind"]]):
+        return f"the kernel computes no reward '{rw['kind']}'"
     learned = (0.0,) * 7 if prm is None else (
         prm.alpha, prm.gamma, prm.activation, prm.temperature, prm.temperature_decay,
         prm.temperature_min, prm.alpha_visits)
@@ -145,12 +151,12 @@ def prepare(res: Any, spec: Any, parts: Any) -> Fused | str:
         prm.tie_break == "centre", prm.temperature_mode == "relative",
         prm.temperature_decay != 1.0)
     fp = np.array([sen["max_range"], sen["radius"], itp["offset"], itp["p"], itp["floor"],
-                   *learned, rw["collision"], rw["base"], rw["heading_cost"], robot.radius,
-                   robot.max_turn_rate_deg_s, robot.control_period_s, robot.min_speed,
-                   robot.max_speed, robot.max_heading_change_deg, robot.recovery_backoff_m,
-                   res.config.experiment.default_speed], dtype=np.float64)
+                   *learned, res.config.experiment.default_speed], dtype=np.float64)
+    if fp.size != len(fk.FP):  # (the kernel reads them by position)
+        raise AssertionError(f"fused: {fp.size} float parameters, the kernel reads {fk.FP}")
     ip = np.array([sen["rays_per_beam"], itp["transform"], _POWER.get(itp["p"], 0),
-                   lr is not None, learning, *rules, contact() is not None],
+                   lr is not None, learning, *rules, contact() is not None,
+                   kinds.index(rw["kind"])],
                   dtype=np.int64)
     # (every array C-contiguous and writable but the world's segments and the substep times,
     # read-only: the types fused_kernels._warm compiles for)
@@ -158,7 +164,10 @@ def prepare(res: Any, spec: Any, parts: Any) -> Fused | str:
                np.array(itp["centers"], dtype=np.float64),
                np.array(beh["singletons"], dtype=np.float64),
                np.array(beh["rules"], dtype=np.int64), lr, beh["fcs"], fp, ip,
-               _times(robot.control_period_s, robot.substep_s), packed_params(robot))
+               _times(robot.control_period_s, robot.substep_s), packed_params(robot),
+               np.array(rw["params"], dtype=np.float64),
+               np.array(rw.get("side", [0]), dtype=np.int64),
+               np.array(rw.get("sines", [0.0]), dtype=np.float64))
     why = _agrees(fz, parts)
     return why if why else fz
 
@@ -222,7 +231,8 @@ def run(fz: Fused, res: Any, spec: Any, rec: Any, env: Any, chain: Any,
         state[6] = 0
         after, hit, contact, resume = carry[:3], False, none2, False
         seg = world.segment_set.packed
-        while fk.run(t1, resume, after, hit, contact, seg, fz.times, rp,
+        while fk.run(t1, resume, after, hit, contact, seg, fz.times, rp, fz.rw, fz.side,
+                     fz.sines,
                      fz.rays, fz.centers, fz.singletons, learn.onehot, learn.q, learn.updates,
                      learn.visits, learn.rule_base, learn.greedy, learn.rules_it, fz.fp, fz.ip,
                      state, carry, reading, u, env.rng, *fz.call_args(), rec.pose,

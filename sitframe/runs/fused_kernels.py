@@ -59,11 +59,16 @@ _INLINE = {**_JIT, "inline": "always"}
 
 #: Names of the float parameters ``fp``, in order.
 FP = ("max_range", "sensor_radius", "offset", "p", "floor", "alpha", "gamma", "activation",
-      "temperature", "temperature_decay", "temperature_min", "alpha_visits", "r_collision",
-      "r_base", "r_heading_cost", "default_speed")
+      "temperature", "temperature_decay", "temperature_min", "alpha_visits", "default_speed")
+#: The rewards the kernel computes (``ip[14]``) and their parameters ``rw``, in order.
+REWARDS = {"obstacle-avoidance": ("collision", "base", "heading_cost"),
+           "wall-following": ("near", "far", "collision", "too_close", "lost", "inside",
+                              "approach", "explore", "heading_cost", "robot_radius",
+                              "max_range", "approach_min")}
 #: Names of the integer parameters ``ip``, in order.
 IP = ("rays_per_beam", "transform", "power", "has_learner", "learning", "b", "p_changes",
-      "min_updates", "thesis", "terminal", "tie_centre", "relative", "decay", "contact")
+      "min_updates", "thesis", "terminal", "tie_centre", "relative", "decay", "contact",
+      "reward")
 #: :func:`run`'s answers: the chunk is done; a step touches a wall (Python steps it).
 DONE, NEED_STEP = 0, 1
 #: How ``w ** p`` is computed, as numpy's in-place power chooses for a scalar exponent.
@@ -294,7 +299,8 @@ def _learn(t, u0, u1, reward, collided, q, updates, visits, rule_base, fp, ip, s
 
 
 @njit(**_JIT)
-def run(t1, resume, after, collided_after, contact_after, seg, times, rp, rel, fc, singletons,
+def run(t1, resume, after, collided_after, contact_after, seg, times, rp, rw, side, sines, rel,
+        fc, singletons,
         onehot, q, updates, visits, rule_base, greedy, rules_it, fp, ip, state, carry, reading,
         u, rng, lg, pw, ex, dd, pose_out, reading_out, u_out, command_out, nearest_out,
         collision_out, contact_out, reward_out, snap_it, snap_rules, snap_greedy,
@@ -327,7 +333,7 @@ def run(t1, resume, after, collided_after, contact_after, seg, times, rp, rel, f
             if ip[3]:
                 _copy(rule_base, rules_it[t])
             heading = controller(onehot, u, singletons, dd, strength)
-            speed = fp[15]
+            speed = fp[12]
             v, omega, t_turn = plan(x, y, th, heading, speed, rp)
             reach = v * rp[2] + rp[0] + rp[6] + 1e-9  # (robot.step_robot's reach)
             if not step_free(x, y, th, v, omega, t_turn, times, seg, reach * reach,
@@ -355,7 +361,7 @@ def run(t1, resume, after, collided_after, contact_after, seg, times, rp, rel, f
         if hit:
             contact_out[t, 0], contact_out[t, 1] = hx, hy
         if ip[4]:
-            r = fp[12] if hit else (fp[13] - fp[14] * abs(heading)) + 0.0
+            r = reward(ip[14], rw, side, sines, hit, heading, reading, r1)
             reward_out[t] = r
             if ip[3] and state[0] < 0 and _learn(t, u, u1, r, hit, q, updates, visits,
                                                  rule_base, fp, ip, state, dd, vmax):
@@ -378,6 +384,43 @@ def _nearest(reading):  # pragma: no cover - compiled
         if (v < best or v != v) and best == best:
             best = v
     return best
+
+
+@njit(**_INLINE)
+def _wall(reading, rw, side, sines):  # pragma: no cover - compiled
+    """``WallFollowingReward.wall_distance``: the nearer wall's distance [m] (inf: none)."""
+    radius, top, best = rw[9], rw[10] - 1e-9, np.inf
+    for j in range(side.size):
+        rs = reading[side[j]]
+        d = (radius + rs) * sines[j] - radius if rs < top else np.inf
+        if d < best:
+            best = d
+    return best if best >= 0.0 else 0.0  # (numpy.maximum(best, 0.0))
+
+
+@njit(**_JIT)
+def reward(kind, rw, side, sines, hit, heading, r0, r1):  # pragma: no cover - compiled
+    """The learner's reward of a transition from reading ``r0`` to ``r1`` under ``heading``
+    [deg]: ``kind`` 0 the ``obstacle-avoidance`` reward's (``ObstacleAvoidanceReward``), 1
+    the ``wall-following`` one's (``WallFollowingReward``: ``side`` its side beams and
+    ``sines`` their sines), with the parameters ``rw`` of :data:`REWARDS`."""
+    if kind == 0:
+        return rw[0] if hit else (rw[1] - rw[2] * abs(heading)) + 0.0
+    if hit:
+        return rw[2]
+    d1 = _wall(r1, rw, side, sines)
+    if d1 < rw[0]:
+        return rw[3]
+    if d1 <= rw[1]:
+        r = rw[5]
+    elif _wall(r0, rw, side, sines) <= rw[1]:
+        return rw[4]
+    else:
+        n0, n1 = _nearest(r0), _nearest(r1)
+        r = rw[6] if n1 < rw[10] - 1e-9 and n1 < n0 - rw[11] else rw[7]
+    if r > 0:
+        r -= rw[8] * abs(heading)
+    return r
 
 
 @njit(**_INLINE)
@@ -429,17 +472,16 @@ def _warm() -> None:
     seg, times = np.array([[0.0], [1.0], [1.0], [0.0], [1.0]]), np.linspace(0.0, 1.5, 31)
     seg.setflags(write=False)  # (as a world's packed segments and the substep times)
     times.setflags(write=False)
-    fp = np.array([3.0, 0.15, 0.1, 5.0, 1e-60, 0.3, 0.9, 0.3, 1.0, 1.0, 0.0, 0.0, -30.0, 30.0,
-                   0.1, 0.15])
+    fp = np.array([3.0, 0.15, 0.1, 5.0, 1e-60, 0.3, 0.9, 0.3, 1.0, 1.0, 0.0, 0.0, 0.15])
     rp = np.array([0.15, 100.0, 1.5, 0.1, 0.3, 90.0, 0.05, 45.0, 1.0])
-    ip = np.array([1, 1, 0, 1, 1, 5, 50, 0, 1, 0, 0, 0, 0, 1])
+    ip = np.array([1, 1, 0, 1, 1, 5, 50, 0, 1, 0, 0, 0, 0, 1, 0])
     ints = [np.zeros(c, np.int64) for _ in range(3)]
     rng = np.random.default_rng(0)
     state = np.array([-1, 0, 0, 0, 1, 0, 0])
     f2 = [np.zeros((L, k)) for k in (3, d, c, 2)]
-    run(L, False, np.zeros(3), False, np.zeros(2), seg, times, rp,
-        np.zeros(d), np.ones((c, d)), np.ones(a), np.zeros((c, a)),
-        np.zeros((c, a)), ints[0],
+    run(L, False, np.zeros(3), False, np.zeros(2), seg, times, rp, np.zeros(12),
+        np.zeros(1, np.int64), np.zeros(1), np.zeros(d), np.ones((c, d)), np.ones(a),
+        np.zeros((c, a)), np.zeros((c, a)), ints[0],
         np.zeros((c, a), np.int64), ints[1], ints[2], np.zeros((L, c), np.int8), fp, ip, state,
         np.array([0.5, 0.5, 0.0, 0.0, 0.0]), np.zeros(d), np.zeros(c), rng, lp.log, lp.power,
         lp.exp, lp.ddot, np.zeros((L + 1, 3)), f2[1], f2[2], f2[3],
