@@ -33,7 +33,7 @@ import warnings
 from pathlib import Path
 
 import pytest
-from helpers import small_config
+from helpers import KILLABLE, small_config
 
 from sitframe.cli.app import main
 from sitframe.logs.compare import compare_logs
@@ -420,7 +420,8 @@ def test_a_killed_run_behind_a_symlink_resumes_where_the_link_points(reference, 
     cfg, ref = reference
     link, real = _links(tmp_path)
     proc = subprocess.Popen([*CLI, "run", str(cfg), "--out", str(link), "--workers", workers,
-                             "--json"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                             "--json"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env=KILLABLE)
     t0 = time.monotonic()
     while proc.poll() is None and time.monotonic() - t0 < 120:
         try:

@@ -24,7 +24,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from helpers import INTERRUPTED_TRIALS, ROOM, small_config
+from helpers import INTERRUPTED_TRIALS, KILLABLE, ROOM, small_config
 
 from sitframe.cli.app import main
 from sitframe.logs.compare import compare_logs
@@ -603,7 +603,7 @@ def test_12_sigterm_aborts_like_ctrl_c_and_resumes_identically(interrupted_refer
     out = tmp_path / "t.h5"
     proc = subprocess.Popen([sys.executable, "-c", _CLI, "run", str(cfg), "--out", str(out),
                              "--workers", workers, "--json"], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE)
+                            stderr=subprocess.PIPE, env=KILLABLE)
     t0 = time.monotonic()
     while time.monotonic() - t0 < 60 and proc.poll() is None:
         try:
@@ -654,7 +654,7 @@ def test_12_sigterm_aborts_a_sweep(tmp_path):
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-c", _CLI, "sweep", str(sweep), "--out", str(out),
                              "--workers", "2", "--json"], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE)
+                            stderr=subprocess.PIPE, env=KILLABLE)
     t0 = time.monotonic()
     while time.monotonic() - t0 < 60 and proc.poll() is None:
         try:

@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 import pytest
-from helpers import INTERRUPTED_ITERATIONS, INTERRUPTED_TRIALS, run_json
+from helpers import INTERRUPTED_ITERATIONS, INTERRUPTED_TRIALS, KILLABLE, run_json
 
 from sitframe.cli.app import main
 from sitframe.errors import InputError
@@ -36,7 +36,7 @@ def reference(interrupted_reference):
 def _start(cfg, out, *extra):
     return subprocess.Popen([sys.executable, "-c", _CLI, "run", str(cfg), "--out", str(out),
                              "--json", *extra],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=KILLABLE)
 
 
 def _wait_for_trials(proc, out, n=1, timeout=60.0):
