@@ -211,22 +211,22 @@ class FuzzyQBehaviour:
                 self.fcs[out].set_rules(lr.rule_base)
 
     def _fused(self) -> dict[str, Any] | None:
-        """The compiled trial's controller and learner (``sitframe.runs.fused``): a heading
-        output alone, fixed or learned by a plain :class:`~sitframe.FuzzyQLearner`; ``None``
-        with a speed output, replay, per-group convergence, evolving situations (their TD
-        errors, merged rows) or a subclass's own ``propose`` or ``learn``."""
+        """The compiled trial's controllers and learner (``sitframe.runs.fused``): a heading
+        output and optionally a speed output, each fixed or learned, at most one of them by
+        a plain :class:`~sitframe.FuzzyQLearner`; ``None`` with two learned outputs, replay,
+        per-group convergence, evolving situations (their TD errors, merged rows) or a
+        subclass's own ``propose`` or ``learn``."""
         cls = type(self)
         if cls.propose is not FuzzyQBehaviour.propose or cls.learn is not FuzzyQBehaviour.learn \
-                or set(self.fcs) != {"heading"} or set(self.learners) - {"heading"}:
+                or "heading" not in self.fcs or len(self.learners) > 1:
             return None
-        lr = self.learners.get("heading")
+        (out, lr), = self.learners.items() if self.learners else [(None, None)]
         if lr is not None and (type(lr) is not FuzzyQLearner or lr.params.groups > 1
                                or lr.params.replay or lr.track_td or lr._evolving
                                or lr.removed.any()):
             return None
-        fcs = self.fcs["heading"]
-        return {"singletons": fcs.singletons, "rules": fcs.rule_actions, "fcs": fcs,
-                "learner": lr}
+        return {"heading": self.fcs["heading"], "speed": self.fcs.get("speed"),
+                "learner": lr, "learned": out}
 
     # -- evolving situations (sitframe.situations) ------------------------------
     def situations_changed(self, event: SituationEvent) -> None:

@@ -117,6 +117,14 @@ class SpeedReward:
         self.per_mm_s = P.number("per_mm_s", per_mm_s)
         self.near_time_s = P.number("near_time_s", near_time_s, lo=0.0, unit="s")
 
+    def _fused(self) -> dict[str, Any] | None:
+        """The compiled trial's reward (``sitframe.runs.fused``), unless a subclass's own
+        ``__call__``."""
+        if type(self).__call__ is not SpeedReward.__call__:
+            return None
+        return {"kind": "speed", "params": [self.collision, self.near, self.base,
+                                            self.per_mm_s, self.near_time_s]}
+
     def __call__(self, tr: Transition) -> float:
         if tr.outcome.collided:
             return self.collision

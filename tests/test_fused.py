@@ -208,3 +208,33 @@ def test_progress_counts_every_iteration_on_both_paths(tmp_path: Path,
             trial, n = map(int, line.split())
             counts.setdefault(trial, []).append(n)
         assert counts == {0: [100] * 7 + [50], 1: [100] * 7 + [50]}
+
+
+def test_a_learned_speed_over_a_fixed_heading_runs_compiled(tmp_path: Path,
+                                                            monkeypatch: pytest.MonkeyPatch
+                                                            ) -> None:
+    """The thesis's speed stage (the `speed` preset's shape): the heading rule base fixed
+    from an earlier log, the speed learned with its own reward and learning-rate schedule,
+    both outputs driving the robot; compiled and not, the same bits."""
+    monkeypatch.setenv("SITFRAME_FUSED", "1")
+    base = tmp_path / "heading.toml"
+    base.write_text(to_toml(_config({"experiment.iterations": 600})))
+    heading_log = tmp_path / "heading.h5"
+    assert cli_main(["run", str(base), "--out", str(heading_log)]) == 0
+    cfg = _config({"experiment.stages": ["learn", "evaluate"],
+                   "experiment.clusters_from": str(heading_log),
+                   "behaviours.avoid.reward": "speed",
+                   "behaviours.avoid.reward_params": {"near_time_s": 3.0},
+                   "behaviours.avoid.speeds": [0.1, 0.2, 0.3],
+                   "behaviours.avoid.learn": ["speed"],
+                   "behaviours.avoid.alpha_visits": 20,
+                   "behaviours.avoid.policy_from": {"log": str(heading_log), "trial": 0,
+                                                    "behaviour": "avoid"}})
+    del cfg["collect"]
+    compiled, n_compiled = _run(tmp_path, "speed", cfg, monkeypatch, True)
+    python, _n = _run(tmp_path, "speed", cfg, monkeypatch, False)
+    assert n_compiled >= 1 and not _differ(compiled, python)
+    assert any(k.endswith("speed/q_snapshots") for k in compiled)
+    speed = next(np.asarray(v)[:, 1] for k, v in compiled.items()
+                 if k.endswith("proposals/avoid"))  # (the blended speed each iteration)
+    assert ((speed >= 0.1) & (speed <= 0.3)).all()

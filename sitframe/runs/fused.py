@@ -6,9 +6,10 @@ has to see each iteration from Python:
 
 * its sensor, interpreter, behaviour, arbiter and reward answer ``_fused()``: the built-in
   ``pioneer-sonar`` (or laser) without noise or dropout, ``fcm`` situations, one ``fuzzy-q``
-  behaviour with a heading output alone and neither replay nor per-group convergence, the
-  ``single`` arbiter, and the ``obstacle-avoidance`` reward without ``progress`` or the
-  ``wall-following`` one. A plugin of one's own answers nothing, and nor does a subclass
+  behaviour with a heading output and optionally a speed output (at most one of them
+  learned) and neither replay nor per-group convergence, the ``single`` arbiter, and the
+  ``obstacle-avoidance`` reward without ``progress``, the ``wall-following`` or the
+  ``speed`` one. A plugin of one's own answers nothing, and nor does a subclass
   of a built-in that overrides a method of the step;
 * the loop has nothing else to do between iterations (:func:`sitframe.runs.loop.simulate`
   decides): no plugin implements ``sitframe_step`` (``sitframe_progress`` follows a trial
@@ -68,14 +69,13 @@ class Fused:
     loops: numpy_loops.Loops
     rays: np.ndarray
     centers: np.ndarray
-    singletons: np.ndarray
-    rules: np.ndarray
+    heading: Any  # the behaviour's heading controller (a SituationFCS)
+    speed: Any  # its speed controller, or None (the run's default speed)
     learner: FuzzyQLearner | None
-    fcs: Any
+    learned: str | None  # the output the learner learns ("heading" or "speed")
     fp: np.ndarray
     ip: np.ndarray
     times: np.ndarray
-
     rp: np.ndarray
     rw: np.ndarray
     side: np.ndarray
@@ -85,6 +85,18 @@ class Fused:
         """The loops' pointers, in :func:`sitframe.runs.fused_kernels.run`'s order."""
         lp = self.loops
         return lp.log, lp.power, lp.exp, lp.ddot
+
+    def output(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """An output's singletons (A,) and the one-hot table (c, A) of its rules, as the
+        kernel takes them (the speed's, without a speed output, are empty)."""
+        fcs = self.speed if name == "speed" else self.heading
+        c = self.centers.shape[0]
+        if fcs is None:
+            return np.zeros(1), np.zeros((c, 1))
+        singles = np.array(fcs.singletons, dtype=np.float64)
+        onehot = np.zeros((c, singles.size))
+        onehot[np.arange(c), np.asarray(fcs.rule_actions, dtype=np.int64)] = 1.0
+        return singles, onehot
 
 
 def _specs(parts: Any, learning: bool) -> dict[str, dict[str, Any]] | str:
@@ -156,14 +168,13 @@ def prepare(res: Any, spec: Any, parts: Any) -> Fused | str:
         raise AssertionError(f"fused: {fp.size} float parameters, the kernel reads {fk.FP}")
     ip = np.array([sen["rays_per_beam"], itp["transform"], _POWER.get(itp["p"], 0),
                    lr is not None, learning, *rules, contact() is not None,
-                   kinds.index(rw["kind"])],
-                  dtype=np.int64)
+                   kinds.index(rw["kind"]), beh["speed"] is not None,
+                   beh["learned"] == "speed"], dtype=np.int64)
     # (every array C-contiguous and writable but the world's segments and the substep times,
     # read-only: the types fused_kernels._warm compiles for)
     fz = Fused(fk, lp, np.array(sen["rays"], dtype=np.float64),
-               np.array(itp["centers"], dtype=np.float64),
-               np.array(beh["singletons"], dtype=np.float64),
-               np.array(beh["rules"], dtype=np.int64), lr, beh["fcs"], fp, ip,
+               np.array(itp["centers"], dtype=np.float64), beh["heading"], beh["speed"], lr,
+               beh["learned"], fp, ip,
                _times(robot.control_period_s, robot.substep_s), packed_params(robot),
                np.array(rw["params"], dtype=np.float64),
                np.array(rw.get("side", [0]), dtype=np.int64),
@@ -173,34 +184,35 @@ def prepare(res: Any, spec: Any, parts: Any) -> Fused | str:
 
 
 def _agrees(fz: Fused, parts: Any) -> str:
-    """'' when the kernel's memberships, controller output, soft-max draws and value of the
+    """'' when the kernel's memberships, controller outputs, soft-max draws and value of the
     next situation equal the Python components' on probes (fixed, not the trial's draws);
     else what differed."""
-    fk, c, a = fz.kernels, fz.centers.shape[0], fz.singletons.size
     probe = np.random.default_rng(20261207)
     d = fz.rays.size // int(fz.ip[0])
     readings = np.vstack([probe.uniform(0.0, fz.fp[0], (12, d)), np.full((1, d), fz.fp[0]),
                           probe.uniform(0.0, 0.3, (3, d))])
-    onehot = np.zeros((c, a))
-    onehot[np.arange(c), fz.rules] = 1.0
     lr = fz.learner
     prm = lr.params if lr is not None else None
-    q = probe.normal(250.0, 30.0, (c, a))
     tau = prm.temperature if prm is not None else 1.0
     relative = prm is None or prm.temperature_mode == "relative"
-    got, heads, mine, v = fk.probe(readings, fz.centers, fz.fp, fz.ip, fz.loops, onehot,
-                                   fz.singletons, q, float(tau), relative,
-                                   np.random.default_rng(7))
-    for r, u, h in zip(readings, got, heads, strict=True):
-        ref = parts.interp.memberships(r)
-        if not np.array_equal(ref, u):
-            return "the compiled memberships differ from the interpreter's"
-        if fz.fcs.output(ref) != h:
-            return "the compiled controller output differs from the behaviour's"
-    if prm is not None and (
-            not np.array_equal(softmax_choice(q, prm, np.random.default_rng(7), tau), mine)
-            or v != float(got[0] @ np.maximum.reduce(q, axis=1))):
-        return "the compiled soft-max or value of the next situation differs from numpy's"
+    for name, fcs in (("heading", fz.heading), ("speed", fz.speed)):
+        if fcs is None:
+            continue
+        singles, onehot = fz.output(name)
+        q = probe.normal(250.0, 30.0, (fz.centers.shape[0], singles.size))
+        got, outs, mine, v = fz.kernels.probe(readings, fz.centers, fz.fp, fz.ip, fz.loops,
+                                              onehot, singles, q, float(tau), relative,
+                                              np.random.default_rng(7))
+        for r, u, o in zip(readings, got, outs, strict=True):
+            ref = parts.interp.memberships(r)
+            if not np.array_equal(ref, u):
+                return "the compiled memberships differ from the interpreter's"
+            if fcs.output(ref) != o:
+                return f"the compiled {name} output differs from the behaviour's"
+        if fz.learned == name and prm is not None and (
+                not np.array_equal(softmax_choice(q, prm, np.random.default_rng(7), tau), mine)
+                or v != float(got[0] @ np.maximum.reduce(q, axis=1))):
+            return "the compiled soft-max or value of the next situation differs from numpy's"
     return ""
 
 
@@ -213,8 +225,14 @@ def run(fz: Fused, res: Any, spec: Any, rec: Any, env: Any, chain: Any,
     is told after every :data:`EVERY` iterations (the caller tells the rest).
     """
     L, lr, fk = spec.iterations, fz.learner, fz.kernels
-    c, a = fz.centers.shape[0], fz.singletons.size
-    learn = _LearnerState(lr, fz.rules, c, a, L)
+    learned = fz.speed if fz.learned == "speed" else fz.heading
+    c, a = fz.centers.shape[0], np.asarray(learned.singletons).size
+    learn = _LearnerState(lr, np.asarray(learned.rule_actions), c, a, L)
+    (heads, onehot), (speeds, onehot_s) = fz.output("heading"), fz.output("speed")
+    if fz.learned == "speed":  # (the learner changes its output's table in place)
+        onehot_s = learn.onehot
+    else:
+        onehot = learn.onehot
     state = np.array([learn.converged, learn.stable, learn.since, learn.changes, 1, 0, 0],
                      dtype=np.int64)
     carry = np.zeros(5)
@@ -233,7 +251,7 @@ def run(fz: Fused, res: Any, spec: Any, rec: Any, env: Any, chain: Any,
         seg = world.segment_set.packed
         while fk.run(t1, resume, after, hit, contact, seg, fz.times, rp, fz.rw, fz.side,
                      fz.sines,
-                     fz.rays, fz.centers, fz.singletons, learn.onehot, learn.q, learn.updates,
+                     fz.rays, fz.centers, heads, onehot, speeds, onehot_s, learn.q, learn.updates,
                      learn.visits, learn.rule_base, learn.greedy, learn.rules_it, fz.fp, fz.ip,
                      state, carry, reading, u, env.rng, *fz.call_args(), rec.pose,
                      rec.reading, rec.memberships, rec.command, rec.nearest, rec.collision,
@@ -254,8 +272,8 @@ def run(fz: Fused, res: Any, spec: Any, rec: Any, env: Any, chain: Any,
     rec.pose[L] = carry[:3]
     rec.weights[:] = 1.0
     rec.proposals[:, 0] = rec.command[:L, 0]
-    rec.proposals[:, 1] = np.nan
-    learn.write_back(state, fz.fcs)
+    rec.proposals[:, 1] = np.nan if fz.speed is None else rec.command[:L, 1]
+    learn.write_back(state, learned)
     return L
 
 

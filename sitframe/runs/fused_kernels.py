@@ -2,9 +2,10 @@
 
 :func:`run` is the control loop of :mod:`sitframe.runs.loop` for one configuration of
 built-in components -- a range-finder ring without noise, fixed fuzzy c-means situations, one
-``fuzzy-q`` heading behaviour, the ``single`` arbiter and the ``obstacle-avoidance`` reward
--- with every operation in the order the Python components perform it, so the log is the
-same to the bit. Sines and cosines are the C library's (used only where they are numpy's,
+``fuzzy-q`` behaviour (a heading output and optionally a speed output, at most one of them
+learned), the ``single`` arbiter and a built-in reward (:data:`REWARDS`) -- with every
+operation in the order the Python components perform it, so the log is the same to the
+bit. Sines and cosines are the C library's (used only where they are numpy's,
 :func:`sitframe.sim.kernels.fused`); logarithms, powers, exponentials and dot products are
 numpy's own loops and OpenBLAS's ``ddot``, reached through pointers
 (:mod:`sitframe.sim.numpy_loops`); sums follow numpy's pairwise order.
@@ -64,11 +65,12 @@ FP = ("max_range", "sensor_radius", "offset", "p", "floor", "alpha", "gamma", "a
 REWARDS = {"obstacle-avoidance": ("collision", "base", "heading_cost"),
            "wall-following": ("near", "far", "collision", "too_close", "lost", "inside",
                               "approach", "explore", "heading_cost", "robot_radius",
-                              "max_range", "approach_min")}
+                              "max_range", "approach_min"),
+           "speed": ("collision", "near", "base", "per_mm_s", "near_time_s")}
 #: Names of the integer parameters ``ip``, in order.
 IP = ("rays_per_beam", "transform", "power", "has_learner", "learning", "b", "p_changes",
       "min_updates", "thesis", "terminal", "tie_centre", "relative", "decay", "contact",
-      "reward")
+      "reward", "has_speed", "learns_speed")
 #: :func:`run`'s answers: the chunk is done; a step touches a wall (Python steps it).
 DONE, NEED_STEP = 0, 1
 #: How ``w ** p`` is computed, as numpy's in-place power chooses for a scalar exponent.
@@ -300,8 +302,8 @@ def _learn(t, u0, u1, reward, collided, q, updates, visits, rule_base, fp, ip, s
 
 @njit(**_JIT)
 def run(t1, resume, after, collided_after, contact_after, seg, times, rp, rw, side, sines, rel,
-        fc, singletons,
-        onehot, q, updates, visits, rule_base, greedy, rules_it, fp, ip, state, carry, reading,
+        fc, singletons, onehot, speeds, onehot_s, q, updates, visits, rule_base, greedy, rules_it,
+        fp, ip, state, carry, reading,
         u, rng, lg, pw, ex, dd, pose_out, reading_out, u_out, command_out, nearest_out,
         collision_out, contact_out, reward_out, snap_it, snap_rules, snap_greedy,
         snap_q):  # pragma: no cover - compiled
@@ -312,7 +314,9 @@ def run(t1, resume, after, collided_after, contact_after, seg, times, rp, rw, si
     c, a = q.shape
     feat, diff, d2 = np.empty(reading.size), np.empty(fc.shape), np.empty(c)
     u1, r1, new, vmax = np.empty(c), np.empty(reading.size), np.empty(c, np.int64), np.empty(c)
-    logits, strength = np.empty(c * a), np.empty(a)
+    logits, strength, strength_s = np.empty(c * a), np.empty(singletons.size), \
+        np.empty(speeds.size)
+    learned = onehot_s if ip[16] else onehot  # (the rule table the learner changes)
     ptrs, dims, strides, scalar = np.empty(3, np.intp), np.empty(1, np.intp), \
         np.empty(3, np.intp), np.empty(1)
     end, touch = np.empty(3), np.empty(14)
@@ -333,7 +337,7 @@ def run(t1, resume, after, collided_after, contact_after, seg, times, rp, rw, si
             if ip[3]:
                 _copy(rule_base, rules_it[t])
             heading = controller(onehot, u, singletons, dd, strength)
-            speed = fp[12]
+            speed = controller(onehot_s, u, speeds, dd, strength_s) if ip[15] else fp[12]
             v, omega, t_turn = plan(x, y, th, heading, speed, rp)
             reach = v * rp[2] + rp[0] + rp[6] + 1e-9  # (robot.step_robot's reach)
             if not step_free(x, y, th, v, omega, t_turn, times, seg, reach * reach,
@@ -361,12 +365,12 @@ def run(t1, resume, after, collided_after, contact_after, seg, times, rp, rw, si
         if hit:
             contact_out[t, 0], contact_out[t, 1] = hx, hy
         if ip[4]:
-            r = reward(ip[14], rw, side, sines, hit, heading, reading, r1)
+            r = reward(ip[14], rw, side, sines, hit, heading, speed, reading, r1)
             reward_out[t] = r
             if ip[3] and state[0] < 0 and _learn(t, u, u1, r, hit, q, updates, visits,
                                                  rule_base, fp, ip, state, dd, vmax):
                 _change(t, q, updates, rule_base, greedy, new, state, fp, ip, rng, ex, logits,
-                        onehot, snap_it, snap_rules, snap_greedy, snap_q)
+                        learned, snap_it, snap_rules, snap_greedy, snap_q)
         carry[0], carry[1], carry[2] = nx, ny, nth
         _copy(r1, reading)
         _copy(u1, u)
@@ -399,13 +403,23 @@ def _wall(reading, rw, side, sines):  # pragma: no cover - compiled
 
 
 @njit(**_JIT)
-def reward(kind, rw, side, sines, hit, heading, r0, r1):  # pragma: no cover - compiled
+def reward(kind, rw, side, sines, hit, heading, speed, r0, r1):  # pragma: no cover
     """The learner's reward of a transition from reading ``r0`` to ``r1`` under ``heading``
-    [deg]: ``kind`` 0 the ``obstacle-avoidance`` reward's (``ObstacleAvoidanceReward``), 1
-    the ``wall-following`` one's (``WallFollowingReward``: ``side`` its side beams and
-    ``sines`` their sines), with the parameters ``rw`` of :data:`REWARDS`."""
+    [deg] and ``speed`` [m/s]: ``kind`` 0 the ``obstacle-avoidance`` reward's
+    (``ObstacleAvoidanceReward``), 1 the ``wall-following`` one's (``WallFollowingReward``:
+    ``side`` its side beams and ``sines`` their sines), 2 the ``speed`` one's
+    (``SpeedReward``), with the parameters ``rw`` of :data:`REWARDS`."""
     if kind == 0:
         return rw[0] if hit else (rw[1] - rw[2] * abs(heading)) + 0.0
+    if kind == 2:
+        if hit:
+            return rw[0]
+        prev, cur = _nearest(r0), _nearest(r1)
+        near = rw[4] * speed
+        near = near if near > rw[1] else rw[1]  # (Python's max(near, near_time_s * speed))
+        if prev < near and cur < prev:
+            return (cur - prev) * 100.0
+        return rw[2] + rw[3] * speed * 1000.0
     if hit:
         return rw[2]
     d1 = _wall(r1, rw, side, sines)
@@ -474,14 +488,14 @@ def _warm() -> None:
     times.setflags(write=False)
     fp = np.array([3.0, 0.15, 0.1, 5.0, 1e-60, 0.3, 0.9, 0.3, 1.0, 1.0, 0.0, 0.0, 0.15])
     rp = np.array([0.15, 100.0, 1.5, 0.1, 0.3, 90.0, 0.05, 45.0, 1.0])
-    ip = np.array([1, 1, 0, 1, 1, 5, 50, 0, 1, 0, 0, 0, 0, 1, 0])
+    ip = np.array([1, 1, 0, 1, 1, 5, 50, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0])
     ints = [np.zeros(c, np.int64) for _ in range(3)]
     rng = np.random.default_rng(0)
     state = np.array([-1, 0, 0, 0, 1, 0, 0])
     f2 = [np.zeros((L, k)) for k in (3, d, c, 2)]
     run(L, False, np.zeros(3), False, np.zeros(2), seg, times, rp, np.zeros(12),
         np.zeros(1, np.int64), np.zeros(1), np.zeros(d), np.ones((c, d)), np.ones(a),
-        np.zeros((c, a)), np.zeros((c, a)), ints[0],
+        np.zeros((c, a)), np.ones(2), np.zeros((c, 2)), np.zeros((c, a)), ints[0],
         np.zeros((c, a), np.int64), ints[1], ints[2], np.zeros((L, c), np.int8), fp, ip, state,
         np.array([0.5, 0.5, 0.0, 0.0, 0.0]), np.zeros(d), np.zeros(c), rng, lp.log, lp.power,
         lp.exp, lp.ddot, np.zeros((L + 1, 3)), f2[1], f2[2], f2[3],
