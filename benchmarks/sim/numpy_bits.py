@@ -8,7 +8,8 @@ library; can a kernel instead call numpy's own float64 loops, OpenBLAS's ``ddot`
 Output: a table printed: operation, sizes tried, results that differ from numpy's (of all
 tried), nanoseconds per call inside a compiled loop, and per numpy call from Python.
 
-How each is reached from a kernel:
+How each is reached from a kernel (``sitframe.sim.numpy_loops`` and the compiled trial's
+``row_norms``, which this script checks):
 
 log, power
     ``ufunc._resolve_dtypes_and_context`` and ``ufunc._get_strided_loop`` (numpy's
@@ -32,50 +33,14 @@ Run::
 from __future__ import annotations
 
 import argparse
-import ctypes
-import glob
-import os
 import time
 from collections.abc import Callable
 
 import numba
 import numpy as np
 
-F8 = np.dtype(np.float64)
-_CAPSULE = b"numpy_1.24_ufunc_call_info"
-_get_pointer = ctypes.pythonapi.PyCapsule_GetPointer
-_get_pointer.restype = ctypes.c_void_p
-_get_pointer.argtypes = [ctypes.py_object, ctypes.c_char_p]
-_LOOP = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p,
-                         ctypes.c_void_p, ctypes.c_void_p)
-_KEEP: list[object] = []  # (the capsules own the loops' context and auxiliary data)
-
-
-def ufunc_loop(ufunc: np.ufunc) -> tuple[Callable[..., int], int, int]:
-    """numpy's own contiguous float64 loop of ``ufunc``: (function, context, auxdata)."""
-    n = ufunc.nin + ufunc.nout
-    _dtypes, cap = ufunc._resolve_dtypes_and_context((F8,) * n)
-    ufunc._get_strided_loop(cap, fixed_strides=(8,) * n)
-    loop, context, aux = (ctypes.c_void_p * 3).from_address(_get_pointer(cap, _CAPSULE))
-    _KEEP.append(cap)
-    return _LOOP(loop), context, aux or 0
-
-
-def openblas_ddot() -> Callable[..., float] | None:
-    """``cblas_ddot`` of the OpenBLAS numpy ships, or None where numpy ships none."""
-    libs = glob.glob(os.path.join(os.path.dirname(np.__file__), os.pardir, "numpy.libs",
-                                  "libscipy_openblas*"))
-    for path in libs:
-        lib = ctypes.CDLL(path)
-        for name in ("scipy_cblas_ddot64_", "scipy_cblas_ddot", "cblas_ddot"):
-            if hasattr(lib, name):
-                f = getattr(lib, name)
-                f.restype = ctypes.c_double
-                f.argtypes = [ctypes.c_int64, ctypes.c_void_p, ctypes.c_int64,
-                              ctypes.c_void_p, ctypes.c_int64]
-                return f
-    return None
-
+from sitframe.runs.fused_kernels import row_norms  # (the compiled trial's own)
+from sitframe.sim.numpy_loops import openblas_ddot, ufunc_loop
 
 LOG, LOG_CTX, LOG_AUX = ufunc_loop(np.log)
 POW, POW_CTX, POW_AUX = ufunc_loop(np.power)
@@ -98,27 +63,6 @@ def _call2(loop, ctx, aux, x, y, out):  # type: ignore[no-untyped-def]
     dims = np.full(1, x.size, dtype=np.intp)
     strides = np.full(3, 8, dtype=np.intp)
     return loop(ctx, ptrs.ctypes.data, dims.ctypes.data, strides.ctypes.data, aux)
-
-
-@numba.njit(cache=True)
-def row_norms(X, out):  # type: ignore[no-untyped-def]
-    """``np.einsum("ij,ij->i", X, X)`` in einsum's order (module docstring)."""
-    n, d = X.shape
-    for i in range(n):
-        lane0 = 0.0
-        lane1 = 0.0
-        k = 0
-        while d - k >= 8:
-            for j in (6, 4, 2, 0):
-                lane0 = X[i, k + j] * X[i, k + j] + lane0
-                lane1 = X[i, k + j + 1] * X[i, k + j + 1] + lane1
-            k += 8
-        while k < d:
-            lane0 = X[i, k] * X[i, k] + lane0
-            second = X[i, k + 1] if k + 1 < d else 0.0
-            lane1 = second * second + lane1
-            k += 2
-        out[i] = 0.0 + (lane0 + lane1)
 
 
 @numba.njit(cache=True)

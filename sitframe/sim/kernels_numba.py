@@ -335,6 +335,23 @@ def arc_poses(t: np.ndarray, plan: np.ndarray, sinc_arg: np.ndarray, sin_sinc: n
         out[2, i] = th0 + omega * tt
 
 
+@njit(**_JIT, inline="always")
+def _arc(t: float, x0: float, y0: float, th0: float, v: float, omega: float, t_turn: float,
+         cos_end: float, sin_end: float) -> tuple[float, float, float]:  # pragma: no cover
+    """``robot._poses_at`` at one time ``t`` [s]: the arc's chord (numpy's ``sinc``) then the
+    straight run, sines and cosines the C library's; ``cos_end``, ``sin_end`` are those of
+    the heading at the turn's end."""
+    tt = t if t < t_turn else t_turn
+    half = (0.5 * omega) * tt
+    y = math.pi * (half * _INV_PI)
+    sarg = _SINC_EPS if y == 0.0 else y
+    chord = (v * tt) * (math.sin(sarg) / sarg)
+    ts = v * (t - tt)
+    ang = th0 + half
+    return (x0 + chord * math.cos(ang) + ts * cos_end, y0 + chord * math.sin(ang) + ts * sin_end,
+            th0 + omega * tt)
+
+
 @njit(**_JIT)
 def step_free(x0: float, y0: float, th0: float, v: float, omega: float, t_turn: float,
               times: np.ndarray, seg: np.ndarray, reach2: float, r2: float,
@@ -365,20 +382,11 @@ def step_free(x0: float, y0: float, th0: float, v: float, omega: float, t_turn: 
         return False
     cos_end, sin_end = math.cos(th_end), math.sin(th_end)
     for i in range(times.size):
-        t = times[i]
-        tt = t if t < t_turn else t_turn
-        half = (0.5 * omega) * tt
-        y = math.pi * (half * _INV_PI)
-        sarg = _SINC_EPS if y == 0.0 else y
-        ang = th0 + half
-        chord = (v * tt) * (math.sin(sarg) / sarg)
-        ts = v * (t - tt)
-        px = x0 + chord * math.cos(ang) + ts * cos_end
-        py = y0 + chord * math.sin(ang) + ts * sin_end
+        px, py, pth = _arc(times[i], x0, y0, th0, v, omega, t_turn, cos_end, sin_end)
         for jj in range(m):
             if _dist2(px, py, seg, idx[jj]) < r2:
                 return True
-        out[0], out[1], out[2] = px, py, th0 + omega * tt
+        out[0], out[1], out[2] = px, py, pth
     return False
 
 
@@ -572,17 +580,8 @@ def _poses(ts: np.ndarray, x0: float, y0: float, th0: float, v: float, omega: fl
     th_end = th0 + omega * t_turn
     cos_end, sin_end = math.cos(th_end), math.sin(th_end)
     for i in range(ts.size):
-        t = ts[i]
-        tt = t if t < t_turn else t_turn
-        half = (0.5 * omega) * tt
-        y = math.pi * (half * _INV_PI)
-        sarg = _SINC_EPS if y == 0.0 else y
-        ang = th0 + half
-        chord = (v * tt) * (math.sin(sarg) / sarg)
-        ts_ = v * (t - tt)
-        out[0, i] = x0 + chord * math.cos(ang) + ts_ * cos_end
-        out[1, i] = y0 + chord * math.sin(ang) + ts_ * sin_end
-        out[2, i] = th0 + omega * tt
+        out[0, i], out[1, i], out[2, i] = _arc(ts[i], x0, y0, th0, v, omega, t_turn, cos_end,
+                                               sin_end)
 
 
 @njit(**_JIT)
