@@ -269,6 +269,34 @@ def test_the_first_run_after_an_install_says_why_it_waits(tmp_path, monkeypatch)
     assert said(Terminal()) == ""
 
 
+def test_a_cached_kernel_calling_changed_kernels_is_compiled_again(tmp_path) -> None:
+    """numba recompiles a cached kernel only when its own file changed; the trial kernel
+    calls the simulator's, so its index is dropped when one of those files is newer
+    (``numba_cache.drop_stale``), and kept otherwise; other modules' indexes are left."""
+    import os
+
+    from numba.core.caching import UserProvidedCacheLocator
+
+    from sitframe.sim import numba_cache
+
+    src, dep = tmp_path / "pkg" / "fused_kernels.py", tmp_path / "pkg" / "kernels_numba.py"
+    src.parent.mkdir()
+    src.write_text("# trial kernel\n")
+    dep.write_text("# simulator kernels\n")
+    folder = tmp_path / "cache"
+    sub = folder / UserProvidedCacheLocator.get_suitable_cache_subpath(str(src))
+    sub.mkdir(parents=True)
+    mine, other = sub / "fused_kernels.run-300.py311.nbi", sub / "kernels_numba.cast-40.py311.nbi"
+    for p in (mine, other):
+        p.write_bytes(b"")
+    t = dep.stat().st_mtime
+    os.utime(mine, (t + 5, t + 5))
+    assert numba_cache.drop_stale(src, dep, folder=folder) == 0 and mine.exists()
+    os.utime(dep, (t + 10, t + 10))  # a simulator kernel changed after the index was written
+    assert numba_cache.drop_stale(src, dep, folder=folder) == 1
+    assert not mine.exists() and other.exists()
+
+
 def test_the_kernel_cache_lives_in_the_users_cache_folder(tmp_path, monkeypatch) -> None:
     """The cache folder is NUMBA_CACHE_DIR if set, else SITFRAME_CACHE_DIR/numba, else the
     user's cache folder: never the installed package, whose __pycache__ a later editable
