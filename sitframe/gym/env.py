@@ -120,7 +120,7 @@ class SitframeEnv(gym.Env):
         cmd = task.command(action, self.continuous)
         before = self._ctx or task.context(self.t, self.pose, self._reading, self.goal,
                                            world=self.world)
-        fast = self._compiled if self._compiled is not False else self._compile()
+        fast = self.compiled_step()
         got = None if fast is None else fast.step(self.world, self.pose, cmd)
         if got is not None:
             out, self._reading, obs, nearest = got
@@ -138,6 +138,11 @@ class SitframeEnv(gym.Env):
         terminated = task.terminated(after, out.collided)
         truncated = not terminated and self.t >= task.max_steps
         return obs, reward, terminated, truncated, self._info(out)
+
+    def compiled_step(self) -> CompiledStep | None:
+        """This env's step as one compiled call (:class:`CompiledStep`), or ``None`` (the
+        Python step); decided for good once the kernels are loaded."""
+        return self._compiled if self._compiled is not False else self._compile()
 
     def _compile(self) -> CompiledStep | None:
         """The compiled step of this env (:class:`CompiledStep`), once the kernels are loaded

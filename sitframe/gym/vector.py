@@ -175,7 +175,7 @@ class SitframeVectorEnv(VectorEnv):
         every robot's step can be one call (module docstring), else ``None``."""
         if self._fast is False:
             env = self.envs[0]
-            fast = env._compiled if env._compiled is not False else env._compile()
+            fast = env.compiled_step()
             f = getattr(env.reward_fn, "_fused", None)
             spec = f() if callable(f) else None
             if fast is None or spec is None or spec["kind"] != "obstacle-avoidance":
@@ -196,13 +196,10 @@ class SitframeVectorEnv(VectorEnv):
         poses = np.array([e.pose for e in robots])
         heads = np.array([c.heading_change_deg for c in cmds], dtype=np.float64)
         speeds = np.array([c.speed_m_s for c in cmds], dtype=np.float64)
-        groups: dict[int, list[int]] = {}
-        for j, e in enumerate(robots):
-            groups.setdefault(id(e.world), []).append(j)
         obs = np.empty((len(robots), *self.single_observation_space.shape), dtype=np.float32)
         at = np.empty((len(robots), 3))
         limit, tc = task.max_steps, task.terminate_on_collision
-        for js in groups.values():
+        for js in _by_world(robots):
             codes, out, readings, seen, rewards = step.steps(
                 robots[js[0]].world, poses[js], heads[js], speeds[js], reward)
             tie = codes == step.k.TIE
@@ -246,13 +243,10 @@ class SitframeVectorEnv(VectorEnv):
             outs = step_robots(task.world, [e.pose for e in robots], cmds, task.res.robot, rngs)
             at = np.array([o.pose for o in outs])  # (M, 3)
             return outs, at, self._read(task.world, robots, at, rngs)
-        groups: dict[int, list[int]] = {}
-        for j, e in enumerate(robots):
-            groups.setdefault(id(e.world), []).append(j)
         outs: list[Any] = [None] * len(robots)
         at = np.empty((len(robots), 3))
         readings = np.empty((len(robots), task.sensor_dim))
-        for js in groups.values():
+        for js in _by_world(robots):
             world, g_rngs = robots[js[0]].world, [rngs[j] for j in js]
             g_outs = step_robots(world, [robots[j].pose for j in js], [cmds[j] for j in js],
                                  task.res.robot, g_rngs)
@@ -279,6 +273,14 @@ class SitframeVectorEnv(VectorEnv):
             poses = np.array([e.pose for e in self.envs])
         return {"pose": poses, "_pose": mask,
                 "collided": collided, "_collided": mask}
+
+
+def _by_world(robots: list[SitframeEnv]) -> list[list[int]]:
+    """The indices of ``robots`` grouped by the world each is in (in order of appearance)."""
+    groups: dict[int, list[int]] = {}
+    for j, e in enumerate(robots):
+        groups.setdefault(id(e.world), []).append(j)
+    return list(groups.values())
 
 
 def _seeds(seed: int | list[int | None] | None, n: int) -> list[int | None]:

@@ -100,19 +100,20 @@ class Fused:
 
 
 def _specs(parts: Any, learning: bool) -> dict[str, dict[str, Any]] | str:
-    """Each component's ``_fused()`` answer, or which component has none."""
+    """Each component's ``_fused()`` answer by role (``sensor``, ``interpreter``,
+    ``arbiter``, ``behaviour``, ``reward``), or which component has none."""
     (label, (beh, rew)), = parts.behaviours.items()
-    comps = {"sensor": parts.sensor, "interpreter": parts.interp, "arbiter": parts.arbiter,
-             f"behaviours.{label}": beh}
+    comps = {"sensor": ("sensor", parts.sensor), "interpreter": ("interpreter", parts.interp),
+             "arbiter": ("arbiter", parts.arbiter), "behaviour": (f"behaviours.{label}", beh)}
     if learning:
-        comps[f"behaviours.{label}.reward"] = rew
+        comps["reward"] = (f"behaviours.{label}.reward", rew)
     out = {}
-    for key, comp in comps.items():
+    for role, (key, comp) in comps.items():
         f = getattr(comp, "_fused", None)
         got = f() if callable(f) else None
         if got is None:
             return f"{key} ({type(comp).__name__}) has no compiled form"
-        out[key.split(".")[0] if key.count(".") < 2 else "reward"] = got
+        out[role] = got
     return out
 
 
@@ -148,7 +149,7 @@ def prepare(res: Any, spec: Any, parts: Any) -> Fused | str:
     lp = numpy_loops.loops()
     if isinstance(fk, str) or isinstance(lp, str):
         return fk if isinstance(fk, str) else lp
-    sen, itp, beh = specs["sensor"], specs["interpreter"], specs["behaviours"]
+    sen, itp, beh = specs["sensor"], specs["interpreter"], specs["behaviour"]
     lr, robot = beh["learner"], res.robot
     prm = lr.params if lr is not None else None
     rw = specs.get("reward", {"kind": "obstacle-avoidance", "params": [0.0, 0.0, 0.0]})
@@ -239,6 +240,7 @@ def run(fz: Fused, res: Any, spec: Any, rec: Any, env: Any, chain: Any,
     carry[:3] = env.start
     reading, u, world = np.empty(rec.reading.shape[1]), np.empty(c), env.world
     none2, rp = np.full(2, np.nan), fz.rp
+    rewards = rec.rewards[:, 0] if rec.rewards.shape[1] else np.empty(L)  # (none: unwritten)
     t = 0
     while t < L:
         t1 = min(L, (t // EVERY + 1) * EVERY)
@@ -255,7 +257,7 @@ def run(fz: Fused, res: Any, spec: Any, rec: Any, env: Any, chain: Any,
                      learn.visits, learn.rule_base, learn.greedy, learn.rules_it, fz.fp, fz.ip,
                      state, carry, reading, u, env.rng, *fz.call_args(), rec.pose,
                      rec.reading, rec.memberships, rec.command, rec.nearest, rec.collision,
-                     rec.contact, rec.rewards[:, 0] if rec.rewards.shape[1] else rec.nearest,
+                     rec.contact, rewards,
                      *snaps) == fk.NEED_STEP:
             out = step_robot(world, carry[:3].copy(), Command(float(carry[3]), float(carry[4])),
                              res.robot, env.rng)

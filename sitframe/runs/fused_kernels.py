@@ -42,16 +42,14 @@ from sitframe.sim.kernels_numba import (
     _JIT,
     FREE,
     TIE,
+    TOUCH,
     _pairwise_sum,
     fcm_ratios,
     finish_turn,
     label_strengths,
     normalize,
-    plan,
     ranges_at,
-    step_contact,
-    step_free,
-    wrap,
+    robot_step,
 )
 
 #: Small helpers are inlined into their callers when typed (numba compiles no function of
@@ -319,7 +317,7 @@ def run(t1, resume, after, collided_after, contact_after, seg, times, rp, rw, si
     learned = onehot_s if ip[16] else onehot  # (the rule table the learner changes)
     ptrs, dims, strides, scalar = np.empty(3, np.intp), np.empty(1, np.intp), \
         np.empty(3, np.intp), np.empty(1)
-    end, touch = np.empty(3), np.empty(14)
+    touch = np.empty(14)
     t = state[5]
     while t < t1:
         x, y, th = carry[0], carry[1], carry[2]
@@ -338,22 +336,15 @@ def run(t1, resume, after, collided_after, contact_after, seg, times, rp, rw, si
                 _copy(rule_base, rules_it[t])
             heading = controller(onehot, u, singletons, dd, strength)
             speed = controller(onehot_s, u, speeds, dd, strength_s) if ip[15] else fp[12]
-            v, omega, t_turn = plan(x, y, th, heading, speed, rp)
-            reach = v * rp[2] + rp[0] + rp[6] + 1e-9  # (robot.step_robot's reach)
-            if not step_free(x, y, th, v, omega, t_turn, times, seg, reach * reach,
-                             rp[0] * rp[0], end):
-                nx, ny, nth = end[0], end[1], wrap(end[2])
-                hit, hx, hy = False, np.nan, np.nan
-            elif ip[13]:  # (the contact compiled too: step_robot's own steps)
-                code = step_contact(x, y, th, v, omega, t_turn, times, seg, rp, touch)
-                if code == TIE:  # (dead ahead: the side of the turn away is drawn)
-                    finish_turn(touch, rng.random() < 0.5)
-                hit = code != FREE
-                nx, ny, nth, hx, hy = touch[0], touch[1], touch[2], touch[3], touch[4]
-            else:
+            code = robot_step(x, y, th, heading, speed, rp, times, seg, ip[13] != 0, touch)
+            if code == TOUCH:  # (the contact is stepped in Python: step_robot)
                 carry[3], carry[4] = heading, speed
                 state[5] = t
                 return NEED_STEP
+            if code == TIE:  # (dead ahead: the side of the turn away is drawn)
+                finish_turn(touch, rng.random() < 0.5)
+            hit = code != FREE
+            nx, ny, nth, hx, hy = touch[0], touch[1], touch[2], touch[3], touch[4]
         ranges_at(nx, ny, nth, rel, seg, fp[0], fp[1], ip[0], True, r1)
         memberships(r1, fc, fp, ip, feat, diff, d2, u1, lg, pw, ptrs, dims, strides, scalar)
         pose_out[t, 0], pose_out[t, 1], pose_out[t, 2] = x, y, th

@@ -171,49 +171,56 @@ def _in_trial(trial: int) -> Iterator[None]:
                           trial=trial) from exc
 
 
-def _observer(pm: pluggy.PluginManager, name: str) -> Callable[..., None] | None:
-    """A function firing hook ``name`` with its keyword arguments and, for a fault, the trial
-    and iteration; ``None`` when no plugin implements the hook.
-
-    An observer that raises is a :class:`PluginFault` naming its plugin (the one whose hook
-    is on the traceback), the trial and the iteration.
-    """
-    hook = getattr(pm.hook, name)
-    impls = hook.get_hookimpls()
-    if not impls:
-        return None
+def _observer_fault(exc: BaseException, pm: pluggy.PluginManager, impls: list[Any], name: str,
+                    trial: int, iteration: int | None) -> PluginFault:
+    """The :class:`PluginFault` of an observer of hook ``name`` that raised ``exc``: it names
+    the plugin whose implementation is on the traceback, the trial and the iteration."""
     info = getattr(pm, "sitframe_info", {})
-
-    def fire(trial: int, iteration: int | None, /, **kwargs: Any) -> None:
-        try:
-            hook(**kwargs)
-        except (KeyboardInterrupt, TaskCancelled, PluginFault):
-            raise
-        except PLUGIN_ERRORS as exc:  # an observer's fault is reported, not raw
-            who = blame(exc, impls)
-            where = (f"plugin {info[who].describe() if who in info else who}"
-                     if who else "an observer")
-            raise fault(exc, where, name, trial, iteration) from exc
-
-    return fire
+    who = blame(exc, impls)
+    where = f"plugin {info[who].describe() if who in info else who}" if who else "an observer"
+    return fault(exc, where, name, trial, iteration)
 
 
 def step_hook_of(pm: pluggy.PluginManager) -> Callable[[StepRecord], Any] | None:
-    """A function firing ``sitframe_step`` observers, or ``None`` when no plugin implements it
-    (faults as :func:`_observer`'s)."""
-    fire = _observer(pm, "sitframe_step")
-    if fire is None:
+    """A function firing ``sitframe_step`` observers, or ``None`` when no plugin implements it.
+
+    An observer that raises is a :class:`PluginFault` naming its plugin (the
+    one whose ``sitframe_step`` is on the traceback), the trial and the iteration.
+    """
+    hook = pm.hook.sitframe_step
+    impls = hook.get_hookimpls()
+    if not impls:
         return None
-    return lambda rec: fire(rec.trial, rec.transition.before.iteration, record=rec)
+
+    def step_hook(rec: StepRecord) -> None:
+        try:
+            hook(record=rec)
+        except (KeyboardInterrupt, TaskCancelled, PluginFault):
+            raise
+        except PLUGIN_ERRORS as exc:  # an observer's fault is reported, not raw
+            raise _observer_fault(exc, pm, impls, "sitframe_step", rec.trial,
+                                  rec.transition.before.iteration) from exc
+
+    return step_hook
 
 
 def progress_hook_of(pm: pluggy.PluginManager) -> Callable[[int, int], None] | None:
     """A function ``(trial, iterations)`` firing ``sitframe_progress``, or ``None`` when no
-    plugin implements it."""
-    fire = _observer(pm, "sitframe_progress")
-    if fire is None:
+    plugin implements it (a fault as :func:`step_hook_of`'s)."""
+    hook = pm.hook.sitframe_progress
+    impls = hook.get_hookimpls()
+    if not impls:
         return None
-    return lambda trial, n: fire(trial, None, trial=trial, iterations=n)
+
+    def progress(trial: int, iterations: int) -> None:
+        try:
+            hook(trial=trial, iterations=iterations)
+        except (KeyboardInterrupt, TaskCancelled, PluginFault):
+            raise
+        except PLUGIN_ERRORS as exc:
+            raise _observer_fault(exc, pm, impls, "sitframe_progress", trial, None) from exc
+
+    return progress
 
 
 def simulate(

@@ -419,15 +419,19 @@ ROBOT = ("radius", "max_turn_rate_deg_s", "control_period_s", "min_speed", "max_
 
 @njit(**_JIT)
 def robot_step(x0: float, y0: float, th0: float, heading: float, speed: float,
-               rp: np.ndarray, times: np.ndarray, seg: np.ndarray,
+               rp: np.ndarray, times: np.ndarray, seg: np.ndarray, contact: bool,
                out: np.ndarray) -> int:  # pragma: no cover - compiled
     """``step_robot`` in one call: the command's :func:`plan`, :func:`step_free` and, when
     the disc touches a wall, :func:`step_contact` (into ``out``, (14,), and its answer;
-    :data:`TIE` leaves the turn's side to the caller's draw, :func:`finish_turn`)."""
+    :data:`TIE` leaves the turn's side to the caller's draw, :func:`finish_turn`). Without
+    ``contact`` (where :func:`step_contact` does not agree with Python's) a step that
+    touches a wall answers :data:`TOUCH` and writes nothing: the caller steps it."""
     v, omega, t_turn = plan(x0, y0, th0, heading, speed, rp)
     reach = v * rp[2] + rp[0] + rp[6] + 1e-9
     end = np.empty(3)
     if step_free(x0, y0, th0, v, omega, t_turn, times, seg, reach * reach, rp[0] * rp[0], end):
+        if not contact:
+            return TOUCH
         return step_contact(x0, y0, th0, v, omega, t_turn, times, seg, rp, out)
     w = wrap(end[2])
     out[0], out[1], out[2], out[3], out[4] = end[0], end[1], w, np.nan, np.nan
@@ -449,7 +453,7 @@ def env_step(x0: float, y0: float, th0: float, heading: float, speed: float, rp:
     dead-ahead contact, whose turn's side is a draw from the robot's generator) before
     reading: the caller steps that one through ``step_robot``.
     """
-    code = robot_step(x0, y0, th0, heading, speed, rp, times, seg, out)
+    code = robot_step(x0, y0, th0, heading, speed, rp, times, seg, True, out)
     if code == TIE:
         return code
     ranges_at(out[0], out[1], out[2], rel, seg, max_range, sensor_radius, group, True, reading)
@@ -510,8 +514,9 @@ def finish_turn(out: np.ndarray, flip: bool) -> None:  # pragma: no cover - comp
 
 
 #: :func:`step_contact`'s answers: the step touched nothing, touched a wall, or touched one
-#: dead ahead (the side of the turn away is the caller's draw: :func:`finish_turn`).
-FREE, HIT, TIE = 0, 1, 2
+#: dead ahead (the side of the turn away is the caller's draw: :func:`finish_turn`); and
+#: :func:`robot_step`'s when it is not to step a contact itself.
+FREE, HIT, TIE, TOUCH = 0, 1, 2, 3
 
 
 @njit(**_JIT)
@@ -1092,7 +1097,7 @@ def _warm() -> None:
     frozen_td(ro, 0.3, True, -1.0, 0.9, 0.5, two, np.zeros(2, dtype=np.intp), out)
     step_free(0.0, 0.0, 0.0, 0.1, 0.0, 0.0, one_ro, seg_ro, 1.0, 0.01, np.empty(3))
     robot_step(0.0, 0.0, 0.0, 10.0, 0.1, np.array([0.15, 100.0, 1.5, 0.1, 0.3, 90.0, 0.05, 45.0,
-                                                   1.0]), one_ro, seg_ro, np.empty(14))
+                                                   1.0]), one_ro, seg_ro, True, np.empty(14))
     hypot(3.0, 4.0)
     wrap(7.0)
     ranges_at(0.0, 0.0, 0.0, one, seg_ro, 3.0, 0.1, 1, True, out)

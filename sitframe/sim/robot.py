@@ -379,7 +379,8 @@ def step_robot(
         out = np.empty(14)
         code = whole.robot_step(x0, y0, th0, float(command.heading_change_deg),
                                 float(command.speed_m_s), packed_params(params),
-                                _times(T, params.substep_s), world.segment_set.packed, out)
+                                _times(T, params.substep_s), world.segment_set.packed, True,
+                                out)
         if code != whole.TIE:
             return outcome_from(pose_before, out, code != whole.FREE, params)
     plan = _plan(pose, command, params)
