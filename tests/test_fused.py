@@ -90,7 +90,7 @@ def _config(changes: dict[str, Any]) -> dict[str, Any]:
 def _run(tmp: Path, name: str, cfg: dict[str, Any], monkeypatch: pytest.MonkeyPatch,
          compiled: bool) -> tuple[dict[str, Any], int]:
     """Run ``cfg``; its log's contents and how many trials ran compiled."""
-    monkeypatch.setenv("SITFRAME_FUSED", "1" if compiled else "0")
+    monkeypatch.setenv("SITFRAME_FUSED", "wait" if compiled else "0")
     calls = []
     real = fused.run
     monkeypatch.setattr(fused, "run", lambda *a, **k: calls.append(1) or real(*a, **k))
@@ -144,11 +144,45 @@ def test_a_trial_with_a_step_observer_or_a_noisy_sensor_runs_the_python_loop(
     path.write_text(to_toml(_config({"experiment.iterations": 500})))
     calls: list[int] = []
     real = fused.run
-    monkeypatch.setenv("SITFRAME_FUSED", "1")
+    monkeypatch.setenv("SITFRAME_FUSED", "wait")
     monkeypatch.setattr(fused, "run", lambda *a, **k: calls.append(1) or real(*a, **k))
     assert cli_main(["--plugins-dir", str(plugin), "run", str(path), "--out",
                      str(tmp_path / "w.h5")]) == 0
     assert calls == []
+
+
+def test_trials_run_the_python_loop_while_the_kernel_compiles_in_the_background(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The first run after an install: the trial kernel is not in the cache and a process
+    of its own compiles it; the trials meanwhile run the Python loop (the same log as
+    ``SITFRAME_FUSED=0``) instead of waiting, and run compiled once it is cached."""
+    import os
+    import sys
+
+    from sitframe.sim import numba_cache
+
+    folder = tmp_path / "cache"
+    folder.mkdir()
+    (folder / "sitframe.runs.fused_kernels.compiling").write_text(str(os.getpid()))  # (alive)
+    monkeypatch.setattr(numba_cache, "_CONFIGURED", [folder])  # (an empty cache)
+    monkeypatch.delitem(sys.modules, "sitframe.runs.fused_kernels", raising=False)  # (not yet)
+    cfg = _config({"experiment.iterations": 600})
+    background, n = _run(tmp_path, "bg", cfg, monkeypatch, False)
+    monkeypatch.setenv("SITFRAME_FUSED", "1")
+    assert "compiling in the background" in str(fused._compiled())
+    calls: list[int] = []
+    real = fused.run
+    monkeypatch.setattr(fused, "run", lambda *a, **k: calls.append(1) or real(*a, **k))
+    path = tmp_path / "bg.toml"
+    path.write_text(to_toml(cfg))
+    assert cli_main(["run", str(path), "--out", str(tmp_path / "bg-1.h5")]) == 0
+    assert calls == [] and "sitframe.runs.fused_kernels" not in sys.modules
+    contents = {k: v for k, v in log_contents(tmp_path / "bg-1.h5").items()
+                if not k.startswith(("code_hash", "created", "config", "run_", "elapsed"))}
+    assert not _differ(contents, background)
+    monkeypatch.undo()  # (the user's cache again: the kernel loaded, or compiled here)
+    monkeypatch.setenv("SITFRAME_FUSED", "wait")
+    assert not isinstance(fused._compiled(), str)
 
 
 def test_a_subclass_that_changes_a_step_is_not_compiled() -> None:
@@ -198,7 +232,7 @@ def test_progress_counts_every_iteration_on_both_paths(tmp_path: Path,
         "        f.write(f'{trial} {iterations}\\n')\n")
     path = tmp_path / "p.toml"
     path.write_text(to_toml(_config({"experiment.iterations": 750, "experiment.trials": 2})))
-    for mode in ("1", "0"):
+    for mode in ("wait", "0"):
         monkeypatch.setenv("SITFRAME_FUSED", mode)
         seen.unlink(missing_ok=True)
         assert cli_main(["--plugins-dir", str(plugin), "run", str(path), "--out",
@@ -216,7 +250,7 @@ def test_a_learned_speed_over_a_fixed_heading_runs_compiled(tmp_path: Path,
     """The thesis's speed stage (the `speed` preset's shape): the heading rule base fixed
     from an earlier log, the speed learned with its own reward and learning-rate schedule,
     both outputs driving the robot; compiled and not, the same bits."""
-    monkeypatch.setenv("SITFRAME_FUSED", "1")
+    monkeypatch.setenv("SITFRAME_FUSED", "wait")
     base = tmp_path / "heading.toml"
     base.write_text(to_toml(_config({"experiment.iterations": 600})))
     heading_log = tmp_path / "heading.h5"

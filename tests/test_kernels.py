@@ -297,6 +297,77 @@ def test_a_cached_kernel_calling_changed_kernels_is_compiled_again(tmp_path) -> 
     assert not mine.exists() and other.exists()
 
 
+def _wait_unlocked(lock: Path, limit: float = 120.0) -> None:
+    import time
+
+    end = time.monotonic() + limit
+    while True:
+        try:
+            if lock.read_text() == "failed":
+                return
+        except FileNotFoundError:
+            return
+        assert time.monotonic() < end, f"{lock} still held after {limit} s"
+        time.sleep(0.05)
+
+
+def test_a_background_process_compiles_missing_kernels_once(tmp_path, monkeypatch) -> None:
+    """The first run after an install: a process of its own compiles a module's kernels into
+    the cache (``numba_cache.compile_elsewhere``); while it runs, every caller is told so
+    (no second process); once cached, the caller imports them itself."""
+    from sitframe.sim import numba_cache
+
+    folder, mods = tmp_path / "cache", tmp_path / "mods"
+    folder.mkdir()
+    mods.mkdir()
+    src = mods / "bg_kernel.py"
+    src.write_text("from numba import njit\n\n\n@njit(cache=True)\ndef twice(x):\n"
+                   "    return 2 * x\n\n\ntwice(1)\n")
+    monkeypatch.setattr(numba_cache, "_CONFIGURED", [folder])
+    monkeypatch.syspath_prepend(str(mods))  # (the background process is given this sys.path)
+    started = len(numba_cache._STARTED)
+    busy = numba_cache.compile_elsewhere("bg_kernel", src)
+    assert busy is not None and "background" in busy
+    again = numba_cache.compile_elsewhere("bg_kernel", src)
+    assert again is not None and "background" in again
+    assert len(numba_cache._STARTED) == started + 1  # one background compile per cache folder
+    _wait_unlocked(folder / "bg_kernel.compiling")
+    assert not (folder / "bg_kernel.compiling").exists()
+    assert not numba_cache.compile_pending(src, folder)  # compiled into the cache
+    assert numba_cache.compile_elsewhere("bg_kernel", src) is None  # now: load it here
+
+
+def test_a_failed_or_vanished_background_compile_is_not_waited_for(tmp_path,
+                                                                  monkeypatch) -> None:
+    """A background compile that failed leaves ``failed`` in its lock: the next caller
+    compiles the module itself (which shows the error) instead of waiting; one whose process
+    is gone without a word (killed) is started again."""
+    import subprocess
+    import sys
+
+    from sitframe.sim import numba_cache
+
+    folder, mods = tmp_path / "cache", tmp_path / "mods"
+    folder.mkdir()
+    mods.mkdir()
+    src = mods / "bad_kernel.py"
+    src.write_text("raise RuntimeError('no kernels here')\n")
+    monkeypatch.setattr(numba_cache, "_CONFIGURED", [folder])
+    monkeypatch.syspath_prepend(str(mods))
+    lock = folder / "bad_kernel.compiling"
+    assert numba_cache.compile_elsewhere("bad_kernel", src) is not None
+    _wait_unlocked(lock)
+    assert lock.read_text() == "failed"
+    assert numba_cache.compile_elsewhere("bad_kernel", src) is None  # compile here
+    assert not lock.exists()
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True).stdout.strip()
+    lock.write_text(gone)  # a compile whose process died
+    busy = numba_cache.compile_elsewhere("bad_kernel", src)
+    assert busy is not None and gone not in busy.split("pid ")[-1]
+    _wait_unlocked(lock)
+
+
 def test_the_kernel_cache_lives_in_the_users_cache_folder(tmp_path, monkeypatch) -> None:
     """The cache folder is NUMBA_CACHE_DIR if set, else SITFRAME_CACHE_DIR/numba, else the
     user's cache folder: never the installed package, whose __pycache__ a later editable

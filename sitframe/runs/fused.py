@@ -56,9 +56,20 @@ MIN_ITERATIONS = 500
 _POWER = {1.0: 1, -1.0: 2, 0.0: 3, 0.5: 4, 2.0: 5}  # (fused_kernels.POW_*: numpy's fast powers)
 
 
+#: Whether this process said that the trial kernel compiles in the background.
+_TOLD: list[None] = []
+
+
+def _mode() -> str:
+    """``SITFRAME_FUSED``: ``0`` (never compiled), ``wait`` (compile the trial kernel in
+    this process when the cache lacks it) or anything else (the default, ``1``: compiled once
+    the kernel is cached, compiled in the background when it is not)."""
+    return os.environ.get("SITFRAME_FUSED", "1").strip().lower()
+
+
 def wanted() -> bool:
     """Whether trials may run compiled (``SITFRAME_FUSED`` is not ``0``)."""
-    return os.environ.get("SITFRAME_FUSED", "1").strip() != "0"
+    return _mode() != "0"
 
 
 @dataclass
@@ -118,7 +129,13 @@ def _specs(parts: Any, learning: bool) -> dict[str, dict[str, Any]] | str:
 
 
 def _compiled() -> ModuleType | str:
-    """The trial kernel's module (compiled or loaded from the cache), or why there is none."""
+    """The trial kernel's module (loaded from the cache, or compiled), or why there is none.
+
+    When the cache lacks it (the first run after an install or upgrade), a process of its own
+    compiles it (:func:`sitframe.sim.numba_cache.compile_elsewhere`) while this one's trials
+    run the Python loop, which gives the same bits; the trials after it is cached run
+    compiled. ``SITFRAME_FUSED=wait`` compiles it here instead, before the trial.
+    """
     if kernels() is None or fused_trig() is None:
         return "the compiled kernels are not loaded, or their sines differ from numpy's"
     if "sitframe.runs.fused_kernels" not in sys.modules and numba_cache.configure():
@@ -126,6 +143,12 @@ def _compiled() -> ModuleType | str:
 
         here = Path(__file__).with_name("fused_kernels.py")
         numba_cache.drop_stale(here, Path(base.__file__), Path(numpy_loops.__file__))
+        busy = None if _mode() == "wait" else \
+            numba_cache.compile_elsewhere("sitframe.runs.fused_kernels", here)
+        if busy is not None:
+            if not _TOLD:
+                _TOLD.append(numba_cache.announce_compilation(here, background=True))
+            return f"the compiled trial: {busy}"
         numba_cache.announce_compilation(here)
     from sitframe.runs import fused_kernels  # (numba's import: only a process that simulates)
 

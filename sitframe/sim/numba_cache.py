@@ -27,11 +27,14 @@ loads it first, before the kernels, and it stays at the foot of the house.
 from __future__ import annotations
 
 import os
+import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
-__all__ = ["announce_compilation", "cache_dir", "compile_pending", "configure", "drop_stale"]
+__all__ = ["announce_compilation", "cache_dir", "compile_elsewhere", "compile_pending", "configure",
+           "drop_stale"]
 
 #: Set once by :func:`configure`: the folder numba caches in, or ``None`` (no cache).
 _CONFIGURED: list[Path | None] = []
@@ -129,8 +132,89 @@ def drop_stale(source: Path, *depends: Path, folder: Path | None = None) -> int:
     return gone
 
 
-def announce_compilation(source: Path | None = None) -> None:
-    """Say on a terminal why the first run after an install waits (numba compiling).
+#: A background compile whose lock is older than this [s] is taken for dead (a reused pid).
+STALE_S = 600.0
+#: The background compiles this process started (polled, so none is left a zombie).
+_STARTED: list[subprocess.Popen[bytes]] = []
+#: What the background process runs: import the module (compiling its kernels into the
+#: cache), then remove the lock; on a failure, write ``failed`` in it instead.
+_CHILD = """import importlib, os, sys
+try:
+    importlib.import_module(sys.argv[2])
+except BaseException:
+    with open(sys.argv[1], "w") as f:
+        f.write("failed")
+    raise
+os.unlink(sys.argv[1])
+"""
+
+
+def _running(lock: Path) -> bool | None:
+    """Whether the background compile of ``lock`` still runs (``None``: it failed)."""
+    try:
+        text, age = lock.read_text().strip(), time.time() - lock.stat().st_mtime
+    except OSError:
+        return False  # (it finished meanwhile)
+    if text == "failed":
+        return None
+    if not text.isdigit():  # (its starter has yet to write the pid)
+        return age < 5.0
+    for p in _STARTED:
+        p.poll()  # (reaps ours)
+    try:
+        os.kill(int(text), 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # (alive, another user's)
+        pass
+    return age < STALE_S
+
+
+def compile_elsewhere(module: str, source: Path) -> str | None:
+    """Have a process of its own compile ``module``'s kernels into the cache, unless one is
+    at it already; the caller goes on without them meanwhile.
+
+    Returns what is happening (``"... compiling in the background (pid N)"``) while a
+    background compile runs, or ``None`` when the caller is to import ``module`` itself: no
+    cache (a process compiles for itself), the kernels are cached now, or the background
+    compile failed (importing it here shows why). ``source`` is the module's file
+    (:func:`compile_pending`). The lock is ``<cache folder>/<module>.compiling``: one
+    background compile per cache folder, however many processes ask.
+    """
+    folder = _CONFIGURED[0] if _CONFIGURED else None
+    if folder is None or not compile_pending(source, folder):
+        return None
+    lock = folder / f"{module}.compiling"
+    try:
+        fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+    except FileExistsError:
+        state = _running(lock)
+        if state:
+            return f"its kernels are compiling in the background ({lock.name})"
+        lock.unlink(missing_ok=True)
+        # (stopped before it finished: try again; failed: compile here, which says why)
+        return compile_elsewhere(module, source) if state is False else None
+    except OSError:
+        return None
+    try:
+        path = os.pathsep.join(p or os.getcwd() for p in sys.path)
+        child = subprocess.Popen(
+            [sys.executable, "-c", _CHILD, str(lock), module], stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+            env=dict(os.environ, NUMBA_CACHE_DIR=str(folder), PYTHONPATH=path))
+        os.write(fd, str(child.pid).encode())
+    except OSError:
+        lock.unlink(missing_ok=True)
+        return None
+    finally:
+        os.close(fd)
+    _STARTED.append(child)
+    return f"its kernels are compiling in the background (pid {child.pid})"
+
+
+def announce_compilation(source: Path | None = None, background: bool = False) -> None:
+    """Say on a terminal why the first run after an install waits (numba compiling), or,
+    with ``background``, that a process of its own compiles the kernels of ``source``.
 
     ``source``: the kernels' module (default :mod:`sitframe.sim.kernels_numba`). Printed
     only when stderr is a terminal and the kernels are cached, so logs, pipes and tests
@@ -140,7 +224,10 @@ def announce_compilation(source: Path | None = None) -> None:
         source = Path(__file__).with_name("kernels_numba.py")
     if (sys.stderr is not None and sys.stderr.isatty() and _CONFIGURED
             and _CONFIGURED[0] is not None and compile_pending(source, _CONFIGURED[0])):
-        print("sitframe: compiling the simulator's kernels with numba (once after an "
+        print("sitframe: compiling the learning trial's kernel in the background (once after "
+              "an install or upgrade); trials run the Python loop, with the same results, "
+              "until it is ready" if background else
+              "sitframe: compiling the simulator's kernels with numba (once after an "
               "install or upgrade; some 10-40 s)", file=sys.stderr, flush=True)
 
 
