@@ -74,3 +74,17 @@ def test_no_command_or_option_without_help() -> None:
             if isinstance(action, argparse._SubParsersAction):
                 continue
             assert action.help, f"sitframe {name}: {action.dest} has no help"
+
+
+@pytest.mark.parametrize("module", ["sitframe", "sitframe.cli"])
+def test_python_dash_m_runs_the_command_line(module: str) -> None:
+    """``python -m sitframe`` is the ``sitframe`` command, as ``python -m sitframe.cli`` is
+    (where the console script is not on the PATH)."""
+    import subprocess
+    import sys
+
+    from sitframe import __version__
+
+    res = subprocess.run([sys.executable, "-m", module, "--version"], capture_output=True,
+                         text=True, check=False)
+    assert res.returncode == 0 and __version__ in res.stdout, res.stderr
