@@ -134,8 +134,10 @@ def drop_stale(source: Path, *depends: Path, folder: Path | None = None) -> int:
 
 #: A background compile whose lock is older than this [s] is taken for dead (a reused pid).
 STALE_S = 600.0
-#: The background compiles this process started (polled, so none is left a zombie).
+#: The background compiles this process started (polled, so none is left a zombie), and
+#: their modules.
 _STARTED: list[subprocess.Popen[bytes]] = []
+_TRIED: set[str] = set()
 #: What the background process runs: import the module (compiling its kernels into the
 #: cache), then remove the lock; on a failure, write ``failed`` in it instead.
 _CHILD = """import importlib, os, sys
@@ -177,7 +179,9 @@ def compile_elsewhere(module: str, source: Path) -> str | None:
     Returns what is happening (``"... compiling in the background (pid N)"``) while a
     background compile runs, or ``None`` when the caller is to import ``module`` itself: no
     cache (a process compiles for itself), the kernels are cached now, or the background
-    compile failed (importing it here shows why). ``source`` is the module's file
+    compile failed, or one this process started stopped before it finished (a full disk,
+    a kill: importing it here shows why, and nothing is started again and again).
+    ``source`` is the module's file
     (:func:`compile_pending`). The lock is ``<cache folder>/<module>.compiling``: one
     background compile per cache folder, however many processes ask.
     """
@@ -192,8 +196,10 @@ def compile_elsewhere(module: str, source: Path) -> str | None:
         if state:
             return f"its kernels are compiling in the background ({lock.name})"
         lock.unlink(missing_ok=True)
-        # (stopped before it finished: try again; failed: compile here, which says why)
-        return compile_elsewhere(module, source) if state is False else None
+        # (stopped before it finished: try again, once per process; failed, or stopped
+        # again: compile here, which says why)
+        again = state is False and module not in _TRIED
+        return compile_elsewhere(module, source) if again else None
     except OSError:
         return None
     try:
@@ -209,6 +215,7 @@ def compile_elsewhere(module: str, source: Path) -> str | None:
     finally:
         os.close(fd)
     _STARTED.append(child)
+    _TRIED.add(module)
     return f"its kernels are compiling in the background (pid {child.pid})"
 
 
