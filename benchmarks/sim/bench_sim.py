@@ -27,9 +27,10 @@ iterations per second, twice the rate before the compiled kernels).
 ``--first-call`` measures what the compiled kernels cost a fresh process:
 importing numba and loading them from numba's cache, and compiling them with
 an empty cache (the first run after an install); the simulator's kernels and the
-compiled learning trial's apart, and both; then short learning runs (``FIRST_RUNS``) with
-an empty cache and a filled one, whose difference is what the first run after an install
-spends compiling (the kernels compiled on first use included)::
+compiled learning trial's apart, and both; then short learning runs and a Gymnasium
+script (``FIRST_RUNS``) with an empty cache and a filled one, whose difference is what
+the first run after an install spends compiling (the kernels compiled on first use
+included)::
 
     python benchmarks/sim/bench_sim.py --against ef46ff4 --repeats 11
     python benchmarks/sim/bench_sim.py --first-call
@@ -182,15 +183,35 @@ def _first_call(repeats: int) -> list[tuple[str, float, float]]:
     return rows
 
 
-#: The first runs measured by ``--first-call``: the main job (its situations evolve, so its
-#: trials run the Python loop) and the thesis's preset (its trials run compiled), short.
-FIRST_RUNS = [["run", preset, "--trials", "1", "--iterations", "1000", "--workers", "1"]
-              for preset in ("obstacle-avoidance", "obstacle-avoidance-thesis")]
+#: What a Gymnasium user's first script runs: 3000 steps of the single env, then 200 steps
+#: of a vector env of 16 robots (the obstacle-avoidance task, random actions).
+GYM_FIRST = """
+import numpy as np
+import sitframe.gym as sg
+env = sg.make_env("obstacle-avoidance")
+env.reset(seed=0)
+for a in np.random.default_rng(0).integers(0, env.action_space.n, 3000):
+    if any(env.step(int(a))[2:4]):
+        env.reset()
+venv = sg.make_vector_env("obstacle-avoidance", 16)
+venv.reset(seed=0)
+for a in np.random.default_rng(0).integers(0, venv.single_action_space.n, (200, 16)):
+    venv.step(a)
+"""
+
+#: The first runs measured by ``--first-call`` (a name, the arguments after ``python``): the
+#: main job (its situations evolve, so its trials run the Python loop) and the thesis's
+#: preset (its trials run compiled), short; and a Gymnasium script (:data:`GYM_FIRST`).
+FIRST_RUNS = [*((f"a whole run: `sitframe {cmd}`", ["-m", "sitframe.cli", *cmd.split()])
+                for cmd in (f"run {preset} --trials 1 --iterations 1000 --workers 1"
+                            for preset in ("obstacle-avoidance", "obstacle-avoidance-thesis"))),
+              ("a Gymnasium script: 3000 steps of `sitframe/ObstacleAvoidance-v0`, then 200 "
+               "steps of its vector env of 16 robots", ["-c", GYM_FIRST])]
 
 
-def _first_run(repeats: int, cmd: list[str]) -> tuple[str, float, float]:
-    """What the first ``sitframe`` run of ``cmd`` after an install spends more than a later
-    one: the same run with an empty kernel cache and with a filled one, in fresh processes;
+def _first_run(repeats: int, name: str, argv: list[str]) -> tuple[str, float, float]:
+    """What the first run of ``python ARGV`` after an install spends more than a later one:
+    the same run with an empty kernel cache and with a filled one, in fresh processes;
     the difference is what compiling costs that run (every kernel it calls, the variants
     compiled on first use included). A kernel compiled in a background process meanwhile
     (``sitframe.sim.numba_cache.compile_elsewhere``: the compiled trial's) is waited for
@@ -198,9 +219,9 @@ def _first_run(repeats: int, cmd: list[str]) -> tuple[str, float, float]:
     median s without)``."""
     def once(cache: str) -> tuple[float, float]:
         with tempfile.TemporaryDirectory() as out:
+            log = ["--out", str(Path(out) / "r.h5")] if argv[0] == "-m" else []
             t0 = time.perf_counter()
-            subprocess.run([sys.executable, "-m", "sitframe.cli", *cmd, "--out",
-                            str(Path(out) / "r.h5")], check=True, capture_output=True,
+            subprocess.run([sys.executable, *argv, *log], check=True, capture_output=True,
                            env=dict(os.environ, SITFRAME_CACHE_DIR=cache), cwd=ROOT)
             wall = time.perf_counter() - t0
             busy = False
@@ -214,13 +235,13 @@ def _first_run(repeats: int, cmd: list[str]) -> tuple[str, float, float]:
         warm = [once(str(Path(root) / "c0"))[0] for _ in range(repeats)]
     w, c = statistics.median(warm), statistics.median(t for t, _ in cold)
     ready = statistics.median(r for _, r in cold)
-    what = f"a whole run: `sitframe {' '.join(cmd)}`"
+    what = name
     if not math.isnan(ready):
         what += (f" (its trial kernel compiled meanwhile in a background process, cached "
                  f"{ready:.1f} s after the start)")
-    print(f"`sitframe {' '.join(cmd)}`: with an empty cache median {c:.2f} s ({len(cold)} "
-          f"runs), with the cache filled {w:.2f} s ({len(warm)} runs): the first run after "
-          f"an install pays {c - w:.2f} s of compiling" +
+    print(f"{name}: with an empty cache median {c:.2f} s ({len(cold)} runs), with the cache "
+          f"filled {w:.2f} s ({len(warm)} runs): the first run after an install pays "
+          f"{c - w:.2f} s of compiling" +
           ("" if math.isnan(ready) else f"; a background compile cached its kernel "
            f"{ready:.2f} s after the start"))
     return what, w, c
@@ -252,7 +273,8 @@ def main() -> None:
         _against(args.against, args)
         return
     if args.first_call:
-        rows = _first_call(args.repeats) + [_first_run(args.repeats, cmd) for cmd in FIRST_RUNS]
+        rows = _first_call(args.repeats) + [_first_run(args.repeats, name, argv)
+                                            for name, argv in FIRST_RUNS]
         if args.publish:
             publish(args.publish, _first_table(rows))
         return

@@ -210,7 +210,8 @@ class CompiledStep:
         obs = np.empty((n, *self.lo.shape), dtype=np.float32)
         max_range, radius, group = self.sensor
         self.k.env_steps(poses, headings, speeds, self.rp, self.times, world.segment_set.packed,
-                         self.rays, max_range, radius, group, self.scale, self.lo, self.hi,
+                         True, True, self.rays, max_range, radius, group, self.scale, self.lo,
+                         self.hi,
                          reward, out, readings, obs, codes, rewards)
         return codes, out, readings, obs, rewards
 
@@ -224,8 +225,9 @@ class CompiledStep:
         max_range, radius, group = self.sensor
         code = self.k.env_step(float(pose[0]), float(pose[1]), float(pose[2]),
                                float(cmd.heading_change_deg), float(cmd.speed_m_s), self.rp,
-                               self.times, world.segment_set.packed, self.rays, max_range, radius,
-                               group, self.scale, self.lo, self.hi, out, reading, obs)
+                               self.times, world.segment_set.packed, True, True, self.rays,
+                               max_range, radius, group, self.scale, self.lo, self.hi, out,
+                               reading, obs)
         if code == self.k.TIE:
             return None
         return outcome_from(pose, out, code != self.k.FREE, self.params), reading, obs, \

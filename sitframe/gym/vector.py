@@ -49,9 +49,15 @@ from sitframe.contract.records import Context, Transition
 from sitframe.gym.env import CompiledStep, SitframeEnv
 from sitframe.gym.task import _NO_U, Task
 from sitframe.sim.fleet import step_robots
-from sitframe.sim.kernels import kernels
+from sitframe.sim.kernels import kernels, load
+from sitframe.sim.robot import step_robot
 
 __all__ = ["SitframeVectorEnv"]
+
+#: Up to this many robots step one by one, with the single env's calls: the batched kernels
+#: pay off only for several, and a robot stepped apart (a dead-ahead contact of the compiled
+#: step) then costs no compile of kernels of its own on a first run.
+_FEW = 2
 
 
 class SitframeVectorEnv(VectorEnv):
@@ -174,13 +180,13 @@ class SitframeVectorEnv(VectorEnv):
         """The compiled step and the reward's figures (collision, base, heading cost) when
         every robot's step can be one call (module docstring), else ``None``."""
         if self._fast is False:
+            if kernels() is None:  # (N robots a step: load them now rather than after the
+                load()  # numpy path's first calls, whose batch would compile kernels of its own)
             env = self.envs[0]
             fast = env.compiled_step()
             f = getattr(env.reward_fn, "_fused", None)
             spec = f() if callable(f) else None
             if fast is None or spec is None or spec["kind"] != "obstacle-avoidance":
-                if kernels() is None:
-                    return None  # (decided once the kernels are loaded)
                 self._fast = None
             else:
                 self._fast = (fast, np.array(spec["params"], dtype=np.float64))
@@ -239,6 +245,12 @@ class SitframeVectorEnv(VectorEnv):
         """Step ``robots`` by ``cmds`` and read their sensors: the outcomes, the new poses
         (M, 3) and the readings (M, d); world by world when the robots are in several."""
         task = self.task
+        if len(robots) <= _FEW:  # (one by one: the single env's calls, no batch kernels)
+            outs = [step_robot(e.world, e.pose, c, task.res.robot, g)
+                    for e, c, g in zip(robots, cmds, rngs, strict=True)]
+            at = np.array([o.pose for o in outs])
+            return outs, at, np.stack([e.sensor.read(e.world, p, g)
+                                       for e, p, g in zip(robots, at, rngs, strict=True)])
         if len(task.worlds) <= 1:
             outs = step_robots(task.world, [e.pose for e in robots], cmds, task.res.robot, rngs)
             at = np.array([o.pose for o in outs])  # (M, 3)

@@ -193,7 +193,9 @@ def prepare(res: Any, spec: Any, parts: Any) -> Fused | str:
     ip = np.array([sen["rays_per_beam"], itp["transform"], _POWER.get(itp["p"], 0),
                    lr is not None, learning, *rules, contact() is not None,
                    kinds.index(rw["kind"]), beh["speed"] is not None,
-                   beh["learned"] == "speed"], dtype=np.int64)
+                   beh["learned"] == "speed", True], dtype=np.int64)  # (clip: no noise)
+    if ip.size != len(fk.IP):
+        raise AssertionError(f"fused: {ip.size} integer parameters, the kernel reads {fk.IP}")
     # (every array C-contiguous and writable but the world's segments and the substep times,
     # read-only: the types fused_kernels._warm compiles for)
     fz = Fused(fk, lp, np.array(sen["rays"], dtype=np.float64),

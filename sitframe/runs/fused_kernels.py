@@ -68,7 +68,7 @@ REWARDS = {"obstacle-avoidance": ("collision", "base", "heading_cost"),
 #: Names of the integer parameters ``ip``, in order.
 IP = ("rays_per_beam", "transform", "power", "has_learner", "learning", "b", "p_changes",
       "min_updates", "thesis", "terminal", "tie_centre", "relative", "decay", "contact",
-      "reward", "has_speed", "learns_speed")
+      "reward", "has_speed", "learns_speed", "clip")
 #: :func:`run`'s answers: the chunk is done; a step touches a wall (Python steps it).
 DONE, NEED_STEP = 0, 1
 #: How ``w ** p`` is computed, as numpy's in-place power chooses for a scalar exponent.
@@ -322,7 +322,7 @@ def run(t1, resume, after, collided_after, contact_after, seg, times, rp, rw, si
     while t < t1:
         x, y, th = carry[0], carry[1], carry[2]
         if state[4]:  # the trial's or an episode's first reading
-            ranges_at(x, y, th, rel, seg, fp[0], fp[1], ip[0], True, reading)
+            ranges_at(x, y, th, rel, seg, fp[0], fp[1], ip[0], ip[17] != 0, reading)
             memberships(reading, fc, fp, ip, feat, diff, d2, u, lg, pw, ptrs, dims, strides,
                         scalar)
             state[4] = 0
@@ -345,7 +345,7 @@ def run(t1, resume, after, collided_after, contact_after, seg, times, rp, rw, si
                 finish_turn(touch, rng.random() < 0.5)
             hit = code != FREE
             nx, ny, nth, hx, hy = touch[0], touch[1], touch[2], touch[3], touch[4]
-        ranges_at(nx, ny, nth, rel, seg, fp[0], fp[1], ip[0], True, r1)
+        ranges_at(nx, ny, nth, rel, seg, fp[0], fp[1], ip[0], ip[17] != 0, r1)
         memberships(r1, fc, fp, ip, feat, diff, d2, u1, lg, pw, ptrs, dims, strides, scalar)
         pose_out[t, 0], pose_out[t, 1], pose_out[t, 2] = x, y, th
         _copy(reading, reading_out[t])
@@ -479,7 +479,7 @@ def _warm() -> None:
     times.setflags(write=False)
     fp = np.array([3.0, 0.15, 0.1, 5.0, 1e-60, 0.3, 0.9, 0.3, 1.0, 1.0, 0.0, 0.0, 0.15])
     rp = np.array([0.15, 100.0, 1.5, 0.1, 0.3, 90.0, 0.05, 45.0, 1.0])
-    ip = np.array([1, 1, 0, 1, 1, 5, 50, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0])
+    ip = np.array([1, 1, 0, 1, 1, 5, 50, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 1])
     ints = [np.zeros(c, np.int64) for _ in range(3)]
     rng = np.random.default_rng(0)
     state = np.array([-1, 0, 0, 0, 1, 0, 0])

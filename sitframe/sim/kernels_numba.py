@@ -442,28 +442,31 @@ def robot_step(x0: float, y0: float, th0: float, heading: float, speed: float,
 
 @njit(**_JIT)
 def env_step(x0: float, y0: float, th0: float, heading: float, speed: float, rp: np.ndarray,
-             times: np.ndarray, seg: np.ndarray, rel: np.ndarray, max_range: float,
-             sensor_radius: float, group: int, scale: float, lo: np.ndarray, hi: np.ndarray,
-             out: np.ndarray, reading: np.ndarray,
+             times: np.ndarray, seg: np.ndarray, contact: bool, clip: bool, rel: np.ndarray,
+             max_range: float, sensor_radius: float, group: int, scale: float, lo: np.ndarray,
+             hi: np.ndarray, out: np.ndarray, reading: np.ndarray,
              obs: np.ndarray) -> int:  # pragma: no cover - compiled
     """One Gym step in one call: :func:`robot_step`, the range finder's read at the end pose
-    (:func:`ranges_at`, clipped: a sensor without noise) and its observation
-    (:func:`observe`). ``out`` (15,): :func:`robot_step`'s fourteen figures and the
-    reading's nearest range. Returns :func:`robot_step`'s answer; on :data:`TIE` (a
-    dead-ahead contact, whose turn's side is a draw from the robot's generator) before
-    reading: the caller steps that one through ``step_robot``.
+    (:func:`ranges_at`) and its observation (:func:`observe`). ``out`` (15,):
+    :func:`robot_step`'s fourteen figures and the reading's nearest range. Returns
+    :func:`robot_step`'s answer; on :data:`TIE` (a dead-ahead contact, whose turn's side is a
+    draw from the robot's generator) before reading: the caller steps that one through
+    ``step_robot``. ``contact`` (robot_step's) and ``clip`` (ranges_at's; a sensor without
+    noise) are both true, passed in rather than written here: numba compiles a kernel
+    again for a constant argument, and robot_step costs seconds to compile.
     """
-    code = robot_step(x0, y0, th0, heading, speed, rp, times, seg, True, out)
+    code = robot_step(x0, y0, th0, heading, speed, rp, times, seg, contact, out)
     if code == TIE:
         return code
-    ranges_at(out[0], out[1], out[2], rel, seg, max_range, sensor_radius, group, True, reading)
+    ranges_at(out[0], out[1], out[2], rel, seg, max_range, sensor_radius, group, clip, reading)
     out[14] = observe(reading, scale, lo, hi, obs)
     return code
 
 
 @njit(**_JIT)
 def env_steps(poses: np.ndarray, headings: np.ndarray, speeds: np.ndarray, rp: np.ndarray,
-              times: np.ndarray, seg: np.ndarray, rel: np.ndarray, max_range: float,
+              times: np.ndarray, seg: np.ndarray, contact: bool, clip: bool, rel: np.ndarray,
+              max_range: float,
               sensor_radius: float, group: int, scale: float, lo: np.ndarray, hi: np.ndarray,
               reward: np.ndarray, out: np.ndarray, readings: np.ndarray, obs: np.ndarray,
               codes: np.ndarray, rewards: np.ndarray) -> None:  # pragma: no cover - compiled
@@ -475,7 +478,7 @@ def env_steps(poses: np.ndarray, headings: np.ndarray, speeds: np.ndarray, rp: n
     for i in range(poses.shape[0]):
         h = headings[i]
         code = env_step(poses[i, 0], poses[i, 1], poses[i, 2], h, speeds[i], rp, times, seg,
-                        rel, max_range, sensor_radius, group, scale, lo, hi, out[i],
+                        contact, clip, rel, max_range, sensor_radius, group, scale, lo, hi, out[i],
                         readings[i], obs[i])
         codes[i] = code
         rewards[i] = reward[0] if code != FREE else (reward[1] - reward[2] * abs(h)) + 0.0
