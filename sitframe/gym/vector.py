@@ -202,27 +202,38 @@ class SitframeVectorEnv(VectorEnv):
         poses = np.array([e.pose for e in robots])
         heads = np.array([c.heading_change_deg for c in cmds], dtype=np.float64)
         speeds = np.array([c.speed_m_s for c in cmds], dtype=np.float64)
-        obs = np.empty((len(robots), *self.single_observation_space.shape), dtype=np.float32)
-        at = np.empty((len(robots), 3))
-        limit, tc = task.max_steps, task.terminate_on_collision
-        for js in _by_world(robots):
+        limit, tc, free, tie = task.max_steps, task.terminate_on_collision, step.k.FREE, \
+            step.k.TIE
+        if len(task.worlds) <= 1:  # (one world: one call for them all, no grouping)
+            groups, obs, at = [range(len(robots))], None, None
+        else:
+            groups = _by_world(robots)
+            obs = np.empty((len(robots), *self.single_observation_space.shape), np.float32)
+            at = np.empty((len(robots), 3))
+        for js in groups:
+            whole = obs is None
             codes, out, readings, seen, rewards = step.steps(
-                robots[js[0]].world, poses[js], heads[js], speeds[js], reward)
-            tie = codes == step.k.TIE
-            hit = (codes != step.k.FREE).tolist()
-            for q, j in enumerate(js):  # (what each robot keeps: its pose, reading and time)
-                if not tie[q]:
-                    env = robots[j]
-                    env.pose, env._reading = out[q, :3].copy(), readings[q]
-                    env.t += 1
-                    i = live[j]
-                    self._ctx[i] = None  # (the reward needs none: a later one is made anew)
-                    rew[i], collided[i] = float(rewards[q]), hit[q]
-                    term[i] = tc and hit[q]
-                    trunc[i] = not term[i] and env.t >= limit
-            obs[js], at[js] = seen, out[:, :3]
-            if tie.any():
-                ties = [j for j, t in zip(js, tie.tolist(), strict=True) if t]
+                robots[js[0]].world, poses if whole else poses[js],
+                heads if whole else heads[js], speeds if whole else speeds[js], reward)
+            moved = out[:, :3].copy()  # (each robot's new pose: a row of its own)
+            ties = []
+            for q, j, code, r in zip(range(len(js)), js, codes.tolist(), rewards.tolist(),
+                                     strict=True):  # (each robot keeps its pose, reading, time)
+                if code == tie:
+                    ties.append(j)
+                    continue
+                env, i, hit = robots[j], live[j], code != free
+                env.pose, env._reading = moved[q], readings[q]
+                env.t += 1
+                self._ctx[i] = None  # (the reward needs none: a later one is made anew)
+                rew[i], collided[i] = r, hit
+                term[i] = tc and hit
+                trunc[i] = not term[i] and env.t >= limit
+            if whole:  # (the infos' poses: out's, not the robots' own rows)
+                obs, at = seen, out[:, :3]
+            else:
+                obs[js], at[js] = seen, moved
+            if ties:
                 obs[ties], at[ties] = self._step_python([live[j] for j in ties],
                                                         [robots[j] for j in ties],
                                                         [cmds[j] for j in ties], figures)
