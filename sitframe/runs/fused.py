@@ -57,7 +57,7 @@ _POWER = {1.0: 1, -1.0: 2, 0.0: 3, 0.5: 4, 2.0: 5}  # (fused_kernels.POW_*: nump
 
 
 #: Whether this process said that the trial kernel compiles in the background.
-_TOLD: list[None] = []
+_TOLD: list[bool] = []
 
 
 def _mode() -> str:
@@ -147,7 +147,8 @@ def _compiled() -> ModuleType | str:
             numba_cache.compile_elsewhere("sitframe.runs.fused_kernels", here)
         if busy is not None:
             if not _TOLD:
-                _TOLD.append(numba_cache.announce_compilation(here, background=True))
+                numba_cache.announce_compilation(here, background=True)
+                _TOLD.append(True)
             return f"the compiled trial: {busy}"
         numba_cache.announce_compilation(here)
     from sitframe.runs import fused_kernels  # (numba's import: only a process that simulates)

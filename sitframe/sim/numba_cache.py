@@ -176,14 +176,23 @@ def compile_elsewhere(module: str, source: Path) -> str | None:
     """Have a process of its own compile ``module``'s kernels into the cache, unless one is
     at it already; the caller goes on without them meanwhile.
 
-    Returns what is happening (``"... compiling in the background (pid N)"``) while a
-    background compile runs, or ``None`` when the caller is to import ``module`` itself: no
-    cache (a process compiles for itself), the kernels are cached now, or the background
-    compile failed, or one this process started stopped before it finished (a full disk,
-    a kill: importing it here shows why, and nothing is started again and again).
-    ``source`` is the module's file
-    (:func:`compile_pending`). The lock is ``<cache folder>/<module>.compiling``: one
-    background compile per cache folder, however many processes ask.
+    Parameters
+    ----------
+    module
+        The module to import (its kernels compile, and are cached, at import).
+    source
+        Its file (:func:`compile_pending` tells from it whether the cache has them).
+
+    Returns
+    -------
+    str or None
+        What is happening while a background compile runs (``"... compiling in the
+        background ..."``). ``None`` when the caller is to import ``module`` itself: there is
+        no cache (every process compiles for itself), the kernels are cached, the background
+        compile failed, or one this process started stopped before it finished (a kill, a
+        full disk). Importing it then shows the error, and nothing is started again and
+        again. The lock is ``<cache folder>/<module>.compiling``, holding the pid: one
+        background compile per cache folder, however many processes ask.
     """
     folder = _CONFIGURED[0] if _CONFIGURED else None
     if folder is None or not compile_pending(source, folder):
@@ -221,7 +230,8 @@ def compile_elsewhere(module: str, source: Path) -> str | None:
 
 def announce_compilation(source: Path | None = None, background: bool = False) -> None:
     """Say on a terminal why the first run after an install waits (numba compiling), or,
-    with ``background``, that a process of its own compiles the kernels of ``source``.
+    with ``background``, that the learning trial's kernel (``source``) compiles in a process
+    of its own (:func:`compile_elsewhere`) while the trials run the Python loop.
 
     ``source``: the kernels' module (default :mod:`sitframe.sim.kernels_numba`). Printed
     only when stderr is a terminal and the kernels are cached, so logs, pipes and tests
