@@ -255,6 +255,11 @@ def test_the_first_run_after_an_install_says_why_it_waits(tmp_path, monkeypatch)
     assert numba_cache.compile_pending(src, folder)  # no cache yet
     assert said(Terminal()).startswith("sitframe: compiling the simulator's kernels with numba")
     assert said(Terminal()).count("\n") == 1
+    bg = Terminal()
+    monkeypatch.setattr("sys.stderr", bg)
+    numba_cache.announce_compilation(src, background=True)  # (the trial kernel's, elsewhere)
+    assert bg.getvalue().startswith("sitframe: compiling the learning trial's kernel in the "
+                                    "background") and bg.getvalue().count("\n") == 1
     assert said(io.StringIO()) == ""  # a pipe or a log: never
     sub = folder / UserProvidedCacheLocator.get_suitable_cache_subpath(str(src))
     sub.mkdir(parents=True)
