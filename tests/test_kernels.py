@@ -319,7 +319,12 @@ def _wait_unlocked(lock: Path, limit: float = 120.0) -> None:
 def test_a_background_process_compiles_missing_kernels_once(tmp_path, monkeypatch) -> None:
     """The first run after an install: a process of its own compiles a module's kernels into
     the cache (``numba_cache.compile_elsewhere``); while it runs, every caller is told so
-    (no second process); once cached, the caller imports them itself."""
+    (no second process), even once some of its kernels are cached; once it is done, the
+    caller imports them itself."""
+    import os
+
+    from numba.core.caching import UserProvidedCacheLocator
+
     from sitframe.sim import numba_cache
 
     folder, mods = tmp_path / "cache", tmp_path / "mods"
@@ -332,13 +337,22 @@ def test_a_background_process_compiles_missing_kernels_once(tmp_path, monkeypatc
     monkeypatch.setattr(numba_cache, "_TRIED", set())
     monkeypatch.syspath_prepend(str(mods))  # (the background process is given this sys.path)
     started = len(numba_cache._STARTED)
+    lock = folder / "bg_kernel.compiling"
+    sub = folder / UserProvidedCacheLocator.get_suitable_cache_subpath(str(src))
+    sub.mkdir(parents=True)
+    index = sub / "bg_kernel.helper-3.py311.nbi"
+    index.write_bytes(b"")  # (a kernel the compile in progress has cached: not all of them)
+    lock.write_text(str(os.getpid()))  # (a background compile in progress)
+    assert "background" in str(numba_cache.compile_elsewhere("bg_kernel", src))
+    lock.unlink()
+    index.unlink()
     busy = numba_cache.compile_elsewhere("bg_kernel", src)
     assert busy is not None and "background" in busy
     again = numba_cache.compile_elsewhere("bg_kernel", src)
     assert again is not None and "background" in again
     assert len(numba_cache._STARTED) == started + 1  # one background compile per cache folder
-    _wait_unlocked(folder / "bg_kernel.compiling")
-    assert not (folder / "bg_kernel.compiling").exists()
+    _wait_unlocked(lock)
+    assert not lock.exists()
     assert not numba_cache.compile_pending(src, folder)  # compiled into the cache
     assert numba_cache.compile_elsewhere("bg_kernel", src) is None  # now: load it here
 

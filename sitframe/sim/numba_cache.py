@@ -195,12 +195,10 @@ def compile_elsewhere(module: str, source: Path) -> str | None:
         background compile per cache folder, however many processes ask.
     """
     folder = _CONFIGURED[0] if _CONFIGURED else None
-    if folder is None or not compile_pending(source, folder):
+    if folder is None:
         return None
     lock = folder / f"{module}.compiling"
-    try:
-        fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
-    except FileExistsError:
+    if lock.exists():  # (first: the kernels it has cached so far are not all of them)
         state = _running(lock)
         if state:
             return f"its kernels are compiling in the background ({lock.name})"
@@ -209,6 +207,12 @@ def compile_elsewhere(module: str, source: Path) -> str | None:
         # again: compile here, which says why)
         again = state is False and module not in _TRIED
         return compile_elsewhere(module, source) if again else None
+    if not compile_pending(source, folder):
+        return None
+    try:
+        fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+    except FileExistsError:  # (another process started one just now)
+        return compile_elsewhere(module, source)
     except OSError:
         return None
     try:
