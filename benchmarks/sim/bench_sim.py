@@ -201,10 +201,15 @@ for a in np.random.default_rng(0).integers(0, venv.single_action_space.n, (200, 
 
 #: The first runs measured by ``--first-call`` (a name, the arguments after ``python``): the
 #: main job (its situations evolve, so its trials run the Python loop) and the thesis's
-#: preset (its trials run compiled), short; and a Gymnasium script (:data:`GYM_FIRST`).
+#: preset (its trials run compiled), short, and the thesis's preset whole (its later trials
+#: run compiled once the background compile has cached the trial kernel); and a Gymnasium
+#: script (:data:`GYM_FIRST`).
 FIRST_RUNS = [*((f"a whole run: `sitframe {cmd}`", ["-m", "sitframe.cli", *cmd.split()])
                 for cmd in (f"run {preset} --trials 1 --iterations 1000 --workers 1"
                             for preset in ("obstacle-avoidance", "obstacle-avoidance-thesis"))),
+              ("a whole run: `sitframe run obstacle-avoidance-thesis` (11 trials of 5000 "
+               "iterations, the worker pool)",
+               ["-m", "sitframe.cli", "run", "obstacle-avoidance-thesis"]),
               ("a Gymnasium script: 3000 steps of `sitframe/ObstacleAvoidance-v0`, then 200 "
                "steps of its vector env of 16 robots", ["-c", GYM_FIRST])]
 
