@@ -141,6 +141,7 @@ _TRIED: set[str] = set()
 #: What the background process runs: import the module (compiling its kernels into the
 #: cache), then remove the lock; on a failure, write ``failed`` in it instead.
 _CHILD = """import importlib, os, sys
+getattr(os, "nice", int)(10)  # (background work: the run's own processes first)
 try:
     importlib.import_module(sys.argv[2])
 except BaseException:
