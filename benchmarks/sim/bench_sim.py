@@ -208,7 +208,8 @@ FIRST_RUNS = [*((f"a whole run: `sitframe {cmd}`", ["-m", "sitframe.cli", *cmd.s
                 for cmd in (f"run {preset} --trials 1 --iterations 1000 --workers 1"
                             for preset in ("obstacle-avoidance", "obstacle-avoidance-thesis"))),
               ("a whole run: `sitframe run obstacle-avoidance-thesis` (11 trials of 5000 "
-               "iterations, the worker pool)",
+               "iterations, the worker pool; its trials run the Python loop until the trial "
+               "kernel is cached, so the difference is compiling and those trials)",
                ["-m", "sitframe.cli", "run", "obstacle-avoidance-thesis"]),
               ("a Gymnasium script: 3000 steps of `sitframe/ObstacleAvoidance-v0`, then 200 "
                "steps of its vector env of 16 robots", ["-c", GYM_FIRST])]
