@@ -9,7 +9,8 @@ kernels). What is shared is the simulator's work:
 - the robots move in one :func:`sitframe.sim.fleet.step_robots` call (with the
   compiled kernels, a few compiled calls for all N robots: which walls each
   can reach, its substeps and first contact, the refinement of the contacts,
-  the contact points and back-offs);
+  the contact points and back-offs; two robots or fewer step one by one, with the
+  single env's calls);
 - sensors with a ``read_many(world, poses, rngs)`` method (the Pioneer sonar
   ring has one: :func:`sitframe.rim_ranges_many`, one compiled call) read all
   N robots at once; others are read one by one;
