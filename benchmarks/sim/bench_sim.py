@@ -208,8 +208,7 @@ FIRST_RUNS = [*((f"a whole run: `sitframe {cmd}`", ["-m", "sitframe.cli", *cmd.s
                 for cmd in (f"run {preset} --trials 1 --iterations 1000 --workers 1"
                             for preset in ("obstacle-avoidance", "obstacle-avoidance-thesis"))),
               ("a whole run: `sitframe run obstacle-avoidance-thesis` (11 trials of 5000 "
-               "iterations, the worker pool; its trials run the Python loop until the trial "
-               "kernel is cached, so the difference is compiling and those trials)",
+               "iterations, the worker pool)",
                ["-m", "sitframe.cli", "run", "obstacle-avoidance-thesis"]),
               ("a Gymnasium script: 3000 steps of `sitframe/ObstacleAvoidance-v0`, then 200 "
                "steps of its vector env of 16 robots", ["-c", GYM_FIRST])]
@@ -244,7 +243,8 @@ def _first_run(repeats: int, name: str, argv: list[str]) -> tuple[str, float, fl
     what = name
     if not math.isnan(ready):
         what += (f" (its trial kernel compiled meanwhile in a background process, cached "
-                 f"{ready:.1f} s after the start)")
+                 f"{ready:.1f} s after the start; its trials until then run the Python loop, "
+                 f"and the difference holds their time too)")
     print(f"{name}: with an empty cache median {c:.2f} s ({len(cold)} runs), with the cache "
           f"filled {w:.2f} s ({len(warm)} runs): the first run after an install pays "
           f"{c - w:.2f} s of compiling" +
