@@ -376,6 +376,9 @@ def test_a_failed_or_vanished_background_compile_is_not_waited_for(tmp_path,
     monkeypatch.setattr(numba_cache, "_TRIED", set())
     monkeypatch.syspath_prepend(str(mods))
     lock = folder / "bad_kernel.compiling"
+    with monkeypatch.context() as m:  # (no interpreter to start: compile here, no lock left)
+        m.setattr(sys, "executable", "")
+        assert numba_cache.compile_elsewhere("bad_kernel", src) is None and not lock.exists()
     assert numba_cache.compile_elsewhere("bad_kernel", src) is not None
     _wait_unlocked(lock)
     assert lock.read_text() == "failed"

@@ -196,7 +196,7 @@ def compile_elsewhere(module: str, source: Path) -> str | None:
         background compile per cache folder, however many processes ask.
     """
     folder = _CONFIGURED[0] if _CONFIGURED else None
-    if folder is None:
+    if folder is None or not sys.executable:  # (an embedded Python: no interpreter to start)
         return None
     lock = folder / f"{module}.compiling"
     if lock.exists():  # (first: the kernels it has cached so far are not all of them)
