@@ -211,8 +211,7 @@ class CompiledStep:
         max_range, radius, group = self.sensor
         self.k.env_steps(poses, headings, speeds, self.rp, self.times, world.segment_set.packed,
                          True, True, self.rays, max_range, radius, group, self.scale, self.lo,
-                         self.hi,
-                         reward, out, readings, obs, codes, rewards)
+                         self.hi, reward, out, readings, obs, codes, rewards)
         return codes, out, readings, obs, rewards
 
     def step(self, world: Any, pose: np.ndarray, cmd: Any

@@ -205,21 +205,20 @@ class SitframeVectorEnv(VectorEnv):
         speeds = np.array([c.speed_m_s for c in cmds], dtype=np.float64)
         limit, tc, free, tie = task.max_steps, task.terminate_on_collision, step.k.FREE, \
             step.k.TIE
-        if len(task.worlds) <= 1:  # (one world: one call for them all, no grouping)
-            groups, obs, at = [range(len(robots))], None, None
-        else:
-            groups = _by_world(robots)
+        whole = len(task.worlds) <= 1  # (one world: one call for them all, no grouping)
+        groups = [range(len(robots))] if whole else _by_world(robots)
+        obs = at = None
+        if not whole:
             obs = np.empty((len(robots), *self.single_observation_space.shape), np.float32)
             at = np.empty((len(robots), 3))
         for js in groups:
-            whole = obs is None
             codes, out, readings, seen, rewards = step.steps(
                 robots[js[0]].world, poses if whole else poses[js],
                 heads if whole else heads[js], speeds if whole else speeds[js], reward)
             moved = out[:, :3].copy()  # (each robot's new pose: a row of its own)
             ties = []
-            for q, j, code, r in zip(range(len(js)), js, codes.tolist(), rewards.tolist(),
-                                     strict=True):  # (each robot keeps its pose, reading, time)
+            for q, (j, code, r) in enumerate(zip(js, codes.tolist(), rewards.tolist(),
+                                                 strict=True)):  # (its pose, reading, time)
                 if code == tie:
                     ties.append(j)
                     continue

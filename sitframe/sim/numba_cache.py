@@ -240,12 +240,15 @@ def announce_compilation(source: Path | None = None, background: bool = False) -
 
     ``source``: the kernels' module (default :mod:`sitframe.sim.kernels_numba`). Printed
     only when stderr is a terminal and the kernels are cached, so logs, pipes and tests
-    never see it (without a cache every process compiles, as its warning said).
+    never see it (without a cache every process compiles, as its warning said); with
+    ``background`` whatever the cache holds so far (the caller knows a compile is running:
+    the one in the background may have cached some of the kernels already).
     """
     if source is None:
         source = Path(__file__).with_name("kernels_numba.py")
     if (sys.stderr is not None and sys.stderr.isatty() and _CONFIGURED
-            and _CONFIGURED[0] is not None and compile_pending(source, _CONFIGURED[0])):
+            and _CONFIGURED[0] is not None
+            and (background or compile_pending(source, _CONFIGURED[0]))):
         print("sitframe: compiling the learning trial's kernel in the background (once after "
               "an install or upgrade); trials run the Python loop, with the same results, "
               "until it is ready" if background else
