@@ -118,7 +118,7 @@ from sitframe import (
 )
 from sitframe import params as P
 
-from .fcm_interpreter import FCMInterpreter
+from .fcm_interpreter import TRANSFORMS, FCMInterpreter
 
 _min = np.minimum.reduce  # (the ufunc's own reduce: ndarray.min adds a Python layer)
 
@@ -225,6 +225,18 @@ class EvolvingInterpreter(FCMInterpreter):
         if self.frozen or self.x_prev is None:
             return
         accumulate_errors(errors, self.x_prev, self.err_sum, self.err_n, self.err_x)
+
+    def _fused(self) -> dict[str, Any] | None:
+        """What the compiled trial needs of these situations (``sitframe.runs.fused``): the
+        ``fcm`` answer over the alive prototypes, and this interpreter (the kernel changes its
+        arrays in place and hands it the iterations that create, check or find nothing); or
+        ``None`` for a subclass, or with no prototype yet."""
+        if type(self) is not EvolvingInterpreter or type(self._u) is not MembershipFunction \
+                or not self.ids.size:
+            return None
+        return {"centers": self.Fa, "p": self._u.p, "floor": self._u.floor,
+                "transform": TRANSFORMS.index(self.transform), "offset": self.offset,
+                "evolving": self}
 
     def events(self) -> list[SituationEvent]:
         """The structural events since the last call (oldest first)."""

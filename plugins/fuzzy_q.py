@@ -213,17 +213,19 @@ class FuzzyQBehaviour:
     def _fused(self) -> dict[str, Any] | None:
         """The compiled trial's controllers and learner (``sitframe.runs.fused``): a heading
         output and optionally a speed output, each fixed or learned, at most one of them by
-        a plain :class:`~sitframe.FuzzyQLearner`; ``None`` with two learned outputs, replay,
-        per-group convergence, evolving situations (their TD errors, merged rows) or a
-        subclass's own ``propose`` or ``learn``."""
-        cls = type(self)
-        if cls.propose is not FuzzyQBehaviour.propose or cls.learn is not FuzzyQBehaviour.learn \
-                or "heading" not in self.fcs or len(self.learners) > 1:
+        a plain :class:`~sitframe.FuzzyQLearner` (its TD errors and rows of evolving
+        situations too); ``None`` with two learned outputs, replay, per-group convergence
+        or a subclass's own ``propose``, ``learn``, ``situation_errors`` or
+        ``learning_converged``."""
+        cls, me = type(self), FuzzyQBehaviour
+        if cls.propose is not me.propose or cls.learn is not me.learn or \
+                cls.situation_errors is not me.situation_errors or \
+                cls.learning_converged is not me.learning_converged or \
+                "heading" not in self.fcs or len(self.learners) > 1:
             return None
         (out, lr), = self.learners.items() if self.learners else [(None, None)]
         if lr is not None and (type(lr) is not FuzzyQLearner or lr.params.groups > 1
-                               or lr.params.replay or lr.track_td or lr._evolving
-                               or lr.removed.any()):
+                               or lr.params.replay):
             return None
         return {"heading": self.fcs["heading"], "speed": self.fcs.get("speed"),
                 "learner": lr, "learned": out}

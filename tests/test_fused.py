@@ -33,11 +33,15 @@ BASE: dict[str, Any] = {
     "evaluate": {"worlds": ["training", "novel-1"], "iterations": 150},
 }
 
+EVOLVING = {"interpreter.component": "evolving", "interpreter.transform": "log",
+            "interpreter.m": 1.2}
+
 #: Variations of BASE, each a dotted key (or a table) -> value; together they take every
 #: branch of the kernel: transforms and exact powers, both update rules, soft-max modes and
 #: annealing, learning-rate schedule, collision as terminal, convergence guards, tie-breaks,
 #: every rule updated, cones of rays, a chain of rooms, a robot and a speed of their own, the
-#: thesis's reward settings and the wall-following reward.
+#: thesis's reward settings and the wall-following reward; evolving situations (every answer
+#: of the kernel: ``test_evolving_trials_hand_python_what_only_it_does``).
 CASES: dict[str, dict[str, Any]] = {
     "thesis": {},
     "log-cones-standard": {"interpreter.transform": "log", "interpreter.m": 1.2,
@@ -64,6 +68,33 @@ CASES: dict[str, dict[str, Any]] = {
     "speed-and-robot": {"experiment.default_speed": 0.22,
                         "robot": {"radius": 0.17, "recovery_turn_deg": 60.0,
                                   "recovery_backoff_m": 0.04, "max_turn_rate_deg_s": 80.0}},
+    # Evolving situations: the main preset's shape (a chain of rooms, cones of rays, the
+    # checks once due at an episode's first reading); splits, prunes, a growth limit and the
+    # situations frozen with the rules; fixed prototypes and every id used (refused).
+    "evolving-rooms": {**EVOLVING, "interpreter.capacity": 24, "interpreter.merge_distance": 0.8,
+                       "experiment.iterations": 1500, "interpreter.check_every": 132,
+                       "experiment.rooms": ["gen:1000000", "gen:1000001", "gen:1000002"],
+                       "experiment.episode_iterations": 130, "collect.worlds": ["gen:1000000"],
+                       "sensor.beam_width_deg": 25, "sensor.rays_per_beam": 5,
+                       "behaviours.avoid.update": "standard",
+                       "behaviours.avoid.terminal_on_collision": True,
+                       "behaviours.avoid.q_init_value": 250.0,
+                       "behaviours.avoid.min_updates": 20,
+                       "behaviours.avoid.reward_params": {"heading_cost": 0.3}},
+    "evolving-split-prune-freeze": {**EVOLVING, "interpreter.transform": "inverse",
+                                    "interpreter.m": 1.5, "interpreter.capacity": 16,
+                                    "interpreter.prune_after": 150,
+                                    "interpreter.split_ratio": 1.5,
+                                    "interpreter.split_min_updates": 20,
+                                    "interpreter.freeze_with_rules": True,
+                                    "interpreter.grow_until": 900, "interpreter.check_every": 30,
+                                    "interpreter.create_distance": 1.0,
+                                    "behaviours.avoid.activation": 0.0, "behaviours.avoid.p": 5,
+                                    "behaviours.avoid.b": 2, "experiment.iterations": 1500},
+    "evolving-range-fixed": {**EVOLVING, "interpreter.transform": "range", "interpreter.m": 2.0,
+                             "interpreter.capacity": 8, "interpreter.adapt": False,
+                             "interpreter.create_distance": 0.5, "interpreter.create_after": 2,
+                             "behaviours.avoid.p": 8, "experiment.iterations": 1200},
     "wall-following": {"experiment.world": "wall-following", "interpreter.transform": "inverse",
                        "behaviours.avoid.reward": "wall-following",
                        "behaviours.avoid.reward_params": {"near": 0.15, "far": 0.35},
@@ -128,6 +159,32 @@ def test_compiled_trial_writes_the_python_loops_log(case: str, tmp_path: Path,
     assert n_compiled >= 1 and n_python == 0  # (the learning trial, and plain evaluations)
     assert not _differ(compiled, python)
     assert any(k.endswith("heading/q_snapshots") for k in compiled)  # (it learned)
+    if case.startswith("evolving"):  # (its situations changed)
+        assert np.asarray(compiled["trials/0000/situations/events/kind"]).size
+
+
+def test_evolving_trials_hand_python_what_only_it_does(tmp_path: Path,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """An evolving trial runs compiled, and the kernel hands Python each kind of iteration it
+    leaves to the interpreter and the tracker: a first reading and a next reading that create
+    or check, events to deliver after learning, and steps that touch a wall."""
+    from sitframe.runs import fused_kernels as fk
+
+    codes: list[int] = []
+
+    class Counted:
+        def __getattr__(self, name: str) -> Any:
+            return getattr(fk, name)
+
+        def run(self, *args: Any) -> int:
+            codes.append(fk.run(*args))
+            return codes[-1]
+
+    monkeypatch.setattr(fused, "_compiled", Counted)
+    monkeypatch.setattr(fused, "contact", lambda: None)
+    _run(tmp_path, "evolving", _config(CASES["evolving-rooms"]), monkeypatch, True)
+    assert {fk.DONE, fk.NEED_STEP, fk.NEED_FIRST, fk.NEED_NEXT, fk.NEED_SYNC} <= set(codes)
+    assert codes.count(fk.NEED_NEXT) < 1500 // 20  # (the kernel does the rest itself)
 
 
 def test_a_trial_with_a_step_observer_or_a_noisy_sensor_runs_the_python_loop(
@@ -217,6 +274,26 @@ def test_a_subclass_that_changes_a_step_is_not_compiled() -> None:
     assert beh._fused() is not None
     assert crisp._fused() is None and fast._fused() is None  # (its own propose; a speed)
     assert SingleArbiter()._fused() == {}
+
+    class Hushed(FuzzyQBehaviour):  # (reports no TD errors to evolving situations)
+        def situation_errors(self) -> None:
+            return None
+
+    hushed = Hushed()
+    hushed.reset(rng, 4, 10)
+    assert hushed._fused() is None
+
+    from sitframe.plugins.evolving import EvolvingInterpreter
+
+    class Eager(EvolvingInterpreter):
+        name = "eager"
+
+    for cls in (EvolvingInterpreter, Eager):
+        itp = cls(c=2, capacity=4)
+        itp.load_state({"centers": np.ones((2, 8)), "feature_centers": np.ones((2, 8)),
+                        "m": 2.0, "transform": "range", "offset": 0.1})
+        assert (itp._fused() is None) == (cls is Eager)
+    assert EvolvingInterpreter()._fused() is None  # (no prototype yet: it starts in Python)
 
 
 def test_progress_counts_every_iteration_on_both_paths(tmp_path: Path,

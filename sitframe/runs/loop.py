@@ -278,10 +278,10 @@ def simulate(
         raise InputError("expected an interpreter whose situations do not evolve: the "
                          "candidates are judged with the situations the trial started from",
                          key="experiment.candidates")
-    fz = "observed, ended by a protocol, evolving, candidates, spaces or protocol episodes" \
-        if step_hook is not None or protocol is not None or env.track is not None or \
-        env.cands is not None or parts.spaces or isinstance(env.chain, _TrainingEpisodes) \
-        else fused.prepare(res, spec, parts)
+    fz = "observed, ended by a protocol, candidates, spaces or protocol episodes" \
+        if step_hook is not None or protocol is not None or env.cands is not None or \
+        parts.spaces or isinstance(env.chain, _TrainingEpisodes) \
+        else fused.prepare(res, spec, parts, env.track)
     n = _run_loop(res, spec, parts, rec, env, step_hook, progress, protocol) \
         if isinstance(fz, str) else fused.run(fz, res, spec, rec, env, env.chain, progress)
     if progress is not None and n % fused.EVERY:

@@ -107,8 +107,19 @@ class SituationTracker:
                 if errs is not None:
                     origin, method = self.origin, "observe_errors"
                     self.observe(errs)
+        except (InputError, PluginFault, KeyboardInterrupt):
+            raise
+        except PLUGIN_ERRORS as exc:  # any fault in plugin code is reported
+            raise fault(exc, origin, method, self.trial) from exc
+        self.deliver(iteration)
+
+    def deliver(self, iteration: int) -> None:
+        """The rest of :meth:`step` after the TD errors: tell the interpreter once every
+        learner has converged, then hand its events to the followers (the compiled trial
+        calls this alone: it passes the TD errors on itself)."""
+        origin, method = self.origin, "learning_converged"
+        try:
             if self.tell is not None:
-                method = "learning_converged"
                 for origin, done in self.converged_sources:  # noqa: B007 - names the caller
                     if not check_flag(done()):
                         break
