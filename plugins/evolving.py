@@ -228,11 +228,10 @@ class EvolvingInterpreter(FCMInterpreter):
 
     def _fused(self) -> dict[str, Any] | None:
         """What the compiled trial needs of these situations (``sitframe.runs.fused``): the
-        ``fcm`` answer over the alive prototypes, and this interpreter (the kernel changes its
-        arrays in place and hands it the iterations that create, check or find nothing); or
-        ``None`` for a subclass, or with no prototype yet."""
-        if type(self) is not EvolvingInterpreter or type(self._u) is not MembershipFunction \
-                or not self.ids.size:
+        ``fcm`` answer over the alive prototypes (none, when it starts from nothing), and
+        this interpreter (the kernel changes its arrays in place and hands it the iterations
+        that create, check or find no prototype); or ``None`` for a subclass."""
+        if type(self) is not EvolvingInterpreter or type(self._u) is not MembershipFunction:
             return None
         return {"centers": self.Fa, "p": self._u.p, "floor": self._u.floor,
                 "transform": TRANSFORMS.index(self.transform), "offset": self.offset,

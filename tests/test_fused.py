@@ -70,7 +70,8 @@ CASES: dict[str, dict[str, Any]] = {
                                   "recovery_backoff_m": 0.04, "max_turn_rate_deg_s": 80.0}},
     # Evolving situations: the main preset's shape (a chain of rooms, cones of rays, the
     # checks once due at an episode's first reading); splits, prunes, a growth limit and the
-    # situations frozen with the rules; fixed prototypes and every id used (refused).
+    # situations frozen with the rules; fixed prototypes and every id used (refused); and
+    # situations grown from nothing (no cluster stage).
     "evolving-rooms": {**EVOLVING, "interpreter.capacity": 24, "interpreter.merge_distance": 0.8,
                        "experiment.iterations": 1500, "interpreter.check_every": 132,
                        "experiment.rooms": ["gen:1000000", "gen:1000001", "gen:1000002"],
@@ -95,6 +96,8 @@ CASES: dict[str, dict[str, Any]] = {
                              "interpreter.capacity": 8, "interpreter.adapt": False,
                              "interpreter.create_distance": 0.5, "interpreter.create_after": 2,
                              "behaviours.avoid.p": 8, "experiment.iterations": 1200},
+    "evolving-from-nothing": {**EVOLVING, "experiment.stages": ["learn", "evaluate"],
+                              "interpreter.capacity": 20, "experiment.iterations": 1000},
     "wall-following": {"experiment.world": "wall-following", "interpreter.transform": "inverse",
                        "behaviours.avoid.reward": "wall-following",
                        "behaviours.avoid.reward_params": {"near": 0.15, "far": 0.35},
@@ -293,7 +296,6 @@ def test_a_subclass_that_changes_a_step_is_not_compiled() -> None:
         itp.load_state({"centers": np.ones((2, 8)), "feature_centers": np.ones((2, 8)),
                         "m": 2.0, "transform": "range", "offset": 0.1})
         assert (itp._fused() is None) == (cls is Eager)
-    assert EvolvingInterpreter()._fused() is None  # (no prototype yet: it starts in Python)
 
 
 def test_progress_counts_every_iteration_on_both_paths(tmp_path: Path,

@@ -1,9 +1,11 @@
 """Issue 41 (speed): a learning trial and the simulator, this checkout against a git revision.
 
 Question: How much faster are a 5000-iteration learning trial (HDF5 log included) and the
-simulator than at git revision REV, where does a trial's time go before and after, and
+simulator than at git revision REV, how much faster does today's preset (evolving situations)
+run compiled than on the Python loop, where does a trial's time go before and after, and
 does a long trial's memory stay flat?
-Output: printed: the medians of both in alternating fresh processes and their ratios; a
+Output: printed: the medians of both in alternating fresh processes and their ratios (and
+today's preset's on both paths of this checkout, alternating too); a
 profile of one trial of each (seconds per part of the step); the peak RSS of trials of
 10k, 50k and 100k iterations (REV's preset, as timed, and today's); with ``--publish NAME``
 the same as a Markdown table in
@@ -165,6 +167,22 @@ def peak_rss(config: str, iterations: int) -> tuple[float, float]:
     return before / 1024, after / 1024
 
 
+def loop_or_compiled(repeats: int) -> dict[str, list[float]]:
+    """Seconds per trial of today's ``obstacle-avoidance`` preset in this checkout, the Python
+    loop (``SITFRAME_FUSED=0``) and compiled alternating in fresh processes."""
+    code = (f"import json, sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); "
+            "import bench_speed as m; "
+            "print(json.dumps(m.trial_times('obstacle-avoidance')))")
+    out: dict[str, list[float]] = {"Python loop": [], "compiled": []}
+    for _ in range(repeats):
+        for name, mode in (("Python loop", "0"), ("compiled", "wait")):
+            res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                                 check=True, env=dict(os.environ, SITFRAME_FUSED=mode,
+                                                      SITFRAME_NUMBA="1"))
+            out[name] += json.loads(res.stdout.strip().splitlines()[-1])
+    return out
+
+
 def _profiles(rev: str) -> dict[str, dict[str, float]]:
     """One profiled trial of each tree (REV's preset), alternating: name -> seconds per part."""
     got = against(rev, Path(__file__), lambda _tree, old: (
@@ -176,12 +194,18 @@ def _table(rev: str, med: dict[str, dict[str, float]], prof: dict[str, dict[str,
            rss: list[tuple[str, int, float, float]]) -> str:
     """The Markdown table of the timings, the profile and the peak RSS."""
     new, old = "this checkout", rev
+    today = med["today"]
     lines = [f"| | {rev} | this checkout | ratio |", "|---|---:|---:|---:|",
              f"| learning trial, 5000 iterations with its log (median s) | "
              f"{med['trial'][old]:.3f} | {med['trial'][new]:.3f} | "
              f"{med['trial'][old] / med['trial'][new]:.2f}x faster |",
              f"| simulator (median control iterations/s) | {med['sim'][old]:,.0f} | "
              f"{med['sim'][new]:,.0f} | {med['sim'][new] / med['sim'][old]:.2f}x the rate |",
+             "", "| today's obstacle-avoidance preset (evolving situations, ten rooms), this "
+             "checkout | Python loop | compiled | ratio |", "|---|---:|---:|---:|",
+             f"| learning trial, 5000 iterations with its log (median s) | "
+             f"{today['Python loop']:.3f} | {today['compiled']:.3f} | "
+             f"{today['Python loop'] / today['compiled']:.2f}x faster |",
              "", f"| profile of one trial (cProfile, s) | {rev} | share | this checkout | "
              "share |", "|---|---:|---:|---:|---:|"]
     for part in sorted(prof[old], key=lambda p: -prof[old][p]):
@@ -211,8 +235,12 @@ def main() -> None:
         f"m.trial_times({str(o / 'sitframe/presets/obstacle-avoidance.toml')!r})"),
         args.repeats, env=env)
     sim = against(rev, Path(__file__), lambda _t, _o: "m.sim_rates()", args.repeats, env=env)
+    today = loop_or_compiled(args.repeats)
     med = {"trial": {k: statistics.median(v) for k, v in trial.items()},
-           "sim": {k: statistics.median(v) for k, v in sim.items()}}
+           "sim": {k: statistics.median(v) for k, v in sim.items()},
+           "today": {k: statistics.median(v) for k, v in today.items()}}
+    for k, v in med["today"].items():
+        print(f"today's preset, {k}: learning trial median {v:.3f} s")
     for k, v in med["trial"].items():
         print(f"{k:>14}: learning trial median {v:.3f} s ({len(trial[k])} trials in "
               f"{args.repeats} processes)")
@@ -228,7 +256,7 @@ def main() -> None:
                                       text=True, check=True, cwd=BENCHMARKS.parent).stdout)
         rss = [(name, n, *peak_rss(cfg, n))
                for name, cfg in ((f"{rev}'s obstacle-avoidance (compiled)", str(old)),
-                                 ("today's obstacle-avoidance (evolving: the Python loop)",
+                                 ("today's obstacle-avoidance (evolving, compiled)",
                                   "obstacle-avoidance"))
                for n in (int(v) for v in args.rss.split(",") if v.strip())]
     table = _table(rev, med, prof, rss)

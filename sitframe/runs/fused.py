@@ -6,7 +6,7 @@ has to see each iteration from Python:
 
 * its sensor, interpreter, behaviour, arbiter and reward answer ``_fused()``: the built-in
   ``pioneer-sonar`` (or laser) without noise or dropout, ``fcm`` or ``evolving`` situations
-  (evolving ones from at least one prototype, followed by the behaviour alone), one
+  (evolving ones followed by the behaviour alone), one
   ``fuzzy-q`` behaviour with a heading output and optionally a speed output (at most one of
   them learned) and neither replay nor per-group convergence, the ``single`` arbiter, and the
   ``obstacle-avoidance`` reward without ``progress``, the ``wall-following`` or the
@@ -183,7 +183,7 @@ def _evolving(itp: dict[str, Any], parts: Any, lr: FuzzyQLearner | None, track: 
                     (*track.followers, *track.error_sources, *track.converged_sources)]
         if lr is None or track.observe is None or len(followed) != 3 or \
                 any(b is not beh for b in followed):
-            return "evolving situations followed by more than one learning behaviour"
+            return "its evolving situations are not followed by one learning behaviour alone"
     return np.array(ev.ids, dtype=np.int64), int(ev.n_situations), ev
 
 
@@ -245,15 +245,16 @@ def prepare(res: Any, spec: Any, parts: Any, track: Any = None) -> Fused | str:
     return why if why else fz
 
 
-def _reference(fz: Fused, parts: Any, reading: np.ndarray) -> np.ndarray:
-    """The interpreter's (c,) memberships of ``reading`` (an evolving one's over its alive
-    prototypes, computed as its ``memberships`` does but without changing it)."""
+def _reference(fz: Fused, parts: Any, reading: np.ndarray, centers: np.ndarray,
+               ids: np.ndarray) -> np.ndarray:
+    """The interpreter's (c,) memberships of ``reading`` (an evolving one's over the feature
+    ``centers`` with ``ids``, computed as its ``memberships`` does but without changing it)."""
     ev = fz.situations
     if ev is None:
         return parts.interp.memberships(reading)
     x = reading if ev.transform == "range" else ev.features(reading)
     u = np.zeros(fz.c)
-    u[fz.ids] = ev._u.from_d2(row_sq_norms(ev.Fa - x))
+    u[ids] = ev._u.from_d2(row_sq_norms(centers - x))
     return u
 
 
@@ -261,7 +262,8 @@ def _agrees(fz: Fused, parts: Any) -> str:
     """'' when the kernel's memberships, controller outputs, soft-max draws and value of the
     next situation (and, for evolving situations, the on-line update's memberships to the
     power m) equal the Python components' on probes (fixed, not the trial's draws); else what
-    differed."""
+    differed. (Evolving situations with no prototype yet are probed with prototypes at the
+    first probe readings.)"""
     probe = np.random.default_rng(20261207)
     d = fz.rays.size // int(fz.ip[0])
     readings = np.vstack([probe.uniform(0.0, fz.fp[0], (12, d)), np.full((1, d), fz.fp[0]),
@@ -271,21 +273,27 @@ def _agrees(fz: Fused, parts: Any) -> str:
     tau = prm.temperature if prm is not None else 1.0
     relative = prm is None or prm.temperature_mode == "relative"
     m = 2.0 if fz.situations is None else float(fz.situations.m)
+    centers, ids = fz.centers, fz.ids
+    if not centers.shape[0]:
+        ev = fz.situations
+        centers = np.array([r if ev.transform == "range" else ev.features(r)
+                            for r in readings[:2]])
+        ids = np.arange(2, dtype=np.int64)
     for name, fcs in (("heading", fz.heading), ("speed", fz.speed)):
         if fcs is None:
             continue
         singles, onehot = fz.output(name)
         q = probe.normal(250.0, 30.0, (fz.c, singles.size))
         got, outs, mine, v, um = fz.kernels.probe(
-            readings, fz.centers, fz.ids, fz.c, fz.fp, fz.ip, fz.loops, onehot, singles, q,
+            readings, centers, ids, fz.c, fz.fp, fz.ip, fz.loops, onehot, singles, q,
             float(tau), relative, np.random.default_rng(7), m, _POWER.get(m, 0))
         for r, u, o in zip(readings, got, outs, strict=True):
-            ref = _reference(fz, parts, r)
+            ref = _reference(fz, parts, r, centers, ids)
             if not np.array_equal(ref, u):
                 return "the compiled memberships differ from the interpreter's"
             if fcs.output(ref) != o:
                 return f"the compiled {name} output differs from the behaviour's"
-        if not np.array_equal(um, got[0][fz.ids] ** m):
+        if not np.array_equal(um, got[0][ids] ** m):
             return "the compiled memberships to the power m differ from numpy's"
         if fz.learned == name and prm is not None and (
                 not np.array_equal(softmax_choice(q, prm, np.random.default_rng(7), tau), mine)

@@ -42,6 +42,12 @@ changes (:data:`NEED_FIRST`, :data:`NEED_NEXT`: the interpreter's own ``membersh
 iteration after which the interpreter has events to deliver, or every learner has just
 converged and the interpreter is to be told, returns :data:`NEED_SYNC` once it is done
 (Python delivers them: :meth:`sitframe.runs.tracker.SituationTracker.deliver`).
+
+Why one module of this size: it is the trial kernel's unit of compiling and caching. Its
+helpers are inlined into :func:`run`, numba caches it as one file, and a first run after an
+install compiles it in one background process
+(:func:`sitframe.sim.numba_cache.compile_elsewhere`); split, the halves would be compiled and
+cached, and waited for, apart.
 """
 
 from __future__ import annotations
