@@ -325,13 +325,13 @@ def run(fz: Fused, res: Any, spec: Any, rec: Any, env: Any, chain: Any,
     reading, u, r1, u1 = np.empty(d), np.empty(fz.c), np.empty(d), np.empty(fz.c)
     world, none2, rp = env.world, np.full(2, np.nan), fz.rp
     rewards = rec.rewards[:, 0] if rec.rewards.shape[1] else np.empty(L)  # (none: unwritten)
+    snaps = (np.empty(EVERY, np.int64), np.empty((EVERY, fz.c), np.int64),
+             np.empty((EVERY, fz.c), np.int64), np.empty((EVERY, fz.c, a)))  # (a call's)
     t = 0
     while t < L:
         t1 = min(L, (t // EVERY + 1) * EVERY)
         if chain is not None:
             t1 = min(t1, chain.first[-1] + chain.episode)
-        snaps = (np.empty(t1 - t, np.int64), np.empty((t1 - t, fz.c), np.int64),
-                 np.empty((t1 - t, fz.c), np.int64), np.empty((t1 - t, fz.c, a)))
         state[6] = 0
         after, hit, contact, resume = carry[:3], False, none2, False
         seg = world.segment_set.packed
@@ -484,14 +484,15 @@ class _LearnerState:
         return self.converged, self.stable, self.since, self.changes
 
     def snapshots(self, snaps: tuple[np.ndarray, ...], k: int) -> None:
-        """Append the ``k`` rule-base changes of a call to the learner's snapshots."""
+        """Append the ``k`` rule-base changes of a call to the learner's snapshots (copies:
+        the buffers are the next call's)."""
         if self.lr is None or not k:
             return
         it, rules, greedy, q = snaps
         self.lr._snap_iter.extend(it[:k].tolist())
-        self.lr._snap_rules.extend(rules[:k])
-        self.lr._snap_greedy.extend(greedy[:k])
-        self.lr._snap_q.extend(q[:k])
+        self.lr._snap_rules.extend(rules[:k].copy())
+        self.lr._snap_greedy.extend(greedy[:k].copy())
+        self.lr._snap_q.extend(q[:k].copy())
 
     def write_back(self, state: np.ndarray) -> None:
         """The learner's scalars, rule bases and learning-rate counts, now."""
