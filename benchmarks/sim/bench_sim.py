@@ -210,6 +210,8 @@ FIRST_RUNS = [*((f"a whole run: `sitframe {cmd}`", ["-m", "sitframe.cli", *cmd.s
               ("a whole run: `sitframe run obstacle-avoidance-thesis` (11 trials of 5000 "
                "iterations, the worker pool)",
                ["-m", "sitframe.cli", "run", "obstacle-avoidance-thesis"]),
+              ("the main job: `sitframe run obstacle-avoidance` (11 trials of 5000 iterations, "
+               "the worker pool)", ["-m", "sitframe.cli", "run", "obstacle-avoidance"]),
               ("a Gymnasium script: 3000 steps of `sitframe/ObstacleAvoidance-v0`, then 200 "
                "steps of its vector env of 16 robots", ["-c", GYM_FIRST])]
 
