@@ -215,16 +215,6 @@ def _from_d2(d2, fp, ip, u, pw, ptrs, dims, strides, scalar):  # pragma: no cove
     normalize(u)
 
 
-@njit(**_JIT)
-def memberships(reading, fc, fp, ip, feat, diff, d2, u, lg, pw, ptrs, dims, strides,
-                scalar):  # pragma: no cover - compiled
-    """The ``fcm`` interpreter's memberships of ``reading`` into ``u`` (``FCMInterpreter.
-    memberships`` and ``MembershipFunction``, operation by operation)."""
-    _features(reading, fp, ip, feat, lg, ptrs, dims, strides)
-    _distances(fc, feat, diff, d2)
-    _from_d2(d2, fp, ip, u, pw, ptrs, dims, strides, scalar)
-
-
 @njit(**_INLINE)
 def _covered(t, d2, feat, ev, evf, streak_sum):  # pragma: no cover - compiled
     """``EvolvingInterpreter._cover`` at its ``t``-th reading (features ``feat``, squared
@@ -687,21 +677,25 @@ def probe(readings: np.ndarray, fc: np.ndarray, ids: np.ndarray, c: int, fp: np.
     n, d = fc.shape
     a = singletons.size
     u, heads = np.zeros((readings.shape[0], c)), np.empty(readings.shape[0])
-    feat, diff, d2, strength = np.empty(d), np.empty(fc.shape), np.empty(n), np.empty(a)
+    feat, diff, d2, ua, strength = np.empty(d), np.empty(fc.shape), np.empty(n), np.empty(n), \
+        np.empty(a)
     ptrs, dims, strides, scalar = np.empty(3, np.intp), np.empty(1, np.intp), \
         np.empty(3, np.intp), np.empty(1)
+    ev, none = np.zeros(len(EV), np.int64), np.empty(0)  # (fixed centres: the fcm's)
+    ev[_CHECK] = 1
+    fc, ids = np.ascontiguousarray(fc, dtype=np.float64), np.asarray(ids, dtype=np.int64)
     um = np.empty(0)
     for k in range(readings.shape[0]):
-        row = np.empty(n)
-        memberships(np.array(readings[k]), fc, fp, ip, feat, diff, d2, row, lp.log, lp.power,
-                    ptrs, dims, strides, scalar)
+        row = np.empty(c)
+        situate(np.array(readings[k]), fc, np.empty(n), ids, fp, ip, ev, np.zeros(len(EVF)),
+                feat, diff, d2, ua, np.empty(n), row, none, none, none, np.empty(0, np.int64),
+                lp.log, lp.power, ptrs, dims, strides, scalar)
         if k == 0:
-            um = row.copy()
+            um = ua.copy()
             _power(um, m, m_power, lp.power[0], lp.power[1], lp.power[2], ptrs, dims, strides,
                    scalar)
-        u[k, ids] = row
-        heads[k] = controller(onehot, np.ascontiguousarray(u[k]), singletons, lp.ddot,
-                              strength)
+        u[k] = row
+        heads[k] = controller(onehot, row, singletons, lp.ddot, strength)
     choice = np.empty(c, dtype=np.int64)
     _softmax(q, tau, relative, rng, lp.exp, np.empty(c * a), choice)
     vmax = np.ascontiguousarray(np.maximum.reduce(q, axis=1))
