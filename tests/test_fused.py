@@ -371,3 +371,26 @@ def test_snapshots_keep_only_the_rule_base_changes_of_a_call() -> None:
     for rows in (lr._snap_rules, lr._snap_greedy, lr._snap_q):
         assert all(r.base is not None and r.base.shape[0] == 2 for r in rows)
     assert all((q == 1.0).all() for q in lr._snap_q)
+
+
+def test_a_compiled_trial_refuses_bad_td_errors_as_the_python_loop_does(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """A Q table that overflows gives TD errors of NaN; the tracker refuses them, naming the
+    behaviour and its ``situation_errors``, whichever path the trial runs (the compiled one
+    checks them before it sums them)."""
+    cfg = _config({**EVOLVING, "experiment.iterations": 600, "behaviours.avoid.q_init": "random",
+                   "behaviours.avoid.q_init_value": 1e308, "behaviours.avoid.q_init_spread": 1e308})
+    path = tmp_path / "nan.toml"
+    path.write_text(to_toml(cfg))
+    said, calls = {}, []
+    real = fused.run
+    monkeypatch.setattr(fused, "run", lambda *a, **k: calls.append(1) or real(*a, **k))
+    for mode in ("wait", "0"):
+        monkeypatch.setenv("SITFRAME_FUSED", mode)
+        assert cli_main(["run", str(path), "--out", str(tmp_path / f"{mode}.h5"),
+                         "--workers", "1"]) != 0
+        said[mode] = [ln for ln in capsys.readouterr().err.splitlines() if "error:" in ln]
+    assert calls == [1]  # (the compiled trial ran, and failed)
+    assert said["wait"] == said["0"] and len(said["0"]) == 1
+    assert "situation_errors()" in said["0"][0] and "TD error of nan" in said["0"][0]

@@ -354,8 +354,12 @@ def run(fz: Fused, res: Any, spec: Any, rec: Any, env: Any, chain: Any,
                 state[4] = 0
             elif code == fk.NEED_NEXT:
                 u1[:] = sits.memberships(r1)
-            else:  # (NEED_SYNC: the tracker delivers after iteration state[5] - 1)
+            elif code == fk.NEED_SYNC:  # (the tracker delivers after iteration state[5] - 1)
                 learn = learn.deliver(state, sits, int(state[5]) - 1)
+            else:  # (NEED_CHECK: TD errors the tracker refuses, naming the learner)
+                learn.write_back(state)
+                fz.track.step(int(state[5]) - 1)
+                raise AssertionError("fused: the tracker took TD errors the kernel refused")
         learn.snapshots(snaps, int(state[6]))
         t = t1
         if progress is not None and t % EVERY == 0:

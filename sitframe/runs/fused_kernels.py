@@ -112,7 +112,8 @@ EVF = ("create_d2", "m")
 #: :func:`run`'s answers: the chunk is done; a step touches a wall (Python steps it); Python
 #: computes the memberships of ``reading`` (a trial's or episode's first) or of ``r1`` (the
 #: next); events or the rules' convergence wait for Python after the iteration.
-DONE, NEED_STEP, NEED_FIRST, NEED_NEXT, NEED_SYNC = 0, 1, 2, 3, 4
+#: (And after an iteration whose TD errors are not finite and >= 0, which the tracker refuses.)
+DONE, NEED_STEP, NEED_FIRST, NEED_NEXT, NEED_SYNC, NEED_CHECK = 0, 1, 2, 3, 4, 5
 #: How ``w ** p`` is computed, as numpy's in-place power chooses for a scalar exponent.
 POW_LOOP, POW_ONE, POW_RECIPROCAL, POW_ZERO, POW_SQRT, POW_SQUARE = range(6)
 
@@ -504,6 +505,21 @@ def _record(t, x, y, th, reading, u, heading, speed, hit, hx, hy, pose_out, read
         contact_out[t, 0], contact_out[t, 1] = hx, hy
 
 
+@njit(**_INLINE)
+def _tracked(td, xp, err_sum, err_n, err_x, ev, state):  # pragma: no cover - compiled
+    """``SituationTracker.step`` after a learning iteration: the learner's TD errors summed
+    at the reading they were learnt on (``observe_errors``). :data:`NEED_CHECK` when they
+    are not finite and >= 0 (nothing summed: Python's tracker refuses them), :data:`NEED_SYNC`
+    when events or the rules' convergence wait for Python, else :data:`DONE`."""
+    ev[_TD] = 1  # (situation_errors() turns the learner's tracking on)
+    for i in range(td.size):
+        if not (td[i] >= 0.0 and td[i] < np.inf):
+            return NEED_CHECK
+    if ev[_FROZEN] == 0 and ev[_PREV]:
+        accumulate_errors(td, xp, err_sum, err_n, err_x)
+    return NEED_SYNC if ev[_DELIVER] != 0 or (ev[_TELL] != 0 and state[0] >= 0) else DONE
+
+
 @njit(**_JIT)
 def run(t1, resume, after, collided_after, contact_after, seg, times, rp, rw, side, sines, rel,
         Fa, Na, ids, ev, evf, streak_sum, xp, xl, last_win, err_sum, err_n, err_x,
@@ -572,7 +588,7 @@ def run(t1, resume, after, collided_after, contact_after, seg, times, rp, rw, si
                 return NEED_NEXT  # (Python sets u1 and calls again)
         _record(t, x, y, th, reading, u, heading, speed, hit, hx, hy, pose_out, reading_out,
                 u_out, command_out, nearest_out, collision_out, contact_out)
-        sync = False
+        then = DONE
         if ip[4]:
             r = reward(ip[14], rw, side, sines, hit, heading, speed, reading, r1)
             reward_out[t] = r
@@ -580,18 +596,15 @@ def run(t1, resume, after, collided_after, contact_after, seg, times, rp, rw, si
                 _learner(t, u, u1, r, hit, q, updates, visits, removed, rule_base, greedy, new,
                          td, fp, ip, state, ev, rng, ex, dd, vmax, logits, learned, snap_it,
                          snap_rules, snap_greedy, snap_q)
-            if ev[_OBSERVE]:  # (SituationTracker.step: the TD errors, then what waits)
-                ev[_TD] = 1
-                if ev[_FROZEN] == 0 and ev[_PREV]:
-                    accumulate_errors(td, xp, err_sum, err_n, err_x)
-                sync = ev[_DELIVER] != 0 or (ev[_TELL] != 0 and state[0] >= 0)
+            if ev[_OBSERVE]:
+                then = _tracked(td, xp, err_sum, err_n, err_x, ev, state)
         carry[0], carry[1], carry[2] = nx, ny, nth
         _copy(r1, reading)
         _copy(u1, u)
         t += 1
         state[5] = t
-        if sync:
-            return NEED_SYNC
+        if then != DONE:
+            return then
     return DONE
 
 
