@@ -178,7 +178,7 @@ def _evolving(itp: dict[str, Any], parts: Any, lr: FuzzyQLearner | None, track: 
         c = np.asarray(itp["centers"]).shape[0]
         return np.arange(c, dtype=np.int64), c, None
     if track is not None:
-        (label, (beh, _rew)), = parts.behaviours.items()
+        ((_label, (beh, _rew)),) = parts.behaviours.items()
         followed = [getattr(f, "__self__", None) for _o, f in
                     (*track.followers, *track.error_sources, *track.converged_sources)]
         if lr is None or track.observe is None or len(followed) != 3 or \
@@ -252,9 +252,8 @@ def _reference(fz: Fused, parts: Any, reading: np.ndarray, centers: np.ndarray,
     ev = fz.situations
     if ev is None:
         return parts.interp.memberships(reading)
-    x = reading if ev.transform == "range" else ev.features(reading)
     u = np.zeros(fz.c)
-    u[ids] = ev._u.from_d2(row_sq_norms(centers - x))
+    u[ids] = ev._u.from_d2(row_sq_norms(centers - ev.features(reading)))
     return u
 
 
@@ -276,8 +275,7 @@ def _agrees(fz: Fused, parts: Any) -> str:
     centers, ids = fz.centers, fz.ids
     if not centers.shape[0]:
         ev = fz.situations
-        centers = np.array([r if ev.transform == "range" else ev.features(r)
-                            for r in readings[:2]])
+        centers = np.array([ev.features(r) for r in readings[:2]])
         ids = np.arange(2, dtype=np.int64)
     for name, fcs in (("heading", fz.heading), ("speed", fz.speed)):
         if fcs is None:
@@ -318,7 +316,7 @@ def run(fz: Fused, res: Any, spec: Any, rec: Any, env: Any, chain: Any,
     a = np.asarray(learned.singletons).size
     d = rec.reading.shape[1]
     sits = _Situations(fz, d)
-    learn = _LearnerState(fz, learned, L, sits.ev)
+    learn = _LearnerState(fz, learned, sits)
     state = np.array([*learn.scalars(), 1, 0, 0], dtype=np.int64)
     carry = np.zeros(11)
     carry[:3] = env.start
@@ -355,7 +353,7 @@ def run(fz: Fused, res: Any, spec: Any, rec: Any, env: Any, chain: Any,
             elif code == fk.NEED_NEXT:
                 u1[:] = sits.memberships(r1)
             elif code == fk.NEED_SYNC:  # (the tracker delivers after iteration state[5] - 1)
-                learn = learn.deliver(state, sits, int(state[5]) - 1)
+                learn = learn.deliver(state, int(state[5]) - 1)
             else:  # (NEED_CHECK: TD errors the tracker refuses, naming the learner)
                 learn.write_back(state)
                 fz.track.step(int(state[5]) - 1)
@@ -453,9 +451,9 @@ class _LearnerState:
     the controllers' rule tables, and their return to the :class:`~sitframe.FuzzyQLearner`
     (after the trial, and around the delivery of evolving situations' events)."""
 
-    def __init__(self, fz: Fused, fcs: Any, iterations: int, ev: np.ndarray) -> None:
+    def __init__(self, fz: Fused, fcs: Any, sits: _Situations) -> None:
         lr, c, a = fz.learner, fz.c, np.asarray(fcs.singletons).size
-        self.fz, self.fcs, self.lr, self.iterations, self.ev = fz, fcs, lr, iterations, ev
+        self.fz, self.fcs, self.lr, self.sits = fz, fcs, lr, sits
         self.rule_base = np.asarray(fcs.rule_actions).astype(np.int64)
         self.onehot = np.zeros((c, a))
         self.onehot[np.arange(c), self.rule_base] = 1.0
@@ -466,7 +464,6 @@ class _LearnerState:
             onehot = self.onehot
         self.tables = (heads, onehot, speeds, onehot_s)
         self.visits = np.zeros((c, a), dtype=np.int64)
-        at = fz.kernels.EV.index
         if lr is None:
             self.q, self.updates, self.greedy = np.zeros((c, a)), np.zeros(c, np.int64), \
                 self.rule_base.copy()
@@ -481,7 +478,7 @@ class _LearnerState:
             self.visits[i, k] = n
         self.converged = -1 if lr.converged_at is None else lr.converged_at
         self.stable, self.since, self.changes = lr.stable_changes, lr.since_change, lr.n_changes
-        ev[at("track_td")], ev[at("evolved")] = lr.track_td, lr._evolving
+        sits.ev[sits.at["track_td"]], sits.ev[sits.at["evolved"]] = lr.track_td, lr._evolving
 
     def scalars(self) -> tuple[int, int, int, int]:
         """``state[:4]``: converged at (-1: not), stable changes, since the last, changes."""
@@ -509,17 +506,18 @@ class _LearnerState:
         lr._vmax = None
         lr._visits = {(int(i), int(k)): int(n) for (i, k), n in np.ndenumerate(self.visits)
                       if n}
-        lr.track_td = bool(self.ev[self.fz.kernels.EV.index("track_td")])
+        lr.track_td = bool(self.sits.ev[self.sits.at["track_td"]])
         self.fcs.set_rules(lr.rule_base)
 
-    def deliver(self, state: np.ndarray, sits: _Situations, iteration: int) -> _LearnerState:
+    def deliver(self, state: np.ndarray, iteration: int) -> _LearnerState:
         """Hand the learner and the interpreter their state, let the tracker deliver after
         ``iteration`` (``SituationTracker.deliver``), and take both back: the learner's as a
         new state (``state[:4]`` too), its rows and rule tables as the events left them."""
+        sits = self.sits
         self.write_back(state)
         sits.out()
         self.fz.track.deliver(iteration)
         sits.back()
-        new = _LearnerState(self.fz, self.fcs, self.iterations, self.ev)
+        new = _LearnerState(self.fz, self.fcs, sits)
         state[:4] = new.scalars()
         return new

@@ -431,6 +431,15 @@ def _vmax(q, vmax):  # pragma: no cover - compiled
 
 
 @njit(**_INLINE)
+def _v_next(q, u1, collided, ip, dd, vmax):  # pragma: no cover - compiled
+    """``V(s')``: ``u1 @ q.max(axis=1)``, or 0 after a collision when it is terminal."""
+    if collided and ip[9]:
+        return 0.0
+    _vmax(q, vmax)
+    return dd(q.shape[0], u1.ctypes.data, 1, vmax.ctypes.data, 1)
+
+
+@njit(**_INLINE)
 def _learn(t, u0, u1, reward, collided, q, updates, visits, rule_base, fp, ip, state,
            dd, vmax, td, track):  # pragma: no cover - compiled
     """``FuzzyQLearner.update`` up to the rule-base change (with ``track``, each updated rule's
@@ -443,10 +452,7 @@ def _learn(t, u0, u1, reward, collided, q, updates, visits, rule_base, fp, ip, s
     for i in range(c):
         any_active = any_active or act <= 0 or u0[i] >= act
     if any_active:
-        v_next = 0.0
-        if not (collided and ip[9]):
-            _vmax(q, vmax)
-            v_next = dd(c, u1.ctypes.data, 1, vmax.ctypes.data, 1)
+        v_next = _v_next(q, u1, collided, ip, dd, vmax)
         alpha, gamma, kappa = fp[5], fp[6], fp[11]
         target = reward + gamma * v_next
         for i in range(c):
@@ -483,12 +489,8 @@ def _learner(t, u, u1, r, hit, q, updates, visits, removed, rule_base, greedy, n
             _change(t, q, updates, removed, ev[_EVOLVED] != 0, rule_base, greedy, new, state, fp,
                     ip, rng, ex, logits, learned, snap_it, snap_rules, snap_greedy, snap_q)
     elif ev[_TD]:
-        v_next = 0.0
-        if not (hit and ip[9]):
-            _vmax(q, vmax)
-            v_next = dd(q.shape[0], u1.ctypes.data, 1, vmax.ctypes.data, 1)
-        frozen_td(u, fp[7] if fp[7] > 0 else -np.inf, ip[8] != 0, r, fp[6], v_next, q,
-                  rule_base, td)
+        frozen_td(u, fp[7] if fp[7] > 0 else -np.inf, ip[8] != 0, r, fp[6],
+                  _v_next(q, u1, hit, ip, dd, vmax), q, rule_base, td)
 
 
 @njit(**_INLINE)
