@@ -128,6 +128,68 @@ def test_robot_step_is_bit_identical(room: World, recovery: str,
     assert 30 < collided < 300  # the contact and recovery paths ran too
 
 
+def test_a_wall_met_at_any_substep_is_met_on_both_paths(monkeypatch: pytest.MonkeyPatch
+                                                        ) -> None:
+    """The compiled step computes no substep before the robot could reach the nearest wall
+    (its path's length so far): robots driving at a wall from every distance that makes the
+    first touch fall on each substep, on it to the last bit, or a hair before or after."""
+    world = parse_world('name = "w"\n[robot]\nstart = [1, 1, 0]\n'
+                        '[[walls]]\npoints = [[0, 0], [12, 0], [12, 6], [0, 6], [0, 0]]\n'
+                        '[[walls]]\npoints = [[6, 1], [6, 5]]')
+    params = RobotParams()
+    r, period = params.radius, params.control_period_s
+    starts = []
+    for speed in (0.1, 0.15, 0.3):
+        for k in range(int(period / params.substep_s) + 2):
+            gap = r + speed * k * params.substep_s  # the touch at substep k
+            for d in (gap, np.nextafter(gap, 0.0), np.nextafter(gap, 9.0), gap - 1e-7,
+                      gap + 1e-7):
+                for turn in (0.0, 10.0, -45.0):  # straight at it, and turning away
+                    starts.append((np.array([6.0 - d, 3.0, 0.0]), Command(turn, speed)))
+    # passing over the inner wall's end (6, 5), the disc grazing it half-way only (a
+    # substep, every 7.5 mm, right over it)
+    for along in (0.015, 0.03, 0.075, 0.12):
+        for h in (r * 0.9, r - 1e-3, r - 1e-6, np.nextafter(r, 0.0)):
+            starts.append((np.array([6.0 - along, 5.0 + h, 0.0]), Command(0.0, 0.15)))
+
+    def steps() -> list[tuple]:
+        rng = np.random.default_rng(5)
+        return [_fields(step_robot(world, p, c, params, rng)) for p, c in starts]
+
+    fast, slow = both(monkeypatch, steps)
+    assert fast == slow
+    assert 0 < sum(o[2] for o in fast) < len(fast)  # both touching and free steps
+
+
+def test_a_read_meets_only_the_walls_within_reach_on_both_paths(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The compiled read leaves out the edges farther than 1.01 times its reach: an edge
+    across each ray at a distance around the reach (to the last bit, and a hair nearer or
+    farther), and edges along rays' lines, read as numpy reads them (every edge tested)."""
+    rel = np.radians((np.array([90.0, 50, 30, 10, -10, -30, -50, -90])[:, None]
+                      + np.linspace(-12.5, 12.5, 5)[None, :]).reshape(-1))
+    reach = 3.0 + 0.15
+    dists = (reach, np.nextafter(reach, 0.0), reach - 1e-9, reach + 1e-9, 0.995 * reach,
+             1.01 * reach, 2 * reach)
+    rng = np.random.default_rng(9)
+    hits = 0
+    for th in [*rng.uniform(-math.pi, math.pi, 20), *(-rel[:5])]:
+        rows = []
+        for j, a in enumerate(rel + th):
+            c, s_, d = math.cos(a), math.sin(a), dists[j % len(dists)]
+            if j % 8 == 7:  # along the ray's line, its near end at d
+                rows.append((d * c, d * s_, (d + 1.0) * c, (d + 1.0) * s_))
+            else:  # across it, 4 cm long, crossing it at d
+                rows.append((d * c - 0.02 * s_, d * s_ + 0.02 * c, d * c + 0.02 * s_,
+                             d * s_ - 0.02 * c))
+        segs = geo.SegmentSet(np.array(rows))
+        fast, slow = both(monkeypatch, lambda th=th, segs=segs: geo.rim_ranges(
+            segs, 0.0, 0.0, rel, 3.0, 0.15, 5, clip=True, heading=th))
+        assert np.array_equal(fast, slow), th
+        hits += int((fast < 3.0).sum())
+    assert hits > 20  # the edges inside the reach were met
+
+
 @settings(max_examples=60, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), c=st.sampled_from([2, 7, 8, 12, 16, 31]),
        m=st.sampled_from([1.2, 2.0]), on_centre=st.booleans())

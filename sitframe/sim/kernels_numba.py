@@ -171,12 +171,20 @@ def ranges(x: float, y: float, dx: np.ndarray, dy: np.ndarray, seg: np.ndarray, 
     Rays of ``max_range + radius`` from ``(x, y)``; ``out[g]`` is the nearest hit of
     rays ``g * group ... (g + 1) * group - 1`` less ``radius``, or ``max_range``;
     with ``clip`` then clipped to ``[0, max_range]``. All rays are cast together
-    (:func:`_nearest_hits`; each ray's distance is :func:`_ray`'s).
+    (:func:`_nearest_hits`; each ray's distance is :func:`_ray`'s), against the segments
+    within :data:`CULL` times their reach: a segment farther away is hit, if at all, beyond
+    the reach, which is ignored (the nearest hit is a minimum, in any order). Rounding could
+    only bring such a hit inside the reach for a ray within some 1e-13 rad of a segment
+    whose line passes within some 1e-13 m of the centre. In a room a reading meets some
+    quarter of the edges, and the cull costs one distance per edge.
     """
     reach = max_range + radius
+    cull2 = (CULL * reach) * (CULL * reach)
+    idx = np.empty(seg.shape[1], dtype=np.intp)
+    near = _gather(seg, idx, near_segments(x, y, seg, cull2, idx))
     hits = np.full(dx.size, reach)
-    if _nearest_hits(x, y, dx, dy, seg, hits):
-        _parallel_hits(x, y, dx, dy, seg, hits)
+    if _nearest_hits(x, y, dx, dy, near, hits):
+        _parallel_hits(x, y, dx, dy, near, hits)
     for g in range(out.size):
         best = reach
         for i in range(g * group, (g + 1) * group):
@@ -203,7 +211,7 @@ def ranges_at(x: float, y: float, heading: float, rel: np.ndarray, seg: np.ndarr
     ranges(x, y, dx, dy, seg, max_range, radius, group, clip, out)
 
 
-#: :func:`ranges_many` leaves out the segments farther than this many times the rays' reach.
+#: :func:`ranges` leaves out the segments farther than this many times the rays' reach.
 CULL = 1.01
 
 
@@ -212,21 +220,9 @@ def ranges_many(xy: np.ndarray, dx: np.ndarray, dy: np.ndarray, seg: np.ndarray,
                 max_range: float, radius: float, group: int, clip: bool,
                 out: np.ndarray) -> None:  # pragma: no cover - compiled
     """:func:`ranges` for N disc centres ``xy`` (N, 2) with their own (N, rays) directions
-    ``dx, dy``: row ``i`` of ``out`` (N, readings) is ``ranges`` of row ``i``.
-
-    Each centre's rays meet only the segments within :data:`CULL` times their reach
-    (``max_range + radius``): a segment farther away is hit, if at all, beyond the reach,
-    which :func:`ranges` ignores (the nearest hit is a minimum, in any order). Rounding
-    could only bring such a hit inside the reach for a ray within some 1e-13 rad of a
-    segment whose line passes within some 1e-13 m of the centre.
-    """
-    reach = max_range + radius
-    cull2 = (CULL * reach) * (CULL * reach)
-    idx = np.empty(seg.shape[1], dtype=np.intp)
+    ``dx, dy``: row ``i`` of ``out`` (N, readings) is ``ranges`` of row ``i``."""
     for i in range(out.shape[0]):
-        c = near_segments(xy[i, 0], xy[i, 1], seg, cull2, idx)
-        ranges(xy[i, 0], xy[i, 1], dx[i], dy[i], _gather(seg, idx, c), max_range, radius, group,
-               clip, out[i])
+        ranges(xy[i, 0], xy[i, 1], dx[i], dy[i], seg, max_range, radius, group, clip, out[i])
 
 
 @njit(**_JIT)
@@ -368,7 +364,13 @@ def step_free(x0: float, y0: float, th0: float, v: float, omega: float, t_turn: 
     where they are numpy's too (:func:`sitframe.sim.kernels.fused`).
     """
     idx = np.empty(seg.shape[1], dtype=np.intp)
-    m = near_segments(x0, y0, seg, reach2, idx)
+    m, near2 = 0, np.inf  # (near_segments, and the nearest one's squared distance)
+    for j in range(seg.shape[1]):
+        d2 = _dist2(x0, y0, seg, j)
+        if d2 < reach2:
+            idx[m] = j
+            m += 1
+            near2 = d2 if d2 < near2 else near2
     th_end = th0 + omega * t_turn
     if m == 0:  # robot._pose_at(T, ...), T the period (the last of ``times``)
         t = times[times.size - 1]
@@ -381,7 +383,13 @@ def step_free(x0: float, y0: float, th0: float, v: float, omega: float, t_turn: 
         out[2] = th0 + omega * tt
         return False
     cos_end, sin_end = math.cos(th_end), math.sin(th_end)
-    for i in range(times.size):
+    # A pose at time t is within |v| t of the start (its path's length), so no edge is within
+    # the radius before |v| t + r reaches the nearest one: those samples are not computed
+    # (1e-9 m of slack is far above the rounding of these distances). The last is, always.
+    gap, first = math.sqrt(near2) - math.sqrt(r2) - 1e-9, times.size - 1
+    while first > 0 and abs(v) * times[first - 1] >= gap:
+        first -= 1
+    for i in range(first, times.size):
         px, py, pth = _arc(times[i], x0, y0, th0, v, omega, t_turn, cos_end, sin_end)
         for jj in range(m):
             if _dist2(px, py, seg, idx[jj]) < r2:
