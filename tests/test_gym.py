@@ -112,6 +112,32 @@ def test_vector_env_equals_single_envs(config: str, continuous: bool, compiled: 
     assert venv.observation_space.shape == (n, 10 if config == "goal-finding" else 8)
 
 
+def test_vector_env_steps_a_dead_ahead_contact_as_its_single_env() -> None:
+    """A robot driving square into a wall (its turn after the contact a draw from its own
+    generator, stepped apart from the compiled batch) beside robots that touch at an angle or
+    stay free: each as its single env, step after step."""
+    from sitframe.sim import kernels
+
+    if kernels.load() is None or kernels.contact() is None:
+        pytest.skip("the compiled step is not used here")
+    n, opts = 4, {"pose": [12.75, 4.0, 0.0]}  # 0.1 m from the training room's east wall
+    venv = sg.SitframeVectorEnv("obstacle-avoidance", num_envs=n, max_steps=30)
+    singles = [sg.SitframeEnv(task=venv.task) for _ in range(n)]
+    venv.reset(seed=3, options=opts)
+    for i, e in enumerate(singles):
+        e.reset(seed=3 + i, options=opts)
+    acts = [[3, 1, 6, 3]] + np.random.default_rng(1).integers(0, 7, (12, n)).tolist()
+    for a in np.array(acts):
+        vobs, vr, vte, vtr, vinfo = venv.step(a)
+        for i, e in enumerate(singles):
+            o, r, te, tr, info = e.step(int(a[i]))
+            np.testing.assert_array_equal(vobs[i], o)
+            assert (vr[i], vte[i], vtr[i], vinfo["collided"][i]) == (r, te, tr,
+                                                                     info["collided"])
+            np.testing.assert_array_equal(vinfo["pose"][i], e.pose)
+    assert venv._fast  # (the compiled batch ran)
+
+
 def test_sonar_read_many_equals_read() -> None:
     from sitframe.plugins.sonar import SonarRing
     from sitframe.sim.world import load_world

@@ -39,6 +39,7 @@ ignored, its reward is 0).
 
 from __future__ import annotations
 
+from contextlib import suppress
 from typing import Any
 
 import numpy as np
@@ -102,6 +103,7 @@ class SitframeVectorEnv(VectorEnv):
         self._done = np.zeros(num_envs, dtype=bool)
         self._all = list(range(num_envs))
         self._table: list[Any] | None = None  # the command of each discrete action
+        self._grid: np.ndarray | None = None  # (its heading change and speed, (A, 2))
         self._ctx: list[Any] = [None] * num_envs  # each robot's last context
         self._many = getattr(self.envs[0].sensor, "read_many", None)
         self._fast: tuple[CompiledStep, np.ndarray] | None | bool = False  # (False: undecided)
@@ -126,7 +128,8 @@ class SitframeVectorEnv(VectorEnv):
             raise ValueError(f"actions: expected {n} actions (one per robot), got shape "
                              f"{acts.shape}")
         obs, at = None, None
-        rew, term, trunc, collided = [0.0] * n, [False] * n, [False] * n, [False] * n
+        rew, term = np.zeros(n), np.zeros(n, dtype=bool)
+        trunc, collided = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
         live = self._all
         if self._done.any():
             obs = np.empty((n, *self.single_observation_space.shape), dtype=np.float32)
@@ -136,19 +139,17 @@ class SitframeVectorEnv(VectorEnv):
             live = np.flatnonzero(~self._done).tolist()
         if live:
             robots = [envs[i] for i in live]
-            cmds = self._commands((acts if live is self._all else acts[live]).tolist())
+            acts = acts if live is self._all else acts[live]
             fast = self._compiled()
             figures = (rew, term, trunc, collided)
-            seen, at = self._step_python(live, robots, cmds, figures) if fast is None else \
-                self._step_compiled(fast, live, robots, cmds, figures)
+            seen, at = self._step_python(live, robots, self._commands(acts.tolist()), figures) \
+                if fast is None else self._step_compiled(fast, live, robots, acts, figures)
             if obs is None:  # (all robots live)
                 obs = seen
             else:
                 obs[live] = seen
-        terminated, truncated, hit = np.array([term, trunc, collided])
-        self._done = terminated | truncated
-        return obs, np.array(rew), terminated, truncated, \
-            self._infos(hit, at if live is self._all else None)
+        self._done = term | trunc
+        return obs, rew, term, trunc, self._infos(collided, at if live is self._all else None)
 
     def _step_python(self, live: list[int], robots: list[SitframeEnv], cmds: list[Any],
                      figures: tuple[list[Any], ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -194,17 +195,14 @@ class SitframeVectorEnv(VectorEnv):
         return self._fast
 
     def _step_compiled(self, fast: tuple[CompiledStep, np.ndarray], live: list[int],
-                       robots: list[SitframeEnv], cmds: list[Any],
-                       figures: tuple[list[Any], ...]) -> tuple[np.ndarray, np.ndarray]:
+                       robots: list[SitframeEnv], acts: np.ndarray,
+                       figures: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`_step_python` in one compiled call per world (a dead-ahead contact, whose
         turn is drawn from the robot's generator, stepped by :meth:`_step_python`)."""
         step, reward = fast
-        task, rew, term, trunc, collided = self.task, *figures
+        task = self.task
         poses = np.array([e.pose for e in robots])
-        heads = np.array([c.heading_change_deg for c in cmds], dtype=np.float64)
-        speeds = np.array([c.speed_m_s for c in cmds], dtype=np.float64)
-        limit, tc, free, tie = task.max_steps, task.terminate_on_collision, step.k.FREE, \
-            step.k.TIE
+        heads, speeds = self._command_arrays(acts)
         whole = len(task.worlds) <= 1  # (one world: one call for them all, no grouping)
         groups = [range(len(robots))] if whole else _by_world(robots)
         obs = at = None
@@ -216,28 +214,61 @@ class SitframeVectorEnv(VectorEnv):
                 robots[js[0]].world, poses if whole else poses[js],
                 heads if whole else heads[js], speeds if whole else speeds[js], reward)
             moved = out[:, :3].copy()  # (each robot's new pose: a row of its own)
-            ties = []
-            for q, (j, code, r) in enumerate(zip(js, codes.tolist(), rewards.tolist(),
-                                                 strict=True)):  # (its pose, reading, time)
-                if code == tie:
-                    ties.append(j)
-                    continue
-                env, i, hit = robots[j], live[j], code != free
-                env.pose, env._reading = moved[q], readings[q]
-                env.t += 1
-                self._ctx[i] = None  # (the reward needs none: a later one is made anew)
-                rew[i], collided[i] = r, hit
-                term[i] = tc and hit
-                trunc[i] = not term[i] and env.t >= limit
+            ties = self._record(step, [live[j] for j in js], [robots[j] for j in js], codes,
+                                moved, readings, rewards, figures)
             if whole:  # (the infos' poses: out's, not the robots' own rows)
                 obs, at = seen, out[:, :3]
             else:
                 obs[js], at[js] = seen, moved
             if ties:
+                ties = [js[q] for q in ties]
+                cmds = self._commands(acts[ties].tolist())
                 obs[ties], at[ties] = self._step_python([live[j] for j in ties],
-                                                        [robots[j] for j in ties],
-                                                        [cmds[j] for j in ties], figures)
+                                                        [robots[j] for j in ties], cmds, figures)
         return obs, at
+
+    def _record(self, step: CompiledStep, live: list[int], robots: list[SitframeEnv],
+                codes: np.ndarray, moved: np.ndarray, readings: np.ndarray,
+                rewards: np.ndarray, figures: tuple[np.ndarray, ...]) -> list[int]:
+        """Give the robots ``live`` (their ``robots``) the compiled step's poses, readings and
+        times, and fill their ``figures``; returns the rows of dead-ahead contacts (not
+        stepped: :data:`~sitframe.sim.kernels_numba.TIE`), which are left alone."""
+        rew, term, trunc, collided = figures
+        ctx = self._ctx
+        ties = np.flatnonzero(codes == step.k.TIE).tolist()
+        rows: Any = slice(None)
+        parts: tuple[Any, ...] = (live, robots, moved, readings)
+        if ties:  # (rare: stepped apart, by _step_python)
+            rows = [q for q in range(len(robots)) if q not in ties]
+            parts = tuple([x[q] for q in rows] for x in parts)
+        times = []
+        for i, env, pose, reading in zip(*parts, strict=True):
+            env.pose, env._reading = pose, reading  # (its pose, reading and time; the
+            env.t += 1  # reward needs no context)
+            times.append(env.t)
+            ctx[i] = None
+        at = np.asarray(live)[rows] if ties or live is not self._all else slice(None)
+        hit = codes[rows] != step.k.FREE
+        rew[at], collided[at] = rewards[rows], hit
+        term[at] = hit & self.task.terminate_on_collision
+        trunc[at] = ~term[at] & (np.array(times) >= self.task.max_steps)
+        return ties
+
+    def _command_arrays(self, acts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The heading changes [deg] and speeds [m/s] (M,) of the live robots' actions:
+        discrete ones looked up (after one range check of them all), others through
+        :meth:`_commands`."""
+        if self._grid is None:
+            cmds = [self.task.command(a, False) for a in range(self.task.n_actions)]
+            self._grid = (np.array([c.heading_change_deg for c in cmds]),
+                          np.array([c.speed_m_s for c in cmds]))
+        if not self.continuous and acts.ndim == 1 and acts.dtype.kind in "iu" and \
+                acts.min() >= 0:
+            with suppress(IndexError):  # (an action past the last: _commands says so)
+                return self._grid[0].take(acts), self._grid[1].take(acts)
+        cmds = self._commands(acts.tolist())  # (their own checks)
+        return (np.array([c.heading_change_deg for c in cmds], dtype=np.float64),
+                np.array([c.speed_m_s for c in cmds], dtype=np.float64))
 
     def _commands(self, acts: list[Any]) -> list[Any]:
         """The commands of the live robots' actions (discrete ones looked up, as
