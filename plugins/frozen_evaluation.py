@@ -65,6 +65,14 @@ class FrozenEvaluation:
         """Never: the run lasts its ``iterations``."""
         return False
 
+    def _fused(self) -> dict[str, Any] | None:
+        """What the compiled trial needs of the protocol (``sitframe.runs.fused``): nothing
+        ends a run early, so it runs compiled without calling :meth:`terminated`; ``None``
+        for a subclass with a ``terminated`` of its own."""
+        if type(self).terminated is not FrozenEvaluation.terminated:
+            return None
+        return {"terminates": False}
+
 
 @hookimpl
 def sitframe_protocols() -> list[Any]:

@@ -159,7 +159,8 @@ def test_compiled_trial_writes_the_python_loops_log(case: str, tmp_path: Path,
     cfg = _config(CASES[case])
     compiled, n_compiled = _run(tmp_path, case, cfg, monkeypatch, True)
     python, n_python = _run(tmp_path, case, cfg, monkeypatch, False)
-    assert n_compiled >= 1 and n_python == 0  # (the learning trial, and plain evaluations)
+    # (the learning trial and its evaluations, the frozen protocol's runs)
+    assert n_compiled == 1 + len(cfg["evaluate"]["worlds"]) and n_python == 0
     assert not _differ(compiled, python)
     assert any(k.endswith("heading/q_snapshots") for k in compiled)  # (it learned)
     if case.startswith("evolving"):  # (its situations changed)
@@ -202,13 +203,13 @@ def test_a_trial_with_a_step_observer_or_a_noisy_sensor_runs_the_python_loop(
         "def sitframe_step(record):\n    SEEN.append(record.transition.before.iteration)\n")
     path = tmp_path / "watched.toml"
     path.write_text(to_toml(_config({"experiment.iterations": 500})))
-    calls: list[int] = []
+    calls: list[bool] = []
     real = fused.run
     monkeypatch.setenv("SITFRAME_FUSED", "wait")
-    monkeypatch.setattr(fused, "run", lambda *a, **k: calls.append(1) or real(*a, **k))
+    monkeypatch.setattr(fused, "run", lambda *a, **k: calls.append(a[2].learn) or real(*a, **k))
     assert cli_main(["--plugins-dir", str(plugin), "run", str(path), "--out",
                      str(tmp_path / "w.h5")]) == 0
-    assert calls == []
+    assert calls == [False, False]  # (its evaluations only: the hook is not called in them)
 
 
 def test_trials_run_the_python_loop_while_the_kernel_compiles_in_the_background(
@@ -285,6 +286,16 @@ def test_a_subclass_that_changes_a_step_is_not_compiled() -> None:
     hushed = Hushed()
     hushed.reset(rng, 4, 10)
     assert hushed._fused() is None
+
+    from sitframe.plugins.frozen_evaluation import FrozenEvaluation
+    from sitframe.runs.loop import _runs_out
+
+    class Brief(FrozenEvaluation):  # (ends its runs early: each iteration must be asked)
+        def terminated(self, context: Any) -> bool:
+            return context.iteration >= 10
+
+    assert _runs_out(None) and _runs_out(FrozenEvaluation())
+    assert not _runs_out(Brief()) and not _runs_out(object())
 
     from sitframe.plugins.evolving import EvolvingInterpreter
 

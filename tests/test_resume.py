@@ -63,7 +63,7 @@ def test_kill_9_then_resume_reproduces_uninterrupted_run(reference, tmp_path, ca
     out = tmp_path / "killed.h5"
     proc = _start(cfg, out, "--workers", workers)
     _wait_for_trials(proc, out)
-    time.sleep(float(rng.uniform(0.0, 0.3)))
+    time.sleep(float(rng.uniform(0.0, 0.05)))  # (the whole run takes some 0.3 s)
     proc.kill()  # SIGKILL
     proc.communicate(timeout=30)  # (also closes the stderr pipe)
     log = open_log(out)  # always opens
@@ -71,7 +71,9 @@ def test_kill_9_then_resume_reproduces_uninterrupted_run(reference, tmp_path, ca
     if log.status == "complete":  # (a resume of a complete log proves nothing)
         pytest.skip("the run finished before it was killed")
     assert log.status == "running"
-    assert 1 <= len(have) < N_TRIALS and have == list(range(len(have)))  # in trial order
+    # in trial order; all of them when the kill came after the last trial but before the
+    # log was marked complete
+    assert 1 <= len(have) <= N_TRIALS and have == list(range(len(have)))
     for k in have:  # every finished trial is intact
         assert log.trial(k).arrays["pose"].shape == (ITERATIONS + 1, 3)
 

@@ -14,8 +14,9 @@ has to see each iteration from Python:
   of a built-in that overrides a method of the step;
 * the loop has nothing else to do between iterations (:func:`sitframe.runs.loop.simulate`
   decides): no plugin implements ``sitframe_step`` (``sitframe_progress`` follows a trial
-  without it), no evaluation protocol may end it early, it has one situation space and no
-  candidates. A chain of rooms (``experiment.rooms``) is fine;
+  without it), no evaluation protocol may end it early (the built-in ``frozen`` protocol's
+  runs, which only their length ends, are fine: its ``_fused()`` says so), it has one
+  situation space and no candidates. A chain of rooms (``experiment.rooms``) is fine;
 * the compiled code is there (numba; neither ``SITFRAME_NUMBA`` nor ``SITFRAME_FUSED`` is
   ``0``), the C library's sines and cosines are numpy's (:func:`sitframe.sim.kernels.fused`),
   numpy hands out its own loops (:mod:`sitframe.sim.numpy_loops`), and a check of this

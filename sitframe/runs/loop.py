@@ -279,7 +279,7 @@ def simulate(
                          "candidates are judged with the situations the trial started from",
                          key="experiment.candidates")
     fz = "observed, ended by a protocol, candidates, spaces or protocol episodes" \
-        if step_hook is not None or protocol is not None or env.cands is not None or \
+        if step_hook is not None or not _runs_out(protocol) or env.cands is not None or \
         parts.spaces or isinstance(env.chain, _TrainingEpisodes) \
         else fused.prepare(res, spec, parts, env.track)
     n = _run_loop(res, spec, parts, rec, env, step_hook, progress, protocol) \
@@ -291,6 +291,14 @@ def simulate(
     for ev_spec in evaluation_specs(spec, result.policies, result.situations.get("state")):
         attach_evaluation(result, ev_spec.world, simulate(res, ev_spec))
     return result
+
+
+def _runs_out(protocol: Any) -> bool:
+    """Whether nothing but the iteration limit ends a run of ``protocol`` (none, or a built-in
+    whose ``terminated`` is never true: its ``_fused()`` says so), so that the compiled
+    trial, which does not call ``terminated``, may run it."""
+    f = getattr(protocol, "_fused", None)
+    return protocol is None or (callable(f) and (f() or {}).get("terminates") is False)
 
 
 @dataclass(frozen=True)
