@@ -35,7 +35,8 @@ What a block is and how it is checked depends on its language:
     Not code: output, diagrams, layouts. ``<!-- test: prints -->`` before one makes it the
     output of the previous block's last command, checked as a console block's output is,
     with every number masked (a learned figure differs on a CPU with other vector
-    arithmetic; the README shows the real one).
+    arithmetic; the README shows the real one), and with it a table cell that holds a
+    number or says there is none (``not converged``, ``–``).
 
 ``sitframe run obstacle-avoidance`` exactly (the main job) is run once per test session
 (:func:`main_job`) and every page that runs it gets that log and output. ``<!-- test:
@@ -299,13 +300,16 @@ def console_steps(block: Block) -> list[tuple[str, list[str]]]:
 # -- comparing output --------------------------------------------------------------------
 
 _NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?")
+#: A table cell that stands for a number a run may or may not have: a trial's "converged at"
+#: and its collisions after convergence ("not converged", "–"), masked with the numbers.
+_NO_NUMBER = re.compile(r"(?<=│ )(?:not converged|–)(?= │)")
 _RULE = re.compile(r"([━─═┄]+)")
 
 
 def _norm(line: str, *, numbers: bool = False) -> str:
     line = " ".join(line.split())
     if numbers:
-        line = _RULE.sub(lambda m: m.group(1)[0], _NUMBER.sub("N", line))
+        line = _RULE.sub(lambda m: m.group(1)[0], _NUMBER.sub("N", _NO_NUMBER.sub("N", line)))
     return line
 
 
