@@ -103,7 +103,8 @@ class SitframeVectorEnv(VectorEnv):
         self._done = np.zeros(num_envs, dtype=bool)
         self._all = list(range(num_envs))
         self._table: list[Any] | None = None  # the command of each discrete action
-        self._grid: np.ndarray | None = None  # (its heading change and speed, (A, 2))
+        self._grid: tuple[np.ndarray, np.ndarray] | None = None  # (their heading changes
+        # and speeds, (A,) each)
         self._ctx: list[Any] = [None] * num_envs  # each robot's last context
         self._many = getattr(self.envs[0].sensor, "read_many", None)
         self._fast: tuple[CompiledStep, np.ndarray] | None | bool = False  # (False: undecided)
@@ -214,8 +215,9 @@ class SitframeVectorEnv(VectorEnv):
                 robots[js[0]].world, poses if whole else poses[js],
                 heads if whole else heads[js], speeds if whole else speeds[js], reward)
             moved = out[:, :3].copy()  # (each robot's new pose: a row of its own)
-            ties = self._record(step, [live[j] for j in js], [robots[j] for j in js], codes,
-                                moved, readings, rewards, figures)
+            ties = self._record(step, live if whole else [live[j] for j in js],
+                                robots if whole else [robots[j] for j in js], codes, moved,
+                                readings, rewards, figures)
             if whole:  # (the infos' poses: out's, not the robots' own rows)
                 obs, at = seen, out[:, :3]
             else:
