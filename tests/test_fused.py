@@ -370,18 +370,39 @@ def test_snapshots_keep_only_the_rule_base_changes_of_a_call() -> None:
     call's whole buffer (a 100k-iteration trial of today's preset held 110 MiB so)."""
     from types import SimpleNamespace
 
-    lr = SimpleNamespace(_snap_iter=[], _snap_rules=[], _snap_greedy=[], _snap_q=[])
+    from sitframe.learning.fuzzy_q import RowStack
+
+    c, a = 48, 7
+    lr = SimpleNamespace(_snap_iter=[0], _snap_rules=RowStack(np.zeros(c, np.int64), np.int16),
+                         _snap_greedy=RowStack(np.zeros(c, np.int64), np.int16),
+                         _snap_q=RowStack(np.zeros((c, a))))
     state = fused._LearnerState.__new__(fused._LearnerState)
     state.lr = lr
-    c, a = 48, 7
-    snaps = (np.arange(fused.EVERY), np.ones((fused.EVERY, c), np.int64),
+    snaps = (np.arange(1, fused.EVERY + 1), np.ones((fused.EVERY, c), np.int64),
              np.ones((fused.EVERY, c), np.int64), np.ones((fused.EVERY, c, a)))
-    state.snapshots(snaps, 2)
+    for _ in range(20):  # (past the stacks' first buffers)
+        state.snapshots(snaps, 2)
     snaps[3][:] = 5.0  # (the next call's changes overwrite the buffers)
-    assert lr._snap_iter == [0, 1] and len(lr._snap_q) == 2
-    for rows in (lr._snap_rules, lr._snap_greedy, lr._snap_q):
-        assert all(r.base is not None and r.base.shape[0] == 2 for r in rows)
-    assert all((q == 1.0).all() for q in lr._snap_q)
+    assert lr._snap_iter[:3] == [0, 1, 2] and len(lr._snap_q) == 41
+    q = lr._snap_q.array()
+    assert q.shape == (41, c, a) and (q[0] == 0.0).all() and (q[1:] == 1.0).all()
+    assert lr._snap_rules.array().dtype == np.int16 and len(lr._snap_greedy) == 41
+
+
+def test_a_row_stack_is_numpys_stack_of_its_rows() -> None:
+    """The learner's snapshots: rows cast as ``astype`` casts, read back as ``numpy.stack``
+    gives them, and a view handed out stays valid while rows are added."""
+    from sitframe.learning.fuzzy_q import RowStack
+
+    rng = np.random.default_rng(2)
+    rows = [rng.integers(-40000, 40000, 5) for _ in range(100)]
+    st = RowStack(rows[0], np.int16)
+    for r in rows[1:40]:
+        st.append(r)
+    early = st.array()
+    st.extend(np.array(rows[40:]))
+    assert np.array_equal(st.array(), np.stack(rows).astype(np.int16))
+    assert np.array_equal(early, np.stack(rows[:40]).astype(np.int16))
 
 
 def test_a_compiled_trial_refuses_bad_td_errors_as_the_python_loop_does(

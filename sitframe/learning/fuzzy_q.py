@@ -38,7 +38,7 @@ Choices where the thesis is ambiguous (all configurable):
 from __future__ import annotations
 
 from dataclasses import KW_ONLY, dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -219,6 +219,65 @@ def softmax_choice(
     return np.minimum((cdf < draws[:, None]).sum(axis=1), q.shape[1] - 1)
 
 
+class RowStack:
+    """Equal-shaped rows kept one after the other in one buffer: what ``numpy.stack`` of a list
+    of them gives, without the list or the stacking copy.
+
+    A learner's snapshots (one per rule-base change, a Q table each) are the largest part of
+    a long trial's data; a list of them stacked at the end held them twice. The buffer grows
+    by reallocation, which for a large buffer moves pages rather than copies them, and
+    :meth:`array` hands out the rows written as a view of it. After that a row appended
+    grows a new buffer instead (the view stays valid).
+
+    Parameters
+    ----------
+    first
+        The first row; its shape is every row's.
+    dtype
+        The rows' type (default ``first``'s); a row is cast to it as ``astype`` casts.
+    """
+
+    def __init__(self, first: np.ndarray, dtype: Any = None) -> None:
+        first = np.asarray(first)
+        self._buf = np.empty((16, *first.shape), dtype=dtype or first.dtype)
+        self._n = 0
+        self._shared = False  # (a view of the buffer is out: never resize it in place)
+        self.append(first)
+
+    def __len__(self) -> int:
+        return self._n
+
+    def append(self, row: np.ndarray) -> None:
+        """Add one row (copied)."""
+        self._room(1)
+        self._buf[self._n] = row
+        self._n += 1
+
+    def extend(self, rows: np.ndarray) -> None:
+        """Add the rows of ``rows`` (k, *shape) (copied)."""
+        k = len(rows)
+        self._room(k)
+        self._buf[self._n:self._n + k] = rows
+        self._n += k
+
+    def array(self) -> np.ndarray:
+        """The rows so far, (n, *shape): a view of the buffer, not a copy."""
+        self._shared = True
+        return self._buf[:self._n]
+
+    def _room(self, k: int) -> None:
+        cap = len(self._buf)
+        if self._n + k <= cap:
+            return
+        shape = (max(2 * cap, self._n + k), *self._buf.shape[1:])
+        if self._shared:
+            grown = np.empty(shape, dtype=self._buf.dtype)
+            grown[:self._n] = self._buf[:self._n]
+            self._buf, self._shared = grown, False
+        else:
+            self._buf.resize(shape, refcheck=False)
+
+
 class FuzzyQLearner:
     """Learns one consequent (e.g. heading) of a situation rule base.
 
@@ -272,9 +331,9 @@ class FuzzyQLearner:
         self.removed = np.zeros(c, dtype=bool)
         # Records: one row per rule-base change (snapshots) and per iteration.
         self._snap_iter: list[int] = [0]
-        self._snap_rules: list[np.ndarray] = [self.rule_base.copy()]
-        self._snap_greedy: list[np.ndarray] = [self.greedy.copy()]
-        self._snap_q: list[np.ndarray] = [self.q.copy()]
+        self._snap_rules = RowStack(self.rule_base, np.int16)
+        self._snap_greedy = RowStack(self.greedy, np.int16)
+        self._snap_q = RowStack(self.q)
         self.rules_per_iteration = np.zeros((max_iterations, c), dtype=np.int8)
         g = int(params.groups)
         if g > 1 and c % g:
@@ -462,9 +521,9 @@ class FuzzyQLearner:
         else:
             self.rule_base = softmax_choice(self.q, self.params, self.rng, self.temperature)
         self._snap_iter.append(iteration + 1)
-        self._snap_rules.append(self.rule_base.copy())
+        self._snap_rules.append(self.rule_base)
         self._snap_greedy.append(greedy)
-        self._snap_q.append(self.q.copy())
+        self._snap_q.append(self.q)
 
     def _min_updates(self) -> int:
         """Fewest updates of a situation that counts (with evolving situations: rows that were
@@ -531,10 +590,10 @@ class FuzzyQLearner:
         """Arrays to log: snapshots at each rule-base change and per-iteration rules."""
         return {
             "q": self.q.copy(),
-            "q_snapshots": np.stack(self._snap_q),
+            "q_snapshots": self._snap_q.array(),
             "snapshot_iteration": np.asarray(self._snap_iter, dtype=np.int64),
-            "snapshot_rule_base": np.stack(self._snap_rules).astype(np.int16),
-            "snapshot_greedy": np.stack(self._snap_greedy).astype(np.int16),
+            "snapshot_rule_base": self._snap_rules.array(),
+            "snapshot_greedy": self._snap_greedy.array(),
             "rule_base": self.rules_per_iteration[:iterations].copy(),
             "final_rule_base": self.final_rule_base().astype(np.int16),
             "updates": self.updates.copy(),

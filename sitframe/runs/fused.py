@@ -486,15 +486,16 @@ class _LearnerState:
         return self.converged, self.stable, self.since, self.changes
 
     def snapshots(self, snaps: tuple[np.ndarray, ...], k: int) -> None:
-        """Append the ``k`` rule-base changes of a call to the learner's snapshots (copies:
-        the buffers are the next call's)."""
+        """Append the ``k`` rule-base changes of a call to the learner's snapshots (copied
+        into their :class:`~sitframe.learning.fuzzy_q.RowStack`: the buffers are the next
+        call's)."""
         if self.lr is None or not k:
             return
         it, rules, greedy, q = snaps
         self.lr._snap_iter.extend(it[:k].tolist())
-        self.lr._snap_rules.extend(rules[:k].copy())
-        self.lr._snap_greedy.extend(greedy[:k].copy())
-        self.lr._snap_q.extend(q[:k].copy())
+        self.lr._snap_rules.extend(rules[:k])
+        self.lr._snap_greedy.extend(greedy[:k])
+        self.lr._snap_q.extend(q[:k])
 
     def write_back(self, state: np.ndarray) -> None:
         """The learner's scalars, rule bases and learning-rate counts, now."""
