@@ -175,8 +175,8 @@ RECIPES: dict[str, Recipe] = {
     "goal-finding": Recipe(("goal-finding",), (
         f"{POOLED} --publish goal-finding {S}/goal-finding",), 4),
     "speed-41": Recipe((), (
-        f"{PY} benchmarks/learning/bench_speed.py --against b2a2035 --repeats 5 "
-        "--publish speed-41",), 6),
+        f"{PY} benchmarks/learning/bench_speed.py --against b2a2035 --repeats 9 "
+        "--publish speed-41",), 8),
     "gym-speed": Recipe((), (
         f"{PY} benchmarks/sim/bench_gym.py --steps 3200 --repeats 5 --publish gym-speed",), 2),
     "first-call": Recipe((), (
