@@ -260,8 +260,8 @@ class SitframeVectorEnv(VectorEnv):
         """The heading changes [deg] and speeds [m/s] (M,) of the live robots' actions:
         discrete ones looked up (after one range check of them all), others through
         :meth:`_commands`."""
-        if self._grid is None:
-            cmds = [self.task.command(a, False) for a in range(self.task.n_actions)]
+        if self._grid is None:  # (from the command table :meth:`_commands` looks up)
+            cmds = self._commands(list(range(self.task.n_actions)))
             self._grid = (np.array([c.heading_change_deg for c in cmds]),
                           np.array([c.speed_m_s for c in cmds]))
         if not self.continuous and acts.ndim == 1 and acts.dtype.kind in "iu" and \

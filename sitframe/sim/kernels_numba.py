@@ -251,12 +251,21 @@ def _dist2(px: float, py: float, seg: np.ndarray, j: int) -> float:  # pragma: n
 def near_segments(x: float, y: float, seg: np.ndarray, reach2: float,
                   idx: np.ndarray) -> int:  # pragma: no cover - compiled
     """Indices (into ``idx``) of the segments closer than ``sqrt(reach2)``; returns their count."""
-    m = 0
+    return _near(x, y, seg, reach2, idx)[0]
+
+
+@njit(**_JIT, inline="always")
+def _near(x: float, y: float, seg: np.ndarray, reach2: float,
+          idx: np.ndarray) -> tuple[int, float]:  # pragma: no cover - compiled
+    """:func:`near_segments`' count, and the nearest one's squared distance (``inf``: none)."""
+    m, near2 = 0, np.inf
     for j in range(seg.shape[1]):
-        if _dist2(x, y, seg, j) < reach2:
+        d2 = _dist2(x, y, seg, j)
+        if d2 < reach2:
             idx[m] = j
             m += 1
-    return m
+            near2 = d2 if d2 < near2 else near2
+    return m, near2
 
 
 @njit(**_JIT)
@@ -364,13 +373,7 @@ def step_free(x0: float, y0: float, th0: float, v: float, omega: float, t_turn: 
     where they are numpy's too (:func:`sitframe.sim.kernels.fused`).
     """
     idx = np.empty(seg.shape[1], dtype=np.intp)
-    m, near2 = 0, np.inf  # (near_segments, and the nearest one's squared distance)
-    for j in range(seg.shape[1]):
-        d2 = _dist2(x0, y0, seg, j)
-        if d2 < reach2:
-            idx[m] = j
-            m += 1
-            near2 = d2 if d2 < near2 else near2
+    m, near2 = _near(x0, y0, seg, reach2, idx)
     th_end = th0 + omega * t_turn
     if m == 0:  # robot._pose_at(T, ...), T the period (the last of ``times``)
         t = times[times.size - 1]
