@@ -118,13 +118,14 @@ def test_no_chain_of_imports_is_longer_than_ten_modules():
 
 def test_the_top_level_is_the_ground_floor_and_the_subpackages():
     """sitframe/ holds the public face (and ``python -m sitframe``), the ground floor (errors,
-    params), one subpackage per job and the presets: thirteen entries besides data folders.
+    params, scratch), one subpackage per job and the presets: fourteen entries besides data
+    folders.
     A new module belongs in the subpackage of its job."""
     entries = sorted(p.name for p in ROOT.iterdir() if p.name != "__pycache__")
     subpackages = ["analysis", "cli", "contract", "gym", "learning", "logs", "runs", "sim",
                    "situations"]
     assert entries == sorted(["__init__.py", "__main__.py", "errors.py", "params.py",
-                              "presets", *subpackages])
+                              "scratch.py", "presets", *subpackages])
     for sub in subpackages:  # each says its job, what it may import and its entry points
         doc = ast.get_docstring(ast.parse((ROOT / sub / "__init__.py").read_text())) or ""
         assert "may import" in doc and "Entry points" in doc, sub

@@ -43,6 +43,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from sitframe import params as P
+from sitframe import scratch
 from sitframe.sim.kernels import kernels
 
 if TYPE_CHECKING:
@@ -235,10 +236,14 @@ class RowStack:
         The first row; its shape is every row's.
     dtype
         The rows' type (default ``first``'s); a row is cast to it as ``astype`` casts.
+    file
+        Keep the buffer in a scratch file once it outgrows :data:`sitframe.scratch.BLOCK`
+        bytes (a long trial's, :mod:`sitframe.scratch`).
     """
 
-    def __init__(self, first: np.ndarray, dtype: Any = None) -> None:
+    def __init__(self, first: np.ndarray, dtype: Any = None, *, file: bool = False) -> None:
         first = np.asarray(first)
+        self._file = file
         self._buf = np.empty((16, *first.shape), dtype=dtype or first.dtype)
         self._n = 0
         self._shared = False  # (a view of the buffer is out: never resize it in place)
@@ -270,12 +275,13 @@ class RowStack:
         if self._n + k <= cap:
             return
         shape = (max(2 * cap, self._n + k), *self._buf.shape[1:])
-        if self._shared:
-            grown = np.empty(shape, dtype=self._buf.dtype)
-            grown[:self._n] = self._buf[:self._n]
-            self._buf, self._shared = grown, False
-        else:
+        big = self._file and shape[0] * self._buf[:1].nbytes >= scratch.BLOCK  # (or memory)
+        if not (self._shared or big or scratch.in_file(self._buf)):
             self._buf.resize(shape, refcheck=False)
+            return
+        grown = scratch.empty(shape, self._buf.dtype, file=big)
+        scratch.copy_rows(grown, self._buf[:self._n])
+        self._buf, self._shared = grown, False
 
 
 class FuzzyQLearner:
@@ -331,10 +337,11 @@ class FuzzyQLearner:
         self.removed = np.zeros(c, dtype=bool)
         # Records: one row per rule-base change (snapshots) and per iteration.
         self._snap_iter: list[int] = [0]
-        self._snap_rules = RowStack(self.rule_base, np.int16)
-        self._snap_greedy = RowStack(self.greedy, np.int16)
-        self._snap_q = RowStack(self.q)
-        self.rules_per_iteration = np.zeros((max_iterations, c), dtype=np.int8)
+        long = scratch.wanted(max_iterations)
+        self._snap_rules = RowStack(self.rule_base, np.int16, file=long)
+        self._snap_greedy = RowStack(self.greedy, np.int16, file=long)
+        self._snap_q = RowStack(self.q, file=long)
+        self.rules_per_iteration = scratch.empty((max_iterations, c), np.int8, fill=0)
         g = int(params.groups)
         if g > 1 and c % g:
             raise ValueError(f"{c} rules do not fall into {g} equal groups")
@@ -594,7 +601,7 @@ class FuzzyQLearner:
             "snapshot_iteration": np.asarray(self._snap_iter, dtype=np.int64),
             "snapshot_rule_base": self._snap_rules.array(),
             "snapshot_greedy": self._snap_greedy.array(),
-            "rule_base": self.rules_per_iteration[:iterations].copy(),
+            "rule_base": scratch.copy(self.rules_per_iteration[:iterations]),
             "final_rule_base": self.final_rule_base().astype(np.int16),
             "updates": self.updates.copy(),
             **({"replayed": self.replayed} if self.params.replay else {}),

@@ -49,6 +49,7 @@ from typing import Any
 
 import numpy as np
 
+from sitframe import scratch
 from sitframe.learning.fuzzy_q import FuzzyQLearner, softmax_choice
 from sitframe.sim import numba_cache, numpy_loops
 from sitframe.sim.kernels import contact, kernels, load
@@ -56,10 +57,13 @@ from sitframe.sim.kernels import fused as fused_trig
 from sitframe.sim.robot import Command, _times, packed_params, step_robot
 from sitframe.situations.fcm import row_sq_norms
 
-__all__ = ["EVERY", "MIN_ITERATIONS", "Fused", "prepare", "run", "wanted"]
+__all__ = ["EVERY", "MIN_ITERATIONS", "RELEASE", "Fused", "prepare", "run", "wanted"]
 
 #: Iterations per call of the kernel (and between two ``sitframe_progress`` calls).
 EVERY = 100
+#: Iterations between two releases of the pages of a trial's rows recorded in scratch files
+#: (:func:`sitframe.scratch.release_all`): a long trial's memory stays that of this many.
+RELEASE = 50 * EVERY
 #: A trial this long loads the compiled kernels for itself (shorter ones use them once loaded).
 MIN_ITERATIONS = 500
 _POWER = {1.0: 1, -1.0: 2, 0.0: 3, 0.5: 4, 2.0: 5}  # (fused_kernels.POW_*: numpy's fast powers)
@@ -361,6 +365,8 @@ def run(fz: Fused, res: Any, spec: Any, rec: Any, env: Any, chain: Any,
                 raise AssertionError("fused: the tracker took TD errors the kernel refused")
         learn.snapshots(snaps, int(state[6]))
         t = t1
+        if t % RELEASE == 0:
+            scratch.release_all()
         if progress is not None and t % EVERY == 0:
             progress(spec.index, EVERY)
         if chain is not None and chain.over(None, t, L):

@@ -37,6 +37,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pluggy
 
+from sitframe import scratch
 from sitframe.contract.checks import (
     MEMBERSHIP_SUM_TOL,
     BoundaryError,
@@ -422,6 +423,9 @@ def _space_load(res: Resolved, name: str, spec: TrialSpec) -> _Space:
 class Recorder:
     """The per-iteration arrays of one trial: allocated, filled and trimmed in one place.
 
+    A trial longer than :func:`sitframe.scratch.limit` iterations keeps them in scratch
+    files, whose pages the loop releases as it goes (:mod:`sitframe.scratch`).
+
     Parameters
     ----------
     iterations
@@ -441,19 +445,23 @@ class Recorder:
 
     def __init__(self, iterations: int, dim: int, c: int, labels: list[str],
                  rewarded: list[str], spaces: dict[str, int] | None = None) -> None:
-        L = iterations
+        L, long = iterations, scratch.wanted(iterations)
+
+        def new(shape: Any, dtype: Any = np.float64, fill: Any = None) -> np.ndarray:
+            return scratch.empty(shape, dtype, fill=fill, file=long)
+
         self.labels = labels
-        self.pose = np.empty((L + 1, 3))
-        self.reading = np.empty((L, dim))
-        self.memberships = np.empty((L, c))
-        self.spaces = {name: np.empty((L, cs)) for name, cs in (spaces or {}).items()}
-        self.weights = np.empty((L, len(labels)))
-        self.command = np.empty((L, 2))
-        self.nearest = np.empty(L)
-        self.collision = np.zeros(L, dtype=bool)
-        self.contact = np.full((L, 2), np.nan)
-        self.proposals = np.empty((L, 2 * len(labels)))
-        self.rewards = np.empty((L, len(rewarded)))
+        self.pose = new((L + 1, 3))
+        self.reading = new((L, dim))
+        self.memberships = new((L, c))
+        self.spaces = {name: new((L, cs)) for name, cs in (spaces or {}).items()}
+        self.weights = new((L, len(labels)))
+        self.command = new((L, 2))
+        self.nearest = new(L)
+        self.collision = new(L, bool, False)
+        self.contact = new((L, 2), np.float64, np.nan)
+        self.proposals = new((L, 2 * len(labels)))
+        self.rewards = new((L, len(rewarded)))
         self.rewarded = rewarded
 
     def record(self, t: int, ctx: Context, cmd: Command, out: StepOutcome, weights: np.ndarray,
@@ -487,20 +495,23 @@ class Recorder:
         Checks every reading (against the sensor's ``max_range``), membership
         vector and weight first (vectorised, :func:`_check_trial_values`).
         """
-        _check_trial_values(self.reading[:n], self.memberships[:n], self.weights[:n], origins,
-                            trial, max_range)
-        for name, u in self.spaces.items():
-            _check_memberships_rows(u[:n], origins[f"spaces.{name}"], trial)
+        for i in range(0, n, fused.RELEASE):  # (in blocks: a long trial's arrays are never all in)
+            j = min(n, i + fused.RELEASE)
+            _check_trial_values(self.reading[i:j], self.memberships[i:j], self.weights[i:j],
+                                origins, trial, max_range, first=i)
+            for name, u in self.spaces.items():
+                _check_memberships_rows(u[i:j], origins[f"spaces.{name}"], trial, first=i)
+            scratch.release_all()
         out = {"pose": self.pose[: n + 1], READING: self.reading[:n],
                "memberships": self.memberships[:n], "command": self.command[:n],
                "collision": self.collision[:n], "contact": self.contact[:n],
                "nearest": self.nearest[:n], "weights": self.weights[:n]}
         for i, lb in enumerate(self.labels):
-            out[f"proposals/{lb}"] = self.proposals[:n, 2 * i: 2 * i + 2].copy()
+            out[f"proposals/{lb}"] = scratch.copy(self.proposals[:n, 2 * i: 2 * i + 2])
         for name, u in self.spaces.items():
             out[f"spaces/{name}/memberships"] = u[:n]
         for i, lb in enumerate(self.rewarded):
-            out[f"reward/{lb}"] = self.rewards[:n, i].copy()
+            out[f"reward/{lb}"] = scratch.copy(self.rewards[:n, i])
         return out
 
 
@@ -600,8 +611,8 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
             if step_hook is not None:
                 step_at = at_step
                 step_hook(StepRecord(k, trs[0], proposals, weights, rewards))
-            if progress is not None and (t + 1) % fused.EVERY == 0:
-                progress(k, fused.EVERY)
+            if (t + 1) % fused.EVERY == 0:
+                _block_done(k, t + 1, progress)
             ctx, ctxs = ctxs2[0], ctxs2
             if at_end is not None and (step_at := at_end) and \
                     check_flag(protocol.terminated(ctx)):
@@ -621,6 +632,16 @@ def _run_loop(res: Resolved, spec: TrialSpec, parts: _TrialParts, rec: Recorder,
         raise _loop_fault(exc, step_at, k, t, res, locals()) from exc
     rec.pose[n_done] = pose
     return n_done
+
+
+def _block_done(trial: int, t: int, progress: Callable[[int, int], None] | None) -> None:
+    """After iteration ``t - 1``, a multiple of :data:`~sitframe.runs.fused.EVERY`: tell
+    ``progress``, and every :data:`~sitframe.runs.fused.RELEASE` iterations drop the pages
+    of the rows recorded in scratch files (:func:`sitframe.scratch.release_all`)."""
+    if t % fused.RELEASE == 0:
+        scratch.release_all()
+    if progress is not None:
+        progress(trial, fused.EVERY)
 
 
 def _in_spaces(ctx: Context, spaces: list[_Space], trial: int) -> list[Context]:
@@ -1084,19 +1105,22 @@ def _loop_fault(exc: Exception, step_at: _Step, trial: int, t: int, res: Resolve
     return fault(exc, step_at.origin or "an observer (sitframe_step)", step_at.method, trial, t)
 
 
-def _check_memberships_rows(u: np.ndarray, origin: Origin, trial: int) -> None:
-    """Vectorised check of a space's memberships over a finished trial."""
+def _check_memberships_rows(u: np.ndarray, origin: Origin, trial: int, first: int = 0) -> None:
+    """Vectorised check of a space's memberships over a finished trial (the rows from
+    iteration ``first`` on)."""
     bad = ~np.isfinite(u).all(axis=1) | (u < 0).any(axis=1) | \
         (np.abs(u.sum(axis=1) - 1.0) > MEMBERSHIP_SUM_TOL)
     if bad.any():
         t = int(np.argmax(bad))
         raise PluginFault(memberships_mismatch(u[t], u.shape[1]) or "invalid", where=str(origin),
-                          method="memberships", trial=trial, iteration=t)
+                          method="memberships", trial=trial, iteration=first + t)
 
 
 def _check_trial_values(readings: np.ndarray, u: np.ndarray, weights: np.ndarray,
-                        origins: dict[str, Origin], trial: int, max_range: float) -> None:
-    """Vectorised checks of every reading, membership vector and weight of a finished trial."""
+                        origins: dict[str, Origin], trial: int, max_range: float,
+                        first: int = 0) -> None:
+    """Vectorised checks of every reading, membership vector and weight of a finished trial
+    (the rows from iteration ``first`` on)."""
     def nonfinite(x: np.ndarray) -> np.ndarray:
         return ~np.isfinite(x).all(axis=1)
 
@@ -1112,7 +1136,7 @@ def _check_trial_values(readings: np.ndarray, u: np.ndarray, weights: np.ndarray
         if bad.any():
             t = int(np.argmax(bad))
             raise PluginFault(why(values[t]), where=str(origins[key]), method=method,
-                              trial=trial, iteration=t)
+                              trial=trial, iteration=first + t)
 
 
 def _checked(origin: Origin, method: str, check: Callable[[Any], Any], fn: Callable[[], Any],

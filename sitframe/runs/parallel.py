@@ -56,6 +56,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import suppress
 from typing import TYPE_CHECKING, Any
 
+from sitframe import scratch
 from sitframe.errors import (
     InputError,
     PluginFault,
@@ -111,10 +112,12 @@ def _worker_init(lifeline: Any = None, inherited_writer: Any = None) -> None:
     pipe whose only write end the main process holds: when the main process
     dies (even by SIGKILL) the read sees EOF and the worker exits, instead
     of lingering blocked on the task queue (whose pipe the workers
-    themselves keep open).
+    themselves keep open). A long trial's arrays in scratch files are handed back by the
+    files' names (:func:`sitframe.scratch.share_by_name`).
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _on_sigterm)
+    scratch.share_by_name()  # (a long trial reaches the main process as its files' names)
     warnings.showwarning = show_warning  # (a worker writes to the command's stderr)
     quiet_teardown()
     if inherited_writer is not None:
