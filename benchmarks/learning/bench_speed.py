@@ -7,7 +7,8 @@ does a long trial's memory stay flat?
 Output: printed: the medians of both in alternating fresh processes and their ratios (and
 today's preset's on both paths of this checkout, alternating too); a
 profile of one trial of each (seconds per part of the step); the peak RSS of trials of
-10k, 50k and 100k iterations (REV's preset, as timed, and today's); with ``--publish NAME``
+10k, 50k and 100k iterations (REV's preset, as timed, and today's, in the process and in a
+pool's worker); with ``--publish NAME``
 the same as a Markdown table in
 ``docs/results/tables/NAME.md``.
 
@@ -19,7 +20,8 @@ warm-up trial first (the compiled kernels loaded, as in any run longer than a fe
 iterations). The simulator is ``benchmarks/sim/bench_sim.py``'s wander loop (one 8-ray
 sonar read and one 1.5 s step per iteration). The profile is cProfile's (its overhead
 inflates Python-heavy parts; compare the shares, not the seconds, with the timings).
-Peak RSS is that of a fresh process running one trial with its log (this checkout)::
+Peak RSS is that of a fresh process running one trial with its log (this checkout), and of
+one whose trial a pool's worker runs (and the worker's)::
 
     python benchmarks/learning/bench_speed.py --against main --repeats 5
     python benchmarks/learning/bench_speed.py --against main --repeats 5 --publish speed-41
@@ -149,22 +151,31 @@ sys.path.insert(0, {bench!r})
 import bench_speed as m
 cfg, source, state, prepare = m._setup({config!r}, {iterations})
 before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+worker = None
 with tempfile.TemporaryDirectory() as tmp:
     exp, _ = prepare(cfg, source=source, out=tmp + "/t.h5")
+    if {pool}:
+        from sitframe.runs.parallel import ProcessExecutor
+        exp.executor = ProcessExecutor(1)
     exp.run(interpreter_state=state)
+    if {pool}:
+        worker = exp.executor.submit(resource.getrusage, resource.RUSAGE_SELF).result().ru_maxrss
+        exp.executor.shutdown()
 after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-print(json.dumps([before, after]))
+print(json.dumps([before, after, worker]))
 """
 
 
-def peak_rss(config: str, iterations: int) -> tuple[float, float]:
+def peak_rss(config: str, iterations: int, pool: bool = False
+             ) -> tuple[float, float, float | None]:
     """Peak RSS [MiB] of a fresh process (this checkout) before and after one logged trial of
-    ``iterations``."""
-    code = _RSS.format(bench=str(Path(__file__).parent), config=config, iterations=iterations)
+    ``iterations``, and with ``pool`` (the trial run by a pool's one worker) the worker's."""
+    code = _RSS.format(bench=str(Path(__file__).parent), config=config, iterations=iterations,
+                       pool=pool)
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, env=dict(os.environ, SITFRAME_NUMBA="1"))
-    before, after = json.loads(res.stdout.strip().splitlines()[-1])
-    return before / 1024, after / 1024
+    before, after, worker = json.loads(res.stdout.strip().splitlines()[-1])
+    return before / 1024, after / 1024, None if worker is None else worker / 1024
 
 
 def loop_or_compiled(repeats: int) -> dict[str, list[float]]:
@@ -216,8 +227,9 @@ def _table(rev: str, med: dict[str, dict[str, float]], prof: dict[str, dict[str,
                      f"{b / prof[new]['total']:.0%} |")
     lines.append(f"| **total** | {prof[old]['total']:.3f} | | {prof[new]['total']:.3f} | |")
     lines += ["", "| one logged trial of | iterations | peak RSS before the trial (MiB) | "
-              "after (MiB) |", "|---|---:|---:|---:|"]
-    lines += [f"| {name} | {n:,} | {b:.0f} | {a:.0f} |" for name, n, b, a in rss]
+              "after (MiB) | its worker's (MiB) |", "|---|---:|---:|---:|---:|"]
+    lines += [f"| {name} | {n:,} | {b:.0f} | {a:.0f} | {'–' if w is None else f'{w:.0f}'} |"
+              for name, n, b, a, w in rss]
     return "\n".join(lines)
 
 
@@ -254,10 +266,12 @@ def main() -> None:
         old.write_text(subprocess.run(["git", "show", f"{rev}:sitframe/presets/"
                                        "obstacle-avoidance.toml"], capture_output=True,
                                       text=True, check=True, cwd=BENCHMARKS.parent).stdout)
-        rss = [(name, n, *peak_rss(cfg, n))
-               for name, cfg in ((f"{rev}'s obstacle-avoidance (compiled)", str(old)),
-                                 ("today's obstacle-avoidance (evolving, compiled)",
-                                  "obstacle-avoidance"))
+        rss = [(name, n, *peak_rss(cfg, n, pool))
+               for name, cfg, pool in (
+                   (f"{rev}'s obstacle-avoidance (compiled)", str(old), False),
+                   ("today's obstacle-avoidance (evolving, compiled)", "obstacle-avoidance",
+                    False),
+                   ("the same in a pool's worker", "obstacle-avoidance", True))
                for n in (int(v) for v in args.rss.split(",") if v.strip())]
     table = _table(rev, med, prof, rss)
     print(table)
