@@ -102,12 +102,12 @@ class FullDisk:
         self.real, self.after, self.n = writer.write_bytes, after, 0
         monkeypatch.setattr(writer, "write_bytes", self)
 
-    def __call__(self, fd: int, image: bytes) -> None:
+    def __call__(self, fd: int, data: bytes | memoryview) -> None:
         self.n += 1
         if self.n > self.after:
             os.close(fd)
             raise OSError(errno.ENOSPC, "No space left on device")
-        self.real(fd, image)
+        self.real(fd, data)
 
 
 def _leftovers(folder: Path) -> list[str]:

@@ -88,10 +88,10 @@ def test_the_end_of_the_run_packs_and_a_failed_commit_leaves_no_trial_file(unpac
 
     real, calls = L.write_bytes, []
 
-    def full(fd, image):  # the trial file is written, the run file is not
-        calls.append(len(image))
+    def full(fd, data):  # the trial file is written, the run file is not
+        calls.append(len(data))
         if len(calls) == 1:
-            return real(fd, image)
+            return real(fd, data)
         os.close(fd)
         raise OSError(errno.ENOSPC, "No space left on device")
 

@@ -69,7 +69,7 @@ def test_a_long_trials_rows_go_to_files_and_a_short_ones_stay_in_memory(monkeypa
 
 
 def test_arrays_cross_to_a_pool_by_name_and_their_files_go(folder):
-    ctx = mp.get_context("forkserver")
+    ctx = mp.get_context("spawn")  # (its own environment: the scratch folder above)
     with cf.ProcessPoolExecutor(1, mp_context=ctx, initializer=scratch.share_by_name) as ex:
         got = ex.submit(_made_in_a_worker, 50_000).result()
     rows = np.arange(50_000 * 8, dtype=np.float64).reshape(50_000, 8)

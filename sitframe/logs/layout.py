@@ -61,22 +61,34 @@ ever publishes a complete, closed file by an atomic rename
 created with :func:`tempfile.mkstemp`, so a pre-existing file or symlink is
 never written through):
 
-* Every file is built in memory (HDF5's core driver, no backing store) and
-  reaches the disk as plain bytes, written to the scratch file by one
-  ordinary ``write`` (:func:`sitframe.logs.writer.write_bytes`, the writer's
-  one boundary with the disk). A full disk then fails that write, which
-  leaves the published log as it was and is one
-  :class:`~sitframe.errors.DiskFullError` line naming the folder, what is
-  free and what the log needs; HDF5 itself never meets a failing write (it
-  used to, and left its library state broken: the next call crashed the
-  process, SIGSEGV, with the log still ``running``).
+* A file reaches the disk only through one function
+  (:func:`sitframe.logs.writer.write_bytes`, the writer's one boundary with
+  the disk), and HDF5 itself never meets a failing write (it used to, and
+  left its library state broken: the next call crashed the process,
+  SIGSEGV, with the log still ``running``). A small file (a stage, the run
+  file during the run, a trial of up to 16 MiB of arrays) is built in memory
+  (HDF5's core driver) and written to the scratch file by one ordinary
+  ``write``. A large one (a long trial's, the log being packed) is written
+  by HDF5 straight into its scratch file, through a Python file object
+  (h5py's ``fileobj`` driver) that gathers its writes into pieces of a few
+  MiB and never reports a failure to HDF5: the first write that fails is
+  recorded, the file as written so far is read back into memory and HDF5
+  finishes it there; once HDF5 has closed the file the error is raised.
+  Either way a full disk removes the scratch file, leaves the published log
+  as it was and is one :class:`~sitframe.errors.DiskFullError` line naming
+  the folder, what is free and what the log needs. Memory does not grow
+  with a trial's length: a large file is never whole in memory (but on
+  that failing path), and a trial's arrays kept in scratch files
+  (:mod:`sitframe.scratch`) are handed to HDF5 a block of rows at a time.
 * A finished trial is written to its own file, ``LOG.trials/NNNN.h5`` (the
   trial group's contents at the file's root), and then linked from the run
   file as ``/trials/NNNN`` by an HDF5 external link; its row is appended to
   ``/summary``. The run file (root attributes, stages, links, summary) is
-  changed copy-on-write: read into memory, changed, and its bytes written to
-  a scratch file renamed over the log. It holds no trial data, so a trial costs the
-  same to write whether it is the first or the thousandth (see
+  changed copy-on-write: read into memory (a large one: copied to the
+  scratch file by plain I/O through the same boundary, so a full disk there
+  fails before HDF5 opens the copy), changed, and written to a scratch file
+  renamed over the log. It holds no trial data, so a trial costs the same to write
+  whether it is the first or the thousandth (see
   ``benchmarks/logs/bench_log.py``).
 * The run's end (any status but ``running``: ``complete``, ``aborted``,
   ``failed``) *packs* the log: one transaction copies every linked trial
