@@ -28,6 +28,7 @@ from __future__ import annotations
 import atexit
 import itertools
 import mmap
+import multiprocessing.util
 import os
 import tempfile
 import weakref
@@ -129,8 +130,9 @@ def share_by_name() -> None:
     (:mod:`sitframe.runs.parallel`). The process that unpickles it unlinks the file; this
     one unlinks those it never hands over (when their arrays are gone, or at exit), and the
     files of processes that died are removed here."""
-    if not _share[0]:
+    if not _share[0]:  # (a pool worker ends by os._exit: multiprocessing's own exit hook)
         atexit.register(_unlink_unhanded)
+        multiprocessing.util.Finalize(None, _unlink_unhanded, exitpriority=0)
     _share[0] = True
     with suppress(OSError):
         for p in folder().glob("*.scratch"):

@@ -46,7 +46,7 @@ def test_a_run_with_its_arrays_in_scratch_files_logs_the_same_bits(tmp_path, wor
     cfg.write_text(small_config(trials=3, iterations=400))
     where = tmp_path / "scratch"
     logs = {}
-    for rows in ("0", "inf"):
+    for rows in ("inf", "0"):  # (files last: a later pool would sweep what it left)
         logs[rows] = tmp_path / f"rows-{rows}.h5"
         env = dict(os.environ, SITFRAME_SCRATCH_ROWS=rows, SITFRAME_SCRATCH_DIR=str(where))
         subprocess.run([sys.executable, "-m", "sitframe", "run", str(cfg), "--out",
