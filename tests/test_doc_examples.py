@@ -155,3 +155,14 @@ def test_the_readme_headline_table_is_the_published_one() -> None:
     readme = (ROOT / "README.md").read_text("utf-8")
     block = readme.split("<!-- headline:start -->\n", 1)[1].split("<!-- headline:end -->")[0]
     assert block.strip() == readme_table(table).strip()
+
+
+def test_the_references_sphinx_roles_read_as_plain_code():
+    """A docstring's ``:func:`~sitframe.scratch.limit``` reads ``limit`` in the reference, not
+    ``:func:limit``; a role without ``~`` keeps its whole name; other text is untouched."""
+    plain = _generate().plain_roles
+    assert plain("sets :func:<code>~sitframe.scratch.limit</code> (default)") == \
+        "sets <code>limit</code> (default)"
+    assert plain("a :class:<code>numpy.memmap</code> and :meth:<code>Foo.bar</code>") == \
+        "a <code>numpy.memmap</code> and <code>Foo.bar</code>"
+    assert plain("ratio: 3:<code>x</code>") == "ratio: 3:<code>x</code>"

@@ -508,3 +508,20 @@ def render(markdown: str) -> str:
 def on_page_markdown(markdown: str, **_kw: Any) -> str:
     """MkDocs hook: the page's markers replaced."""
     return render(markdown)
+
+
+#: A Sphinx role as the API reference renders it from a docstring: ``:func:`~a.b.c```
+#: becomes ``:func:<code>~a.b.c</code>``.
+ROLE = re.compile(r":(?:func|class|meth|mod|data|attr|exc|obj):<code>(~?)([^<]*)</code>")
+
+
+def plain_roles(html: str) -> str:
+    """``html`` with the docstrings' Sphinx roles shown as code alone (``~`` shortening a
+    dotted name to its last part, as Sphinx does)."""
+    return ROLE.sub(lambda m: f"<code>{m.group(2).rsplit('.', 1)[-1] if m.group(1) else m.group(2)}"
+                              "</code>", html)
+
+
+def on_page_content(html: str, **_kw: Any) -> str:
+    """MkDocs hook: the reference's Sphinx roles shown as plain code (:func:`plain_roles`)."""
+    return plain_roles(html)
