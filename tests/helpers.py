@@ -3,6 +3,12 @@
 from __future__ import annotations
 
 import os
+import subprocess
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
 
 #: The environment of a run a test kills part-way: its trials on the Python loop
 #: (``SITFRAME_FUSED=0``, the same results), so that it is still running some 0.3 s after
@@ -97,3 +103,32 @@ points = [[0, 0], [6, 0], [6, 4], [0, 4], [0, 0]]
 [[obstacles]]
 points = [[4, 2.5], [5, 2.5], [5, 3.2], [4, 3.2]]
 """
+
+
+class Disk:
+    """A folder on a tmpfs of its own (``size`` in bytes, changed by :meth:`resize`)."""
+
+    def __init__(self, folder: Path) -> None:
+        self.folder = folder
+
+    def resize(self, size: int) -> None:
+        subprocess.run(["mount", "-o", f"remount,size={size}", str(self.folder)], check=True)
+
+
+@contextmanager
+def small_tmpfs(folder: Path, size: str) -> Iterator[Disk]:
+    """A tmpfs of ``size`` (``mount``'s, e.g. ``"4m"``) mounted on the new ``folder``: a real
+    full disk. Skips the test where mounting needs root or the system does not allow it
+    (the injected ENOSPC tests cover the path there)."""
+    folder.mkdir()
+    if os.geteuid() != 0:
+        pytest.skip("mounting a tmpfs needs root (the injected ENOSPC tests cover the path)")
+    res = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(folder)],
+                         capture_output=True, text=True)
+    if res.returncode:
+        pytest.skip(f"this system does not allow mounting a tmpfs ({res.stderr.strip()}); "
+                    "the injected ENOSPC tests cover the path")
+    try:
+        yield Disk(folder)
+    finally:
+        subprocess.run(["umount", "-l", str(folder)], check=False)

@@ -33,7 +33,7 @@ import warnings
 from pathlib import Path
 
 import pytest
-from helpers import KILLABLE, small_config
+from helpers import KILLABLE, small_config, small_tmpfs
 
 from sitframe.cli.app import main
 from sitframe.logs.compare import compare_logs
@@ -211,31 +211,10 @@ def test_disk_full_before_a_new_run_has_a_trial_keeps_the_log_it_was_to_replace(
 # ----------------------------------------------------------------------------- a real tmpfs
 
 
-class Disk:
-    """A folder on a tmpfs of its own (``size`` in bytes, changed by :meth:`resize`)."""
-
-    def __init__(self, folder: Path) -> None:
-        self.folder = folder
-
-    def resize(self, size: int) -> None:
-        subprocess.run(["mount", "-o", f"remount,size={size}", str(self.folder)], check=True)
-
-
 @pytest.fixture
 def small_disk(tmp_path):
-    folder = tmp_path / "disk"
-    folder.mkdir()
-    if os.geteuid() != 0:
-        pytest.skip("mounting a tmpfs needs root (the injected ENOSPC tests cover the path)")
-    res = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=4m", "tmpfs", str(folder)],
-                         capture_output=True, text=True)
-    if res.returncode:
-        pytest.skip(f"this system does not allow mounting a tmpfs ({res.stderr.strip()}); "
-                    "the injected ENOSPC tests cover the path")
-    try:
-        yield Disk(folder)
-    finally:
-        subprocess.run(["umount", "-l", str(folder)], check=False)
+    with small_tmpfs(tmp_path / "disk", "4m") as disk:
+        yield disk
 
 
 @pytest.mark.parametrize("workers", ["1", "2"])

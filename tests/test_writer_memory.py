@@ -25,6 +25,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from helpers import small_tmpfs
 
 import sitframe.logs.writer as L
 from sitframe import scratch
@@ -150,30 +151,10 @@ def test_a_full_disk_half_way_through_a_trial_file_is_one_error_and_hdf5_goes_on
         assert np.array_equal(log.trial(1).arrays[name], arr), name
 
 
-class Tmpfs:
-    """A folder on a tmpfs of its own (``size`` in bytes, changed by :meth:`resize`)."""
-
-    def __init__(self, folder: Path) -> None:
-        self.folder = folder
-
-    def resize(self, size: int) -> None:
-        subprocess.run(["mount", "-o", f"remount,size={size}", str(self.folder)], check=True)
-
-
 @pytest.fixture
 def small_disk(tmp_path):
-    folder = tmp_path / "disk"
-    folder.mkdir()
-    if os.geteuid() != 0:
-        pytest.skip("mounting a tmpfs needs root (the injected ENOSPC test covers the path)")
-    res = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=8m", "tmpfs", str(folder)],
-                         capture_output=True, text=True)
-    if res.returncode:
-        pytest.skip(f"this system does not allow mounting a tmpfs ({res.stderr.strip()})")
-    try:
-        yield Tmpfs(folder)
-    finally:
-        subprocess.run(["umount", "-l", str(folder)], check=False)
+    with small_tmpfs(tmp_path / "disk", "8m") as disk:
+        yield disk
 
 
 def test_a_real_full_disk_half_way_through_a_trial_file(small_disk):
