@@ -273,6 +273,10 @@ def sitframe_trial_data(trial: TrialResult) -> dict[str, Any] | None:
 
     Every implementation is called; each result is kept under its own plugin's
     name (a key handed twice by one plugin is an error).
+
+    A trial longer than :func:`sitframe.scratch.limit` iterations has its arrays in
+    scratch files (memory-mapped numpy arrays): read them a block of rows at a time to
+    keep a long trial's memory flat; a whole copy (``np.array(arr)``) brings it back.
     """
 
 
@@ -285,7 +289,8 @@ def sitframe_trial_end(run: RunInfo, trial: TrialResult) -> None:
 
     :param run: The run, as given to :func:`sitframe_run_start`.
     :param trial: The :class:`sitframe.contract.records.TrialResult`: seed, per-
-        iteration arrays, per-behaviour learning data, learned policies,
+        iteration arrays (a long trial's in scratch files, as for
+        :func:`sitframe_trial_data`), per-behaviour learning data, learned policies,
         plugin data and summary scalars.
         An observer may add arrays for the log to
         ``trial.plugin_data["<its plugin name>"]`` here: the HDF5 logger's
