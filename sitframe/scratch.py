@@ -141,12 +141,17 @@ def share_by_name() -> None:
                 p.unlink(missing_ok=True)
 
 
-def _unlink_unhanded() -> None:
-    """At exit: unlink the named files this process made and never handed over."""
-    for _ref, named in _made:
-        if not named["handed"]:
+def _unlink_unhanded(gone_only: bool = False) -> None:
+    """Unlink the named files this process made and never handed over (``gone_only``: of
+    the arrays already gone; else all, at exit), and forget them."""
+    keep = []
+    for ref, named in _made:
+        if gone_only and ref() is not None:
+            keep.append((ref, named))
+        elif not named["handed"]:
             with suppress(OSError):
                 os.unlink(named["path"])
+    _made[:] = keep
 
 
 def _alive(pid: int) -> bool:
@@ -204,14 +209,7 @@ def _add(arr: np.memmap) -> None:
         del _live[key]
     for key in [k for k, ref in _opened.items() if ref() is None]:
         del _opened[key]
-    keep = []
-    for ref, named in _made:
-        if ref() is not None:
-            keep.append((ref, named))
-        elif not named["handed"]:
-            with suppress(OSError):
-                os.unlink(named["path"])
-    _made[:] = keep
+    _unlink_unhanded(gone_only=True)
     _live[id(arr)] = weakref.ref(arr)
 
 
@@ -283,9 +281,4 @@ def release(*arrays: np.ndarray) -> None:
 
 def release_all() -> None:
     """:func:`release` every scratch array of this process."""
-    for ref in list(_live.values()):
-        if (arr := ref()) is None:
-            continue
-        mm = arr._mmap
-        if mm is not None and not mm.closed:
-            mm.madvise(mmap.MADV_DONTNEED)
+    release(*(arr for ref in list(_live.values()) if (arr := ref()) is not None))

@@ -234,7 +234,7 @@ def test_the_window_does_not_change_the_log(tmp_path, monkeypatch, window):
 @pytest.mark.parametrize("streamed", [False, True])
 def test_arrays_in_scratch_files_give_the_same_log_as_arrays_in_memory(tmp_path, in_files,
                                                                        monkeypatch, streamed):
-    monkeypatch.setattr(L, "_BLOCK", 100_000)  # many blocks, not aligned with the rows
+    monkeypatch.setattr(scratch, "BLOCK", 100_000)  # many blocks, not aligned with the rows
     if streamed:
         monkeypatch.setattr(L, "_SMALL", 0)
     logs, trial_files = {}, {}

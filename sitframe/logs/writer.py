@@ -57,11 +57,6 @@ from sitframe.logs.layout import (
 
 _COMPRESS_MIN = 1024  # elements; smaller arrays are stored uncompressed
 
-#: Bytes of a scratch array (:mod:`sitframe.scratch`) handed to HDF5 at a time (rounded to
-#: whole chunks of rows), its pages released after each: a long trial's arrays are never
-#: all resident at once.
-_BLOCK = 4 << 20
-
 #: Bytes up to which a file is built in memory (HDF5's core driver) and written in one
 #: piece: a stage, the run file (its trials in their own files), a trial of at most this
 #: many bytes of arrays (a 5000-iteration trial has 6 MB, its file 1.4 MB). Larger ones,
@@ -78,9 +73,10 @@ def _write_value(group: h5py.Group, name: str, value: Any) -> None:
     """Write a scalar as an attribute, an array as a (compressed) dataset.
 
     An array in a scratch file (:func:`sitframe.scratch.in_file`) is written a block of
-    whole chunks of rows at a time (:data:`_BLOCK`), its pages released after each, into
-    a dataset made as ``data=`` would make it (the same shape, dtype, chunk shape guessed
-    from them, filters): the same dataset, without the whole array resident at once."""
+    whole chunks of rows at a time (some :data:`sitframe.scratch.BLOCK` bytes), its pages
+    released after each, into a dataset made as ``data=`` would make it (the same shape,
+    dtype, chunk shape guessed from them, filters): the same dataset, without the whole
+    array resident at once."""
     if "/" in name:
         head, tail = name.split("/", 1)
         sub = group.require_group(head)
@@ -107,10 +103,10 @@ def _write_value(group: h5py.Group, name: str, value: Any) -> None:
         kw.update(compression="gzip", compression_opts=1, shuffle=True)
     if name in group:
         del group[name]
-    if arr.ndim and scratch.in_file(arr):  # (a block of rows at a time: see _BLOCK)
+    if arr.ndim and scratch.in_file(arr):  # (a block of whole chunks of rows at a time)
         ds = group.create_dataset(name, shape=arr.shape, dtype=arr.dtype, **kw)
         row = max(arr[:1].nbytes, 1)
-        step = max(_BLOCK // row // ds.chunks[0], 1) * ds.chunks[0]  # (whole chunks)
+        step = max(scratch.BLOCK // row // ds.chunks[0], 1) * ds.chunks[0]  # (whole chunks)
         for i in range(0, len(arr), step):
             ds[i:i + step] = arr[i:i + step]
             scratch.release(arr)
