@@ -18,6 +18,11 @@ Reading a component's checks
     component with its defaults while :func:`record_checks` records every check, and
     returns one :class:`Key` per parameter (default from the signature, range and unit from
     the check). The component reference of the documentation is made from it.
+Environment variables
+    The variables sitframe reads (``SITFRAME_NUMBA``, ``SITFRAME_SCRATCH_ROWS``...) are
+    :class:`Key` declarations too (:data:`ENVIRONMENT`), read and checked by
+    :func:`environment`: a bad value is an :class:`~sitframe.errors.InputError` naming the
+    variable, never silently a default.
 """
 
 from __future__ import annotations
@@ -29,7 +34,9 @@ import functools
 import inspect
 import math
 import numbers
+import os
 from collections.abc import Callable, Iterator, Mapping, Sequence
+from pathlib import Path
 from typing import Any, Literal, get_args, get_origin, get_type_hints
 
 from sitframe.errors import InputError, InputTypeError, did_you_mean
@@ -562,3 +569,79 @@ def _kind_of(annotation: Any, default: Any) -> str:
     if isinstance(default, dict) or text.startswith("dict"):
         return "table"
     return text.replace("'", "") if annotation is not inspect.Parameter.empty else ""
+
+
+# -- environment variables ---------------------------------------------------------------
+
+#: The environment variables sitframe reads, declared once: :func:`environment` reads and
+#: checks them, the CLI checks them all before a command runs (:func:`check_environment`), and
+#: the CLI reference lists them from here. A ``"text"`` variable is on when set to anything.
+ENVIRONMENT: dict[str, Key] = {k.name: k for k in (
+    Key("SITFRAME_TRACEBACK", "text", "", "Set to anything: an error shows its Python "
+        "traceback instead of one line."),
+    Key("SITFRAME_DISABLE_PLUGIN_AUTOLOAD", "text", "", "Set to anything: no entry-point "
+        "plugin is loaded, not even the built-ins."),
+    Key("SITFRAME_NUMBA", "choice", "1", "`0`: the numpy path instead of the compiled "
+        "kernels (the same results, slower).", choices=("0", "1")),
+    Key("SITFRAME_FUSED", "choice", "1", "`0`: every trial runs the Python loop, none "
+        "compiled whole; `wait`: when the compiled trial's kernel is not cached yet, it is "
+        "compiled in the run's own process before its first compiled trial, instead of in "
+        "the background while trials run the Python loop.", choices=("0", "1", "wait")),
+    Key("SITFRAME_START_METHOD", "choice", "", "The multiprocessing start method of a run's "
+        "worker pool (default: `forkserver` where the platform has it, else `spawn`).",
+        choices=("fork", "forkserver", "spawn")),
+    Key("SITFRAME_CACHE_DIR", "path", "", "Where the compiled kernels are cached, and the "
+        "scratch files' default folder (default: the user's cache folder, by platformdirs; "
+        "numba's own `NUMBA_CACHE_DIR` wins for the kernels)."),
+    Key("SITFRAME_SCRATCH_ROWS", "integer", 20_000, "A trial longer than this many "
+        "iterations keeps its per-iteration rows in scratch files instead of memory "
+        "(`0`: every trial).", lo=0),
+    Key("SITFRAME_SCRATCH_DIR", "path", "", "The scratch files' folder (default: "
+        "`scratch` in the cache folder). Where no file can be made there, the rows stay in "
+        "memory."),
+)}
+
+
+def environment(name: str) -> Any:
+    """The value of the environment variable ``name`` (a key of :data:`ENVIRONMENT`),
+    checked: its declared default when unset or blank.
+
+    A choice is compared in lower case, an integer may be written as a float (``2e4``).
+
+    Raises
+    ------
+    InputError
+        Keyed ``name``: the value is not what the variable takes (e.g.
+        ``SITFRAME_FUSED: expected one of '0', '1', 'wait', got 'maybe'``).
+    """
+    key = ENVIRONMENT[name]
+    raw = os.environ.get(name, "").strip()
+    if not raw:
+        return key.default
+    value: Any = raw.lower() if key.kind == "choice" else raw
+    if key.kind == "integer":
+        try:
+            value = float(raw)
+        except ValueError:
+            raise InputError(f"expected an integer in {key.range_text}, got {raw!r}",
+                             key=name) from None
+        value = int(value) if value.is_integer() else value
+    return key.validate(value)
+
+
+def check_environment() -> None:
+    """Check every variable of :data:`ENVIRONMENT` that is set (the first bad one raises
+    :func:`environment`'s :class:`~sitframe.errors.InputError`)."""
+    for name in ENVIRONMENT:
+        environment(name)
+
+
+def cache_folder() -> Path:
+    """sitframe's cache folder: ``SITFRAME_CACHE_DIR``, else the user's cache folder
+    (:func:`platformdirs.user_cache_dir`). Not created."""
+    own = environment("SITFRAME_CACHE_DIR")
+    if own:
+        return Path(own).expanduser()
+    import platformdirs
+
+    return Path(platformdirs.user_cache_dir("sitframe", appauthor=False))

@@ -31,6 +31,7 @@ import mmap
 import multiprocessing.util
 import os
 import tempfile
+import threading
 import weakref
 from contextlib import suppress
 from pathlib import Path
@@ -38,8 +39,11 @@ from typing import Any
 
 import numpy as np
 
+from sitframe.errors import warn
+from sitframe.params import cache_folder, environment
+
 __all__ = ["BLOCK", "copy", "copy_rows", "empty", "folder", "in_file", "limit", "release",
-           "release_all", "share_by_name", "wanted"]
+           "release_all", "share_by_name", "share_warning", "wanted"]
 
 #: Bytes of rows :func:`copy_rows` copies between two releases.
 BLOCK = 4 * 2**20
@@ -55,17 +59,15 @@ _made: list[tuple[weakref.ref[np.memmap], dict[str, Any]]] = []
 #: Whether this process names its scratch files (:func:`share_by_name`).
 _share = [False]
 _names = itertools.count()
+#: Whether this process (or, after :func:`share_warning`, its pool) said that no scratch
+#: file could be made (:func:`_warn_once`): a flag with ``is_set`` and ``set``.
+_said: list[Any] = [threading.Event()]
 
 
-def limit() -> float:
+def limit() -> int:
     """Rows (iterations) above which :func:`empty` makes a scratch file
-    (``SITFRAME_SCRATCH_ROWS``, default 20,000)."""
-    raw = os.environ.get("SITFRAME_SCRATCH_ROWS", "").strip()
-    try:
-        rows = float(raw) if raw else 20_000.0
-    except ValueError:
-        rows = 20_000.0
-    return max(rows, 0.0)
+    (``SITFRAME_SCRATCH_ROWS``, default 20,000; checked by :func:`sitframe.params.environment`)."""
+    return environment("SITFRAME_SCRATCH_ROWS")
 
 
 def wanted(rows: int) -> bool:
@@ -75,15 +77,8 @@ def wanted(rows: int) -> bool:
 
 def folder() -> Path:
     """The folder scratch files are made in (see the module's docstring); not created."""
-    own = os.environ.get("SITFRAME_SCRATCH_DIR", "").strip()
-    if own:
-        return Path(own).expanduser()
-    cache = os.environ.get("SITFRAME_CACHE_DIR", "").strip()
-    if cache:
-        return Path(cache).expanduser() / "scratch"
-    import platformdirs
-
-    return Path(platformdirs.user_cache_dir("sitframe", appauthor=False)) / "scratch"
+    own = environment("SITFRAME_SCRATCH_DIR")
+    return Path(own).expanduser() if own else cache_folder() / "scratch"
 
 
 class _Mapped(np.memmap):
@@ -179,6 +174,8 @@ def _mapped(shape: tuple[int, ...], dtype: np.dtype) -> np.memmap | None:
     """A zero-filled array of a new scratch file, or ``None`` if none can be made. The file is
     unlinked at once (gone with the mapping) unless the process shares its files by name."""
     size = int(np.prod(shape)) * dtype.itemsize
+    if size == 0:  # (nothing to keep: no file, and no warning that none could be made)
+        return None
     path = None
     try:
         where = folder()
@@ -191,15 +188,33 @@ def _mapped(shape: tuple[int, ...], dtype: np.dtype) -> np.memmap | None:
         with fh:
             os.posix_fallocate(fh.fileno(), 0, size)
             arr = _Mapped(fh, dtype=dtype, mode="r+", shape=shape)
-    except (OSError, ValueError):
+    except (OSError, ValueError) as exc:
         if path is not None:
             path.unlink(missing_ok=True)
+        _warn_once(exc)
         return None
     if path is not None:  # (unlinked when the mapping is gone unless pickled: then the
         arr.__dict__["named"] = named = {"path": str(path), "handed": False}  # receiver does)
         _made.append((weakref.ref(arr), named))
     _add(arr)
     return arr
+
+
+def share_warning(flag: Any) -> None:
+    """Say that no scratch file could be made at most once across the processes given the
+    same ``flag`` (a :class:`multiprocessing.Event`: a run's main process and its pool's
+    workers) instead of once in each."""
+    _said[0] = flag
+
+
+def _warn_once(exc: Exception) -> None:
+    """Say once per process, in one line, that no scratch file could be made (the rows then
+    stay in memory: a run never fails for it)."""
+    if not _said[0].is_set():
+        _said[0].set()
+        why = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+        warn(f"scratch folder {folder()}: cannot make a file there ({why}); a long trial's "
+             "rows stay in memory instead (set SITFRAME_SCRATCH_DIR to a folder with room)")
 
 
 def _add(arr: np.memmap) -> None:

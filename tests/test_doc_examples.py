@@ -88,6 +88,13 @@ def test_the_cli_reference_has_every_command_and_option(generate) -> None:
                     assert f"`{option}" in text, f"sitframe {name} {option}"
 
 
+def test_the_cli_reference_lists_every_environment_variable(generate) -> None:
+    from sitframe.params import ENVIRONMENT
+
+    rows = generate.environment_reference().splitlines()
+    assert [row.split("`")[1] for row in rows] == list(ENVIRONMENT)
+
+
 def test_the_config_reference_has_every_key(generate) -> None:
     text = generate.config_reference()
     for section, keys in C.DEFAULTS.items():

@@ -41,19 +41,32 @@ def _resident_mib() -> float:
 @pytest.mark.parametrize("workers", [1, 2])
 def test_a_run_with_its_arrays_in_scratch_files_logs_the_same_bits(tmp_path, workers):
     """Every array in a file (and, with two workers, handed to the main process by name)
-    against every array in memory: the same log, and no scratch file left behind."""
+    against every array in memory: the same log, and no scratch file left behind. With a
+    scratch folder where no file can be made: the same log too, and one warning line for the
+    whole run (not one per worker)."""
     cfg = tmp_path / "c.toml"
     cfg.write_text(small_config(trials=3, iterations=400))
-    where = tmp_path / "scratch"
-    logs = {}
-    for rows in ("inf", "0"):  # (files last: a later pool would sweep what it left)
-        logs[rows] = tmp_path / f"rows-{rows}.h5"
-        env = dict(os.environ, SITFRAME_SCRATCH_ROWS=rows, SITFRAME_SCRATCH_DIR=str(where))
-        subprocess.run([sys.executable, "-m", "sitframe", "run", str(cfg), "--out",
-                        str(logs[rows]), "--workers", str(workers)], env=env, check=True,
-                       capture_output=True)
-    assert compare_logs(logs["0"], logs["inf"]) == []
+    where, blocked = tmp_path / "scratch", tmp_path / "a-file"
+    blocked.write_text("not a folder")
+    logs, errs = {}, {}
+    for rows, folder in (("1000000", where), ("0", blocked), ("0", where)):  # (files last:
+        logs[rows, folder] = out = tmp_path / f"rows-{rows}-{folder.name}.h5"  # a later pool
+        env = dict(os.environ, SITFRAME_SCRATCH_ROWS=rows,  # would sweep what it left)
+                   SITFRAME_SCRATCH_DIR=str(folder))
+        errs[rows, folder] = subprocess.run(
+            [sys.executable, "-m", "sitframe", "run", str(cfg), "--out", str(out), "--workers",
+             str(workers)], env=env, check=True, capture_output=True, text=True).stderr
+    memory = logs["1000000", where]
+    assert compare_logs(logs["0", where], memory) == []
+    assert compare_logs(logs["0", blocked], memory) == []
     assert where.is_dir() and not list(where.iterdir())
+    said = [line for line in errs["0", blocked].splitlines() if "scratch folder" in line]
+    assert len(said) == 1, said  # (e.g. "(File exists)": what the OS said)
+    assert said[0].startswith(f"sitframe: warning: scratch folder {blocked}: cannot make a "
+                              "file there (")
+    assert said[0].endswith("); a long trial's rows stay in memory instead (set "
+                            "SITFRAME_SCRATCH_DIR to a folder with room)")
+    assert "scratch" not in errs["0", where] + errs["1000000", where]
 
 
 def test_a_long_trials_rows_go_to_files_and_a_short_ones_stay_in_memory(monkeypatch, tmp_path):

@@ -7,6 +7,9 @@ by what :data:`GENERATORS` ``[NAME]`` returns for it:
 ``cli``
     Every command of ``sitframe``, grouped as ``sitframe --help`` groups them, with its
     usage, options (default and help) and example: from :func:`sitframe.cli.build_parser`.
+``environment``
+    The environment variables sitframe reads, their values, defaults and meanings: from
+    :data:`sitframe.params.ENVIRONMENT`, the declarations that check them.
 ``config``
     Every config key with its type, default, unit and range: from the typed config's
     declarations (:mod:`sitframe.contract.config`), the ones validation uses.
@@ -168,6 +171,20 @@ def cli_reference(_arg: str | None = None) -> str:
         for name in names:
             out += _command_section(name, subs[name], helps.get(name, ""))
     return "\n".join(out)
+
+
+def environment_reference(_arg: str | None = None) -> str:
+    """The environment variables sitframe reads (:data:`sitframe.params.ENVIRONMENT`)."""
+    from sitframe.params import ENVIRONMENT
+
+    rows = []
+    for k in ENVIRONMENT.values():
+        values = {"text": "any value", "path": "a folder"}.get(k.kind) or (
+            f"an integer in {k.range_text}" if k.kind == "integer"
+            else " or ".join([", ".join(f"`{c}`" for c in k.choices[:-1]), f"`{k.choices[-1]}`"]))
+        default = f", default `{k.default}`" if k.default != "" else ""
+        rows.append(f"- **`{k.name}`** ({values}{default}): {k.doc}")
+    return "\n".join(rows) + "\n"
 
 
 # -- config keys and components ----------------------------------------------------------
@@ -489,6 +506,7 @@ def api_page(package: str | None) -> str:
 
 GENERATORS: dict[str, Callable[[str | None], str]] = {
     "cli": cli_reference,
+    "environment": environment_reference,
     "config": config_reference,
     "components": components_reference,
     "generator": generator_reference,

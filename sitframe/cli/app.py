@@ -236,6 +236,7 @@ def main(argv: list[str] | None = None) -> int:
         with terminate_as_interrupt(), warnings.catch_warnings():
             warnings.showwarning = show_warning
             args = build_parser().parse_args(argv)
+            P.check_environment()  # (a bad variable: one line before any work)
             return _dispatch(args)
     except (InputError, PluginError) as exc:
         if os.environ.get("SITFRAME_TRACEBACK"):

@@ -50,6 +50,7 @@ from sitframe.contract.pluginmanager import Registry, get_plugin_manager
 from sitframe.contract.records import Context, TrialInfo
 from sitframe.contract.resolve import Resolved
 from sitframe.errors import InputError
+from sitframe.params import check_environment
 from sitframe.sim.kernels import kernels
 from sitframe.sim.robot import Command
 from sitframe.sim.world import Goal, World
@@ -140,6 +141,7 @@ class Task:
         ValueError
             The config has no behaviour with headings, or a bad argument.
         """
+        check_environment()  # (a bad SITFRAME_NUMBA, say: said here, not ignored)
         if isinstance(config, dict):
             cfg, source, base = copy.deepcopy(config), None, "."
         else:

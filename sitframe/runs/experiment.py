@@ -38,6 +38,7 @@ from sitframe.errors import (
     located_in,
     warn,
 )
+from sitframe.params import check_environment
 from sitframe.runs.arithmetic import arithmetic_versions
 from sitframe.runs.collect import (
     Collected,
@@ -555,6 +556,7 @@ def drive(runs: list[tuple[Experiment, RunPlan]], executor: Any) -> list[RunResu
     the trials already handed to observers in the logs, marks every run
     still running ``aborted`` (Ctrl-C) or ``failed`` and re-raises.
     """
+    check_environment()  # (a bad environment variable: before anything starts)
     t0 = time.perf_counter()
     for exp, _plan in runs:
         exp.executor = executor

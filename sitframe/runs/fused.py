@@ -39,7 +39,6 @@ calls, after the iteration's learning, as the Python loop delivers them.
 
 from __future__ import annotations
 
-import os
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -51,6 +50,7 @@ import numpy as np
 
 from sitframe import scratch
 from sitframe.learning.fuzzy_q import FuzzyQLearner, softmax_choice
+from sitframe.params import environment
 from sitframe.sim import numba_cache, numpy_loops
 from sitframe.sim.kernels import contact, kernels, load
 from sitframe.sim.kernels import fused as fused_trig
@@ -77,7 +77,7 @@ def _mode() -> str:
     """``SITFRAME_FUSED``: ``0`` (never compiled), ``wait`` (compile the trial kernel in
     this process when the cache lacks it) or anything else (the default, ``1``: compiled once
     the kernel is cached, compiled in the background when it is not)."""
-    return os.environ.get("SITFRAME_FUSED", "1").strip().lower()
+    return environment("SITFRAME_FUSED")
 
 
 def wanted() -> bool:

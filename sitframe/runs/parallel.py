@@ -66,6 +66,7 @@ from sitframe.errors import (
     warn,
 )
 from sitframe.logs.interrupts import deferred_interrupt
+from sitframe.params import environment
 from sitframe.runs.arithmetic import arithmetic, check_same_arithmetic
 from sitframe.sim import kernels
 
@@ -104,7 +105,8 @@ def _on_sigterm(_signum: int, _frame: Any) -> None:
         raise TaskCancelled("the run was cancelled")
 
 
-def _worker_init(lifeline: Any = None, inherited_writer: Any = None) -> None:
+def _worker_init(lifeline: Any = None, inherited_writer: Any = None,
+                 said: Any = None) -> None:
     """Pool worker set-up: ignore SIGINT, exit when the main process is gone.
 
     Ctrl-C in a terminal reaches the whole process group; only the main
@@ -113,11 +115,14 @@ def _worker_init(lifeline: Any = None, inherited_writer: Any = None) -> None:
     dies (even by SIGKILL) the read sees EOF and the worker exits, instead
     of lingering blocked on the task queue (whose pipe the workers
     themselves keep open). A long trial's arrays in scratch files are handed back by the
-    files' names (:func:`sitframe.scratch.share_by_name`).
+    files' names (:func:`sitframe.scratch.share_by_name`); ``said``, the pool's flag that a
+    scratch file could not be made, keeps that warning to one line for the whole pool.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _on_sigterm)
     scratch.share_by_name()  # (a long trial reaches the main process as its files' names)
+    if said is not None:
+        scratch.share_warning(said)
     warnings.showwarning = show_warning  # (a worker writes to the command's stderr)
     quiet_teardown()
     if inherited_writer is not None:
@@ -425,7 +430,7 @@ class SerialExecutor(PoolExecutor):
 def start_method() -> str:
     """The multiprocessing start method of the pool (env ``SITFRAME_START_METHOD`` overrides)."""
     methods = mp.get_all_start_methods()
-    wanted = os.environ.get("SITFRAME_START_METHOD", "")
+    wanted = environment("SITFRAME_START_METHOD")
     if wanted:
         if wanted not in methods:
             raise InputError(f"unknown start method '{wanted}'; this platform has "
@@ -468,7 +473,9 @@ class ProcessExecutor(PoolExecutor):
             reader, writer = ctx.Pipe(duplex=False)
             self._lifeline = (reader, writer)  # never written; closed when we exit
             # A forked child inherits the write end too and must close it.
-            initargs = (reader, writer if method == "fork" else None)
+            said = ctx.Event()  # (the scratch folder's warning: once for the whole pool)
+            scratch.share_warning(said)
+            initargs = (reader, writer if method == "fork" else None, said)
             self._pool = cf.ProcessPoolExecutor(self.workers, mp_context=ctx,
                                                 initializer=_worker_init, initargs=initargs)
         return self._pool

@@ -43,7 +43,9 @@ _CALLS = [0]
 
 
 def wanted() -> bool:
-    """Whether the kernels are to be used (``SITFRAME_NUMBA`` is not ``0``)."""
+    """Whether the kernels are to be used (``SITFRAME_NUMBA`` is not ``0``; read here as it
+    is, at the foot of the house: its value is checked where a command, a run or an env
+    starts, :func:`sitframe.params.check_environment`)."""
     return os.environ.get("SITFRAME_NUMBA", "1").strip() != "0"
 
 
