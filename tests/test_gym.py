@@ -109,6 +109,10 @@ def test_vector_env_equals_single_envs(config: str, continuous: bool, compiled: 
             assert (vr[i], vte[i], vtr[i]) == (r, te, tr)
             np.testing.assert_array_equal(vinfo["pose"][i], e.pose)
             done[i] = te or tr
+        for mine, e in zip(venv.envs, singles, strict=True):  # (the robots' own envs, whose
+            np.testing.assert_array_equal(mine.pose, e.pose)  # state the compiled step keeps
+            np.testing.assert_array_equal(mine._reading, e._reading)  # apart, brought up to
+            assert mine.t == e.t  # date)
     assert venv.observation_space.shape == (n, 10 if config == "goal-finding" else 8)
 
 

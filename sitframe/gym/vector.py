@@ -24,9 +24,10 @@ Compiled, in one call: when the single env's step is compiled
 (:class:`~sitframe.gym.env.CompiledStep`: a range finder without noise, no goals) and the
 reward is the built-in ``obstacle-avoidance`` (without ``progress``), every robot's step,
 contact included, reading, observation and reward are one call per world
-(:func:`sitframe.sim.kernels_numba.env_steps`); nothing stays per robot but its pose, its
-reading and its step count (a dead-ahead contact, whose turn is a draw from the robot's
-generator, is stepped as above).
+(:func:`sitframe.sim.kernels_numba.env_steps`), and no Python runs per robot: their poses,
+readings and step counts are kept in (N, ...) arrays, handed to the robots' own envs only
+when something reads them there (:attr:`SitframeVectorEnv.envs`; a dead-ahead
+contact, whose turn is a draw from the robot's generator and is stepped as above).
 
 With several worlds (``worlds=[...]``) each robot draws its episode's world as
 the single env does, and the robots are moved and read world by world (each
@@ -95,9 +96,9 @@ class SitframeVectorEnv(VectorEnv):
         self.num_envs = num_envs
         self.continuous = bool(continuous)
         # one env per robot holds its components and episode state; the stepping is batched here
-        self.envs = [SitframeEnv(continuous=continuous, task=self.task) for _ in range(num_envs)]
-        self.single_observation_space = self.envs[0].observation_space
-        self.single_action_space = self.envs[0].action_space
+        self._envs = [SitframeEnv(continuous=continuous, task=self.task) for _ in range(num_envs)]
+        self.single_observation_space = self._envs[0].observation_space
+        self.single_action_space = self._envs[0].action_space
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self._done = np.zeros(num_envs, dtype=bool)
@@ -106,8 +107,41 @@ class SitframeVectorEnv(VectorEnv):
         self._grid: tuple[np.ndarray, np.ndarray] | None = None  # (their heading changes
         # and speeds, (A,) each)
         self._ctx: list[Any] = [None] * num_envs  # each robot's last context
-        self._many = getattr(self.envs[0].sensor, "read_many", None)
+        self._many = getattr(self._envs[0].sensor, "read_many", None)
         self._fast: tuple[CompiledStep, np.ndarray] | None | bool = False  # (False: undecided)
+        # The compiled step keeps the robots' poses (N, 3), readings (N, d) and step counts (N,)
+        # here instead of in their envs (None: not taken from the envs yet); ``_stale``: the
+        # envs' own are older, until :attr:`envs` or a robot stepped in Python brings them up.
+        self._state: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._stale = False
+
+    @property
+    def envs(self) -> list[SitframeEnv]:
+        """The robots' single envs: their components and episode state, brought up to date, to
+        read (a robot is placed by ``reset(options=...)``, not by setting its env's pose)."""
+        if self._stale:
+            self._push()
+        return self._envs
+
+    def _push(self) -> None:
+        """Give every robot's env its pose, reading and step count from :attr:`_state`."""
+        pose, reading, t = self._state  # type: ignore[misc]
+        for i, env in enumerate(self._envs):
+            env.pose, env._reading, env.t = pose[i].copy(), reading[i].copy(), int(t[i])
+        self._stale = False
+
+    def _pull(self, rows: list[int]) -> None:
+        """Take the pose, reading and step count of the robots ``rows`` from their envs."""
+        if self._state is None:  # (all of them, into new arrays)
+            envs = self._envs
+            self._state = (np.array([e.pose for e in envs], dtype=np.float64),
+                           np.array([e._reading for e in envs], dtype=np.float64),
+                           np.array([e.t for e in envs], dtype=np.int64))
+            return
+        for i in rows:
+            env = self._envs[i]
+            self._state[0][i], self._state[1][i], self._state[2][i] = env.pose, env._reading, \
+                env.t
 
     def reset(self, *, seed: int | list[int | None] | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
@@ -115,33 +149,41 @@ class SitframeVectorEnv(VectorEnv):
         seeds = _seeds(seed, self.num_envs)
         if seed is not None:
             self._np_random, self._np_random_seed = seeding.np_random(seeds[0])
-        obs = [env.reset(seed=s, options=options)[0] for env, s in zip(self.envs, seeds,
+        obs = [env.reset(seed=s, options=options)[0] for env, s in zip(self._envs, seeds,
                                                                       strict=True)]
+        self._state, self._stale = None, False  # (the envs hold it all again)
         self._done[:] = False
         self._ctx = [None] * self.num_envs
         return np.stack(obs), self._infos(np.zeros(self.num_envs, dtype=bool))
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
                                           dict[str, Any]]:
-        n, envs = self.num_envs, self.envs
+        n, envs = self.num_envs, self._envs
         acts = np.asarray(actions)
         if acts.shape[:1] != (n,):
             raise ValueError(f"actions: expected {n} actions (one per robot), got shape "
                              f"{acts.shape}")
+        fast = self._compiled()
+        if fast is not None and len(self.task.worlds) <= 1 and not self._done.any():
+            lean = self._step_all(fast, acts)
+            if lean is not None:
+                return lean
         obs, at = None, None
         rew, term = np.zeros(n), np.zeros(n, dtype=bool)
         trunc, collided = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
         live = self._all
         if self._done.any():
             obs = np.empty((n, *self.single_observation_space.shape), dtype=np.float32)
-            for i in np.flatnonzero(self._done).tolist():  # NEXT_STEP autoreset
+            done = np.flatnonzero(self._done).tolist()
+            for i in done:  # NEXT_STEP autoreset
                 obs[i] = envs[i].reset()[0]
                 self._ctx[i] = None
+            if self._state is not None:
+                self._pull(done)
             live = np.flatnonzero(~self._done).tolist()
         if live:
             robots = [envs[i] for i in live]
             acts = acts if live is self._all else acts[live]
-            fast = self._compiled()
             figures = (rew, term, trunc, collided)
             seen, at = self._step_python(live, robots, self._commands(acts.tolist()), figures) \
                 if fast is None else self._step_compiled(fast, live, robots, acts, figures)
@@ -185,7 +227,7 @@ class SitframeVectorEnv(VectorEnv):
         if self._fast is False:
             if kernels() is None:  # (N robots a step: load them now rather than after the
                 load()  # numpy path's first calls, whose batch would compile kernels of its own)
-            env = self.envs[0]
+            env = self._envs[0]
             fast = env.compiled_step()
             f = getattr(env.reward_fn, "_fused", None)
             spec = f() if callable(f) else None
@@ -195,65 +237,83 @@ class SitframeVectorEnv(VectorEnv):
                 self._fast = (fast, np.array(spec["params"], dtype=np.float64))
         return self._fast
 
+    def _step_all(self, fast: tuple[CompiledStep, np.ndarray], acts: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                             dict[str, Any]] | None:
+        """:meth:`step` of every robot in one world in one compiled call, the common case
+        (no robot to reset); ``None``, with nothing changed, when a robot meets a wall dead
+        ahead (:meth:`_step_compiled` then steps them all)."""
+        step, reward = fast
+        if self._state is None:
+            self._pull(self._all)
+        pose, _reading, t = self._state  # type: ignore[misc]
+        heads, speeds = self._command_arrays(acts)
+        codes, out, readings, obs, rew = step.steps(self.task.world, pose, heads, speeds,
+                                                    reward)
+        if (codes == step.k.TIE).any():
+            return None
+        at = out[:, :3]
+        self._state, self._stale = (at.copy(), readings, t + 1), True
+        self._ctx = [None] * self.num_envs
+        hit = codes != step.k.FREE
+        term = hit & self.task.terminate_on_collision
+        trunc = ~term & (self._state[2] >= self.task.max_steps)
+        self._done = term | trunc
+        return obs, rew, term, trunc, self._infos(hit, at)
+
     def _step_compiled(self, fast: tuple[CompiledStep, np.ndarray], live: list[int],
                        robots: list[SitframeEnv], acts: np.ndarray,
                        figures: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`_step_python` in one compiled call per world (a dead-ahead contact, whose
-        turn is drawn from the robot's generator, stepped by :meth:`_step_python`)."""
+        turn is drawn from the robot's generator, stepped by :meth:`_step_python`), on the
+        robots' state kept here (:attr:`_state`)."""
         step, reward = fast
         task = self.task
-        poses = np.array([e.pose for e in robots])
+        if self._state is None:
+            self._pull(self._all)
+        everyone = live is self._all
+        rows = np.arange(self.num_envs) if everyone else np.array(live)
+        poses = self._state[0] if everyone else self._state[0][rows]
         heads, speeds = self._command_arrays(acts)
         whole = len(task.worlds) <= 1  # (one world: one call for them all, no grouping)
         groups = [range(len(robots))] if whole else _by_world(robots)
-        obs = at = None
-        if not whole:
-            obs = np.empty((len(robots), *self.single_observation_space.shape), np.float32)
-            at = np.empty((len(robots), 3))
+        obs = np.empty((len(robots), *self.single_observation_space.shape), np.float32)
+        at = np.empty((len(robots), 3))
+        self._ctx = [None] * self.num_envs  # (the robots stepped here have none; ties below)
+        ties: list[int] = []
         for js in groups:
             codes, out, readings, seen, rewards = step.steps(
                 robots[js[0]].world, poses if whole else poses[js],
                 heads if whole else heads[js], speeds if whole else speeds[js], reward)
-            moved = out[:, :3].copy()  # (each robot's new pose: a row of its own)
-            ties = self._record(step, live if whole else [live[j] for j in js],
-                                robots if whole else [robots[j] for j in js], codes, moved,
-                                readings, rewards, figures)
-            if whole:  # (the infos' poses: out's, not the robots' own rows)
-                obs, at = seen, out[:, :3]
-            else:
-                obs[js], at[js] = seen, moved
-            if ties:
-                ties = [js[q] for q in ties]
-                cmds = self._commands(acts[ties].tolist())
-                obs[ties], at[ties] = self._step_python([live[j] for j in ties],
-                                                        [robots[j] for j in ties], cmds, figures)
+            obs[js], at[js] = seen, out[:, :3]
+            ties += [js[q] for q in self._record(step, rows[js], codes, out, readings, rewards,
+                                                 figures)]
+        if ties:  # (rare: stepped apart, in their envs)
+            self._push()
+            cmds = self._commands(acts[ties].tolist())
+            obs[ties], at[ties] = self._step_python([live[j] for j in ties],
+                                                    [robots[j] for j in ties], cmds, figures)
+            self._pull([live[j] for j in ties])
         return obs, at
 
-    def _record(self, step: CompiledStep, live: list[int], robots: list[SitframeEnv],
-                codes: np.ndarray, moved: np.ndarray, readings: np.ndarray,
-                rewards: np.ndarray, figures: tuple[np.ndarray, ...]) -> list[int]:
-        """Give the robots ``live`` (their ``robots``) the compiled step's poses, readings and
-        times, and fill their ``figures``; returns the rows of dead-ahead contacts (not
-        stepped: :data:`~sitframe.sim.kernels_numba.TIE`), which are left alone."""
+    def _record(self, step: CompiledStep, rows: np.ndarray, codes: np.ndarray,
+                out: np.ndarray, readings: np.ndarray, rewards: np.ndarray,
+                figures: tuple[np.ndarray, ...]) -> list[int]:
+        """Keep the compiled step's poses, readings and step counts of the robots ``rows``
+        (:attr:`_state`) and fill their ``figures``; returns the positions in ``rows`` of
+        dead-ahead contacts (not stepped: :data:`~sitframe.sim.kernels_numba.TIE`), which are
+        left alone."""
         rew, term, trunc, collided = figures
-        ctx = self._ctx
         ties = np.flatnonzero(codes == step.k.TIE).tolist()
-        rows: Any = slice(None)
-        parts: tuple[Any, ...] = (live, robots, moved, readings)
-        if ties:  # (rare: stepped apart, by _step_python)
-            rows = [q for q in range(len(robots)) if q not in ties]
-            parts = tuple([x[q] for q in rows] for x in parts)
-        times = []
-        for i, env, pose, reading in zip(*parts, strict=True):
-            env.pose, env._reading = pose, reading  # (its pose, reading and time; the
-            env.t += 1  # reward needs no context)
-            times.append(env.t)
-            ctx[i] = None
-        at = np.asarray(live)[rows] if ties or live is not self._all else slice(None)
-        hit = codes[rows] != step.k.FREE
-        rew[at], collided[at] = rewards[rows], hit
+        keep = codes != step.k.TIE
+        at, hit = rows[keep], codes[keep] != step.k.FREE
+        pose, reading, t = self._state  # type: ignore[misc]
+        pose[at], reading[at] = out[keep, :3], readings[keep]
+        t[at] += 1
+        self._stale = True
+        rew[at], collided[at] = rewards[keep], hit
         term[at] = hit & self.task.terminate_on_collision
-        trunc[at] = ~term[at] & (np.array(times) >= self.task.max_steps)
+        trunc[at] = ~term[at] & (t[at] >= self.task.max_steps)
         return ties
 
     def _command_arrays(self, acts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -325,8 +385,9 @@ class SitframeVectorEnv(VectorEnv):
     def _infos(self, collided: np.ndarray, poses: np.ndarray | None = None) -> dict[str, Any]:
         """``pose`` (N, 3) (``poses``, if given, are every robot's) and ``collided`` (N,)."""
         mask = np.ones(self.num_envs, dtype=bool)
-        if poses is None:
-            poses = np.array([e.pose for e in self.envs])
+        if poses is None:  # (the compiled step's state is every robot's, reset ones too)
+            poses = self._state[0].copy() if self._state is not None else \
+                np.array([e.pose for e in self._envs])
         return {"pose": poses, "_pose": mask,
                 "collided": collided, "_collided": mask}
 
