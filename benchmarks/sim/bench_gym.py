@@ -24,6 +24,12 @@ kernels
     ``read_many``. No vector env can step faster than this, so kernels / single is the
     ceiling of vector / single with today's kernels.
 
+With ``--against REV`` the single and the vector env are also timed in the sitframe of git
+revision ``REV`` and of this checkout, in alternating fresh processes (one timed loop of each
+per process, ``--repeats`` processes per tree): each env's rate against its rate at ``REV``,
+and this checkout's vector env against ``REV``'s single env (another reading of issue 41's
+6x, against the commit before the change).
+
 Times are CPU seconds of this process (``time.process_time``): on a machine
 shared with other jobs, wall time mostly measures the others.
 
@@ -35,6 +41,7 @@ whether ``check_env`` passes for every registered id.
 Run::
 
     python benchmarks/sim/bench_gym.py [--steps 3000] [--num-envs 16] [--repeats 5]
+        [--against REV]
 """
 
 from __future__ import annotations
@@ -50,6 +57,7 @@ import numpy as np
 from gymnasium.utils.env_checker import check_env
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/: common
+from common import against  # noqa: E402
 from common.publish import publish  # noqa: E402
 
 import sitframe.gym as sg  # noqa: E402
@@ -114,11 +122,44 @@ def kernels(venv: sg.SitframeVectorEnv, steps: int, seed: int) -> float:
     return time.process_time() - t0
 
 
+def env_rates(steps: int, num_envs: int) -> list[float]:
+    """The single env's steps/s and the vector env's robot-steps/s of the sitframe imported,
+    one timed loop each after a warm-up (what ``--against`` runs in each tree): the kernels
+    loaded (compiled, the first time a tree runs) and a loop of each untimed."""
+    from sitframe.sim.kernels import load
+
+    load()
+    env = sg.make_env("obstacle-avoidance")
+    venv = sg.make_vector_env("obstacle-avoidance", num_envs)
+    single(env, steps, 99)
+    vector(venv, steps, 99)
+    return [steps / single(env, steps, 0), steps / vector(venv, steps, 0)]
+
+
+def against_rows(rev: str, steps: int, num_envs: int, repeats: int) -> list[str]:
+    """The Markdown rows of ``--against``: each env's median rate in ``rev`` and this checkout
+    (module docstring), printed too."""
+    got = against(rev, Path(__file__), lambda _t, _o: f"m.env_rates({steps}, {num_envs})",
+                  repeats)
+    med = {name: (statistics.median(v[0::2]), statistics.median(v[1::2]))
+           for name, v in got.items()}
+    (s0, v0), (s1, v1) = med[rev], med["this checkout"]
+    rows = [f"| | {rev} | this checkout | ratio |", "|---|---:|---:|---:|",
+            f"| `SitframeEnv` (steps/s) | {s0:,.0f} | {s1:,.0f} | {s1 / s0:.2f}x |",
+            f"| `SitframeVectorEnv`, N = {num_envs} (robot-steps/s) | {v0:,.0f} | {v1:,.0f} "
+            f"| {v1 / v0:.2f}x |",
+            f"| this checkout's vector env ÷ {rev}'s single env | | | {v1 / s0:.1f}x |"]
+    print("\n".join(rows))
+    return rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--steps", type=int, default=3000, help="(robot-)steps per timed loop")
     ap.add_argument("--num-envs", type=int, default=16)
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--against", metavar="REV",
+                    help="also time both envs in git revision REV, in alternating processes")
     ap.add_argument("--publish", metavar="NAME",
                     help="also write the figures as a table to docs/results/tables/NAME.md")
     a = ap.parse_args()
@@ -152,6 +193,7 @@ def main() -> None:
           f"{m['kernels'] / m['single']:.2f}  (the ceiling of vector/single)")
     print("median of the per-repeat ratios: " + ", ".join(f"{k} = {v:.2f}"
                                                           for k, v in paired.items()))
+    rows = against_rows(a.against, steps, a.num_envs, a.repeats) if a.against else []
     if a.publish:
         publish(a.publish, "\n".join([
             f"| loop ({steps} steps, medians of {a.repeats} alternated repeats) | rate | "
@@ -163,7 +205,10 @@ def main() -> None:
             f"vector ÷ single {m['vector'] / m['single']:.2f} / {paired['vector/single']:.2f} |",
             f"| its compiled work alone (`env_steps`) | {m['kernels']:,.0f} "
             f"robot-steps/s | kernels ÷ single {m['kernels'] / m['single']:.2f} / "
-            f"{paired['kernels/single']:.2f} |"]))
+            f"{paired['kernels/single']:.2f} |",
+            *(["", f"Against {a.against}, the commit before issue 41's change (medians of "
+                   f"{a.repeats} alternated fresh processes of each tree, one timed loop of "
+                   f"{steps} steps each):", "", *rows] if rows else [])]))
 
 
 if __name__ == "__main__":
