@@ -178,7 +178,8 @@ RECIPES: dict[str, Recipe] = {
         f"{PY} benchmarks/learning/bench_speed.py --against b2a2035 --repeats 9 "
         "--publish speed-41",), 8),
     "gym-speed": Recipe((), (
-        f"{PY} benchmarks/sim/bench_gym.py --steps 3200 --repeats 5 --publish gym-speed",), 2),
+        f"{PY} benchmarks/sim/bench_gym.py --steps 3200 --repeats 5 --against b2a2035 "
+        "--publish gym-speed",), 4),
     "first-call": Recipe((), (
         f"{PY} benchmarks/sim/bench_sim.py --first-call --repeats 6 --publish first-call",), 3),
     "goal-finding-learned": Recipe(("goal-finding-learned",), (
