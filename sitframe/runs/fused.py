@@ -75,8 +75,9 @@ _TOLD: list[bool] = []
 
 def _mode() -> str:
     """``SITFRAME_FUSED``: ``0`` (never compiled), ``wait`` (compile the trial kernel in
-    this process when the cache lacks it) or anything else (the default, ``1``: compiled once
-    the kernel is cached, compiled in the background when it is not)."""
+    this process when the cache lacks it) or ``1`` (the default: compiled once the kernel is
+    cached, compiled in the background when it is not); checked by
+    :func:`sitframe.params.environment`."""
     return environment("SITFRAME_FUSED")
 
 
