@@ -18,9 +18,11 @@ is an ordinary one in memory: a run never fails for its scratch.
 Where: ``SITFRAME_SCRATCH_DIR``, else the ``scratch`` folder of ``SITFRAME_CACHE_DIR`` or of
 the user's cache folder (``~/.cache/sitframe/scratch``), never ``/tmp``, which may be memory
 itself. ``SITFRAME_SCRATCH_ROWS`` sets :func:`limit` (default 20,000; ``0`` puts every
-array in a file, ``inf`` none). The values are the same bits either way.
+array in a file, a number above any trial's length none). The values are the same bits
+either way. Both variables are read and checked by :func:`sitframe.params.environment`.
 
-It imports nothing of sitframe: the learner, the loop and the writer all use it.
+It imports only the rest of the ground floor (errors, params): the learner, the loop and
+the writer all use it.
 """
 
 from __future__ import annotations

@@ -256,8 +256,7 @@ class SitframeVectorEnv(VectorEnv):
         self._state, self._stale = (at.copy(), readings, t + 1), True
         self._ctx = [None] * self.num_envs
         hit = codes != step.k.FREE
-        term = hit & self.task.terminate_on_collision
-        trunc = ~term & (self._state[2] >= self.task.max_steps)
+        term, trunc = self._ends(hit, self._state[2])
         self._done = term | trunc
         return obs, rew, term, trunc, self._infos(hit, at)
 
@@ -312,9 +311,14 @@ class SitframeVectorEnv(VectorEnv):
         t[at] += 1
         self._stale = True
         rew[at], collided[at] = rewards[keep], hit
-        term[at] = hit & self.task.terminate_on_collision
-        trunc[at] = ~term[at] & (t[at] >= self.task.max_steps)
+        term[at], trunc[at] = self._ends(hit, t[at])
         return ties
+
+    def _ends(self, hit: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Terminated and truncated (M,) of robots stepped by the compiled step: ``hit``
+        (M,) whether each touched a wall, ``t`` (M,) its step count now."""
+        term = hit & self.task.terminate_on_collision
+        return term, ~term & (t >= self.task.max_steps)
 
     def _command_arrays(self, acts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The heading changes [deg] and speeds [m/s] (M,) of the live robots' actions:
